@@ -1,0 +1,10 @@
+"""eppf: noise-resistant 3D object classification and retrieval with the EPPF descriptor.
+
+A scikit-learn compatible toolkit implementing Bobkov et al., "Noise-resistant
+Deep Learning for Object Classification in 3D Point Clouds Using a Point Pair
+Descriptor", IEEE Robotics and Automation Letters, 2018.
+"""
+
+__version__ = "0.1.0"
+
+__all__ = []

@@ -1,0 +1,192 @@
+"""Validation and packing of ragged point-cloud input.
+
+Every estimator that takes point clouds goes through :func:`check_point_clouds`
+so that bad input fails the same way everywhere: a ``TypeError`` for the wrong
+kind of object, a ``ValueError`` naming the estimator, the object index and the
+problem for wrong shapes, non-finite values, too few or identical points and
+zero-length normals.
+"""
+
+import numbers
+
+import numpy as np
+
+__all__ = ["check_n_jobs", "check_point_cloud", "check_point_clouds", "object_seeds", "pack_point_clouds"]
+
+
+def _prefix(owner):
+    return f"{owner}: " if owner else ""
+
+
+def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_normals=True):
+    """Validate one point cloud and return it as a C-contiguous float64 array.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by normals (columns 3 to 5).
+    owner : str, default=None
+        Name of the calling estimator or function, used in error messages.
+    index : int, default=None
+        Position of the cloud in a collection, used in error messages.
+    min_points : int, default=2
+        Smallest accepted number of points.
+    allow_normals : bool, default=True
+        Whether six-column input (points and normals) is accepted.
+
+    Returns
+    -------
+    cloud : ndarray of shape (n_points, 3) or (n_points, 6), dtype float64
+        The cloud; normals, when present, are scaled to unit length.
+
+    Raises
+    ------
+    TypeError
+        If ``cloud`` is not numeric array-like.
+    ValueError
+        If the shape is wrong, a value is NaN or infinite, there are fewer than
+        ``min_points`` points or fewer than two distinct ones, or a normal has
+        zero length.
+    """
+    pre = _prefix(owner)
+    what = "point cloud" if index is None else f"point cloud {index}"
+    if isinstance(cloud, (str, bytes)) or cloud is None:
+        raise TypeError(f"{pre}{what} must be an array of shape (n_points, 3) or (n_points, 6), got {type(cloud).__name__}")
+    try:
+        arr = np.asarray(cloud)
+    except Exception as exc:  # ragged nested lists and the like
+        raise TypeError(f"{pre}{what} could not be converted to an array: {exc}") from None
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+        raise TypeError(f"{pre}{what} must hold numbers, got dtype {arr.dtype}")
+    if np.iscomplexobj(arr):
+        raise TypeError(f"{pre}{what} must hold real numbers, got dtype {arr.dtype}")
+    allowed = (3, 6) if allow_normals else (3,)
+    if arr.ndim != 2 or arr.shape[1] not in allowed:
+        cols = " or ".join(f"(n_points, {c})" for c in allowed)
+        raise ValueError(f"{pre}{what} must have shape {cols}, got shape {arr.shape}")
+    n = arr.shape[0]
+    if n < min_points:
+        raise ValueError(f"{pre}{what} has {n} point{'s' if n != 1 else ''}; at least {min_points} are needed")
+    arr = np.array(arr, dtype=np.float64, order="C", copy=True)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{pre}{what} contains NaN or infinite values")
+    xyz = arr[:, :3]
+    if n >= 2 and np.all(xyz == xyz[0]):
+        raise ValueError(f"{pre}{what} has all {n} points identical; at least two distinct points are needed")
+    if arr.shape[1] == 6:
+        normals = arr[:, 3:]
+        norms = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+        bad = np.flatnonzero(norms < 1e-12)
+        if bad.size:
+            raise ValueError(f"{pre}{what} has {bad.size} zero-length normal(s), first at point {bad[0]}")
+        arr[:, 3:] = normals / norms[:, None]
+    return arr
+
+
+def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True):
+    """Validate a collection of point clouds.
+
+    Parameters
+    ----------
+    X : list of array-like of shape (n_i, 3) or (n_i, 6), or ndarray of shape (n_objects, n_points, 3|6)
+        The clouds. Clouds may differ in size; a collection may mix clouds
+        with and without normals.
+    owner : str, default=None
+        Name of the calling estimator or function, used in error messages.
+    min_points : int, default=2
+        Smallest accepted number of points per cloud.
+    allow_normals : bool, default=True
+        Whether six-column clouds are accepted.
+
+    Returns
+    -------
+    clouds : list of ndarray
+        Validated float64 clouds (see :func:`check_point_cloud`).
+    """
+    pre = _prefix(owner)
+    if X is None or isinstance(X, (str, bytes, dict, numbers.Number)):
+        raise TypeError(f"{pre}X must be a list of point clouds (arrays of shape (n_i, 3) or (n_i, 6)), got {type(X).__name__}")
+    if isinstance(X, np.ndarray) and X.dtype != object:
+        if X.ndim == 2:
+            raise ValueError(
+                f"{pre}X is a single 2D array of shape {X.shape}; pass a list of point clouds, "
+                "e.g. [cloud], or a 3D array of shape (n_objects, n_points, 3|6)"
+            )
+        if X.ndim != 3:
+            raise ValueError(f"{pre}X must be a list of (n_i, 3|6) arrays or a 3D array, got an array of shape {X.shape}")
+        items = list(X)
+    else:
+        try:
+            items = list(X)
+        except TypeError:
+            raise TypeError(f"{pre}X must be a list of point clouds, got {type(X).__name__}") from None
+    if len(items) == 0:
+        raise ValueError(f"{pre}X is empty: at least one point cloud is needed")
+    return [
+        check_point_cloud(c, owner=owner, index=i, min_points=min_points, allow_normals=allow_normals)
+        for i, c in enumerate(items)
+    ]
+
+
+def pack_point_clouds(clouds):
+    """Pack validated clouds into contiguous arrays for the compiled kernels.
+
+    Parameters
+    ----------
+    clouds : list of ndarray of shape (n_i, 3) or (n_i, 6)
+        Validated clouds, all with normals or all without.
+
+    Returns
+    -------
+    points : ndarray of shape (sum n_i, 3), float64
+    normals : ndarray of shape (sum n_i, 3), float64, or None
+        None when the clouds carry no normals.
+    offsets : ndarray of shape (n_objects + 1,), int64
+        Object ``k`` is ``points[offsets[k]:offsets[k + 1]]``.
+    """
+    sizes = np.fromiter((c.shape[0] for c in clouds), dtype=np.int64, count=len(clouds))
+    offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    stacked = np.concatenate(clouds, axis=0) if len(clouds) > 1 else clouds[0]
+    points = np.ascontiguousarray(stacked[:, :3], dtype=np.float64)
+    normals = None
+    if stacked.shape[1] == 6:
+        normals = np.ascontiguousarray(stacked[:, 3:6], dtype=np.float64)
+    return points, normals, offsets
+
+
+def check_n_jobs(n_jobs, *, owner=None):
+    """Resolve ``n_jobs`` (joblib's meaning) to a positive thread count.
+
+    ``None`` means the OpenMP default, which honours ``OMP_NUM_THREADS`` and
+    ``threadpoolctl`` limits (so estimators nested in joblib workers do not
+    oversubscribe); ``-1`` means all cores, ``-2`` all but one, and so on.
+    """
+    import os
+
+    from ._core import openmp_max_threads
+
+    pre = _prefix(owner)
+    if n_jobs is None:
+        return max(1, int(openmp_max_threads()))
+    if isinstance(n_jobs, bool) or not isinstance(n_jobs, numbers.Integral):
+        raise TypeError(f"{pre}n_jobs must be an int or None, got {type(n_jobs).__name__}")
+    if n_jobs == 0:
+        raise ValueError(f"{pre}n_jobs == 0 has no meaning; use None, a positive int or -1")
+    if n_jobs > 0:
+        return int(n_jobs)
+    n_cpus = os.cpu_count() or 1
+    return max(1, n_cpus + 1 + int(n_jobs))
+
+
+def object_seeds(random_state, n_objects):
+    """Draw one 64-bit seed per object from ``random_state``.
+
+    Kernels give each object a private generator seeded from its entry, so a
+    descriptor depends only on ``random_state`` and the object's position,
+    never on the number of threads or on chunking.
+    """
+    from sklearn.utils import check_random_state
+
+    rng = check_random_state(random_state)
+    return rng.randint(0, np.iinfo(np.int64).max, size=n_objects, dtype=np.int64).astype(np.uint64)
