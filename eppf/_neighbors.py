@@ -1,0 +1,549 @@
+"""Matching of histogram descriptors by symmetric Kullback-Leibler divergence.
+
+The symmetric KL divergence of two histograms ``a`` and ``b`` is
+
+    d(a, b) = sum_i (a_i - b_i) (ln a_i - ln b_i)
+            = sum_i a_i ln a_i + sum_i b_i ln b_i - a . ln(b) - b . ln(a).
+
+The two cross terms are matrix products, so the distances between every row
+of a query block and every row of a reference set cost two GEMMs. Rows are
+processed in chunks so that no more than a chunk of the distance matrix
+(plus the floored histograms and their logarithms) is held at once.
+"""
+
+import numbers
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.utils import check_array
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+__all__ = ["KLNearestNeighbors", "symmetric_kl_distances"]
+
+# Target size of one block of the distance matrix, in float64 entries (64 MiB).
+_BLOCK_ENTRIES = 1 << 23
+# Side of the square blocks used by the leave-one-out search.
+_LOO_BLOCK = 1024
+
+
+def _check_floor(floor, owner):
+    """Return ``"auto"`` or ``floor`` as a positive finite float."""
+    if isinstance(floor, str):
+        if floor != "auto":
+            raise ValueError(f"{owner}: floor must be 'auto' or a positive float, got {floor!r}")
+        return floor
+    if isinstance(floor, bool) or not isinstance(floor, numbers.Real):
+        raise TypeError(f"{owner}: floor must be 'auto' or a positive float, got {type(floor).__name__}")
+    floor = float(floor)
+    if not (np.isfinite(floor) and floor > 0):
+        raise ValueError(f"{owner}: floor must be 'auto' or a positive float, got {floor!r}")
+    return floor
+
+
+def _check_chunk_size(chunk_size, owner):
+    if chunk_size is None:
+        return None
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, numbers.Integral):
+        raise TypeError(f"{owner}: chunk_size must be a positive int or None, got {type(chunk_size).__name__}")
+    if chunk_size < 1:
+        raise ValueError(f"{owner}: chunk_size must be a positive int or None, got {chunk_size}")
+    return int(chunk_size)
+
+
+def _check_renormalize(renormalize, owner):
+    if not isinstance(renormalize, (bool, np.bool_)):
+        raise TypeError(f"{owner}: renormalize must be a bool, got {type(renormalize).__name__}")
+    return bool(renormalize)
+
+
+def _blas_limits(n_jobs, owner):
+    """Context manager limiting BLAS threads to ``n_jobs`` (no-op for None)."""
+    from contextlib import nullcontext
+
+    if n_jobs is None:
+        return nullcontext()
+    from threadpoolctl import threadpool_limits
+
+    from ._validation import check_n_jobs
+
+    return threadpool_limits(limits=check_n_jobs(n_jobs, owner=owner), user_api="blas")
+
+
+def _check_non_negative(X, owner, name="X"):
+    """Raise if the (finite, numeric) array ``X`` holds a negative value."""
+    if X.size and X.min() < 0:
+        raise ValueError(
+            f"Negative values in data passed to {owner} ({name}): histograms must be "
+            f"non-negative, found minimum {X.min()!r}"
+        )
+
+
+def _learn_floor(arrays, owner):
+    """Half the smallest positive value over ``arrays`` (the paper's floor)."""
+    smallest = np.inf
+    for A in arrays:
+        positive = A[A > 0]
+        if positive.size:
+            smallest = min(smallest, float(positive.min()))
+    if not np.isfinite(smallest):
+        raise ValueError(
+            f"{owner}: cannot learn floor='auto' because X has no positive value; "
+            "pass floor as a positive float"
+        )
+    return smallest / 2.0
+
+
+def _prepare(X, floor, renormalize, owner):
+    """Floor, optionally renormalise, and return ``(H, log H, sum H log H)``."""
+    H = np.maximum(X, floor, dtype=np.float64)
+    if renormalize:
+        H /= H.sum(axis=1, keepdims=True)
+    with np.errstate(over="ignore", invalid="ignore"):
+        logH = np.log(H)
+        self_term = np.einsum("ij,ij->i", H, logH)
+    if not np.all(np.isfinite(self_term)):
+        raise ValueError(f"{owner}: histogram values are too large for the KL divergence (overflow in x ln x)")
+    return H, logH, self_term
+
+
+def _kl_block(A, LA, sA, B, LB, sB, out, tmp):
+    """Fill ``out`` with the symmetric KL distances between rows of A and of B.
+
+    ``out`` and ``tmp`` are C-contiguous buffers of shape (len(A), len(B)).
+    """
+    np.matmul(A, LB.T, out=out)
+    np.matmul(LA, B.T, out=tmp)
+    out += tmp
+    np.subtract(sA[:, None], out, out=out)
+    out += sB[None, :]
+    np.maximum(out, 0.0, out=out)  # rounding can leave tiny negative values
+    return out
+
+
+def _auto_chunk(n_ref):
+    return max(1, _BLOCK_ENTRIES // max(1, n_ref))
+
+
+def _iter_kl_chunks(Q, LQ, sQ, R, LR, sR, chunk_size):
+    """Yield ``(start, block)``: distances of query rows ``start:start+len(block)`` to all of R.
+
+    The buffers are reused, so a consumer must be done with a block before
+    asking for the next one.
+    """
+    n_q, n_r = Q.shape[0], R.shape[0]
+    step = chunk_size if chunk_size is not None else _auto_chunk(n_r)
+    step = min(step, max(n_q, 1))
+    buf = np.empty((step, n_r))
+    tmp = np.empty((step, n_r))
+    for start in range(0, n_q, step):
+        stop = min(start + step, n_q)
+        c = stop - start
+        yield start, _kl_block(Q[start:stop], LQ[start:stop], sQ[start:stop], R, LR, sR, buf[:c], tmp[:c])
+
+
+def _validate_histograms(X, owner, name):
+    X = check_array(X, dtype=np.float64, ensure_all_finite=True, input_name=name)
+    _check_non_negative(X, owner, name)
+    return X
+
+
+def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_size=None, n_jobs=None):
+    """All-pairs symmetric Kullback-Leibler divergence between histograms.
+
+    Parameters
+    ----------
+    X : array-like of shape (n_samples_X, n_bins)
+        Non-negative histograms, one per row.
+    Y : array-like of shape (n_samples_Y, n_bins), default=None
+        Second set of histograms. ``None`` means ``Y = X``; the diagonal of
+        the result is then exactly zero.
+    floor : "auto" or float, default="auto"
+        Every bin below ``floor`` (in particular every empty bin) is raised to
+        ``floor`` before taking logarithms. ``"auto"`` uses half the smallest
+        positive value in ``X`` and ``Y`` together, the paper's "common
+        minimum value that is twice smaller than the smallest observed bin
+        value"; on that data the floor only ever replaces zeros.
+    renormalize : bool, default=False
+        Whether each floored histogram is divided by its sum. The paper does
+        not say; by default histograms are left as they are, so flooring adds
+        a little mass to sparse histograms.
+    chunk_size : int, default=None
+        Rows of ``X`` handled per block; temporaries are two blocks of shape
+        ``(chunk_size, n_samples_Y)``. ``None`` picks blocks of about 64 MiB.
+        The result does not depend on it.
+    n_jobs : int, default=None
+        Threads for the BLAS matrix products (joblib's meaning; ``None``
+        leaves the BLAS thread count as it is).
+
+    Returns
+    -------
+    distances : ndarray of shape (n_samples_X, n_samples_Y)
+        ``d(x, y) = sum_i (x_i - y_i)(ln x_i - ln y_i)``, non-negative
+        (rounding below zero is clipped).
+
+    See Also
+    --------
+    KLNearestNeighbors : Nearest-neighbour classification with this distance.
+
+    Notes
+    -----
+    With ``h`` the floored histograms, ``d(x, y) = sum x ln x + sum y ln y -
+    x . ln y - y . ln x``; the two cross terms are computed as matrix
+    products, chunk by chunk. Results agree with a direct evaluation to
+    about ``1e-15`` times ``sum |x ln x|``.
+
+    References
+    ----------
+    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal, E. Steinbach,
+       "Noise-resistant Deep Learning for Object Classification in 3D Point
+       Clouds Using a Point Pair Descriptor", IEEE Robotics and Automation
+       Letters, 2018.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf import symmetric_kl_distances
+    >>> X = np.array([[0.5, 0.5, 0.0], [0.25, 0.25, 0.5]])
+    >>> D = symmetric_kl_distances(X, floor=0.01)
+    >>> D.shape
+    (2, 2)
+    >>> bool(np.isclose(D[0, 1], (0.5 - 0.25) * np.log(2) * 2 + (0.01 - 0.5) * np.log(0.02)))
+    True
+    """
+    owner = "symmetric_kl_distances"
+    floor = _check_floor(floor, owner)
+    renormalize = _check_renormalize(renormalize, owner)
+    chunk_size = _check_chunk_size(chunk_size, owner)
+    X = _validate_histograms(X, owner, "X")
+    same = Y is None
+    if not same:
+        Y = _validate_histograms(Y, owner, "Y")
+        if Y.shape[1] != X.shape[1]:
+            raise ValueError(
+                f"{owner}: X and Y must have the same number of bins, got {X.shape[1]} and {Y.shape[1]}"
+            )
+    if floor == "auto":
+        floor = _learn_floor([X] if same else [X, Y], owner)
+    HX, LX, sX = _prepare(X, floor, renormalize, owner)
+    HY, LY, sY = (HX, LX, sX) if same else _prepare(Y, floor, renormalize, owner)
+    D = np.empty((HX.shape[0], HY.shape[0]))
+    with _blas_limits(n_jobs, owner):
+        for start, block in _iter_kl_chunks(HX, LX, sX, HY, LY, sY, chunk_size):
+            D[start : start + block.shape[0]] = block
+    if same:
+        np.fill_diagonal(D, 0.0)
+    return D
+
+
+def _smallest_k(D, k):
+    """Indices of the ``k`` smallest entries of each row, ties to the lowest index.
+
+    Returns indices of shape (n_rows, k) sorted by increasing distance.
+    """
+    n_rows, n_cols = D.shape
+    if k == 1:
+        return np.argmin(D, axis=1)[:, None]
+    if k < n_cols:
+        part = np.argpartition(D, k - 1, axis=1)
+        kth = np.take_along_axis(D, part[:, k - 1 : k], axis=1)
+        mask = D <= kth  # at least k per row; more only with ties at the k-th value
+        rows, cols = np.nonzero(mask)
+    else:
+        rows, cols = np.divmod(np.arange(n_rows * n_cols), n_cols)
+    vals = D[rows, cols]
+    order = np.lexsort((cols, vals, rows))
+    cols = cols[order]
+    counts = np.bincount(rows, minlength=n_rows)
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    take = starts[:, None] + np.arange(k)[None, :]
+    return cols[take]
+
+
+def _loo_nearest(H, L, s, block=None):
+    """Leave-one-out nearest neighbour of every row of ``H`` among the others.
+
+    Uses the symmetry of the distance: only blocks on or above the block
+    diagonal are computed, each serving both its rows and its columns, so
+    the cost is half that of the full matrix. Ties go to the lowest index.
+
+    Returns ``(indices, distances)``, each of shape (n_samples,).
+    """
+    n = H.shape[0]
+    b = min(block or _LOO_BLOCK, n)
+    best_d = np.full(n, np.inf)
+    best_i = np.full(n, n, dtype=np.intp)
+    buf = np.empty((b, b))
+    tmp = np.empty((b, b))
+
+    def merge(rows, cand_d, cand_i):
+        cur_d, cur_i = best_d[rows], best_i[rows]
+        better = (cand_d < cur_d) | ((cand_d == cur_d) & (cand_i < cur_i))
+        best_d[rows] = np.where(better, cand_d, cur_d)
+        best_i[rows] = np.where(better, cand_i, cur_i)
+
+    for i0 in range(0, n, b):
+        i1 = min(i0 + b, n)
+        for j0 in range(i0, n, b):
+            j1 = min(j0 + b, n)
+            D = _kl_block(H[i0:i1], L[i0:i1], s[i0:i1], H[j0:j1], L[j0:j1], s[j0:j1], buf[: i1 - i0, : j1 - j0], tmp[: i1 - i0, : j1 - j0])
+            if i0 == j0:
+                np.fill_diagonal(D, np.inf)
+            arg = np.argmin(D, axis=1)
+            merge(slice(i0, i1), D[np.arange(i1 - i0), arg], arg + j0)
+            if j0 != i0:
+                arg = np.argmin(D, axis=0)
+                merge(slice(j0, j1), D[arg, np.arange(j1 - j0)], arg + i0)
+    return best_i, best_d
+
+
+class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
+    """k-nearest-neighbour classifier on histograms with symmetric KL divergence.
+
+    The paper's retrieval matcher: descriptors are compared with the
+    symmetric Kullback-Leibler divergence after raising empty bins to a
+    common floor; with ``n_neighbors=1`` a query takes the label of its
+    closest training descriptor.
+
+    Parameters
+    ----------
+    n_neighbors : int, default=1
+        Number of neighbours used by :meth:`predict` and
+        :meth:`predict_proba`.
+    weights : {"uniform", "distance"}, default="uniform"
+        ``"uniform"``: every neighbour votes equally. ``"distance"``: votes
+        are weighted by the inverse distance; neighbours at distance zero,
+        when there are any, take all the weight.
+    floor : "auto" or float, default="auto"
+        Bins below ``floor`` (in particular empty bins) are raised to it
+        before taking logarithms, in training and query histograms alike.
+        ``"auto"`` learns half the smallest positive value of the training
+        ``X`` in :meth:`fit` (the paper's choice).
+    renormalize : bool, default=False
+        Whether floored histograms are divided by their sum (the paper does
+        not say; by default they are not).
+    chunk_size : int, default=None
+        Query rows handled per block; memory beyond the training data is two
+        blocks of ``chunk_size * n_samples_fit`` floats. ``None`` picks blocks
+        of about 64 MiB. Results do not depend on it.
+    n_jobs : int, default=None
+        Threads for the BLAS matrix products that compute the distances
+        (joblib's meaning; ``None`` leaves the BLAS thread count as it is,
+        which honours ``threadpoolctl`` limits set by the caller).
+
+    Attributes
+    ----------
+    classes_ : ndarray of shape (n_classes,)
+        Class labels seen in :meth:`fit`.
+    floor_ : float
+        The floor used for all histograms.
+    n_features_in_ : int
+        Number of bins seen in :meth:`fit`.
+    feature_names_in_ : ndarray of shape (n_features_in_,)
+        Names of features seen in :meth:`fit`, when ``X`` has string column
+        names.
+    n_samples_fit_ : int
+        Number of training histograms.
+
+    See Also
+    --------
+    symmetric_kl_distances : The distance used here.
+    eppf.metrics.leave_one_out_retrieval : The paper's retrieval protocol.
+
+    Notes
+    -----
+    The distance between histograms ``a`` and ``b`` (after flooring) is
+
+    .. math:: d(a, b) = \\sum_i (a_i - b_i) \\ln \\frac{a_i}{b_i}.
+
+    It is computed as two matrix products per block of query rows. Equal
+    distances are resolved in favour of the training sample with the lowest
+    index, and equal votes in favour of the first class in ``classes_``.
+    :meth:`kneighbors` without ``X`` excludes each training point from its
+    own neighbours, which gives leave-one-out retrieval.
+
+    References
+    ----------
+    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal, E. Steinbach,
+       "Noise-resistant Deep Learning for Object Classification in 3D Point
+       Clouds Using a Point Pair Descriptor", IEEE Robotics and Automation
+       Letters, 2018.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf import KLNearestNeighbors
+    >>> X = np.array([[0.7, 0.3, 0.0], [0.6, 0.4, 0.0], [0.0, 0.2, 0.8], [0.1, 0.1, 0.8]])
+    >>> y = ["chair", "chair", "table", "table"]
+    >>> clf = KLNearestNeighbors().fit(X, y)
+    >>> clf.predict([[0.65, 0.35, 0.0], [0.0, 0.3, 0.7]])
+    array(['chair', 'table'], dtype='<U5')
+    >>> clf.kneighbors(return_distance=False).ravel()
+    array([1, 0, 3, 2])
+    """
+
+    def __init__(self, n_neighbors=1, *, weights="uniform", floor="auto", renormalize=False, chunk_size=None, n_jobs=None):
+        self.n_neighbors = n_neighbors
+        self.weights = weights
+        self.floor = floor
+        self.renormalize = renormalize
+        self.chunk_size = chunk_size
+        self.n_jobs = n_jobs
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.positive_only = True
+        return tags
+
+    def _check_params(self):
+        name = type(self).__name__
+        k = self.n_neighbors
+        if isinstance(k, bool) or not isinstance(k, numbers.Integral):
+            raise TypeError(f"{name}: n_neighbors must be a positive int, got {type(k).__name__}")
+        if k < 1:
+            raise ValueError(f"{name}: n_neighbors must be a positive int, got {k}")
+        if self.weights not in ("uniform", "distance"):
+            raise ValueError(f"{name}: weights must be 'uniform' or 'distance', got {self.weights!r}")
+        floor = _check_floor(self.floor, name)
+        renormalize = _check_renormalize(self.renormalize, name)
+        chunk_size = _check_chunk_size(self.chunk_size, name)
+        if self.n_jobs is not None:
+            from ._validation import check_n_jobs
+
+            check_n_jobs(self.n_jobs, owner=name)
+        return floor, renormalize, chunk_size
+
+    def fit(self, X, y):
+        """Store the training histograms and learn the floor.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_bins)
+            Non-negative training histograms.
+        y : array-like of shape (n_samples,)
+            Class labels (numbers or strings).
+
+        Returns
+        -------
+        self : KLNearestNeighbors
+            The fitted classifier.
+        """
+        name = type(self).__name__
+        floor, renormalize, _ = self._check_params()
+        X, y = validate_data(self, X, y, dtype=np.float64, ensure_all_finite=True)
+        check_classification_targets(y)
+        _check_non_negative(X, name)
+        self.floor_ = _learn_floor([X], name) if floor == "auto" else floor
+        self.classes_, self._y = np.unique(y, return_inverse=True)
+        self._renormalize = renormalize
+        self._H, self._L, self._s = _prepare(X, self.floor_, renormalize, name)
+        self.n_samples_fit_ = X.shape[0]
+        return self
+
+    def _query(self, X):
+        check_is_fitted(self)
+        X = validate_data(self, X, dtype=np.float64, ensure_all_finite=True, reset=False)
+        _check_non_negative(X, type(self).__name__)
+        return _prepare(X, self.floor_, self._renormalize, type(self).__name__)
+
+    def kneighbors(self, X=None, n_neighbors=None, return_distance=True):
+        """Find the nearest training histograms of each query.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, n_bins), default=None
+            Query histograms. ``None`` queries the training histograms, each
+            one excluded from its own neighbours (leave-one-out).
+        n_neighbors : int, default=None
+            Number of neighbours; ``None`` uses the ``n_neighbors`` parameter.
+        return_distance : bool, default=True
+            Whether to return the distances too.
+
+        Returns
+        -------
+        neigh_dist : ndarray of shape (n_queries, n_neighbors)
+            Symmetric KL distances to the neighbours, increasing along each
+            row. Only returned if ``return_distance=True``.
+        neigh_ind : ndarray of shape (n_queries, n_neighbors)
+            Indices of the neighbours in the training set.
+        """
+        check_is_fitted(self)
+        name = type(self).__name__
+        _, _, chunk_size = self._check_params()
+        k = self.n_neighbors if n_neighbors is None else n_neighbors
+        if isinstance(k, bool) or not isinstance(k, numbers.Integral):
+            raise TypeError(f"{name}: n_neighbors must be a positive int, got {type(k).__name__}")
+        if k < 1:
+            raise ValueError(f"{name}: n_neighbors must be a positive int, got {k}")
+        loo = X is None
+        if loo:
+            H, L, s = self._H, self._L, self._s
+        else:
+            H, L, s = self._query(X)
+        available = self.n_samples_fit_ - (1 if loo else 0)
+        if k > available:
+            extra = " excluding each query itself" if loo else ""
+            raise ValueError(
+                f"{name}: n_neighbors={k} is more than the {available} training sample(s) available{extra}"
+            )
+        n_q = H.shape[0]
+        ind = np.empty((n_q, k), dtype=np.intp)
+        dist = np.empty((n_q, k)) if return_distance else None
+        with _blas_limits(self.n_jobs, name):
+            for start, D in _iter_kl_chunks(H, L, s, self._H, self._L, self._s, chunk_size):
+                c = D.shape[0]
+                if loo:
+                    D[np.arange(c), np.arange(start, start + c)] = np.inf
+                idx = _smallest_k(D, k)
+                ind[start : start + c] = idx
+                if return_distance:
+                    dist[start : start + c] = np.take_along_axis(D, idx, axis=1)
+        return (dist, ind) if return_distance else ind
+
+    def predict_proba(self, X):
+        """Class probabilities from the votes of the nearest neighbours.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, n_bins)
+            Query histograms.
+
+        Returns
+        -------
+        proba : ndarray of shape (n_queries, n_classes)
+            Share of the (weighted) votes per class, columns ordered as
+            ``classes_``.
+        """
+        check_is_fitted(self)
+        dist, ind = self.kneighbors(X)
+        if self.weights == "uniform":
+            w = np.ones_like(dist)
+        else:
+            zero = dist == 0
+            with np.errstate(divide="ignore"):
+                w = 1.0 / dist
+            rows = zero.any(axis=1)
+            w[rows] = zero[rows].astype(np.float64)
+        labels = self._y[ind]
+        proba = np.zeros((ind.shape[0], self.classes_.size))
+        np.add.at(proba, (np.arange(ind.shape[0])[:, None], labels), w)
+        proba /= proba.sum(axis=1, keepdims=True)
+        return proba
+
+    def predict(self, X):
+        """Predict the class of each query histogram.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, n_bins)
+            Query histograms.
+
+        Returns
+        -------
+        y_pred : ndarray of shape (n_queries,)
+            Predicted labels; a tie between classes goes to the first of them
+            in ``classes_``.
+        """
+        check_is_fitted(self)
+        proba = self.predict_proba(X)
+        return self.classes_[np.argmax(proba, axis=1)]
