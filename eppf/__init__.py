@@ -7,4 +7,6 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 
 __version__ = "0.1.0"
 
-__all__ = []
+from ._neighbors import KLNearestNeighbors, symmetric_kl_distances
+
+__all__ = ["KLNearestNeighbors", "symmetric_kl_distances"]
