@@ -1,0 +1,506 @@
+"""Perturbations of a single point cloud: noise, occlusion, dropout, rotation, resampling.
+
+Every function takes one cloud, an array of shape (n_points, 3) or
+(n_points, 6) whose last three columns are normals, validates it with
+:func:`eppf._validation.check_point_cloud` and returns a new float64 array with
+the same number of columns; the input is never modified. Normals follow the
+points: they are rotated with them and dropped with them. Randomness comes
+from ``random_state`` (anything :func:`sklearn.utils.check_random_state`
+accepts), so a fixed integer gives the same output on every call.
+
+The functions are the building blocks of the synthetic data set
+(:func:`eppf.datasets.make_shapes`) and of the point-cloud transformers in
+:mod:`eppf.preprocessing`.
+"""
+
+import numbers
+
+import numpy as np
+from sklearn.utils import check_random_state
+
+from ._validation import check_point_cloud
+
+__all__ = [
+    "add_gaussian_noise",
+    "occlude",
+    "random_dropout",
+    "random_rotation",
+    "random_rotation_matrix",
+    "resample",
+    "rotate",
+    "rotation_matrix",
+]
+
+_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+# --------------------------------------------------------------------------- #
+# parameter checks
+# --------------------------------------------------------------------------- #
+def _check_real(value, name, owner):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{owner}: {name} must be a real number, got {type(value).__name__}")
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"{owner}: {name} must be finite, got {value!r}")
+    return value
+
+
+def _check_non_negative(value, name, owner):
+    value = _check_real(value, name, owner)
+    if value < 0:
+        raise ValueError(f"{owner}: {name} must be >= 0, got {value!r}")
+    return value
+
+
+def _check_fraction(value, name, owner):
+    value = _check_real(value, name, owner)
+    if not 0.0 <= value < 1.0:
+        raise ValueError(f"{owner}: {name} must be in [0, 1), got {value!r}")
+    return value
+
+
+def _check_vector(value, name, owner):
+    """Return ``value`` as a unit 3-vector; ``'x'``, ``'y'``, ``'z'`` name the axes."""
+    if isinstance(value, str):
+        if value not in _AXES:
+            raise ValueError(f"{owner}: {name} must be 'x', 'y', 'z' or a vector of length 3, got {value!r}")
+        return np.array(_AXES[value])
+    try:
+        vec = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{owner}: {name} must be 'x', 'y', 'z' or a vector of length 3, got {type(value).__name__}") from None
+    if vec.shape != (3,):
+        raise ValueError(f"{owner}: {name} must be a vector of length 3, got shape {vec.shape}")
+    if not np.isfinite(vec).all():
+        raise ValueError(f"{owner}: {name} contains NaN or infinite values")
+    norm = np.sqrt(vec @ vec)
+    if norm < 1e-12:
+        raise ValueError(f"{owner}: {name} must be a nonzero vector")
+    return vec / norm
+
+
+def _n_removed(fraction, n_points):
+    """Points removed for ``fraction``: rounded to nearest, leaving at least 2."""
+    return min(int(np.floor(fraction * n_points + 0.5)), n_points - 2)
+
+
+def _random_unit_vector(rng):
+    while True:
+        vec = rng.normal(size=3)
+        norm = np.sqrt(vec @ vec)
+        if norm > 1e-12:
+            return vec / norm
+
+
+# --------------------------------------------------------------------------- #
+# noise
+# --------------------------------------------------------------------------- #
+def add_gaussian_noise(cloud, sigma, *, relative_to="unit_cube", random_state=None):
+    """Add zero-mean Gaussian noise to the coordinates of a point cloud.
+
+    Each coordinate of each point receives an independent draw from
+    :math:`\\mathcal{N}(0, s^2)`. This is the perturbation of the paper's
+    noise experiment (Fig. 8), where the standard deviation is measured in
+    units of the unit cube that the data set is scaled into.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    sigma : float
+        Standard deviation of the noise, >= 0. ``0`` returns a copy.
+    relative_to : {"unit_cube", "none"}, default="unit_cube"
+        ``"unit_cube"``: ``s = sigma * L`` where ``L`` is the largest side of
+        the cloud's axis-aligned bounding box, so ``sigma=0.06`` means 6 % of
+        the cube the cloud fits in, whatever its size. ``"none"``: ``s = sigma``
+        in the cloud's own units.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the noise.
+
+    Returns
+    -------
+    noisy : ndarray of shape (n_points, 3) or (n_points, 6)
+        The perturbed cloud. Normals, when present, are copied unchanged and
+        so describe the noise-free surface: re-estimate them from the noisy
+        points if the experiment needs normals consistent with the data.
+
+    See Also
+    --------
+    occlude : View-dependent removal of points.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import add_gaussian_noise
+    >>> cloud = np.random.RandomState(0).uniform(size=(100, 3))
+    >>> noisy = add_gaussian_noise(cloud, 0.01, random_state=0)
+    >>> noisy.shape
+    (100, 3)
+    """
+    owner = "add_gaussian_noise"
+    arr = check_point_cloud(cloud, owner=owner)
+    sigma = _check_non_negative(sigma, "sigma", owner)
+    if relative_to not in ("unit_cube", "none"):
+        raise ValueError(f"{owner}: relative_to must be 'unit_cube' or 'none', got {relative_to!r}")
+    rng = check_random_state(random_state)
+    if relative_to == "unit_cube":
+        sigma = sigma * float(np.ptp(arr[:, :3], axis=0).max())
+    return _add_noise(arr, sigma, rng)
+
+
+def _add_noise(arr, sigma, rng):
+    """Kernel of :func:`add_gaussian_noise` on a validated array, in place."""
+    if sigma > 0:
+        arr[:, :3] += rng.normal(scale=sigma, size=(arr.shape[0], 3))
+    return arr
+
+
+# --------------------------------------------------------------------------- #
+# point removal
+# --------------------------------------------------------------------------- #
+def occlude(cloud, fraction, *, direction=None, random_state=None):
+    """Remove the far side of a point cloud as seen from one viewing direction.
+
+    A sensor that looks at an object from one side does not see the side
+    facing away from it. This function models that self-occlusion by a plane
+    cut: the sensor sits far away along ``direction``, every point is ranked
+    by its projection ``p . direction`` (its nearness to the sensor), and the
+    ``fraction`` of points with the smallest projections, those behind a plane
+    orthogonal to ``direction``, are removed. The removed points therefore all
+    lie on one side of that plane; for a sphere and ``fraction=0.5`` exactly
+    the hemisphere facing away from the sensor is removed.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    fraction : float
+        Share of the points to remove, ``0 <= fraction < 1``. The number
+        removed is ``round(fraction * n_points)``, but at least two points are
+        always kept.
+    direction : {"x", "y", "z"} or array-like of shape (3,), default=None
+        Direction from the object towards the sensor (need not be unit
+        length). ``None`` draws it uniformly on the unit sphere from
+        ``random_state``.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the random direction; unused when ``direction`` is given.
+
+    Returns
+    -------
+    visible : ndarray of shape (n_kept, 3) or (n_kept, 6)
+        The points facing the sensor, with their normals, in their original
+        order.
+
+    See Also
+    --------
+    random_dropout : Removal of points independent of geometry.
+
+    Notes
+    -----
+    Ties in the projection are broken by point order, so the result is
+    deterministic for a given direction.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import occlude
+    >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
+    >>> occlude(cloud, 0.3, direction="z").shape
+    (70, 3)
+    """
+    owner = "occlude"
+    arr = check_point_cloud(cloud, owner=owner)
+    fraction = _check_fraction(fraction, "fraction", owner)
+    if direction is None:
+        view = _random_unit_vector(check_random_state(random_state))
+    else:
+        view = _check_vector(direction, "direction", owner)
+    return _occlude(arr, fraction, view)
+
+
+def _occlude(arr, fraction, view):
+    """Kernel of :func:`occlude` on a validated array and a unit direction."""
+    n_remove = _n_removed(fraction, arr.shape[0])
+    if n_remove == 0:
+        return arr
+    order = np.argsort(arr[:, :3] @ view, kind="stable")
+    keep = np.ones(arr.shape[0], dtype=bool)
+    keep[order[:n_remove]] = False
+    return arr[keep]
+
+
+def random_dropout(cloud, fraction, *, random_state=None):
+    """Remove a random subset of the points of a cloud.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    fraction : float
+        Share of the points to remove, ``0 <= fraction < 1``. The number
+        removed is ``round(fraction * n_points)``, but at least two points are
+        always kept. Every subset of that size is equally likely.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the choice of points.
+
+    Returns
+    -------
+    kept : ndarray of shape (n_kept, 3) or (n_kept, 6)
+        The remaining points, with their normals, in their original order.
+
+    See Also
+    --------
+    occlude : View-dependent removal of points.
+    resample : Draw a fixed number of points.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import random_dropout
+    >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
+    >>> random_dropout(cloud, 0.25, random_state=0).shape
+    (75, 3)
+    """
+    owner = "random_dropout"
+    arr = check_point_cloud(cloud, owner=owner)
+    fraction = _check_fraction(fraction, "fraction", owner)
+    rng = check_random_state(random_state)
+    n = arr.shape[0]
+    n_remove = _n_removed(fraction, n)
+    if n_remove == 0:
+        return arr
+    keep = np.sort(rng.choice(n, size=n - n_remove, replace=False))
+    return arr[keep]
+
+
+def resample(cloud, n_points, *, random_state=None):
+    """Draw a fixed number of points from a cloud.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n, 3) or (n, 6)
+        Coordinates, optionally followed by unit normals.
+    n_points : int
+        Number of points to return, >= 2. When ``n_points <= n`` the points
+        are drawn without replacement. When ``n_points > n`` every point is
+        kept once and the ``n_points - n`` extra points are drawn with
+        replacement, so no information is lost.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the draw.
+
+    Returns
+    -------
+    sampled : ndarray of shape (n_points, 3) or (n_points, 6)
+        The drawn points with their normals, in random order.
+
+    See Also
+    --------
+    random_dropout : Remove a share of the points.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import resample
+    >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
+    >>> resample(cloud, 64, random_state=0).shape
+    (64, 3)
+    >>> resample(cloud, 256, random_state=0).shape
+    (256, 3)
+    """
+    owner = "resample"
+    arr = check_point_cloud(cloud, owner=owner)
+    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
+        raise TypeError(f"{owner}: n_points must be an int, got {type(n_points).__name__}")
+    if n_points < 2:
+        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
+    rng = check_random_state(random_state)
+    n = arr.shape[0]
+    if n_points <= n:
+        index = rng.choice(n, size=int(n_points), replace=False)
+    else:
+        extra = rng.randint(0, n, size=int(n_points) - n)
+        index = rng.permutation(np.concatenate([np.arange(n), extra]))
+    return arr[index]
+
+
+# --------------------------------------------------------------------------- #
+# rotation
+# --------------------------------------------------------------------------- #
+def rotation_matrix(axis, angle):
+    """Matrix of the rotation by ``angle`` about ``axis`` (right-hand rule).
+
+    Parameters
+    ----------
+    axis : {"x", "y", "z"} or array-like of shape (3,)
+        Rotation axis; a vector need not be unit length.
+    angle : float
+        Angle in radians.
+
+    Returns
+    -------
+    rotation : ndarray of shape (3, 3)
+        Proper rotation matrix ``R`` (``R @ R.T = I``, ``det R = 1``); a point
+        ``p`` (row) maps to ``p @ R.T``.
+
+    Notes
+    -----
+    Rodrigues' formula: ``R = I + sin(a) K + (1 - cos(a)) K^2`` with ``K`` the
+    cross-product matrix of the unit axis.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import rotation_matrix
+    >>> np.round(rotation_matrix("z", np.pi / 2) @ [1.0, 0.0, 0.0], 12)
+    array([0., 1., 0.])
+    """
+    owner = "rotation_matrix"
+    u = _check_vector(axis, "axis", owner)
+    angle = _check_real(angle, "angle", owner)
+    k = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def random_rotation_matrix(*, axis=None, random_state=None):
+    """Draw a random rotation matrix.
+
+    Parameters
+    ----------
+    axis : {"x", "y", "z"} or array-like of shape (3,), default=None
+        ``None`` draws uniformly from all rotations (the Haar measure on
+        SO(3)). Otherwise the rotation is about this axis, e.g. the up axis
+        ``"z"`` for upright objects, by an angle uniform in [0, 2 pi).
+    random_state : int, RandomState instance or None, default=None
+        Seed of the draw.
+
+    Returns
+    -------
+    rotation : ndarray of shape (3, 3)
+        Proper rotation matrix.
+
+    Notes
+    -----
+    A uniform rotation is the matrix of a unit quaternion whose four
+    components are independent standard normal draws, normalised; the
+    normalised Gaussian is uniform on the 3-sphere, and the double cover maps
+    that uniform measure to the Haar measure on SO(3).
+    """
+    owner = "random_rotation_matrix"
+    rng = check_random_state(random_state)
+    if axis is not None:
+        u = _check_vector(axis, "axis", owner)
+        return rotation_matrix(u, rng.uniform(0.0, 2.0 * np.pi))
+    while True:
+        q = rng.normal(size=4)
+        norm = np.sqrt(q @ q)
+        if norm > 1e-12:
+            break
+    w, x, y, z = q / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _rotate(arr, rotation, center):
+    out = arr.copy()
+    if center == "centroid":
+        origin = arr[:, :3].mean(axis=0)
+        out[:, :3] = (arr[:, :3] - origin) @ rotation.T + origin
+    else:
+        out[:, :3] = arr[:, :3] @ rotation.T
+    if arr.shape[1] == 6:
+        out[:, 3:] = arr[:, 3:] @ rotation.T
+    return out
+
+
+def _check_center(center, owner):
+    if center not in ("centroid", "origin"):
+        raise ValueError(f"{owner}: center must be 'centroid' or 'origin', got {center!r}")
+
+
+def rotate(cloud, rotation, *, center="centroid"):
+    """Rotate a point cloud and its normals by a given rotation matrix.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    rotation : array-like of shape (3, 3)
+        Proper rotation matrix ``R``; each point ``p`` becomes ``R p`` (about
+        the centre) and each normal ``n`` becomes ``R n``.
+    center : {"centroid", "origin"}, default="centroid"
+        Fixed point of the rotation: the mean of the points, so the object
+        stays where it is, or the coordinate origin.
+
+    Returns
+    -------
+    rotated : ndarray of shape (n_points, 3) or (n_points, 6)
+        The rotated cloud.
+
+    See Also
+    --------
+    rotation_matrix, random_rotation
+    """
+    owner = "rotate"
+    arr = check_point_cloud(cloud, owner=owner)
+    _check_center(center, owner)
+    try:
+        rot = np.asarray(rotation, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{owner}: rotation must be a (3, 3) array, got {type(rotation).__name__}") from None
+    if rot.shape != (3, 3):
+        raise ValueError(f"{owner}: rotation must have shape (3, 3), got shape {rot.shape}")
+    if not np.isfinite(rot).all():
+        raise ValueError(f"{owner}: rotation contains NaN or infinite values")
+    if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise ValueError(f"{owner}: rotation must be a proper rotation matrix (orthonormal, determinant +1)")
+    return _rotate(arr, rot, center)
+
+
+def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
+    """Rotate a point cloud and its normals by a random rotation.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    axis : {"x", "y", "z"} or array-like of shape (3,), default=None
+        ``None`` draws a rotation uniformly from SO(3); otherwise the rotation
+        is about this axis (e.g. ``"z"``, the up axis of upright objects) by
+        a uniform angle.
+    center : {"centroid", "origin"}, default="centroid"
+        Fixed point of the rotation: the mean of the points or the origin.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the rotation.
+
+    Returns
+    -------
+    rotated : ndarray of shape (n_points, 3) or (n_points, 6)
+        The rotated cloud. Pairwise distances are unchanged.
+
+    See Also
+    --------
+    random_rotation_matrix : The matrix this function applies.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import random_rotation
+    >>> cloud = np.random.RandomState(0).normal(size=(10, 3))
+    >>> rotated = random_rotation(cloud, random_state=0)
+    >>> bool(np.allclose(np.linalg.norm(rotated[0] - rotated[1]),
+    ...                  np.linalg.norm(cloud[0] - cloud[1])))
+    True
+    """
+    owner = "random_rotation"
+    arr = check_point_cloud(cloud, owner=owner)
+    _check_center(center, owner)
+    if axis is not None:
+        axis = _check_vector(axis, "axis", owner)
+    rot = random_rotation_matrix(axis=axis, random_state=random_state)
+    return _rotate(arr, rot, center)
