@@ -276,9 +276,11 @@ def _lzf_decompress(src, expected, path, owner, base):
 def _parse_pcd_header(data, path, owner):
     header, pos, lineno = {}, 0, 0
     while True:
+        if pos >= len(data):
+            raise ValueError(f"{owner}: {path!r} line {lineno}: header ends before its DATA line")
         end = data.find(b"\n", pos)
         if end < 0:
-            raise ValueError(f"{owner}: {path!r} line {lineno + 1}: header ends before its DATA line")
+            end = len(data)
         raw = data[pos:end]
         lineno += 1
         pos = end + 1

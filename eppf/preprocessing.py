@@ -1,0 +1,293 @@
+"""Perturbations and sampling of point clouds, as scikit-learn transformers.
+
+Each transformer maps a list of point clouds (arrays of shape (n_i, 3) or
+(n_i, 6), normals last) to a new list, so it can stand in a
+:class:`~sklearn.pipeline.Pipeline` before a descriptor transformer, or be
+applied once to a data set (``GaussianNoise(0.02).fit_transform(data.data)``).
+``fit`` learns nothing; the transformers work unfitted too.
+
+Randomness: one seed per object is drawn from ``random_state``
+(:func:`eppf._validation.object_seeds`), and object ``k`` is perturbed with its
+own generator. A fixed integer ``random_state`` therefore gives the same
+output on every call and for any split of the data into chunks; a
+``RandomState`` instance gives fresh draws on each call (augmentation).
+
+The work on one cloud is done by the functions of :mod:`eppf._perturb`;
+:func:`sample_mesh` turns meshes (see :func:`eppf.io.read_mesh`) into clouds.
+"""
+
+import numbers
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+
+from . import _perturb
+from ._sampling import sample_mesh
+from ._validation import check_point_clouds, object_seeds
+
+__all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "Resampler", "sample_mesh"]
+
+
+def _object_rng(seed):
+    """A NumPy RandomState from one 64-bit object seed (all 64 bits kept)."""
+    seed = int(seed)
+    return np.random.RandomState(np.array([seed & 0xFFFFFFFF, seed >> 32], dtype=np.uint32))
+
+
+class _CloudTransformer(TransformerMixin, BaseEstimator):
+    """Shared plumbing: validation, per-object seeding, tags."""
+
+    def _check_params(self):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def _apply(self, cloud, rng):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def fit(self, X, y=None):
+        """Check the parameters and the clouds; nothing is learned.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds, normals in the last three columns.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : object
+            The transformer.
+        """
+        self._check_params()
+        check_point_clouds(X, owner=type(self).__name__)
+        return self
+
+    def transform(self, X):
+        """Perturb every cloud.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds, normals in the last three columns.
+
+        Returns
+        -------
+        X_new : list of ndarray
+            New float64 clouds; the input is not modified. Normals follow
+            their points.
+        """
+        self._check_params()
+        clouds = check_point_clouds(X, owner=type(self).__name__)
+        seeds = object_seeds(self.random_state, len(clouds))
+        return [self._apply(cloud, _object_rng(seed)) for cloud, seed in zip(clouds, seeds)]
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.requires_fit = False
+        tags.input_tags.two_d_array = False
+        tags.input_tags.three_d_array = True
+        return tags
+
+
+class GaussianNoise(_CloudTransformer):
+    """Add Gaussian noise to the coordinates of point clouds.
+
+    The perturbation of the paper's noise experiment (Fig. 8): each
+    coordinate receives independent noise of standard deviation
+    ``sigma`` in units of the cube the object fits in. Normals are kept as
+    they are (re-estimate them from the noisy points to model a real sensor).
+
+    Parameters
+    ----------
+    sigma : float, default=0.01
+        Standard deviation of the noise, >= 0.
+    relative_to : {"unit_cube", "none"}, default="unit_cube"
+        ``"unit_cube"``: ``sigma`` is a fraction of the largest side of each
+        cloud's bounding box. ``"none"``: ``sigma`` is in the cloud's units.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the noise; see the module notes on per-object seeds.
+
+    See Also
+    --------
+    RandomDropout : Remove random points.
+    Occlusion : Remove the side of an object facing away from a sensor.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.preprocessing import GaussianNoise
+    >>> clouds = [np.random.RandomState(0).uniform(size=(50, 3))]
+    >>> noisy = GaussianNoise(0.05, random_state=0).fit_transform(clouds)
+    >>> noisy[0].shape
+    (50, 3)
+    """
+
+    def __init__(self, sigma=0.01, *, relative_to="unit_cube", random_state=None):
+        self.sigma = sigma
+        self.relative_to = relative_to
+        self.random_state = random_state
+
+    def _check_params(self):
+        owner = type(self).__name__
+        _perturb._check_non_negative(self.sigma, "sigma", owner)
+        if self.relative_to not in ("unit_cube", "none"):
+            raise ValueError(f"{owner}: relative_to must be 'unit_cube' or 'none', got {self.relative_to!r}")
+
+    def _apply(self, cloud, rng):
+        return _perturb.add_gaussian_noise(cloud, self.sigma, relative_to=self.relative_to, random_state=rng)
+
+
+class RandomDropout(_CloudTransformer):
+    """Remove a random share of the points of each cloud.
+
+    Parameters
+    ----------
+    fraction : float, default=0.1
+        Share of the points to remove, ``0 <= fraction < 1``; at least two
+        points are always kept.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the choice of points.
+
+    See Also
+    --------
+    Occlusion : View-dependent removal of points.
+    Resampler : Draw a fixed number of points.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.preprocessing import RandomDropout
+    >>> clouds = [np.random.RandomState(0).uniform(size=(100, 3))]
+    >>> RandomDropout(0.25, random_state=0).fit_transform(clouds)[0].shape
+    (75, 3)
+    """
+
+    def __init__(self, fraction=0.1, *, random_state=None):
+        self.fraction = fraction
+        self.random_state = random_state
+
+    def _check_params(self):
+        _perturb._check_fraction(self.fraction, "fraction", type(self).__name__)
+
+    def _apply(self, cloud, rng):
+        return _perturb.random_dropout(cloud, self.fraction, random_state=rng)
+
+
+class Occlusion(_CloudTransformer):
+    """Remove the side of each cloud that faces away from a sensor.
+
+    The points are ranked by their projection on the viewing direction and
+    the ``fraction`` farthest from the sensor are removed (a plane cut); see
+    :func:`eppf._perturb.occlude`.
+
+    Parameters
+    ----------
+    fraction : float, default=0.3
+        Share of the points to remove, ``0 <= fraction < 1``.
+    direction : {"x", "y", "z"} or array-like of shape (3,), default=None
+        Direction from the object to the sensor, the same for every cloud.
+        ``None`` draws one direction per cloud uniformly on the sphere.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the random directions.
+
+    See Also
+    --------
+    RandomDropout : Removal independent of geometry.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.preprocessing import Occlusion
+    >>> clouds = [np.random.RandomState(0).normal(size=(100, 3))]
+    >>> Occlusion(0.3, direction="z").fit_transform(clouds)[0].shape
+    (70, 3)
+    """
+
+    def __init__(self, fraction=0.3, *, direction=None, random_state=None):
+        self.fraction = fraction
+        self.direction = direction
+        self.random_state = random_state
+
+    def _check_params(self):
+        owner = type(self).__name__
+        _perturb._check_fraction(self.fraction, "fraction", owner)
+        if self.direction is not None:
+            _perturb._check_vector(self.direction, "direction", owner)
+
+    def _apply(self, cloud, rng):
+        return _perturb.occlude(cloud, self.fraction, direction=self.direction, random_state=rng)
+
+
+class RandomRotation(_CloudTransformer):
+    """Rotate each cloud (and its normals) by its own random rotation.
+
+    Parameters
+    ----------
+    axis : {"x", "y", "z"} or array-like of shape (3,), default=None
+        ``None`` draws rotations uniformly from SO(3); otherwise rotations are
+        about this axis by a uniform angle.
+    center : {"centroid", "origin"}, default="centroid"
+        Fixed point of the rotation.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the rotations.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.preprocessing import RandomRotation
+    >>> clouds = [np.random.RandomState(0).normal(size=(10, 3))]
+    >>> RandomRotation(axis="z", random_state=0).fit_transform(clouds)[0].shape
+    (10, 3)
+    """
+
+    def __init__(self, *, axis=None, center="centroid", random_state=None):
+        self.axis = axis
+        self.center = center
+        self.random_state = random_state
+
+    def _check_params(self):
+        owner = type(self).__name__
+        if self.axis is not None:
+            _perturb._check_vector(self.axis, "axis", owner)
+        if self.center not in ("centroid", "origin"):
+            raise ValueError(f"{owner}: center must be 'centroid' or 'origin', got {self.center!r}")
+
+    def _apply(self, cloud, rng):
+        return _perturb.random_rotation(cloud, axis=self.axis, center=self.center, random_state=rng)
+
+
+class Resampler(_CloudTransformer):
+    """Draw a fixed number of points from each cloud.
+
+    Clouds with at least ``n_points`` points are subsampled without
+    replacement; smaller ones keep every point and repeat random ones.
+
+    Parameters
+    ----------
+    n_points : int, default=2048
+        Points per output cloud, >= 2 (the paper feeds PointNet 2,048).
+    random_state : int, RandomState instance or None, default=None
+        Seed of the draw.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.preprocessing import Resampler
+    >>> clouds = [np.zeros((5, 3)) + np.arange(5)[:, None], np.ones((300, 3)) * np.arange(300)[:, None]]
+    >>> [c.shape for c in Resampler(64, random_state=0).fit_transform(clouds)]
+    [(64, 3), (64, 3)]
+    """
+
+    def __init__(self, n_points=2048, *, random_state=None):
+        self.n_points = n_points
+        self.random_state = random_state
+
+    def _check_params(self):
+        owner = type(self).__name__
+        if isinstance(self.n_points, bool) or not isinstance(self.n_points, numbers.Integral):
+            raise TypeError(f"{owner}: n_points must be an int, got {type(self.n_points).__name__}")
+        if self.n_points < 2:
+            raise ValueError(f"{owner}: n_points must be >= 2, got {self.n_points}")
+
+    def _apply(self, cloud, rng):
+        return _perturb.resample(cloud, int(self.n_points), random_state=rng)
