@@ -1,0 +1,470 @@
+# cython: language_level=3
+"""Compiled kernels of the baseline descriptors: ESF and Wahl et al.
+
+Python allocates every array (outputs and per-thread scratch); the kernels
+fill them. Work is parallel over objects (``prange``); each object has a
+private generator seeded from one 64-bit seed, so the output never depends on
+the number of threads. An object whose samples cannot be drawn (for example
+all points collinear for ESF) gets ``status[k] = 1`` and a zero row; the
+Python layer turns that into a ``ValueError``.
+
+ESF follows PCL 1.13's ``ESFEstimation`` (Wohlkinger & Vincze 2011): see
+``eppf/_esf.py`` for the description of every step.
+"""
+import numpy as np
+
+cimport numpy as cnp
+from cython.parallel cimport prange, threadid
+from libc.math cimport sqrt, acos, atan2, floor, ceil, fabs, M_PI
+from libc.stdint cimport int8_t, int32_t, int64_t, uint32_t, uint64_t
+from libc.string cimport memset
+
+from ._common cimport splitmix64, rand_below
+
+cnp.import_array()
+
+cdef enum:
+    # ESF histograms, in PCL's order.
+    A3_IN = 0
+    A3_OUT = 1
+    A3_MIX = 2
+    D3_IN = 3
+    D3_OUT = 4
+    D3_MIX = 5
+    D2_IN = 6
+    D2_OUT = 7
+    D2_MIX = 8
+    D2_RATIO = 9
+    # Line classes.
+    LINE_IN = 0
+    LINE_OUT = 1
+    LINE_MIX = 2
+
+
+cdef inline int _pcl_cell(double v, int half, int grid) noexcept nogil:
+    """PCL's voxel of a coordinate in grid units centred on ``half``."""
+    cdef int c
+    if v < 0.0:
+        c = <int>floor(v) + half
+    else:
+        c = <int>ceil(v) + half - 1
+    if c < 0:
+        return 0
+    if c >= grid:
+        return grid - 1
+    return c
+
+
+cdef inline int _bit(const uint64_t* bits, int64_t idx) noexcept nogil:
+    return <int>((bits[idx >> 6] >> (idx & 63)) & 1)
+
+
+cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
+                     int* n_in, int* n_total, double* ratio) noexcept nogil:
+    """Classify the voxel line from ``a`` towards ``b`` like PCL's ``lci``.
+
+    A 3D Bresenham walk along the dominant axis (length L) that visits
+    max(L, 1) voxels: the start voxel and the next L - 1, not the end voxel
+    (PCL's count). Minor axes step when their error term is positive, before
+    the major step. Returns LINE_IN when at most one visited voxel is empty,
+    LINE_OUT when at most 7 are occupied, LINE_MIX otherwise (with ``ratio``
+    = occupied / visited).
+    """
+    cdef int d[3]
+    cdef int s[3]
+    cdef int64_t stride[3]
+    cdef int ax, m1, m2, L, i, occ = 0, cnt
+    cdef int64_t idx, st1, st2, stmaj
+    cdef int e1, e2, t1, t2, two1, two2, twoL
+    stride[0] = <int64_t>grid * grid
+    stride[1] = grid
+    stride[2] = 1
+    for ax in range(3):
+        d[ax] = b[ax] - a[ax]
+        s[ax] = -1 if d[ax] < 0 else 1
+        if d[ax] < 0:
+            d[ax] = -d[ax]
+    # PCL's tie order: x if it is not smaller than y and z, then y, then z.
+    if d[0] >= d[1] and d[0] >= d[2]:
+        ax = 0; m1 = 1; m2 = 2
+    elif d[1] >= d[0] and d[1] >= d[2]:
+        ax = 1; m1 = 0; m2 = 2
+    else:
+        ax = 2; m1 = 1; m2 = 0
+    L = d[ax]
+    twoL = 2 * L
+    two1 = 2 * d[m1]
+    two2 = 2 * d[m2]
+    e1 = two1 - L
+    e2 = two2 - L
+    stmaj = s[ax] * stride[ax]
+    st1 = s[m1] * stride[m1]
+    st2 = s[m2] * stride[m2]
+    idx = a[0] * stride[0] + a[1] * stride[1] + a[2]
+    for i in range(1, L):
+        occ += _bit(bits, idx)
+        t1 = e1 > 0
+        t2 = e2 > 0
+        idx += stmaj + t1 * st1 + t2 * st2
+        e1 += two1 - t1 * twoL
+        e2 += two2 - t2 * twoL
+    occ += _bit(bits, idx)
+    cnt = L if L > 1 else 1
+    n_in[0] = occ
+    n_total[0] = cnt
+    if occ >= cnt - 1:
+        return LINE_IN
+    if occ <= 7:
+        return LINE_OUT
+    ratio[0] = <double>occ / <double>cnt
+    return LINE_MIX
+
+
+cdef inline int _round_bin(double v, int n_bins) noexcept nogil:
+    """PCL's ``round(v * (n_bins - 1))`` for v in [0, 1], clipped."""
+    cdef int i = <int>floor(v * (n_bins - 1) + 0.5)
+    if i < 0:
+        return 0
+    if i >= n_bins:
+        return n_bins - 1
+    return i
+
+
+cdef inline double _abs_cos(double ax, double ay, double az,
+                            double bx, double by, double bz, double norm) noexcept nogil:
+    """|a . b| / norm, clipped to 1."""
+    cdef double c = fabs(ax * bx + ay * by + az * bz) / norm
+    return c if c < 1.0 else 1.0
+
+
+cdef int _esf_object(const double* points, int64_t start, int64_t n,
+                     uint64_t seed, int n_triplets, int grid, int n_bins,
+                     double area_eps,
+                     double* pts, uint64_t* bits, double* d2v, double* d3v,
+                     int8_t* cls2, int8_t* cls3, double* out) noexcept nogil:
+    """One object's ESF into ``out`` (10 * n_bins, zeroed). Returns a status."""
+    cdef int64_t i, k, idx, n_words
+    cdef int half = grid // 2
+    cdef double cx = 0.0, cy = 0.0, cz = 0.0, r2, rmax = 0.0, sc
+    cdef int cell[3]
+    cdef int c1[3]
+    cdef int c2[3]
+    cdef int c3[3]
+    cdef int x, y, z, ax, bin_, ok
+    cdef uint64_t state = seed
+    cdef int64_t attempts = 0, max_attempts = 1000 + <int64_t>200 * n_triplets
+    cdef uint32_t i1, i2, i3
+    cdef double a, b, c, s, heron, inv
+    cdef double v21x, v21y, v21z, v31x, v31y, v31z, v23x, v23y, v23z
+    cdef int th1, th2, th3, w12, w13, w23
+    cdef int in12, in13, in23, n12, n13, n23, in_sum, n_sum
+    cdef double ratio = 0.0, pih = M_PI / 2.0, maxd2 = 0.0, maxd3 = 0.0, total
+    cdef int t = 0
+    cdef double weights[10]
+    # Centre on the mean and scale the farthest point to radius grid / 2.
+    for i in range(n):
+        cx += points[3 * (start + i) + 0]
+        cy += points[3 * (start + i) + 1]
+        cz += points[3 * (start + i) + 2]
+    cx /= n
+    cy /= n
+    cz /= n
+    for i in range(n):
+        pts[3 * i] = points[3 * (start + i) + 0] - cx
+        pts[3 * i + 1] = points[3 * (start + i) + 1] - cy
+        pts[3 * i + 2] = points[3 * (start + i) + 2] - cz
+        r2 = pts[3 * i] * pts[3 * i] + pts[3 * i + 1] * pts[3 * i + 1] + pts[3 * i + 2] * pts[3 * i + 2]
+        if r2 > rmax:
+            rmax = r2
+    sc = half / sqrt(rmax)
+    for i in range(3 * n):
+        pts[i] *= sc
+    # Occupancy: every point's voxel and its 26 neighbours (PCL's voxelize9).
+    n_words = (<int64_t>grid * grid * grid + 63) // 64
+    memset(bits, 0, n_words * sizeof(uint64_t))
+    for i in range(n):
+        for ax in range(3):
+            cell[ax] = _pcl_cell(pts[3 * i + ax], half, grid)
+        for x in range(cell[0] - 1, cell[0] + 2):
+            if x < 0 or x >= grid:
+                continue
+            for y in range(cell[1] - 1, cell[1] + 2):
+                if y < 0 or y >= grid:
+                    continue
+                for z in range(cell[2] - 1, cell[2] + 2):
+                    if z < 0 or z >= grid:
+                        continue
+                    idx = (<int64_t>x * grid + y) * grid + z
+                    bits[idx >> 6] |= (<uint64_t>1) << (idx & 63)
+    while t < n_triplets:
+        attempts += 1
+        if attempts > max_attempts:
+            return 1
+        i1 = rand_below(&state, <uint32_t>n)
+        i2 = rand_below(&state, <uint32_t>n)
+        i3 = rand_below(&state, <uint32_t>n)
+        if i1 == i2 or i1 == i3 or i2 == i3:
+            continue
+        v21x = pts[3 * i2] - pts[3 * i1]
+        v21y = pts[3 * i2 + 1] - pts[3 * i1 + 1]
+        v21z = pts[3 * i2 + 2] - pts[3 * i1 + 2]
+        v31x = pts[3 * i3] - pts[3 * i1]
+        v31y = pts[3 * i3 + 1] - pts[3 * i1 + 1]
+        v31z = pts[3 * i3 + 2] - pts[3 * i1 + 2]
+        v23x = pts[3 * i2] - pts[3 * i3]
+        v23y = pts[3 * i2 + 1] - pts[3 * i3 + 1]
+        v23z = pts[3 * i2 + 2] - pts[3 * i3 + 2]
+        a = sqrt(v21x * v21x + v21y * v21y + v21z * v21z)
+        b = sqrt(v31x * v31x + v31y * v31y + v31z * v31z)
+        c = sqrt(v23x * v23x + v23y * v23y + v23z * v23z)
+        s = (a + b + c) * 0.5
+        heron = s * (s - a) * (s - b) * (s - c)
+        if heron <= area_eps:
+            continue
+        # A3: the triangle's angles folded into [0, pi/2] (|cos|).
+        th1 = _round_bin(acos(_abs_cos(v21x, v21y, v21z, v31x, v31y, v31z, a * b)) / pih, n_bins)
+        th2 = _round_bin(acos(_abs_cos(v23x, v23y, v23z, v31x, v31y, v31z, c * b)) / pih, n_bins)
+        th3 = _round_bin(acos(_abs_cos(v23x, v23y, v23z, v21x, v21y, v21z, c * a)) / pih, n_bins)
+        # D2 and the three lines.
+        for ax in range(3):
+            c1[ax] = _pcl_cell(pts[3 * i1 + ax], half, grid)
+            c2[ax] = _pcl_cell(pts[3 * i2 + ax], half, grid)
+            c3[ax] = _pcl_cell(pts[3 * i3 + ax], half, grid)
+        d2v[3 * t] = a
+        d2v[3 * t + 1] = b
+        d2v[3 * t + 2] = c
+        w12 = _lci(bits, grid, c1, c2, &in12, &n12, &ratio)
+        if w12 == LINE_MIX:
+            out[D2_RATIO * n_bins + _round_bin(ratio, n_bins)] += 1.0
+        w13 = _lci(bits, grid, c1, c3, &in13, &n13, &ratio)
+        if w13 == LINE_MIX:
+            out[D2_RATIO * n_bins + _round_bin(ratio, n_bins)] += 1.0
+        w23 = _lci(bits, grid, c2, c3, &in23, &n23, &ratio)
+        if w23 == LINE_MIX:
+            out[D2_RATIO * n_bins + _round_bin(ratio, n_bins)] += 1.0
+        cls2[3 * t] = <int8_t>w12
+        cls2[3 * t + 1] = <int8_t>w13
+        cls2[3 * t + 2] = <int8_t>w23
+        # D3: square root of the area; the triangle's class from its lines.
+        d3v[t] = sqrt(sqrt(heron))
+        in_sum = in12 + in13 + in23
+        n_sum = n12 + n13 + n23
+        if in_sum <= 21:
+            k = A3_OUT
+            cls3[t] = LINE_OUT
+        elif n_sum - in_sum < 4:
+            k = A3_IN
+            cls3[t] = LINE_IN
+        else:
+            k = A3_MIX
+            cls3[t] = LINE_MIX
+        # Each angle weighted by the voxel count of the opposite side / 32.
+        out[k * n_bins + th1] += n23 / 32.0
+        out[k * n_bins + th2] += n12 / 32.0
+        out[k * n_bins + th3] += n13 / 32.0
+        if a > maxd2: maxd2 = a
+        if b > maxd2: maxd2 = b
+        if c > maxd2: maxd2 = c
+        if d3v[t] > maxd3: maxd3 = d3v[t]
+        t += 1
+    for i in range(n_triplets):
+        k = D3_IN if cls3[i] == LINE_IN else (D3_OUT if cls3[i] == LINE_OUT else D3_MIX)
+        out[k * n_bins + _round_bin(d3v[i] / maxd3, n_bins)] += 1.0
+    for i in range(3 * <int64_t>n_triplets):
+        k = D2_IN if cls2[i] == LINE_IN else (D2_OUT if cls2[i] == LINE_OUT else D2_MIX)
+        out[k * n_bins + _round_bin(d2v[i] / maxd2, n_bins)] += 1.0
+    # PCL's weights (the D2-in and ratio halves folded in), then sum to one.
+    weights[A3_IN] = 0.5
+    weights[A3_OUT] = 0.5
+    weights[A3_MIX] = 0.5
+    weights[D3_IN] = 0.5
+    weights[D3_OUT] = 0.5
+    weights[D3_MIX] = 1.0
+    weights[D2_IN] = 0.5
+    weights[D2_OUT] = 2.0
+    weights[D2_MIX] = 2.0
+    weights[D2_RATIO] = 1.0
+    total = 0.0
+    for k in range(10):
+        for i in range(n_bins):
+            out[k * n_bins + i] *= weights[k]
+            total += out[k * n_bins + i]
+    inv = 1.0 / total
+    for i in range(10 * n_bins):
+        out[i] *= inv
+    return 0
+
+
+def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
+              const uint64_t[::1] seeds, int n_triplets, int grid, int n_bins,
+              double area_eps, double[:, ::1] out, int8_t[::1] status,
+              int num_threads):
+    """Fill ``out`` (n_objects, 10 * n_bins) with ESF histograms.
+
+    Parameters are validated by the caller. ``area_eps`` is the threshold on
+    Heron's s(s-a)(s-b)(s-c) (grid units) under which a triplet is redrawn.
+    """
+    cdef Py_ssize_t n_objects = offsets.shape[0] - 1
+    cdef Py_ssize_t k
+    cdef int64_t max_n = 0
+    cdef int tid
+    for k in range(n_objects):
+        if offsets[k + 1] - offsets[k] > max_n:
+            max_n = offsets[k + 1] - offsets[k]
+    cdef int64_t n_words = (<int64_t>grid * grid * grid + 63) // 64
+    cdef double[:, ::1] pts = np.empty((num_threads, 3 * max_n), dtype=np.float64)
+    cdef uint64_t[:, ::1] bits = np.empty((num_threads, n_words), dtype=np.uint64)
+    cdef double[:, ::1] d2v = np.empty((num_threads, 3 * <int64_t>n_triplets), dtype=np.float64)
+    cdef double[:, ::1] d3v = np.empty((num_threads, n_triplets), dtype=np.float64)
+    cdef int8_t[:, ::1] cls2 = np.empty((num_threads, 3 * <int64_t>n_triplets), dtype=np.int8)
+    cdef int8_t[:, ::1] cls3 = np.empty((num_threads, n_triplets), dtype=np.int8)
+    for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
+        tid = threadid()
+        status[k] = <int8_t>_esf_object(
+            &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
+            grid, n_bins, area_eps, &pts[tid, 0], &bits[tid, 0], &d2v[tid, 0],
+            &d3v[tid, 0], &cls2[tid, 0], &cls3[tid, 0], &out[k, 0])
+        if status[k] != 0:
+            memset(&out[k, 0], 0, 10 * n_bins * sizeof(double))
+
+
+# ---------------------------------------------------------------------------
+# Wahl et al. (2003): surflet-pair-relation histograms.
+
+cdef inline int _lin_bin(double v, double lo, double hi, int n_bins) noexcept nogil:
+    """clip(floor(n_bins * (v - lo) / (hi - lo)), 0, n_bins - 1)."""
+    cdef double t = n_bins * (v - lo) / (hi - lo)
+    cdef int i
+    if t <= 0.0:
+        return 0
+    i = <int>t
+    if i >= n_bins:
+        return n_bins - 1
+    return i
+
+
+cdef inline int _surflet_pair(const double* p1, const double* n1,
+                              const double* p2, const double* n2,
+                              int source_parallel, double* feat) noexcept nogil:
+    """Wahl's (alpha, beta, gamma, delta) of one surflet pair into ``feat``.
+
+    The source s is the point whose normal is more perpendicular to the
+    connecting line (smaller |n . d_hat|) by default, the more parallel one
+    when ``source_parallel`` (PCL's PFH rule). With t = target, d = p_t - p_s,
+    u = n_s, v = d x u / |d x u|, w = u x v:
+    alpha = atan2(w . n_t, u . n_t), beta = v . n_t, gamma = u . d / |d|,
+    delta = |d|. Returns 0 when |d| = 0 or n_s is parallel to d.
+    """
+    cdef double dx = p2[0] - p1[0], dy = p2[1] - p1[1], dz = p2[2] - p1[2]
+    cdef double dist = sqrt(dx * dx + dy * dy + dz * dz)
+    cdef double c1, c2, vx, vy, vz, vn, wx, wy, wz
+    cdef const double* u
+    cdef const double* nt
+    cdef int swap
+    if dist == 0.0:
+        return 0
+    dx /= dist
+    dy /= dist
+    dz /= dist
+    c1 = n1[0] * dx + n1[1] * dy + n1[2] * dz
+    c2 = n2[0] * dx + n2[1] * dy + n2[2] * dz
+    if source_parallel:
+        swap = fabs(c1) < fabs(c2)
+    else:
+        swap = fabs(c1) > fabs(c2)
+    if swap:
+        u = n2
+        nt = n1
+        dx = -dx
+        dy = -dy
+        dz = -dz
+        feat[2] = -c2
+    else:
+        u = n1
+        nt = n2
+        feat[2] = c1
+    vx = dy * u[2] - dz * u[1]
+    vy = dz * u[0] - dx * u[2]
+    vz = dx * u[1] - dy * u[0]
+    vn = sqrt(vx * vx + vy * vy + vz * vz)
+    if vn < 1e-12:
+        return 0
+    vx /= vn
+    vy /= vn
+    vz /= vn
+    wx = u[1] * vz - u[2] * vy
+    wy = u[2] * vx - u[0] * vz
+    wz = u[0] * vy - u[1] * vx
+    feat[0] = atan2(wx * nt[0] + wy * nt[1] + wz * nt[2],
+                    u[0] * nt[0] + u[1] * nt[1] + u[2] * nt[2])
+    feat[1] = vx * nt[0] + vy * nt[1] + vz * nt[2]
+    feat[3] = dist
+    return 1
+
+
+def surflet_pair_features(const double[::1] p1, const double[::1] n1,
+                          const double[::1] p2, const double[::1] n2,
+                          bint source_parallel=False):
+    """Wahl's (alpha, beta, gamma, delta) for one pair (None when undefined)."""
+    cdef double feat[4]
+    if not _surflet_pair(&p1[0], &n1[0], &p2[0], &n2[0], source_parallel, feat):
+        return None
+    return (feat[0], feat[1], feat[2], feat[3])
+
+
+cdef int _wahl_object(const double* points, const double* normals,
+                      int64_t start, int64_t n, uint64_t seed, int n_pairs,
+                      const int32_t* nb, int source_parallel,
+                      int32_t* cell, double* dist, double* out) noexcept nogil:
+    cdef uint64_t state = seed
+    cdef int64_t attempts = 0, max_attempts = 1000 + <int64_t>200 * n_pairs
+    cdef int t = 0, i
+    cdef uint32_t a, b
+    cdef double feat[4]
+    cdef double dmax = 0.0, inv
+    while t < n_pairs:
+        attempts += 1
+        if attempts > max_attempts:
+            return 1
+        a = rand_below(&state, <uint32_t>n)
+        b = rand_below(&state, <uint32_t>n)
+        if a == b:
+            continue
+        if not _surflet_pair(points + 3 * (start + a), normals + 3 * (start + a),
+                             points + 3 * (start + b), normals + 3 * (start + b),
+                             source_parallel, feat):
+            continue
+        cell[t] = ((_lin_bin(feat[0], -M_PI, M_PI, nb[0]) * nb[1]
+                    + _lin_bin(feat[1], -1.0, 1.0, nb[1])) * nb[2]
+                   + _lin_bin(feat[2], -1.0, 1.0, nb[2]))
+        dist[t] = feat[3]
+        if feat[3] > dmax:
+            dmax = feat[3]
+        t += 1
+    for i in range(n_pairs):
+        out[cell[i] * nb[3] + _lin_bin(dist[i] / dmax, 0.0, 1.0, nb[3])] += 1.0
+    inv = 1.0 / n_pairs
+    for i in range(nb[0] * nb[1] * nb[2] * nb[3]):
+        out[i] *= inv
+    return 0
+
+
+def wahl_batch(const double[:, ::1] points, const double[:, ::1] normals,
+               const int64_t[::1] offsets, const uint64_t[::1] seeds,
+               int n_pairs, const int32_t[::1] n_bins, bint source_parallel,
+               double[:, ::1] out, int8_t[::1] status, int num_threads):
+    """Fill ``out`` (n_objects, prod(n_bins)) with Wahl histograms."""
+    cdef Py_ssize_t n_objects = offsets.shape[0] - 1
+    cdef Py_ssize_t k
+    cdef int tid
+    cdef int n_out = n_bins[0] * n_bins[1] * n_bins[2] * n_bins[3]
+    cdef int32_t[:, ::1] cell = np.empty((num_threads, n_pairs), dtype=np.int32)
+    cdef double[:, ::1] dist = np.empty((num_threads, n_pairs), dtype=np.float64)
+    for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
+        tid = threadid()
+        status[k] = <int8_t>_wahl_object(
+            &points[0, 0], &normals[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k],
+            n_pairs, &n_bins[0], source_parallel, &cell[tid, 0], &dist[tid, 0],
+            &out[k, 0])
+        if status[k] != 0:
+            memset(&out[k, 0], 0, n_out * sizeof(double))
