@@ -1,0 +1,278 @@
+"""A real four-dimensional convolution built from ``conv3d``.
+
+PyTorch has no ``conv4d``. A 4D convolution with kernel ``(k1, k2, k3, k4)``
+is a sum over the ``k4`` taps of 3D convolutions, each applied to the input
+shifted by that tap along the fourth axis. Folding the fourth axis into the
+batch turns every shifted slice into an ordinary 3D volume, and stacking the
+``k4`` shifted copies along the channel axis lets one ``conv3d`` call do the
+whole sum (the "general path"). When ``k4 == 1`` no shifted copies are needed:
+the fourth axis is folded into the batch and a single ``conv3d`` with the
+unchanged weight does the work (the "fast path"), which is the case of the
+paper's (5, 2, 2, 1) kernels.
+"""
+
+import math
+import numbers
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = ["Conv4d", "conv4d", "same_padding"]
+
+
+def same_padding(kernel_size):
+    """Zero padding before and after one axis for "same" output size.
+
+    Follows TensorFlow's convention for stride 1: the total padding is
+    ``kernel_size - 1``; when it is odd, the extra zero goes after.
+
+    Parameters
+    ----------
+    kernel_size : int
+        Kernel extent along the axis.
+
+    Returns
+    -------
+    before, after : int
+        Zeros to add before and after the axis.
+
+    Examples
+    --------
+    >>> from eppf.nn import same_padding
+    >>> same_padding(5), same_padding(2), same_padding(1)
+    ((2, 2), (0, 1), (0, 0))
+    """
+    total = int(kernel_size) - 1
+    before = total // 2
+    return before, total - before
+
+
+def _check_input(input, weight, bias):
+    if input.dim() != 6:
+        raise ValueError(
+            f"conv4d: input must have shape (batch, channels, n1, n2, n3, n4), got {tuple(input.shape)}"
+        )
+    if weight.dim() != 6:
+        raise ValueError(
+            f"conv4d: weight must have shape (out_channels, in_channels, k1, k2, k3, k4), got {tuple(weight.shape)}"
+        )
+    if input.shape[1] != weight.shape[1]:
+        raise ValueError(
+            f"conv4d: input has {input.shape[1]} channels but weight expects {weight.shape[1]}"
+        )
+    if bias is not None and tuple(bias.shape) != (weight.shape[0],):
+        raise ValueError(f"conv4d: bias must have shape ({weight.shape[0]},), got {tuple(bias.shape)}")
+
+
+def _pad_first_three(input, kernel):
+    """Zero-pad axes n1, n2, n3 of a (B, C, n1, n2, n3) tensor for "same" output."""
+    pads = []
+    for k in reversed(kernel[:3]):  # F.pad lists the last axis first
+        pads.extend(same_padding(k))
+    if any(pads):
+        input = F.pad(input, pads)
+    return input
+
+
+def _fold_last_axis(input):
+    """(B, C, n1, n2, n3, n4) -> (B * n4, C, n1, n2, n3), fourth axis into the batch."""
+    b, c, n1, n2, n3, n4 = input.shape
+    return input.permute(0, 5, 1, 2, 3, 4).reshape(b * n4, c, n1, n2, n3)
+
+
+def _unfold_last_axis(output, batch, n4):
+    """(B * n4, O, n1, n2, n3) -> (B, O, n1, n2, n3, n4)."""
+    _, o, n1, n2, n3 = output.shape
+    return output.reshape(batch, n4, o, n1, n2, n3).permute(0, 2, 3, 4, 5, 1)
+
+
+def _conv4d_fast(input, weight, bias):
+    """Kernel of size 1 along the fourth axis: one conv3d over the folded batch."""
+    batch, n4 = input.shape[0], input.shape[5]
+    folded = _pad_first_three(_fold_last_axis(input), weight.shape[2:])
+    out = F.conv3d(folded, weight[..., 0], bias)
+    return _unfold_last_axis(out, batch, n4)
+
+
+def _conv4d_general(input, weight, bias):
+    """Any kernel: the k4 shifted copies of the input are stacked as channels."""
+    batch, c = input.shape[0], input.shape[1]
+    n4 = input.shape[5]
+    k4 = weight.shape[5]
+    before, after = same_padding(k4)
+    padded = F.pad(input, (before, after)) if (before or after) else input
+    # shifted[..., t, l] = padded[..., l + t]: tap t of the kernel meets it at output l.
+    shifted = torch.stack([padded[..., t : t + n4] for t in range(k4)], dim=2)
+    # (B, C, k4, n1, n2, n3, n4) -> (B * n4, C * k4, n1, n2, n3)
+    _, _, _, n1, n2, n3, _ = shifted.shape
+    folded = shifted.permute(0, 6, 1, 2, 3, 4, 5).reshape(batch * n4, c * k4, n1, n2, n3)
+    folded = _pad_first_three(folded, weight.shape[2:])
+    # weight (O, C, k1, k2, k3, k4) -> (O, C * k4, k1, k2, k3) with the same (C, k4) order.
+    w = weight.permute(0, 1, 5, 2, 3, 4).reshape(weight.shape[0], c * k4, *weight.shape[2:5])
+    out = F.conv3d(folded, w, bias)
+    return _unfold_last_axis(out, batch, n4)
+
+
+def conv4d(input, weight, bias=None, *, path="auto"):
+    """Four-dimensional convolution, stride 1, zero "same" padding.
+
+    Computes the cross-correlation (as every deep-learning framework does)
+
+    ``out[b, o, x] = bias[o] + sum_{c, t} weight[o, c, t] * in_pad[b, c, x + t]``
+
+    over the four spatial axes, where ``in_pad`` is the input padded with
+    zeros as :func:`same_padding` says, so the output has the input's spatial
+    shape.
+
+    Parameters
+    ----------
+    input : torch.Tensor of shape (batch, in_channels, n1, n2, n3, n4)
+        Input volume.
+    weight : torch.Tensor of shape (out_channels, in_channels, k1, k2, k3, k4)
+        Filters; any positive kernel size, even ones included.
+    bias : torch.Tensor of shape (out_channels,), default=None
+        Added once per output channel.
+    path : {"auto", "fast", "general"}, default="auto"
+        ``"fast"`` needs ``k4 == 1`` and runs one ``conv3d`` with the fourth
+        axis folded into the batch; ``"general"`` stacks the ``k4`` shifted
+        copies of the input as channels (any kernel); ``"auto"`` takes the
+        fast path whenever it applies.
+
+    Returns
+    -------
+    output : torch.Tensor of shape (batch, out_channels, n1, n2, n3, n4)
+        Convolution result.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from eppf.nn import conv4d
+    >>> x = torch.ones(1, 1, 3, 3, 3, 3)
+    >>> w = torch.ones(1, 1, 3, 3, 3, 3)
+    >>> conv4d(x, w)[0, 0, 1, 1, 1, 1].item()  # interior: all 81 taps see a one
+    81.0
+    """
+    _check_input(input, weight, bias)
+    if path not in ("auto", "fast", "general"):
+        raise ValueError(f"conv4d: path must be 'auto', 'fast' or 'general', got {path!r}")
+    if path == "fast" and weight.shape[5] != 1:
+        raise ValueError(
+            f"conv4d: the fast path needs a kernel of size 1 along the fourth axis, got {tuple(weight.shape[2:])}"
+        )
+    if path == "fast" or (path == "auto" and weight.shape[5] == 1):
+        return _conv4d_fast(input, weight, bias)
+    return _conv4d_general(input, weight, bias)
+
+
+def _check_kernel_size(kernel_size):
+    if isinstance(kernel_size, numbers.Integral) and not isinstance(kernel_size, bool):
+        kernel_size = (int(kernel_size),) * 4
+    try:
+        kernel_size = tuple(kernel_size)
+    except TypeError:
+        raise TypeError(f"Conv4d: kernel_size must be an int or a tuple of 4 ints, got {kernel_size!r}") from None
+    if len(kernel_size) != 4 or not all(
+        isinstance(k, numbers.Integral) and not isinstance(k, bool) and k >= 1 for k in kernel_size
+    ):
+        raise ValueError(f"Conv4d: kernel_size must be 4 positive ints, got {kernel_size!r}")
+    return tuple(int(k) for k in kernel_size)
+
+
+class Conv4d(nn.Module):
+    """Four-dimensional convolution layer (stride 1, zero "same" padding).
+
+    The layer the paper uses on the 4D EPPF histogram. PyTorch has no 4D
+    convolution; this one is exact for any kernel size and is built from
+    ``conv3d`` (see :func:`conv4d`). With a kernel of size 1 along the last
+    axis, as the paper's (5, 2, 2, 1), it runs a single ``conv3d`` with the
+    last axis folded into the batch.
+
+    Parameters
+    ----------
+    in_channels : int
+        Channels of the input.
+    out_channels : int
+        Number of filters.
+    kernel_size : int or tuple of 4 ints
+        Kernel extent along the four spatial axes. Even sizes are padded as
+        TensorFlow does: the extra zero goes after.
+    bias : bool, default=True
+        Whether to learn one additive bias per filter.
+
+    Attributes
+    ----------
+    weight : torch.nn.Parameter of shape (out_channels, in_channels, k1, k2, k3, k4)
+        Filters, initialised as ``torch.nn.Conv3d`` initialises its own
+        (Kaiming uniform over the fan-in ``in_channels * k1 * k2 * k3 * k4``).
+    bias : torch.nn.Parameter of shape (out_channels,) or None
+        Per-filter bias.
+
+    See Also
+    --------
+    conv4d : The functional form.
+
+    References
+    ----------
+    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal and E. Steinbach,
+       "Noise-resistant Deep Learning for Object Classification in 3D Point
+       Clouds Using a Point Pair Descriptor", IEEE Robotics and Automation
+       Letters, 3(2), 2018.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from eppf.nn import Conv4d
+    >>> layer = Conv4d(1, 32, (5, 2, 2, 1))
+    >>> layer(torch.zeros(8, 1, 20, 4, 5, 3)).shape
+    torch.Size([8, 32, 20, 4, 5, 3])
+    """
+
+    def __init__(self, in_channels, out_channels, kernel_size, bias=True):
+        super().__init__()
+        for name, value in (("in_channels", in_channels), ("out_channels", out_channels)):
+            if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"Conv4d: {name} must be a positive int, got {value!r}")
+        self.in_channels = int(in_channels)
+        self.out_channels = int(out_channels)
+        self.kernel_size = _check_kernel_size(kernel_size)
+        self.weight = nn.Parameter(torch.empty(self.out_channels, self.in_channels, *self.kernel_size))
+        self.bias = nn.Parameter(torch.empty(self.out_channels)) if bias else None
+        self.reset_parameters()
+
+    def reset_parameters(self):
+        """Initialise weight and bias as ``torch.nn.Conv3d`` does."""
+        nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
+        if self.bias is not None:
+            fan_in = self.in_channels * math.prod(self.kernel_size)
+            bound = 1.0 / math.sqrt(fan_in)
+            nn.init.uniform_(self.bias, -bound, bound)
+
+    def forward(self, input):
+        """Convolve a (batch, in_channels, n1, n2, n3, n4) tensor."""
+        return conv4d(input, self.weight, self.bias)
+
+    def forward_folded(self, input):
+        """Convolve an input whose fourth axis is already folded into the batch.
+
+        Only for kernels of size 1 along the fourth axis. Networks that stack
+        such layers keep the folded (batch * n4, channels, n1, n2, n3) layout
+        between them and skip the permutations around every layer.
+
+        Parameters
+        ----------
+        input : torch.Tensor of shape (batch * n4, in_channels, n1, n2, n3)
+
+        Returns
+        -------
+        output : torch.Tensor of shape (batch * n4, out_channels, n1, n2, n3)
+        """
+        if self.kernel_size[3] != 1:
+            raise ValueError(f"Conv4d: forward_folded needs a kernel of size 1 along the fourth axis, got {self.kernel_size}")
+        return F.conv3d(_pad_first_three(input, self.kernel_size), self.weight[..., 0], self.bias)
+
+    def extra_repr(self):
+        return (
+            f"{self.in_channels}, {self.out_channels}, kernel_size={self.kernel_size}, "
+            f"padding='same', bias={self.bias is not None}"
+        )
