@@ -12,6 +12,7 @@ processed in chunks so that no more than a chunk of the distance matrix
 """
 
 import numbers
+from collections import namedtuple
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -94,30 +95,56 @@ def _learn_floor(arrays, owner):
     return smallest / 2.0
 
 
+class _Prepared(namedtuple("_Prepared", "H L s mass lam")):
+    """Floored histograms ``H``, ``L = ln H``, ``s = sum H ln H`` per row,
+    the row masses and the largest ``|ln H|`` per row (for rounding bounds)."""
+
+    def rows(self, start, stop):
+        return _Prepared(*(a[start:stop] for a in self))
+
+
 def _prepare(X, floor, renormalize, owner):
-    """Floor, optionally renormalise, and return ``(H, log H, sum H log H)``."""
+    """Floor, optionally renormalise, and precompute logs and row terms."""
     H = np.maximum(X, floor, dtype=np.float64)
     if renormalize:
         H /= H.sum(axis=1, keepdims=True)
     with np.errstate(over="ignore", invalid="ignore"):
-        logH = np.log(H)
-        self_term = np.einsum("ij,ij->i", H, logH)
-    if not np.all(np.isfinite(self_term)):
+        L = np.log(H)
+        s = np.einsum("ij,ij->i", H, L)
+    if not np.all(np.isfinite(s)):
         raise ValueError(f"{owner}: histogram values are too large for the KL divergence (overflow in x ln x)")
-    return H, logH, self_term
+    lam = np.abs(L).max(axis=1) if L.shape[1] else np.zeros(L.shape[0])
+    return _Prepared(H, L, s, H.sum(axis=1), lam)
 
 
-def _kl_block(A, LA, sA, B, LB, sB, out, tmp):
-    """Fill ``out`` with the symmetric KL distances between rows of A and of B.
+def _kl_block(P, Q, out, tmp):
+    """Fill ``out`` with the symmetric KL distances between rows of P and of Q.
 
-    ``out`` and ``tmp`` are C-contiguous buffers of shape (len(A), len(B)).
+    ``out`` and ``tmp`` are C-contiguous buffers of shape (len(P.H), len(Q.H)).
     """
-    np.matmul(A, LB.T, out=out)
-    np.matmul(LA, B.T, out=tmp)
+    np.matmul(P.H, Q.L.T, out=out)
+    np.matmul(P.L, Q.H.T, out=tmp)
     out += tmp
-    np.subtract(sA[:, None], out, out=out)
-    out += sB[None, :]
+    np.subtract(P.s[:, None], out, out=out)
+    out += Q.s[None, :]
     np.maximum(out, 0.0, out=out)  # rounding can leave tiny negative values
+    return out
+
+
+def _tie_tolerance(P, Q, out):
+    """Bound on the rounding error of each entry of ``_kl_block(P, Q)``.
+
+    The terms summed are bounded by ``|s_p| + |s_q| + m_p lam_q + m_q lam_p``
+    (masses ``m``, largest ``|ln h|`` per row ``lam``); a dot product of
+    length ``n`` carries a relative error of at most about ``n`` units in the
+    last place. Distances closer than this are treated as ties.
+    """
+    rel = 4.0 * max(P.H.shape[1], 16) * np.finfo(np.float64).eps
+    np.multiply(P.mass[:, None], Q.lam[None, :], out=out)
+    out += P.lam[:, None] * Q.mass[None, :]
+    out += np.abs(P.s)[:, None]
+    out += np.abs(Q.s)[None, :]
+    out *= rel
     return out
 
 
@@ -125,21 +152,25 @@ def _auto_chunk(n_ref):
     return max(1, _BLOCK_ENTRIES // max(1, n_ref))
 
 
-def _iter_kl_chunks(Q, LQ, sQ, R, LR, sR, chunk_size):
-    """Yield ``(start, block)``: distances of query rows ``start:start+len(block)`` to all of R.
+def _iter_kl_chunks(P, Q, chunk_size, with_tolerance=False):
+    """Yield ``(start, D, T)``: distances of rows ``start:start+len(D)`` of P to all of Q.
 
-    The buffers are reused, so a consumer must be done with a block before
+    ``T`` holds the tie tolerance of each entry (None unless asked for). The
+    buffers are reused, so a consumer must be done with a block before
     asking for the next one.
     """
-    n_q, n_r = Q.shape[0], R.shape[0]
-    step = chunk_size if chunk_size is not None else _auto_chunk(n_r)
-    step = min(step, max(n_q, 1))
-    buf = np.empty((step, n_r))
-    tmp = np.empty((step, n_r))
-    for start in range(0, n_q, step):
-        stop = min(start + step, n_q)
+    n_p, n_q = P.H.shape[0], Q.H.shape[0]
+    step = chunk_size if chunk_size is not None else _auto_chunk(n_q)
+    step = min(step, max(n_p, 1))
+    buf = np.empty((step, n_q))
+    tmp = np.empty((step, n_q))
+    for start in range(0, n_p, step):
+        stop = min(start + step, n_p)
         c = stop - start
-        yield start, _kl_block(Q[start:stop], LQ[start:stop], sQ[start:stop], R, LR, sR, buf[:c], tmp[:c])
+        Pc = P.rows(start, stop)
+        D = _kl_block(Pc, Q, buf[:c], tmp[:c])
+        T = _tie_tolerance(Pc, Q, tmp[:c]) if with_tolerance else None
+        yield start, D, T
 
 
 def _validate_histograms(X, owner, name):
@@ -225,75 +256,103 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
             )
     if floor == "auto":
         floor = _learn_floor([X] if same else [X, Y], owner)
-    HX, LX, sX = _prepare(X, floor, renormalize, owner)
-    HY, LY, sY = (HX, LX, sX) if same else _prepare(Y, floor, renormalize, owner)
-    D = np.empty((HX.shape[0], HY.shape[0]))
+    PX = _prepare(X, floor, renormalize, owner)
+    PY = PX if same else _prepare(Y, floor, renormalize, owner)
+    D = np.empty((X.shape[0], PY.H.shape[0]))
     with _blas_limits(n_jobs, owner):
-        for start, block in _iter_kl_chunks(HX, LX, sX, HY, LY, sY, chunk_size):
+        for start, block, _ in _iter_kl_chunks(PX, PY, chunk_size):
             D[start : start + block.shape[0]] = block
     if same:
         np.fill_diagonal(D, 0.0)
     return D
 
 
-def _smallest_k(D, k):
-    """Indices of the ``k`` smallest entries of each row, ties to the lowest index.
+def _first_near_min(D, T, axis):
+    """Lowest index along ``axis`` whose distance is within ``T`` of the minimum."""
+    m = D.min(axis=axis, keepdims=True)
+    return np.argmax(D <= m + T, axis=axis)
 
-    Returns indices of shape (n_rows, k) sorted by increasing distance.
+
+def _smallest_k(D, T, k):
+    """Indices of the ``k`` nearest columns of each row of ``D``.
+
+    Greedy rule, applied ``k`` times: among the columns not yet taken, the
+    lowest index whose distance is within its tie tolerance ``T`` of the
+    smallest remaining distance. Without near-ties this is plain sorting by
+    distance; with exact or rounding-level ties it prefers low indices.
     """
     n_rows, n_cols = D.shape
     if k == 1:
-        return np.argmin(D, axis=1)[:, None]
+        return _first_near_min(D, T, axis=1)[:, None]
     if k < n_cols:
-        part = np.argpartition(D, k - 1, axis=1)
-        kth = np.take_along_axis(D, part[:, k - 1 : k], axis=1)
-        mask = D <= kth  # at least k per row; more only with ties at the k-th value
-        rows, cols = np.nonzero(mask)
+        kth = np.partition(D, k - 1, axis=1)[:, k - 1 : k]
+        cand = D <= kth + T  # the k nearest and everything tied with them
     else:
-        rows, cols = np.divmod(np.arange(n_rows * n_cols), n_cols)
-    vals = D[rows, cols]
-    order = np.lexsort((cols, vals, rows))
-    cols = cols[order]
+        cand = np.ones(D.shape, dtype=bool)
+    rows, cols = np.nonzero(cand)  # sorted by row, then column
     counts = np.bincount(rows, minlength=n_rows)
-    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-    take = starts[:, None] + np.arange(k)[None, :]
-    return cols[take]
+    width = int(counts.max())
+    pos = np.arange(rows.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    vals = np.full((n_rows, width), np.inf)
+    tols = np.zeros((n_rows, width))
+    idx = np.full((n_rows, width), n_cols, dtype=np.intp)
+    vals[rows, pos] = D[rows, cols]
+    tols[rows, pos] = T[rows, cols]
+    idx[rows, pos] = cols
+    out = np.empty((n_rows, k), dtype=np.intp)
+    r = np.arange(n_rows)
+    for step in range(k):
+        m = vals.min(axis=1, keepdims=True)
+        pick = np.argmax(vals <= m + tols, axis=1)
+        out[:, step] = idx[r, pick]
+        vals[r, pick] = np.inf
+        tols[r, pick] = 0.0
+    return out
 
 
-def _loo_nearest(H, L, s, block=None):
-    """Leave-one-out nearest neighbour of every row of ``H`` among the others.
+def _loo_nearest(P, block=None):
+    """Leave-one-out nearest neighbour of every row of ``P`` among the others.
 
     Uses the symmetry of the distance: only blocks on or above the block
     diagonal are computed, each serving both its rows and its columns, so
-    the cost is half that of the full matrix. Ties go to the lowest index.
+    the cost is half that of the full matrix. Near-ties (within rounding)
+    go to the lowest index.
 
     Returns ``(indices, distances)``, each of shape (n_samples,).
     """
-    n = H.shape[0]
+    n = P.H.shape[0]
     b = min(block or _LOO_BLOCK, n)
     best_d = np.full(n, np.inf)
+    best_t = np.zeros(n)
     best_i = np.full(n, n, dtype=np.intp)
     buf = np.empty((b, b))
     tmp = np.empty((b, b))
 
-    def merge(rows, cand_d, cand_i):
-        cur_d, cur_i = best_d[rows], best_i[rows]
-        better = (cand_d < cur_d) | ((cand_d == cur_d) & (cand_i < cur_i))
+    def merge(rows, cand_d, cand_t, cand_i):
+        cur_d, cur_t, cur_i = best_d[rows], best_t[rows], best_i[rows]
+        tol = np.maximum(cand_t, cur_t)
+        better = (cand_d < cur_d - tol) | ((cand_d <= cur_d + tol) & (cand_i < cur_i))
         best_d[rows] = np.where(better, cand_d, cur_d)
+        best_t[rows] = np.where(better, cand_t, cur_t)
         best_i[rows] = np.where(better, cand_i, cur_i)
 
     for i0 in range(0, n, b):
         i1 = min(i0 + b, n)
+        Pi = P.rows(i0, i1)
         for j0 in range(i0, n, b):
             j1 = min(j0 + b, n)
-            D = _kl_block(H[i0:i1], L[i0:i1], s[i0:i1], H[j0:j1], L[j0:j1], s[j0:j1], buf[: i1 - i0, : j1 - j0], tmp[: i1 - i0, : j1 - j0])
+            Pj = P.rows(j0, j1)
+            D = _kl_block(Pi, Pj, buf[: i1 - i0, : j1 - j0], tmp[: i1 - i0, : j1 - j0])
+            T = _tie_tolerance(Pi, Pj, tmp[: i1 - i0, : j1 - j0])
             if i0 == j0:
                 np.fill_diagonal(D, np.inf)
-            arg = np.argmin(D, axis=1)
-            merge(slice(i0, i1), D[np.arange(i1 - i0), arg], arg + j0)
+            arg = _first_near_min(D, T, axis=1)
+            r = np.arange(i1 - i0)
+            merge(slice(i0, i1), D[r, arg], T[r, arg], arg + j0)
             if j0 != i0:
-                arg = np.argmin(D, axis=0)
-                merge(slice(j0, j1), D[arg, np.arange(j1 - j0)], arg + i0)
+                arg = _first_near_min(D, T, axis=0)
+                c = np.arange(j1 - j0)
+                merge(slice(j0, j1), D[arg, c], T[arg, c], arg + i0)
     return best_i, best_d
 
 
@@ -436,7 +495,7 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         self.floor_ = _learn_floor([X], name) if floor == "auto" else floor
         self.classes_, self._y = np.unique(y, return_inverse=True)
         self._renormalize = renormalize
-        self._H, self._L, self._s = _prepare(X, self.floor_, renormalize, name)
+        self._fit_data = _prepare(X, self.floor_, renormalize, name)
         self.n_samples_fit_ = X.shape[0]
         return self
 
@@ -477,24 +536,24 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
             raise ValueError(f"{name}: n_neighbors must be a positive int, got {k}")
         loo = X is None
         if loo:
-            H, L, s = self._H, self._L, self._s
+            P = self._fit_data
         else:
-            H, L, s = self._query(X)
+            P = self._query(X)
         available = self.n_samples_fit_ - (1 if loo else 0)
         if k > available:
             extra = " excluding each query itself" if loo else ""
             raise ValueError(
                 f"{name}: n_neighbors={k} is more than the {available} training sample(s) available{extra}"
             )
-        n_q = H.shape[0]
+        n_q = P.H.shape[0]
         ind = np.empty((n_q, k), dtype=np.intp)
         dist = np.empty((n_q, k)) if return_distance else None
         with _blas_limits(self.n_jobs, name):
-            for start, D in _iter_kl_chunks(H, L, s, self._H, self._L, self._s, chunk_size):
+            for start, D, T in _iter_kl_chunks(P, self._fit_data, chunk_size, with_tolerance=True):
                 c = D.shape[0]
                 if loo:
                     D[np.arange(c), np.arange(start, start + c)] = np.inf
-                idx = _smallest_k(D, k)
+                idx = _smallest_k(D, T, k)
                 ind[start : start + c] = idx
                 if return_distance:
                     dist[start : start + c] = np.take_along_axis(D, idx, axis=1)
