@@ -9,4 +9,8 @@ __version__ = "0.1.0"
 
 from ._neighbors import KLNearestNeighbors, symmetric_kl_distances
 
-__all__ = ["KLNearestNeighbors", "symmetric_kl_distances"]
+from ._esf import ESFTransformer
+from ._ourcvfh import OURCVFHTransformer
+from ._wahl import WahlTransformer
+
+__all__ = ["ESFTransformer", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "symmetric_kl_distances"]

@@ -1,0 +1,188 @@
+"""Speed and leave-one-out retrieval of EPPF and the paper's baseline descriptors.
+
+Prints one table in the layout of the paper's Table II: for each descriptor
+(and matching metric), milliseconds per object on one core at 1,024 and
+10,000 points, then total accuracy, mean class accuracy, macro precision,
+recall and F1 of leave-one-out 1-NN retrieval on each data set, as
+mean ± std over ``--draws`` descriptor draws where the descriptor is random.
+PCL 1.13's own ESF and OUR-CVFH outputs (``../shared/reference``) are
+scored the same way as a yardstick.
+
+Every object is centred on its mean and scaled so its largest bounding-box
+side is 1 (as the PCL reference runs), and gets PCA normals over 10
+neighbours pointing away from its centroid, computed once and given to every
+descriptor (normal estimation is timed separately).
+
+Usage::
+
+    python benchmarks/bench_baselines.py                      # everything
+    python benchmarks/bench_baselines.py --draws 3 --descriptors esf wahl
+    python benchmarks/bench_baselines.py --no-retrieval       # timings only
+
+Needs ``../shared/data``; exits with a message when it is absent.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+from sklearn.metrics import pairwise_distances_chunked
+
+import eppf
+from eppf import ESFTransformer, OURCVFHTransformer, WahlTransformer
+from eppf._normals import estimate_normals_batch
+from eppf._validation import pack_point_clouds
+from eppf.metrics import leave_one_out_retrieval, retrieval_scores
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SHARED = os.environ.get("EPPF_SHARED", os.path.join(HERE, "..", "..", "shared"))
+DATASETS = {"modelnet10": "modelnet10_1024", "dales": "dales_objects"}
+METRICS = ("total_accuracy", "mean_class_accuracy", "macro_precision", "macro_recall", "macro_f1")
+SHORT = ("acc", "mAcc", "P", "R", "F1")
+
+
+def descriptors():
+    """name -> (factory(random_state), random?, matching metrics)."""
+    return {
+        "eppf": (lambda rs: eppf.EPPFTransformer(scaling="object", random_state=rs, n_jobs=1), True, ("kl",)),
+        "eppf_short": (
+            lambda rs: eppf.EPPFTransformer(n_bins=(15, 3, 4, 3), scaling="object", random_state=rs, n_jobs=1),
+            True,
+            ("kl",),
+        ),
+        "wahl": (lambda rs: WahlTransformer(random_state=rs, n_jobs=1), True, ("kl",)),
+        "esf": (lambda rs: ESFTransformer(random_state=rs, n_jobs=1), True, ("kl", "l1")),
+        "ourcvfh": (lambda rs: OURCVFHTransformer(n_jobs=1), False, ("kl", "l1")),
+    }
+
+
+def load(name):
+    path = os.path.join(SHARED, "data", DATASETS[name] + ".npz")
+    d = np.load(path)
+    pts, off = d["points"].astype(np.float64), d["offsets"]
+    clouds = []
+    for k in range(len(off) - 1):
+        p = pts[off[k] : off[k + 1]]
+        p = p - p.mean(axis=0)
+        clouds.append(p / np.ptp(p, axis=0).max())
+    return clouds, d["labels"]
+
+
+def with_normals(clouds):
+    points, _, offsets = pack_point_clouds(clouds)
+    t = time.perf_counter()
+    normals = estimate_normals_batch(points, offsets, 10, "centroid", n_jobs=1)
+    dt = time.perf_counter() - t
+    out = [np.hstack([points[a:b], normals[a:b]]) for a, b in zip(offsets[:-1], offsets[1:])]
+    return out, dt
+
+
+def loo_l1(X, y):
+    """Leave-one-out 1-NN with the L1 distance (ties to the lowest index)."""
+    y = np.asarray(y)
+    pred = np.empty(len(X), dtype=y.dtype)
+    start = 0
+    for block in pairwise_distances_chunked(X, metric="manhattan", working_memory=256):
+        rows = np.arange(start, start + len(block))
+        block[np.arange(len(block)), rows] = np.inf
+        pred[rows] = y[np.argmin(block, axis=1)]
+        start += len(block)
+    return pred
+
+
+def score(X, y, metric):
+    pred = leave_one_out_retrieval(X, y) if metric == "kl" else loo_l1(X, y)
+    return retrieval_scores(y, pred)
+
+
+def time_descriptor(factory, clouds):
+    t = time.perf_counter()
+    factory(0).fit_transform(clouds)
+    return 1e3 * (time.perf_counter() - t) / len(clouds)
+
+
+def fmt(values):
+    v = 100 * np.asarray(values)
+    if len(v) == 1:
+        return f"{v[0]:6.2f}"
+    return f"{v.mean():6.2f}±{v.std():4.2f}"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--draws", type=int, default=10, help="descriptor draws for random descriptors (default 10)")
+    ap.add_argument("--descriptors", nargs="+", default=list(descriptors()), choices=list(descriptors()))
+    ap.add_argument("--datasets", nargs="+", default=list(DATASETS), choices=list(DATASETS))
+    ap.add_argument("--n-time", type=int, default=100, help="objects timed at 1,024 points (default 100)")
+    ap.add_argument("--no-retrieval", action="store_true")
+    ap.add_argument("--no-reference", action="store_true", help="skip PCL's reference rows")
+    args = ap.parse_args(argv)
+    if not os.path.isdir(os.path.join(SHARED, "data")):
+        sys.exit(f"bench_baselines: no data folder at {SHARED}/data (set EPPF_SHARED)")
+    table = {}  # (descriptor, metric) -> {"ms1k", "ms10k", dataset: {metric: values}}
+    specs = descriptors()
+
+    # Speed: the same clouds for every descriptor, normals given.
+    mn, _ = load("modelnet10")
+    stride = max(1, len(mn) // args.n_time)
+    c1k, t_n1k = with_normals(mn[::stride][: args.n_time])
+    dales, _ = load("dales")
+    big = [c for c in dales if len(c) >= 10000][:10]
+    c10k, t_n10k = with_normals([c[:10000] for c in big])
+    print(f"normals (PCA, k=10): {1e3 * t_n1k / len(c1k):.2f} ms/object at 1,024 points, "
+          f"{1e3 * t_n10k / len(c10k):.2f} at 10,000", flush=True)
+    for name in args.descriptors:
+        factory, _, metrics = specs[name]
+        ms1k = time_descriptor(factory, c1k)
+        ms10k = time_descriptor(factory, c10k)
+        print(f"{name}: {ms1k:.2f} ms/object at 1,024 points, {ms10k:.2f} at 10,000", flush=True)
+        for m in metrics:
+            table[(name, m)] = {"ms1k": ms1k, "ms10k": ms10k}
+
+    if not args.no_retrieval:
+        for ds in args.datasets:
+            clouds, y = load(ds)
+            clouds, _ = with_normals(clouds)
+            for name in args.descriptors:
+                factory, random, metrics = specs[name]
+                draws = args.draws if random else 1
+                res = {m: {k: [] for k in METRICS} for m in metrics}
+                t = time.perf_counter()
+                for r in range(draws):
+                    X = factory(1000 + r).fit_transform(clouds)
+                    for m in metrics:
+                        s = score(X, y, m)
+                        for k in METRICS:
+                            res[m][k].append(s[k])
+                for m in metrics:
+                    table[(name, m)][ds] = res[m]
+                print(f"{ds} {name}: {draws} draw(s) in {time.perf_counter() - t:.0f} s, "
+                      + ", ".join(f"{m} acc {fmt(res[m]['total_accuracy'])}" for m in metrics), flush=True)
+            ref = os.path.join(SHARED, "reference", f"pcl_{DATASETS[ds]}.npz")
+            if not args.no_reference and os.path.exists(ref):
+                r = np.load(ref)
+                for key in ("esf", "ourcvfh"):
+                    X = r[key].astype(np.float64)
+                    for m in ("kl", "l1"):
+                        Xm = X / X.sum(axis=1, keepdims=True) if m == "kl" else X
+                        s = score(Xm, y, m)
+                        table.setdefault((f"PCL {key}", m), {})[ds] = {k: [s[k]] for k in METRICS}
+
+    # One table.
+    cols = ["descriptor", "match", "ms@1k", "ms@10k"]
+    for ds in args.datasets:
+        cols += [f"{ds}:{s}" for s in SHORT]
+    print()
+    print(" | ".join(cols))
+    print(" | ".join("---" for _ in cols))
+    for (name, m), row in table.items():
+        cells = [name, m, f"{row['ms1k']:.2f}" if "ms1k" in row else "-", f"{row['ms10k']:.2f}" if "ms10k" in row else "-"]
+        for ds in args.datasets:
+            cells += [fmt(row[ds][k]) if ds in row else "-" for k in METRICS]
+        print(" | ".join(cells))
+
+
+if __name__ == "__main__":
+    main()
