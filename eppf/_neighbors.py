@@ -76,7 +76,7 @@ def _check_non_negative(X, owner, name="X"):
     if X.size and X.min() < 0:
         raise ValueError(
             f"Negative values in data passed to {owner} ({name}): histograms must be "
-            f"non-negative, found minimum {X.min()!r}"
+            f"non-negative, found minimum {float(X.min())!r}"
         )
 
 
@@ -173,8 +173,18 @@ def _iter_kl_chunks(P, Q, chunk_size, with_tolerance=False):
         yield start, D, T
 
 
+def _named(owner, func, *args, **kwargs):
+    """Call a scikit-learn validator, prefixing its error messages with ``owner``."""
+    try:
+        return func(*args, **kwargs)
+    except (ValueError, TypeError) as exc:
+        if type(exc) not in (ValueError, TypeError) or str(exc).startswith(owner):
+            raise
+        raise type(exc)(f"{owner}: {exc}") from exc
+
+
 def _validate_histograms(X, owner, name):
-    X = check_array(X, dtype=np.float64, ensure_all_finite=True, input_name=name)
+    X = _named(owner, check_array, X, dtype=np.float64, ensure_all_finite=True, input_name=name)
     _check_non_negative(X, owner, name)
     return X
 
@@ -489,8 +499,8 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         """
         name = type(self).__name__
         floor, renormalize, _ = self._check_params()
-        X, y = validate_data(self, X, y, dtype=np.float64, ensure_all_finite=True)
-        check_classification_targets(y)
+        X, y = _named(name, validate_data, self, X, y, dtype=np.float64, ensure_all_finite=True)
+        _named(name, check_classification_targets, y)
         _check_non_negative(X, name)
         self.floor_ = _learn_floor([X], name) if floor == "auto" else floor
         self.classes_, self._y = np.unique(y, return_inverse=True)
@@ -501,7 +511,7 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
 
     def _query(self, X):
         check_is_fitted(self)
-        X = validate_data(self, X, dtype=np.float64, ensure_all_finite=True, reset=False)
+        X = _named(type(self).__name__, validate_data, self, X, dtype=np.float64, ensure_all_finite=True, reset=False)
         _check_non_negative(X, type(self).__name__)
         return _prepare(X, self.floor_, self._renormalize, type(self).__name__)
 

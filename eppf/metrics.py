@@ -11,18 +11,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from sklearn.base import clone
-from sklearn.utils import check_array, check_random_state
+from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import type_of_target
 
 from ._neighbors import (
     _blas_limits,
     _check_chunk_size,
     _check_floor,
-    _check_non_negative,
     _check_renormalize,
     _learn_floor,
     _loo_nearest,
     _prepare,
+    _validate_histograms,
 )
 
 __all__ = [
@@ -188,8 +188,7 @@ def leave_one_out_retrieval(
     floor = _check_floor(floor, owner)
     renormalize = _check_renormalize(renormalize, owner)
     chunk_size = _check_chunk_size(chunk_size, owner)
-    X = check_array(X, dtype=np.float64, ensure_all_finite=True, input_name="X")
-    _check_non_negative(X, owner)
+    X = _validate_histograms(X, owner, "X")
     y = _check_labels(y, owner, "y")
     if y.shape[0] != X.shape[0]:
         raise ValueError(f"{owner}: X has {X.shape[0]} samples but y has {y.shape[0]} labels")
