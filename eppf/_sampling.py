@@ -5,7 +5,17 @@ import numbers
 import numpy as np
 from sklearn.utils import check_random_state
 
-__all__ = ["sample_mesh"]
+__all__ = ["object_rng", "sample_mesh"]
+
+
+def object_rng(seed):
+    """A NumPy RandomState from one 64-bit object seed (all 64 bits kept).
+
+    The seeds come from :func:`eppf._validation.object_seeds`; each object
+    gets its own generator so its draws do not depend on the other objects.
+    """
+    seed = int(seed)
+    return np.random.RandomState(np.array([seed & 0xFFFFFFFF, seed >> 32], dtype=np.uint32))
 
 
 def _check_mesh(vertices, faces, owner):

@@ -22,16 +22,10 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
-from ._sampling import sample_mesh
+from ._sampling import object_rng, sample_mesh
 from ._validation import check_point_clouds, object_seeds
 
 __all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "Resampler", "sample_mesh"]
-
-
-def _object_rng(seed):
-    """A NumPy RandomState from one 64-bit object seed (all 64 bits kept)."""
-    seed = int(seed)
-    return np.random.RandomState(np.array([seed & 0xFFFFFFFF, seed >> 32], dtype=np.uint32))
 
 
 class _CloudTransformer(TransformerMixin, BaseEstimator):
@@ -79,7 +73,7 @@ class _CloudTransformer(TransformerMixin, BaseEstimator):
         self._check_params()
         clouds = check_point_clouds(X, owner=type(self).__name__)
         seeds = object_seeds(self.random_state, len(clouds))
-        return [self._apply(cloud, _object_rng(seed)) for cloud, seed in zip(clouds, seeds)]
+        return [self._apply(cloud, object_rng(seed)) for cloud, seed in zip(clouds, seeds)]
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
