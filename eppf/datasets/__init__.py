@@ -2,5 +2,6 @@
 
 from ._npz import load_npz
 from ._synthetic import make_shapes
+from ._loaders import load_modelnet, load_s3dis_objects, load_scannet_objects
 
-__all__ = ["load_npz", "make_shapes"]
+__all__ = ["load_modelnet", "load_npz", "load_s3dis_objects", "load_scannet_objects", "make_shapes"]
