@@ -63,7 +63,7 @@ def test_return_X_y_matches_bunch():
         assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("occlusion", [0.0, 0.2, 0.5, 0.9])
+@pytest.mark.parametrize("occlusion", [0.0, 0.2, 0.5, 0.9, 0.99])
 @pytest.mark.parametrize("n_points", [2, 37, 256])
 def test_exact_point_count(occlusion, n_points):
     X, _ = make_shapes(1, n_points=n_points, occlusion=occlusion, with_normals=True, return_X_y=True)
@@ -80,12 +80,20 @@ def test_class_subset_and_order():
     assert sides[0] < 0.5 * sides[1]
 
 
-@pytest.mark.parametrize("test_size, n_test", [(0.0, 0), (0.25, 2), (0.5, 4), (0.6, 5)])
-def test_split_is_stratified(test_size, n_test):
-    shapes = make_shapes(8, n_points=16, test_size=test_size)
+@pytest.mark.parametrize(
+    "n_per_class, test_size, n_test",
+    [(8, 0.0, 0), (8, 0.25, 2), (8, 0.5, 4), (8, 0.6, 5), (8, 0.99, 7), (2, 0.75, 1), (1, 0.9, 0)],
+)
+def test_split_is_stratified(n_per_class, test_size, n_test):
+    shapes = make_shapes(n_per_class, n_points=16, test_size=test_size)
     for label in range(10):
         assert np.sum((shapes.target == label) & (shapes.split == "test")) == n_test
-        assert np.sum((shapes.target == label) & (shapes.split == "train")) == 8 - n_test
+        assert np.sum((shapes.target == label) & (shapes.split == "train")) == n_per_class - n_test
+
+
+def test_split_depends_on_seed():
+    a, b = make_shapes(8, n_points=16, random_state=0), make_shapes(8, n_points=16, random_state=1)
+    assert not np.array_equal(a.split, b.split)
 
 
 # --------------------------------------------------------------------------- #
@@ -345,11 +353,13 @@ def test_size_alone_does_not_separate_classes():
         (dict(noise=-0.01), ValueError, "make_shapes: noise must be >= 0, got -0.01"),
         (dict(noise=np.inf), ValueError, "make_shapes: noise must be finite, got inf"),
         (dict(occlusion=1.0), ValueError, "make_shapes: occlusion must be in [0, 1), got 1.0"),
+        (dict(occlusion=0.995), ValueError, "make_shapes: occlusion must be <= 0.99, got 0.995"),
         (dict(occlusion=-0.1), ValueError, "make_shapes: occlusion must be in [0, 1), got -0.1"),
         (dict(size_variation=1.2), ValueError, "make_shapes: size_variation must be in [0, 1), got 1.2"),
         (dict(test_size=1.0), ValueError, "make_shapes: test_size must be in [0, 1), got 1.0"),
         (dict(rotate="y"), ValueError, "make_shapes: rotate must be True, False or 'z', got 'y'"),
         (dict(rotate=1), ValueError, "make_shapes: rotate must be True, False or 'z', got 1"),
+        (dict(rotate=None), ValueError, "make_shapes: rotate must be True, False or 'z', got None"),
         (
             dict(classes=["box", "sofa"]),
             ValueError,

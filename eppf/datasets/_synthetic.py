@@ -26,6 +26,7 @@ from .._perturb import (
 __all__ = ["make_shapes"]
 
 _OWNER = "make_shapes"
+_MAX_OCCLUSION = 0.99
 
 
 # --------------------------------------------------------------------------- #
@@ -379,7 +380,7 @@ def make_shapes(
         a nominal object fits the unit cube (the paper's unit).
     occlusion : float, default=0.2
         Share of each object's sampled surface points removed on the side
-        facing away from the random viewer, ``0 <= occlusion < 1``.
+        facing away from the random viewer, ``0 <= occlusion <= 0.99``.
     size_variation : float, default=0.3
         Relative spread of the overall scale and of each dimension,
         ``0 <= size_variation < 1``. ``0`` makes all objects of a class
@@ -394,7 +395,8 @@ def make_shapes(
         perturbed by the noise).
     test_size : float, default=0.25
         Share of each class put in the test split, ``0 <= test_size < 1``:
-        ``round(test_size * n_samples_per_class)`` objects per class.
+        ``round(test_size * n_samples_per_class)`` objects per class, but at
+        least one object per class stays in the training split.
     random_state : int, RandomState instance or None, default=0
         Seed of everything random; the same seed gives the same data set.
     return_X_y : bool, default=False
@@ -435,7 +437,7 @@ def make_shapes(
     >>> shapes = make_shapes(5, n_points=256)
     >>> len(shapes.data), shapes.data[0].shape
     (50, (256, 3))
-    >>> list(shapes.target_names[:3])
+    >>> shapes.target_names[:3].tolist()
     ['box', 'sphere', 'cylinder']
     """
     n_per_class = _check_int(n_samples_per_class, "n_samples_per_class", 1)
@@ -443,8 +445,13 @@ def make_shapes(
     classes = _check_classes(classes)
     noise = _check_non_negative(noise, "noise", _OWNER)
     occlusion = _check_fraction(occlusion, "occlusion", _OWNER)
+    if occlusion > _MAX_OCCLUSION:
+        # each object is sampled with n_points / (1 - occlusion) points
+        raise ValueError(f"{_OWNER}: occlusion must be <= {_MAX_OCCLUSION}, got {occlusion!r}")
     size_variation = _check_fraction(size_variation, "size_variation", _OWNER)
-    if not (rotate is True or rotate is False or (isinstance(rotate, str) and rotate == "z")):
+    if isinstance(rotate, (bool, np.bool_)):
+        rotate = bool(rotate)
+    elif not (isinstance(rotate, str) and rotate == "z"):
         raise ValueError(f"{_OWNER}: rotate must be True, False or 'z', got {rotate!r}")
     test_size = _check_fraction(test_size, "test_size", _OWNER)
     rng = check_random_state(random_state)
@@ -475,7 +482,7 @@ def make_shapes(
     target = np.repeat(np.arange(len(classes), dtype=np.int64), n_per_class)
 
     split = np.full(target.size, "train", dtype="<U5")
-    n_test = int(np.floor(test_size * n_per_class + 0.5))
+    n_test = min(int(np.floor(test_size * n_per_class + 0.5)), n_per_class - 1)
     for label in range(len(classes)):
         members = np.flatnonzero(target == label)
         split[rng.permutation(members)[:n_test]] = "test"
