@@ -248,23 +248,17 @@ _CLASSES = {
 
 
 def _draw(patches, k, rng):
-    """``k`` points area-weighted over ``patches`` (grouped by patch) and the patch of each."""
+    """``k`` points area-weighted over ``patches``, grouped by patch."""
     areas = np.array([a for a, _ in patches])
     counts = rng.multinomial(k, areas / areas.sum())
-    pts, nrm, owner = [], [], []
-    for p, ((_, sample), c) in enumerate(zip(patches, counts)):
-        if c:
-            x, n = sample(int(c), rng)
-            pts.append(x)
-            nrm.append(n)
-            owner.append(np.full(c, p))
-    return np.concatenate(pts), np.concatenate(nrm), np.concatenate(owner)
+    drawn = [sample(int(c), rng) for (_, sample), c in zip(patches, counts) if c]
+    return np.concatenate([x for x, _ in drawn]), np.concatenate([n for _, n in drawn])
 
 
 def _sample_surface(patches, boxes, k, rng):
     """Draw ``k`` points uniformly over the visible surface, shuffled; shape (k, 6)."""
     if boxes is None:
-        pts, nrm, _ = _draw(patches, k, rng)
+        pts, nrm = _draw(patches, k, rng)
     else:
         centers = np.array([c for c, _ in boxes], dtype=np.float64)
         halves = np.array([h for _, h in boxes], dtype=np.float64)
