@@ -11,12 +11,14 @@ downloads), returns a :class:`~sklearn.utils.Bunch` (or ``(X, y)`` with
   ``(filename, message)`` for files that could not be read.
 - ``on_error="raise"`` stops at the first unreadable file with an error that
   names it; ``on_error="skip"`` loads the rest and warns how many it skipped.
-- Meshes are sampled with :func:`eppf.preprocessing.sample_mesh`; object
-  ``k`` uses its own seed drawn from ``random_state``, so a cloud does not
-  depend on ``n_jobs`` or on which other files could be read.
+- Meshes are sampled with :func:`eppf.preprocessing.sample_mesh`; each file
+  gets its own seed from ``random_state`` and its path inside the folder, so
+  a cloud does not depend on ``n_jobs``, ``subset`` or on which other files
+  could be read.
 """
 
 import glob
+import hashlib
 import json
 import numbers
 import os
@@ -29,7 +31,6 @@ from sklearn.utils import Bunch, check_random_state
 
 from .._perturb import resample
 from .._sampling import object_rng, sample_mesh
-from .._validation import object_seeds
 from ..io import read_mesh, read_point_cloud
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
@@ -81,6 +82,20 @@ def _check_resolution(resolution, owner):
     if not (resolution > 0 and np.isfinite(resolution)):
         raise ValueError(f"{owner}: resolution must be positive, got {resolution}")
     return float(resolution)
+
+
+def _file_seeds(random_state, folder, files):
+    """One 64-bit seed per file from ``random_state`` and the file's relative path.
+
+    A file's seed does not depend on which other files are loaded (subset,
+    classes, skipped files), so an object is the same cloud in every call.
+    """
+    base = int(check_random_state(random_state).randint(0, np.iinfo(np.int64).max, dtype=np.int64))
+    seeds = []
+    for f in files:
+        key = f"{base}/{os.path.relpath(f, folder).replace(os.sep, '/')}".encode()
+        seeds.append(int.from_bytes(hashlib.blake2b(key, digest_size=8).digest(), "little"))
+    return seeds
 
 
 def _subset_splits(subset):
@@ -291,7 +306,8 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
         Files read in parallel through joblib (None: one, unless inside a
         :func:`joblib.parallel_config` context).
     random_state : int, RandomState instance or None, default=0
-        Seed of mesh sampling; one seed per file is drawn from it.
+        Seed of mesh sampling; each file's seed derives from it and the
+        file's path inside the folder.
     return_X_y : bool, default=False
         Return ``(data, target)`` instead of a Bunch.
 
@@ -358,7 +374,7 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
                 split_of += [s] * len(found)
         if not files:
             raise ValueError(f"{owner}: {folder!r} holds no .off files for subset={subset!r}")
-        seeds = object_seeds(random_state, len(files))
+        seeds = _file_seeds(random_state, folder, files)
         use_normals = normals is not False
         jobs = [(f, _from_mesh, (f, n_points, resolution, use_normals, seed)) for f, seed in zip(files, seeds)]
         clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
@@ -539,7 +555,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     if not entries:
         raise ValueError(f"{owner}: {root!r} holds no object files of the classes {names} for subset={subset!r}")
     files = [e[0] for e in entries]
-    seeds = object_seeds(random_state, len(files))
+    seeds = _file_seeds(random_state, root, files)
     jobs = [(f, _from_any, (f, n_points, resolution, normals, seed)) for f, seed in zip(files, seeds)]
     clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
     labels = [index[e[1]] for e in entries]
@@ -627,7 +643,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
         n_train = int(np.floor(train_size * len(members) + 0.5))
         for rank, j in enumerate(order):
             split_of[members[j]] = "train" if rank < n_train else "test"
-    seeds = object_seeds(rng, len(entries))
+    seeds = _file_seeds(rng, root, [f for f, _ in entries])
     keep = [k for k in range(len(entries)) if split_of[k] in _subset_splits(subset)]
     jobs = [(entries[k][0], _from_cloud_file, (entries[k][0], n_points, False, seeds[k])) for k in keep]
     clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
