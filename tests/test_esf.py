@@ -1,0 +1,270 @@
+"""Tests of eppf.ESFTransformer (hand-computed triangle, slow reference, invariants, errors)."""
+
+import math
+import re
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from sklearn.exceptions import NotFittedError
+from sklearn.model_selection import GridSearchCV
+from sklearn.pipeline import make_pipeline
+
+from eppf import ESFTransformer, KLNearestNeighbors
+from eppf._validation import object_seeds
+
+MASK = (1 << 64) - 1
+
+
+def _clouds(n_objects=4, seed=0):
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n_objects):
+        p = rng.normal(size=(60 + 10 * k, 3)) * [1.0, 0.5 + 0.2 * k, 0.3]
+        out.append(p)
+    return out
+
+
+# --- an independent, slow reading of PCL's ESF with eppf's generator --------
+
+
+def _splitmix(state):
+    state = (state + 0x9E3779B97F4A7C15) & MASK
+    z = state
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & MASK
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & MASK
+    return state, z ^ (z >> 31)
+
+
+def _below(state, n):
+    state, z = _splitmix(state)
+    return state, ((z >> 32) * n) >> 32
+
+
+def _cell(v, half):
+    return math.floor(v) + half if v < 0 else math.ceil(v) + half - 1
+
+
+def _walk(occ, a, b):
+    """PCL's lci as a plain loop over a set of occupied voxels."""
+    d = [abs(b[i] - a[i]) for i in range(3)]
+    s = [1 if b[i] >= a[i] else -1 for i in range(3)]
+    if d[0] >= d[1] and d[0] >= d[2]:
+        major, minors = 0, (1, 2)
+    elif d[1] >= d[0] and d[1] >= d[2]:
+        major, minors = 1, (0, 2)
+    else:
+        major, minors = 2, (1, 0)
+    L = d[major]
+    err = [2 * d[m] - L for m in minors]
+    cur = list(a)
+    n_in = 0
+    for _ in range(1, L):
+        n_in += tuple(cur) in occ
+        for j, m in enumerate(minors):
+            if err[j] > 0:
+                cur[m] += s[m]
+                err[j] -= 2 * L
+            err[j] += 2 * d[m]
+        cur[major] += s[major]
+    n_in += tuple(cur) in occ
+    count = max(L, 1)
+    if n_in >= count - 1:
+        return 0, n_in, count, None
+    if n_in <= 7:
+        return 1, n_in, count, None
+    return 2, n_in, count, n_in / count
+
+
+def _rbin(v, n_bins=64):
+    return min(max(math.floor(v * (n_bins - 1) + 0.5), 0), n_bins - 1)
+
+
+def _esf_reference(cloud, seed, n_triplets, grid=64):
+    half = grid // 2
+    p = cloud - cloud.mean(axis=0)
+    p = p * (half / np.sqrt((p**2).sum(axis=1).max()))
+    pts = [tuple(float(x) for x in row) for row in p]
+    cells = [tuple(min(max(_cell(v, half), 0), grid - 1) for v in q) for q in pts]
+    occ = set()
+    for c in cells:
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    v = (c[0] + dx, c[1] + dy, c[2] + dz)
+                    if all(0 <= x < grid for x in v):
+                        occ.add(v)
+    h = np.zeros((10, 64))
+    d2, d3 = [], []
+    state, n, t = seed, len(pts), 0
+    while t < n_triplets:
+        state, i1 = _below(state, n)
+        state, i2 = _below(state, n)
+        state, i3 = _below(state, n)
+        if len({i1, i2, i3}) < 3:
+            continue
+        P1, P2, P3 = (np.array(pts[i]) for i in (i1, i2, i3))
+        v21, v31, v23 = P2 - P1, P3 - P1, P2 - P3
+        a, b, c = (math.sqrt(float(v @ v)) for v in (v21, v31, v23))
+        s = (a + b + c) * 0.5
+        heron = s * (s - a) * (s - b) * (s - c)
+        if heron <= 0.001:
+            continue
+
+        def ang(x, y, norm):
+            return _rbin(math.acos(min(abs(float(x @ y)) / norm, 1.0)) / (math.pi / 2))
+
+        th1, th2, th3 = ang(v21, v31, a * b), ang(v23, v31, c * b), ang(v23, v21, c * a)
+        lines = [_walk(occ, cells[i1], cells[i2]), _walk(occ, cells[i1], cells[i3]), _walk(occ, cells[i2], cells[i3])]
+        for cls, _, _, ratio in lines:
+            if cls == 2:
+                h[9, _rbin(ratio)] += 1
+        for side, (cls, _, _, _) in zip((a, b, c), lines):
+            d2.append((side, cls))
+        in_sum = sum(x[1] for x in lines)
+        n_sum = sum(x[2] for x in lines)
+        k = 1 if in_sum <= 21 else (0 if n_sum - in_sum < 4 else 2)
+        h[k, th1] += lines[2][2] / 32.0
+        h[k, th2] += lines[0][2] / 32.0
+        h[k, th3] += lines[1][2] / 32.0
+        d3.append((math.sqrt(math.sqrt(heron)), k))
+        t += 1
+    m2, m3 = max(x for x, _ in d2), max(x for x, _ in d3)
+    for v, k in d3:
+        h[3 + k, _rbin(v / m3)] += 1
+    for v, k in d2:
+        h[6 + k, _rbin(v / m2)] += 1
+    h *= np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 0.5, 2.0, 2.0, 1.0])[:, None]
+    return (h / h.sum()).ravel()
+
+
+@pytest.mark.parametrize("random_state", [0, 7])
+def test_matches_slow_reference(random_state):
+    clouds = _clouds(3, seed=random_state)
+    X = ESFTransformer(n_triplets=300, random_state=random_state).fit_transform(clouds)
+    seeds = object_seeds(random_state, len(clouds))
+    for k, cloud in enumerate(clouds):
+        assert_allclose(X[k], _esf_reference(cloud, int(seeds[k]), 300), rtol=0, atol=1e-12)
+
+
+def test_right_triangle_by_hand():
+    # Three points: every triplet is the same 3-4-5 triangle, all lines "out"
+    # (a line holds occupied voxels only next to its ends), so the histogram
+    # follows from the triangle alone.
+    tri = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
+    X = ESFTransformer(n_triplets=50, random_state=0).fit_transform([tri])[0].reshape(10, 64)
+    p = tri - tri.mean(axis=0)
+    p *= 32 / np.sqrt((p**2).sum(axis=1).max())
+    cells = np.where(p < 0, np.floor(p) + 32, np.ceil(p) + 31)
+    n_vox = lambda i, j: max(int(np.abs(cells[i] - cells[j]).max()), 1)  # noqa: E731
+    expected = np.zeros((10, 64))
+    # A3 (out): angle at each vertex (90, atan(3/4), atan(4/3) degrees), weight = opposite side's voxels / 32.
+    for angle, opposite in ((np.pi / 2, (1, 2)), (np.arctan2(3, 4), (0, 2)), (np.arctan2(4, 3), (0, 1))):
+        expected[1, int(np.floor(angle / (np.pi / 2) * 63 + 0.5))] += 0.5 * n_vox(*opposite) / 32
+    expected[4, 63] = 0.5  # D3 (out): one triangle, at the maximum
+    for side in (5.0, 4.0, 3.0):  # D2 (out), relative to the longest side
+        expected[7, int(np.floor(side / 5.0 * 63 + 0.5))] += 2.0
+    expected /= expected.sum()
+    assert_allclose(X, expected, rtol=1e-12, atol=1e-15)
+    assert X[1, 63] > 0 and X[1, 26] > 0 and X[1, 37] > 0
+
+
+def test_shape_sum_layout_and_names():
+    est = ESFTransformer(n_triplets=2000, random_state=0)
+    X = est.fit_transform(_clouds())
+    assert X.shape == (4, 640)
+    assert np.all(X >= 0)
+    assert_allclose(X.sum(axis=1), 1.0)
+    names = est.get_feature_names_out()
+    assert len(names) == 640 and names[0] == "esf_a3_in_0" and names[-1] == "esf_d2_ratio_63"
+    assert ESFTransformer(n_bins=16, n_triplets=500, random_state=0).fit_transform(_clouds()).shape == (4, 160)
+
+
+def test_threads_and_repeats_are_bit_identical():
+    clouds = _clouds(6)
+    a = ESFTransformer(n_triplets=3000, random_state=3, n_jobs=1).fit_transform(clouds)
+    b = ESFTransformer(n_triplets=3000, random_state=3, n_jobs=2).fit_transform(clouds)
+    est = ESFTransformer(n_triplets=3000, random_state=3).fit(clouds)
+    assert_array_equal(a, b)
+    assert_array_equal(est.transform(clouds), est.transform(clouds))
+    assert_array_equal(a[2], ESFTransformer(n_triplets=3000, random_state=3).fit_transform(clouds)[2])
+    c = ESFTransformer(n_triplets=3000, random_state=4).fit_transform(clouds)
+    assert not np.array_equal(a, c)
+
+
+def test_scale_invariant_and_normals_ignored():
+    clouds = _clouds(2)
+    est = ESFTransformer(n_triplets=2000, random_state=1)
+    a = est.fit_transform(clouds)
+    b = est.transform([2.0 * c for c in clouds])  # a power of two keeps every value exact
+    assert_array_equal(a, b)
+    with_normals = [np.hstack([c, np.tile([0.0, 0.0, 1.0], (len(c), 1))]) for c in clouds]
+    assert_array_equal(a, est.transform(with_normals))
+
+
+def test_rotation_changes_little():
+    # ESF is rotation invariant up to its voxelisation.
+    rng = np.random.default_rng(0)
+    clouds = [rng.normal(size=(400, 3)) * [1.0, 0.4, 0.2], rng.uniform(size=(400, 3))]
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    est = ESFTransformer(n_triplets=20000, random_state=0)
+    X = est.fit_transform(clouds)
+    R = est.transform([c @ q.T for c in clouds])
+    assert np.abs(X[0] - R[0]).sum() < 0.5 * np.abs(X[0] - X[1]).sum()
+
+
+def test_pipeline_and_grid_search():
+    rng = np.random.default_rng(0)
+    clouds, y = [], []
+    for k in range(12):
+        scale = [1.0, 1.0, 0.05] if k % 2 else [1.0, 0.3, 0.3]
+        clouds.append(rng.normal(size=(80, 3)) * scale)
+        y.append(k % 2)
+    pipe = make_pipeline(ESFTransformer(n_triplets=1000, random_state=0), KLNearestNeighbors())
+    search = GridSearchCV(pipe, {"esftransformer__n_bins": [16, 32]}, cv=2).fit(clouds, y)
+    assert search.best_score_ > 0.8
+
+
+@pytest.mark.parametrize(
+    "params, err, msg",
+    [
+        ({"n_triplets": 0}, ValueError, "ESFTransformer: n_triplets must be in [1, 536870912], got 0"),
+        ({"n_triplets": 1.5}, TypeError, "ESFTransformer: n_triplets must be an int, got float"),
+        ({"grid_size": 63}, ValueError, "ESFTransformer: grid_size must be even, got 63"),
+        ({"grid_size": 2}, ValueError, "ESFTransformer: grid_size must be in [4, 1024], got 2"),
+        ({"n_bins": 0}, ValueError, "ESFTransformer: n_bins must be in [1, 4096], got 0"),
+        ({"n_jobs": 0}, ValueError, "n_jobs == 0 has no meaning"),
+    ],
+)
+def test_bad_parameters(params, err, msg):
+    with pytest.raises(err, match=re.escape(msg)):
+        ESFTransformer(**params).fit(_clouds())
+
+
+@pytest.mark.parametrize(
+    "X, err, msg",
+    [
+        ([np.zeros((2, 3)) + [[0, 0, 0], [1, 0, 0]]], ValueError, "point cloud 0 has 2 points; at least 3 are needed"),
+        ([np.array([[0.0, 0, 0], [1, 0, 0], [np.nan, 0, 0]])], ValueError, "point cloud 0 contains NaN"),
+        ([np.ones((5, 4))], ValueError, "point cloud 0 must have shape"),
+        ([], ValueError, "X is empty"),
+        (np.ones((5, 3)), ValueError, "X is a single 2D array"),
+        ("cloud", TypeError, "X must be a list of point clouds"),
+    ],
+)
+def test_bad_clouds(X, err, msg):
+    with pytest.raises(err, match=re.escape("ESFTransformer: " + msg)):
+        ESFTransformer(n_triplets=100).fit(X)
+
+
+def test_collinear_cloud_is_rejected():
+    line = np.outer(np.linspace(0, 1, 20), [1.0, 2.0, 3.0])
+    est = ESFTransformer(n_triplets=100, random_state=0).fit([line])
+    msg = "ESFTransformer: point cloud 0 has no triangles of non-zero area"
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        est.transform([line])
+
+
+def test_not_fitted():
+    with pytest.raises(NotFittedError):
+        ESFTransformer().transform(_clouds())
