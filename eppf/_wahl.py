@@ -169,7 +169,8 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         Parameters
         ----------
         X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds, with normals in columns 3-5 when available.
+            Point clouds of at least 2 points, with normals in columns 3-5
+            when available.
         y : None
             Ignored.
 
@@ -179,7 +180,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
             The fitted transformer.
         """
         n_bins, _, _, _ = self._check_params()
-        check_point_clouds(X, owner=type(self).__name__, min_points=3)
+        check_point_clouds(X, owner=type(self).__name__, min_points=2)
         self.n_bins_ = n_bins
         self.n_features_out_ = int(np.prod(n_bins))
         return self
@@ -190,7 +191,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         Parameters
         ----------
         X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points; normals are estimated for
+            Point clouds of at least 2 points; normals are estimated for
             clouds with three columns.
 
         Returns
@@ -201,7 +202,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         check_is_fitted(self)
         owner = type(self).__name__
         n_bins, n_pairs, n_neighbors, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3)
+        clouds = check_point_clouds(X, owner=owner, min_points=2)
         points, normals, offsets = _points_and_normals(clouds, n_neighbors, self.orientation, n_threads, owner)
         seeds = object_seeds(self.random_state, len(clouds))
         out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)
