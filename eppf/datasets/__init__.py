@@ -3,5 +3,16 @@
 from ._npz import load_npz
 from ._synthetic import make_shapes
 from ._loaders import load_modelnet, load_s3dis_objects, load_scannet_objects
+from ._fetch import clear_data_home, fetch_file, fetch_modelnet, get_data_home
 
-__all__ = ["load_modelnet", "load_npz", "load_s3dis_objects", "load_scannet_objects", "make_shapes"]
+__all__ = [
+    "clear_data_home",
+    "fetch_file",
+    "fetch_modelnet",
+    "get_data_home",
+    "load_modelnet",
+    "load_npz",
+    "load_s3dis_objects",
+    "load_scannet_objects",
+    "make_shapes",
+]
