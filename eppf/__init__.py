@@ -8,9 +8,10 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 __version__ = "0.1.0"
 
 from ._neighbors import KLNearestNeighbors, symmetric_kl_distances
+from ._cnn import EPPF4DClassifier
 
 from ._esf import ESFTransformer
 from ._ourcvfh import OURCVFHTransformer
 from ._wahl import WahlTransformer
 
-__all__ = ["ESFTransformer", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "symmetric_kl_distances"]
+__all__ = ["EPPF4DClassifier", "ESFTransformer", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "symmetric_kl_distances"]

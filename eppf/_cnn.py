@@ -313,9 +313,10 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         if y.shape[0] != X.shape[0]:
             raise ValueError(f"{_OWNER}: X has {X.shape[0]} objects but y has {y.shape[0]} labels")
         check_classification_targets(y)
-        self.classes_, y_enc = np.unique(y, return_inverse=True)
-        if self.classes_.shape[0] < 2:
-            raise ValueError(f"{_OWNER}: y has a single class {self.classes_[0]!r}; at least 2 are needed")
+        classes, y_enc = np.unique(y, return_inverse=True)
+        if classes.shape[0] < 2:
+            raise ValueError(f"{_OWNER}: y has a single class {classes[0].tolist()!r}; at least 2 are needed")
+        self.classes_ = classes
         y_enc = y_enc.astype(np.int64)
         self.n_features_in_ = n_features
         self.n_draws_fit_ = X.shape[1]
@@ -421,11 +422,15 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         proba : ndarray of shape (n_objects, n_classes)
             Columns follow ``classes_``.
         """
+        import torch
+
         check_is_fitted(self, "net_")
         X = self._validate_X(X, self.n_features_in_)
         n, k, f = X.shape
         flat = self._standardise(X.reshape(n * k, f))
-        with _torch_threads(self._n_threads()):
+        # fork_rng: torch's data loader draws a seed from the global generator
+        # even at inference; leave the caller's random stream untouched.
+        with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
             proba = self.net_.predict_proba(flat)
         return proba.reshape(n, k, -1).mean(axis=1)
 
@@ -442,7 +447,8 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         y : ndarray of shape (n_objects,)
             Labels from ``classes_``.
         """
-        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+        proba = self.predict_proba(X)
+        return self.classes_[np.argmax(proba, axis=1)]
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

@@ -1,0 +1,371 @@
+import math
+import pickle
+import re
+
+import numpy as np
+import pytest
+import torch
+from numpy.testing import assert_allclose, assert_array_equal
+from sklearn.base import BaseEstimator, TransformerMixin, clone
+from sklearn.exceptions import NotFittedError
+from sklearn.model_selection import GridSearchCV
+from sklearn.pipeline import Pipeline
+
+from eppf import EPPF4DClassifier
+from eppf.nn import DescriptorPoolDataset, EPPFNet2D, EPPFNet3D, EPPFNet4D, count_parameters, plane_shape
+
+NETS = {"2d": EPPFNet2D, "3d": EPPFNet3D, "4d": EPPFNet4D}
+SMALL = dict(filters=(4, 8, 4), n_hidden=16, batch_size=16, n_jobs=1)
+N_BINS = (4, 2, 3, 2)
+
+
+def _toy(n, rng, n_bins=N_BINS, labels=("cat", "dog", "eel"), noise=0.3):
+    """Histogram-like rows whose mass sits in a class-specific block of f1 bins."""
+    n_features = math.prod(n_bins)
+    y = rng.integers(0, len(labels), n)
+    X = rng.random((n, n_features)) * noise
+    block = n_features // len(labels)
+    for c in range(len(labels)):
+        X[y == c, c * block : (c + 1) * block] += 1.0
+    X /= X.sum(axis=1, keepdims=True)
+    return X, np.asarray(labels)[y]
+
+
+# ----------------------------------------------------------------- networks
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+@pytest.mark.parametrize("n_bins", [(20, 4, 5, 3), (15, 3, 4, 3), (4, 2, 3, 2), (3, 1, 1, 1), (5, 3, 3, 2)])
+def test_network_output_shapes(conv, n_bins):
+    net = NETS[conv](n_bins=n_bins, n_classes=7, filters=(2, 3, 2), n_hidden=8)
+    out = net(torch.rand(3, math.prod(n_bins)))
+    assert out.shape == (3, 7)
+
+
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_default_networks_dense_input_and_parameter_count(conv):
+    net = NETS[conv](n_classes=10)
+    assert net.n_flat == 48 * 20 * 15
+    dense = (14400 * 1024 + 1024) + (1024 * 10 + 10)
+    if conv == "4d":  # two (5,2,2,1) 4D convolutions, then a 5x5 2D one
+        convs = (32 * 20 + 32) + (64 * 32 * 20 + 64) + (48 * 64 * 25 + 48)
+    else:  # three 5x5 (or 5x5x1) convolutions
+        convs = (32 * 25 + 32) + (64 * 32 * 25 + 64) + (48 * 64 * 25 + 48)
+    assert count_parameters(net) == convs + dense
+
+
+def test_short_descriptor_sizes():
+    # EPPF short: 540 bins -> plane (27, 20) -> pooled (14, 10); 3D (15, 3, 12) -> (8, 2, 12)
+    assert EPPFNet4D(n_bins=(15, 3, 4, 3), n_hidden=8).n_flat == 48 * 14 * 10
+    assert EPPFNet2D(n_bins=(15, 3, 4, 3), n_hidden=8).n_flat == 48 * 14 * 10
+    assert EPPFNet3D(n_bins=(15, 3, 4, 3), n_hidden=8).n_flat == 48 * 8 * 2 * 12
+
+
+@pytest.mark.parametrize("n, expected", [(1200, (40, 30)), (540, (27, 20)), (48, (8, 6)), (7, (7, 1)), (1, (1, 1))])
+def test_plane_shape(n, expected):
+    assert plane_shape(n) == expected
+
+
+@pytest.mark.parametrize("kernel", [(5, 2, 2, 1), (3, 2, 2, 2)])
+def test_4d_network_folded_route_matches_general_route(kernel):
+    torch.manual_seed(0)
+    net = EPPFNet4D(n_bins=(5, 3, 2, 3), n_classes=3, filters=(3, 4, 2), kernel_size=kernel, n_hidden=8).eval()
+    x = torch.rand(4, 90)
+    out = net(x)
+    net.folded = False
+    assert_allclose(net(x).detach().numpy(), out.detach().numpy(), rtol=1e-5, atol=1e-6)
+
+
+def test_4d_network_reshape_follows_c_order():
+    # With identity-like layers the 4D network's plane is each channel's
+    # (f1, f2, f3, f4) volume in C order: check by hooking the 2D conv input.
+    torch.manual_seed(0)
+    net = EPPFNet4D(n_bins=(4, 2, 3, 2), n_classes=2, filters=(1, 1, 1), kernel_size=(1, 1, 1, 1), n_hidden=4)
+    with torch.no_grad():
+        for conv in (net.conv1, net.conv2):
+            conv.weight.fill_(1.0)
+            conv.bias.zero_()
+    seen = {}
+    net.conv3.register_forward_hook(lambda m, inp, out: seen.setdefault("x", inp[0]))
+    x = torch.rand(2, 48)
+    net(x)
+    assert_allclose(seen["x"][:, 0].detach().numpy(), x.reshape(2, 8, 6).numpy())
+
+
+@pytest.mark.parametrize(
+    "kwargs, msg",
+    [
+        ({"n_bins": (20, 4, 5)}, "EPPFNet4D: n_bins must be a tuple of 4 positive ints, got (20, 4, 5)"),
+        ({"n_bins": (20, 0, 5, 3)}, "EPPFNet4D: n_bins must be a tuple of 4 positive ints, got (20, 0, 5, 3)"),
+        ({"n_classes": 1}, "EPPFNet4D: n_classes must be an int >= 2, got 1"),
+        ({"dropout": 1.0}, "EPPFNet4D: dropout must be a float in [0, 1), got 1.0"),
+        ({"filters": (32, 64)}, "EPPFNet4D: filters must be 3 positive ints, got (32, 64)"),
+        ({"n_hidden": 0}, "EPPFNet4D: n_hidden must be a positive int, got 0"),
+    ],
+)
+def test_network_errors(kwargs, msg):
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        EPPFNet4D(**kwargs)
+
+
+def test_network_rejects_wrong_length():
+    msg = "EPPFNet3D: expected input of shape (batch, 540) for n_bins=(15, 3, 4, 3), got (2, 1200)"
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        EPPFNet3D(n_bins=(15, 3, 4, 3), n_hidden=4)(torch.zeros(2, 1200))
+
+
+def test_descriptor_pool_dataset_draws_every_member():
+    X = np.stack([np.full((5, 3), k, dtype=np.float32) for k in range(4)], axis=1)  # draw k holds k
+    ds = DescriptorPoolDataset(X, np.arange(5), random_state=0)
+    seen = {float(ds[i % 5][0][0]) for i in range(200)}
+    assert seen == {0.0, 1.0, 2.0, 3.0}
+    single = DescriptorPoolDataset(X[:, 2:3], np.arange(5))
+    assert {float(single[i][0][0]) for i in range(5)} == {2.0}
+
+
+# --------------------------------------------------------------- classifier
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_learns_separable_toy_set(conv):
+    rng = np.random.default_rng(0)
+    X, y = _toy(150, rng)
+    X_test, y_test = _toy(90, rng)
+    clf = EPPF4DClassifier(n_bins=N_BINS, conv=conv, max_epochs=8, lr=5e-3, early_stopping=False, random_state=0, **SMALL)
+    clf.fit(X, y)
+    assert clf.score(X_test, y_test) >= 0.9
+    assert clf.n_epochs_ == 8 and clf.best_epoch_ == 8
+
+
+def test_deterministic_under_random_state():
+    rng = np.random.default_rng(1)
+    X, y = _toy(60, rng)
+    make = lambda seed: EPPF4DClassifier(n_bins=N_BINS, max_epochs=3, random_state=seed, **SMALL)  # noqa: E731
+    before = torch.get_rng_state()
+    p1 = make(3).fit(X, y).predict_proba(X)
+    p2 = make(3).fit(X, y).predict_proba(X)
+    assert_array_equal(p1, p2)
+    assert not np.allclose(p1, make(4).fit(X, y).predict_proba(X))
+    assert torch.equal(torch.get_rng_state(), before)  # the global torch RNG is left alone
+
+
+def test_string_and_integer_labels_map_back():
+    rng = np.random.default_rng(2)
+    X, y = _toy(60, rng, labels=("zebra", "ant", "moose"))
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, **SMALL).fit(X, y)
+    assert_array_equal(clf.classes_, ["ant", "moose", "zebra"])
+    assert set(clf.predict(X)) <= set(clf.classes_)
+    proba = clf.predict_proba(X)
+    assert proba.shape == (60, 3)
+    assert_allclose(proba.sum(axis=1), 1.0, rtol=1e-5)
+    assert_array_equal(clf.predict(X), clf.classes_[proba.argmax(axis=1)])
+
+    y_int = np.select([y == "ant", y == "moose"], [10, -3], 7)
+    clf_int = EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, **SMALL).fit(X, y_int)
+    assert_array_equal(clf_int.classes_, [-3, 7, 10])
+    assert set(clf_int.predict(X)) <= {-3, 7, 10}
+
+
+def test_pickle_roundtrip_and_clone():
+    rng = np.random.default_rng(3)
+    X, y = _toy(50, rng)
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, **SMALL).fit(X, y)
+    restored = pickle.loads(pickle.dumps(clf))
+    assert_array_equal(restored.predict_proba(X), clf.predict_proba(X))
+    assert_array_equal(restored.classes_, clf.classes_)
+    fresh = clone(clf)
+    assert fresh.get_params() == clf.get_params()
+    assert not hasattr(fresh, "net_")
+    with pytest.raises(NotFittedError):
+        fresh.predict(X)
+
+
+def test_descriptor_pool_fit_and_test_time_averaging():
+    rng = np.random.default_rng(4)
+    draws = [_toy(60, np.random.default_rng(7))[0] for _ in range(3)]
+    _, y = _toy(60, np.random.default_rng(7))
+    pool = np.stack([d + rng.random(d.shape) * 1e-3 for d in draws], axis=1)
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=3, random_state=0, **SMALL).fit(pool, y)
+    assert clf.n_draws_fit_ == 3
+    averaged = clf.predict_proba(pool)
+    per_draw = np.mean([clf.predict_proba(pool[:, k]) for k in range(3)], axis=0)
+    assert_allclose(averaged, per_draw, rtol=1e-6)
+    assert clf.predict(pool).shape == (60,)
+    assert clf.predict(pool[:, 0]).shape == (60,)  # single draws work too
+
+
+def test_global_input_scaling_learned_on_training_part():
+    rng = np.random.default_rng(5)
+    X, y = _toy(40, rng)
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=False, random_state=0, **SMALL).fit(X, y)
+    assert_allclose(clf.input_mean_, [X.mean()], rtol=1e-5)
+    assert_allclose(clf.input_scale_, [X.std()], rtol=1e-4)
+    clf_bin = clone(clf).set_params(input_scaling="bin").fit(X, y)
+    assert_allclose(clf_bin.input_mean_, X.mean(axis=0), rtol=1e-5)
+    clf_none = clone(clf).set_params(input_scaling="none").fit(X, y)
+    assert_allclose(clf_none.input_scale_, [1.0])
+
+
+def test_early_stopping_uses_validation_from_training_data():
+    rng = np.random.default_rng(6)
+    X, y = _toy(80, rng)
+    clf = EPPF4DClassifier(
+        n_bins=N_BINS, max_epochs=30, n_iter_no_change=2, validation_fraction=0.25, lr=0.05, random_state=0, **SMALL
+    ).fit(X, y)
+    history = clf.net_.history
+    losses = history[:, "valid_loss"]
+    assert clf.n_epochs_ == len(history) <= 30
+    assert clf.best_epoch_ == int(np.argmin(losses)) + 1
+    if clf.n_epochs_ < 30:  # stopped early: no improvement over the patience window
+        assert clf.n_epochs_ - clf.best_epoch_ == 2
+    # 20 of 80 objects are held out: one epoch trains on 60
+    assert sum(b["train_batch_size"] for b in history[0]["batches"] if "train_batch_size" in b) == 60
+
+
+def test_n_jobs_restores_torch_threads():
+    rng = np.random.default_rng(7)
+    X, y = _toy(30, rng)
+    before = torch.get_num_threads()
+    EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, random_state=0, **SMALL).fit(X, y)
+    assert torch.get_num_threads() == before
+
+
+def test_verbose_prints_epochs(capsys):
+    rng = np.random.default_rng(8)
+    X, y = _toy(40, rng)
+    EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, verbose=1, **SMALL).fit(X, y)
+    out = capsys.readouterr().out
+    assert "train_loss" in out and "valid_loss" in out
+    EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, **SMALL).fit(X, y)
+    assert capsys.readouterr().out == ""
+
+
+class _BlockHistogram(TransformerMixin, BaseEstimator):
+    """Stand-in descriptor: normalised histogram of a 1D signal's values over n_bins."""
+
+    def __init__(self, n_bins=N_BINS):
+        self.n_bins = n_bins
+
+    def fit(self, X, y=None):
+        return self
+
+    def transform(self, X):
+        n = math.prod(self.n_bins)
+        H = np.stack([np.histogram(x, bins=n, range=(0, 1))[0] for x in np.asarray(X)]).astype(float) + 1e-3
+        return H / H.sum(axis=1, keepdims=True)
+
+
+def test_pipeline_grid_search_with_stand_in_transformer():
+    rng = np.random.default_rng(9)
+    y = np.repeat(["low", "high"], 20)
+    signals = np.where(y[:, None] == "low", rng.random((40, 50)) * 0.5, 0.5 + rng.random((40, 50)) * 0.5)
+    pipe = Pipeline(
+        [
+            ("desc", _BlockHistogram()),
+            ("cnn", EPPF4DClassifier(max_epochs=6, lr=1e-2, random_state=0, early_stopping=False, **SMALL)),
+        ]
+    )
+    grid = GridSearchCV(
+        pipe,
+        {"desc__n_bins": [(4, 2, 3, 2), (2, 2, 2, 2)], "cnn__conv": ["4d", "2d"]},
+        cv=2,
+        n_jobs=1,
+    )
+    # the classifier's n_bins must follow the descriptor's: tie them in the grid
+    grid.set_params(
+        param_grid=[
+            {"desc__n_bins": [nb], "cnn__n_bins": [nb], "cnn__conv": ["4d", "2d"]} for nb in [(4, 2, 3, 2), (2, 2, 2, 2)]
+        ]
+    )
+    grid.fit(signals, y)
+    assert len(grid.cv_results_["params"]) == 4
+    assert grid.score(signals, y) >= 0.9
+
+
+def test_pipeline_with_eppf_transformer():
+    EPPFTransformer = pytest.importorskip("eppf").__dict__.get("EPPFTransformer")
+    if EPPFTransformer is None:
+        pytest.skip("EPPFTransformer not available")
+    rng = np.random.default_rng(10)
+    clouds, y = [], []
+    for i in range(24):
+        if i % 2:  # flat square
+            pts = np.c_[rng.random((60, 2)), 0.01 * rng.random(60)]
+        else:  # long thin stick
+            pts = np.c_[rng.random(60), 0.05 * rng.random((60, 2))]
+        clouds.append(pts)
+        y.append("plate" if i % 2 else "stick")
+    y = np.asarray(y)
+    n_bins = (4, 2, 3, 2)
+    pipe = Pipeline(
+        [
+            ("eppf", EPPFTransformer(n_bins=n_bins, n_pairs=500, scaling="object", random_state=0, n_jobs=1)),
+            ("cnn", EPPF4DClassifier(n_bins=n_bins, max_epochs=8, lr=1e-2, early_stopping=False, random_state=0, **SMALL)),
+        ]
+    )
+    grid = GridSearchCV(pipe, {"eppf__c": [1.2, 2.0]}, cv=2, n_jobs=1).fit(clouds, y)
+    assert grid.score(clouds, y) >= 0.9
+
+
+# ------------------------------------------------------------------- errors
+@pytest.mark.parametrize(
+    "params, err, msg",
+    [
+        ({"n_bins": (20, 4, 5)}, ValueError, "EPPF4DClassifier: n_bins must be a tuple of 4 positive ints, got (20, 4, 5)"),
+        ({"n_bins": 1200}, TypeError, "EPPF4DClassifier: n_bins must be a tuple of 4 positive ints, got 1200"),
+        ({"conv": "5d"}, ValueError, "EPPF4DClassifier: conv must be one of '4d', '3d', '2d', got '5d'"),
+        ({"max_epochs": 0}, ValueError, "EPPF4DClassifier: max_epochs must be an int >= 1, got 0"),
+        ({"lr": -1.0}, ValueError, "EPPF4DClassifier: lr must be a float in (0.0, inf), got -1.0"),
+        ({"lr": float("nan")}, ValueError, "EPPF4DClassifier: lr must be a float in (0.0, inf), got nan"),
+        ({"batch_size": 0}, ValueError, "EPPF4DClassifier: batch_size must be an int >= 1, got 0"),
+        ({"dropout": 1.0}, ValueError, "EPPF4DClassifier: dropout must be a float in [0.0, 1.0), got 1.0"),
+        ({"weight_decay": -0.1}, ValueError, "EPPF4DClassifier: weight_decay must be a float in [0.0, inf), got -0.1"),
+        ({"n_hidden": 0}, ValueError, "EPPF4DClassifier: n_hidden must be an int >= 1, got 0"),
+        ({"filters": (4, 8)}, ValueError, "EPPF4DClassifier: filters must be a tuple of 3 positive ints, got (4, 8)"),
+        ({"early_stopping": "yes"}, ValueError, "EPPF4DClassifier: early_stopping must be True or False, got 'yes'"),
+        ({"validation_fraction": 1.0}, ValueError, "EPPF4DClassifier: validation_fraction must be a float in (0.0, 1.0), got 1.0"),
+        ({"n_iter_no_change": 0}, ValueError, "EPPF4DClassifier: n_iter_no_change must be an int >= 1, got 0"),
+        ({"input_scaling": "minmax"}, ValueError, "EPPF4DClassifier: input_scaling must be one of 'global', 'bin', 'none', got 'minmax'"),
+        ({"device": None}, ValueError, "EPPF4DClassifier: device must be a str such as 'cpu' or 'cuda', got None"),
+        ({"n_jobs": 0}, ValueError, "EPPF4DClassifier: n_jobs must be None or a non-zero int, got 0"),
+        ({"verbose": -1}, ValueError, "EPPF4DClassifier: verbose must be an int >= 0, got -1"),
+    ],
+)
+def test_bad_parameters(params, err, msg):
+    X, y = _toy(20, np.random.default_rng(0))
+    kwargs = {"n_bins": N_BINS, **SMALL, **params}
+    with pytest.raises(err, match=re.escape(msg)):
+        EPPF4DClassifier(**kwargs).fit(X, y)
+
+
+@pytest.mark.parametrize(
+    "X, y, err, msg",
+    [
+        (np.full((6, 1200), 1 / 1200), ["a", "b"] * 3, ValueError,
+         "EPPF4DClassifier: descriptors have 1200 values but n_bins=(4, 2, 3, 2) needs 48; pass the n_bins the descriptors were computed with"),
+        (np.zeros(48), ["a"], ValueError, "EPPF4DClassifier: X must have shape (n_objects, n_features) or (n_objects, n_draws, n_features), got shape (48,)"),
+        (np.zeros((0, 48)), [], ValueError, "EPPF4DClassifier: X is empty (shape (0, 1, 48))"),
+        (np.full((4, 48), np.nan), ["a", "b"] * 2, ValueError, "EPPF4DClassifier: X contains NaN or infinite values"),
+        (np.full((4, 48), "x"), ["a", "b"] * 2, TypeError, "EPPF4DClassifier: X must hold numbers, got dtype <U1"),
+        (None, ["a"], TypeError, "EPPF4DClassifier: X must be an array of descriptors, got NoneType"),
+        (np.full((4, 48), 1 / 48), ["a", "b", "a"], ValueError, "EPPF4DClassifier: X has 4 objects but y has 3 labels"),
+        (np.full((4, 48), 1 / 48), ["a"] * 4, ValueError, "EPPF4DClassifier: y has a single class 'a'; at least 2 are needed"),
+        (np.full((4, 48), 1 / 48), [[0, 1]] * 4, ValueError, "EPPF4DClassifier: y must be 1D, got shape (4, 2)"),
+    ],
+)
+def test_bad_input(X, y, err, msg):
+    with pytest.raises(err, match=re.escape(msg)):
+        EPPF4DClassifier(n_bins=N_BINS, **SMALL).fit(X, np.asarray(y))
+
+
+def test_predict_checks_length_and_fit():
+    X, y = _toy(20, np.random.default_rng(0))
+    with pytest.raises(NotFittedError):
+        EPPF4DClassifier(n_bins=N_BINS).predict(X)
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=False, random_state=0, **SMALL).fit(X, y)
+    msg = "EPPF4DClassifier: descriptors have 540 values but n_bins=(4, 2, 3, 2) needs 48"
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        clf.predict(np.full((3, 540), 1 / 540))
+
+
+def test_validation_fraction_too_large_for_data():
+    X, y = _toy(3, np.random.default_rng(0))
+    msg = "EPPF4DClassifier: validation_fraction=0.9 of 3 objects leaves no validation or no training objects"
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        EPPF4DClassifier(n_bins=N_BINS, validation_fraction=0.9, **SMALL).fit(X, y)
