@@ -4,8 +4,10 @@ from ._npz import load_npz
 from ._synthetic import make_shapes
 from ._loaders import load_modelnet, load_s3dis_objects, load_scannet_objects
 from ._fetch import clear_data_home, fetch_file, fetch_modelnet, get_data_home
+from ._cache import CachedTransformer
 
 __all__ = [
+    "CachedTransformer",
     "clear_data_home",
     "fetch_file",
     "fetch_modelnet",

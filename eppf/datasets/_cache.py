@@ -1,0 +1,163 @@
+"""Caching of descriptors on disk with :class:`joblib.Memory`."""
+
+import os
+import warnings
+
+from sklearn.base import BaseEstimator, TransformerMixin, clone
+from sklearn.utils import get_tags
+from sklearn.utils.validation import check_is_fitted, check_memory
+
+__all__ = ["CachedTransformer"]
+
+# parameters that change how fast a transformer runs, never what it returns
+_NEUTRAL_PARAMS = ("n_jobs", "verbose", "chunk_size", "batch_size")
+
+
+def _key(transformer):
+    """What the output depends on: class, parameters and fitted state."""
+    cls = f"{type(transformer).__module__}.{type(transformer).__qualname__}"
+    params = {k: v for k, v in transformer.get_params(deep=True).items() if k.rsplit("__", 1)[-1] not in _NEUTRAL_PARAMS}
+    state = {k: v for k, v in vars(transformer).items() if k.endswith("_") and not k.startswith("_")}
+    return cls, params, state
+
+
+def _fit_transform(cls, params, X, y, transformer):
+    est = clone(transformer)
+    return est, est.fit_transform(X, y) if y is not None else est.fit_transform(X)
+
+
+def _transform(cls, params, state, X, transformer):
+    return transformer.transform(X)
+
+
+class CachedTransformer(TransformerMixin, BaseEstimator):
+    """Cache the output of a descriptor transformer on disk.
+
+    Descriptors of a large data set take minutes to compute and are needed
+    again for every classifier, grid-search candidate and experiment. This
+    wrapper stores them with :class:`joblib.Memory`, keyed on the wrapped
+    transformer's class, its parameters (except ones that only change speed:
+    ``n_jobs``, ``verbose``, ``chunk_size``, ``batch_size``), its fitted
+    attributes and a hash of the input clouds. A second call with the same
+    key loads the result instead of computing it.
+
+    Parameters
+    ----------
+    transformer : estimator
+        The transformer to cache, e.g. :class:`eppf.EPPFTransformer`; it is
+        cloned in ``fit``.
+    memory : str, path-like or joblib.Memory, default=None
+        Where to cache (a folder, or a Memory object); None disables caching.
+
+    Attributes
+    ----------
+    transformer_ : estimator
+        The fitted clone of ``transformer``.
+
+    Notes
+    -----
+    Only cache transformers with a fixed ``random_state``: with
+    ``random_state=None`` every call should draw afresh, but the cache
+    returns the first draw (a warning says so).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> import numpy as np
+    >>> from sklearn.preprocessing import FunctionTransformer
+    >>> from eppf.datasets import CachedTransformer
+    >>> X = np.arange(6.0).reshape(3, 2)
+    >>> cached = CachedTransformer(FunctionTransformer(np.sqrt), memory=tempfile.mkdtemp())
+    >>> cached.fit_transform(X).shape
+    (3, 2)
+    """
+
+    def __init__(self, transformer, *, memory=None):
+        self.transformer = transformer
+        self.memory = memory
+
+    def _memory(self):
+        owner = type(self).__name__
+        if not hasattr(self.transformer, "fit") or not hasattr(self.transformer, "transform"):
+            raise TypeError(f"{owner}: transformer must have fit and transform methods, got {type(self.transformer).__name__}")
+        memory = self.memory
+        if isinstance(memory, os.PathLike):
+            memory = os.fspath(memory)
+        try:
+            memory = check_memory(memory)
+        except ValueError as exc:
+            raise ValueError(f"{owner}: memory must be None, a folder or a joblib.Memory ({exc})") from None
+        params = self.transformer.get_params(deep=True)
+        if memory.location is not None and "random_state" in params and params["random_state"] is None:
+            warnings.warn(
+                f"{owner}: the wrapped {type(self.transformer).__name__} has random_state=None; the cache "
+                "returns the first draw on every call. Set an integer random_state.",
+                UserWarning,
+                stacklevel=3,
+            )
+        return memory
+
+    def fit(self, X, y=None):
+        """Fit a clone of the transformer (cached).
+
+        Parameters
+        ----------
+        X : list of array-like
+            Point clouds, as the wrapped transformer takes them.
+        y : array-like, default=None
+            Passed on to the wrapped transformer.
+
+        Returns
+        -------
+        self : object
+            The fitted wrapper.
+        """
+        self.fit_transform(X, y)
+        return self
+
+    def fit_transform(self, X, y=None):
+        """Fit a clone of the transformer and return its output (cached).
+
+        Parameters
+        ----------
+        X : list of array-like
+            Point clouds.
+        y : array-like, default=None
+            Passed on to the wrapped transformer.
+
+        Returns
+        -------
+        X_new : ndarray
+            The wrapped transformer's output.
+        """
+        memory = self._memory()
+        cls, params, _ = _key(self.transformer)
+        func = memory.cache(_fit_transform, ignore=["transformer"])
+        self.transformer_, Xt = func(cls, params, X, y, self.transformer)
+        return Xt
+
+    def transform(self, X):
+        """Transform with the fitted transformer (cached).
+
+        Parameters
+        ----------
+        X : list of array-like
+            Point clouds.
+
+        Returns
+        -------
+        X_new : ndarray
+            The wrapped transformer's output.
+        """
+        check_is_fitted(self, "transformer_")
+        memory = self._memory()
+        cls, params, state = _key(self.transformer_)
+        func = memory.cache(_transform, ignore=["transformer"])
+        return func(cls, params, state, X, self.transformer_)
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        inner = get_tags(self.transformer)
+        tags.input_tags = inner.input_tags
+        tags.transformer_tags = inner.transformer_tags
+        return tags
