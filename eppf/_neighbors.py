@@ -426,10 +426,20 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
     .. math:: d(a, b) = \\sum_i (a_i - b_i) \\ln \\frac{a_i}{b_i}.
 
     It is computed as two matrix products per block of query rows. Equal
-    distances are resolved in favour of the training sample with the lowest
-    index, and equal votes in favour of the first class in ``classes_``.
+    distances, and distances closer than the rounding error of that
+    computation (about ``1e-12`` relative to the summed terms), are resolved
+    in favour of the training sample with the lowest index, so exact
+    duplicates in the training set give the same answer whatever the
+    chunking. Equal votes go to the first class in ``classes_``.
     :meth:`kneighbors` without ``X`` excludes each training point from its
     own neighbours, which gives leave-one-out retrieval.
+
+    The divergence compares distributions: histograms of raw counts with
+    different totals (e.g. OUR-CVFH over clouds of different sizes) should be
+    L1-normalised first, e.g. with
+    ``sklearn.preprocessing.Normalizer(norm="l1")`` in a pipeline. EPPF
+    descriptors already are. Flooring adds a little mass to sparse
+    histograms; ``renormalize=True`` removes it again.
 
     References
     ----------

@@ -129,7 +129,7 @@ def test_loo_matches_brute_force(chunk_size, renormalize):
     assert_array_equal(ind, knn.kneighbors(return_distance=False)[:, 0])
 
 
-@pytest.mark.parametrize("chunk_size", [None, 1, 2, 5, 37, 64])
+@pytest.mark.parametrize("chunk_size", [None, 3, 37, 64])
 def test_loo_ties_go_to_lowest_index(chunk_size):
     # exact copies of rows, with enough bins and rows that the matrix products
     # round differently at different positions
