@@ -1,0 +1,816 @@
+# cython: language_level=3
+"""Compiled kernel for PCA surface normals, parallel over objects (or over the
+points of one object) with OpenMP.
+
+- Exact k nearest neighbours on a uniform grid of cubic cells. The cell size
+  adapts to the object and to k (about ``_PTS_PER_CELL * k`` points per
+  occupied cell), so the 3x3x3 block of cells around a query usually holds its
+  neighbourhood. Fast path: candidates of that block closer than a guess of the
+  k-th distance (taken from the previous query) are ranked without branches,
+  and the result is accepted when the k-th distance is provably smaller than
+  the distance to the block's boundary. Otherwise an exact search over growing
+  shells of cells with a sorted k-list takes over. Both paths return the same
+  list: the k smallest squared distances, ties broken by the point's position
+  in the grid order (cell, then original index).
+- The normal is the eigenvector of the smallest eigenvalue of the
+  neighbourhood's covariance: closed-form eigenvalues plus a cross product of
+  two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
+  spectra.
+
+Every normal depends only on its own object's coordinates and k, never on the
+thread that computed it or on the order in which points were visited, so the
+output is bit-identical for any thread count.
+"""
+from cython.parallel cimport prange, threadid
+from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, log, pow, INFINITY
+from libc.float cimport DBL_EPSILON
+from libc.stdint cimport int64_t
+
+import numpy as np
+
+# Modes of orientation understood by the kernel.
+cdef enum:
+    _N_BUCKETS = 64
+
+cdef enum:
+    ORIENT_NONE = 0
+    ORIENT_CENTROID = 1
+    ORIENT_VIEWPOINT = 2
+
+
+# Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
+# the closed-form eigenvector is replaced by Jacobi's.
+cdef double _GAP_RATIO = 1e-3
+cdef double _PI = 3.141592653589793
+# Grid cell size over the estimated radius of a k-neighbourhood.
+cdef double _CELL_OVER_RADIUS = 1.2
+# The fast path keeps candidates within this factor of the previous query's
+# k-th squared distance, and gives up when more than _MAX_CAND_PER_K * k pass.
+cdef double _GUESS_FACTOR = 2.0
+cdef Py_ssize_t _MAX_CAND_PER_K = 8
+
+
+cdef struct Grid:
+    double lo[3]
+    double h
+    double inv_h
+    double margin
+    int64_t res[3]
+    int64_t ncells
+    double scale
+
+
+cdef struct Scratch:
+    # Object part (sized by the largest object, max_n points).
+    double* spts          # 3 * max_n  coordinates in grid order, rescaled
+    double* cand_d2       # max_n      fast-path candidate squared distances
+    int64_t* sidx         # max_n      original index of each grid-order point
+    int64_t* cell_of      # max_n      cell of each point
+    int64_t* cell_start   # cap + 1    first grid-order position of each cell
+    int64_t* cand_pos     # max_n      fast-path candidate positions
+    int64_t* sel          # max_n      fast-path candidates of the k-th's bucket
+    # Query part (sized by k).
+    double* kd2           # k          the k-list's squared distances, ascending
+    double* nb            # 3 * k      gathered neighbourhood
+    double* guess         # 1          k-th squared distance guess for the next query
+    int64_t* kpos         # k + 1      the k-list's grid-order positions (+1 slack
+                          #            for the fast path's branch-free compaction)
+
+
+def max_cells(Py_ssize_t n):
+    """Upper bound on the number of grid cells for an object of ``n`` points."""
+    return 4 * n + 64
+
+
+def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
+    """Lengths of one thread's float64 and int64 scratch rows for objects of
+    at most ``max_n`` points and neighbourhoods of ``k`` points."""
+    return 4 * max_n + 4 * k + 1, 4 * max_n + max_cells(max_n) + 1 + k + 1
+
+
+cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_ssize_t k,
+                                Scratch* sc) noexcept nogil:
+    """Carve one thread's scratch rows (see :func:`scratch_sizes`)."""
+    cdef Py_ssize_t cap = 4 * max_n + 64
+    sc.spts = fs
+    sc.cand_d2 = fs + 3 * max_n
+    sc.kd2 = sc.cand_d2 + max_n
+    sc.nb = sc.kd2 + k
+    sc.guess = sc.nb + 3 * k
+    sc.sidx = its
+    sc.cell_of = its + max_n
+    sc.cell_start = sc.cell_of + max_n
+    sc.cand_pos = sc.cell_start + cap + 1
+    sc.sel = sc.cand_pos + max_n
+    sc.kpos = sc.sel + max_n
+
+
+cdef inline int64_t _cell_coord(double x, double lo, double inv_h, int64_t res) noexcept nogil:
+    cdef int64_t c = <int64_t>((x - lo) * inv_h)
+    if c < 0:
+        c = 0
+    if c >= res:
+        c = res - 1
+    return c
+
+
+cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap) noexcept nogil:
+    """Cells per axis for cell size ``h`` (grown until at most ``cap`` cells)."""
+    cdef int64_t prod, r
+    cdef int a
+    while True:
+        prod = 1
+        for a in range(3):
+            r = <int64_t>floor(e[a] / h)
+            if r < 1:
+                r = 1
+            if r > 1 << 20:
+                r = 1 << 20
+            g.res[a] = r
+            prod *= r
+        if prod <= cap:
+            break
+        h *= 1.25
+    g.h = h
+    g.inv_h = 1.0 / h
+    g.ncells = prod
+    # Rounding slack for the geometric bounds (coordinates are below 1).
+    g.margin = 64.0 * DBL_EPSILON * (1.0 + h)
+    return prod
+
+
+cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cell_of,
+                          int64_t* counts) noexcept nogil:
+    """Cell of every point and points per cell (in ``counts[c + 1]``);
+    return the number of occupied cells."""
+    cdef Py_ssize_t i
+    cdef int64_t c, cx, cy, cz, occupied = 0
+    for c in range(g.ncells + 1):
+        counts[c] = 0
+    for i in range(n):
+        cx = _cell_coord(pts[3 * i] * g.scale, g.lo[0], g.inv_h, g.res[0])
+        cy = _cell_coord(pts[3 * i + 1] * g.scale, g.lo[1], g.inv_h, g.res[1])
+        cz = _cell_coord(pts[3 * i + 2] * g.scale, g.lo[2], g.inv_h, g.res[2])
+        c = (cz * g.res[1] + cy) * g.res[0] + cx
+        cell_of[i] = c
+        occupied += counts[c + 1] == 0
+        counts[c + 1] += 1
+    return occupied
+
+
+cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t cap,
+                      Grid* g, double* spts, int64_t* sidx, int64_t* cell_of,
+                      int64_t* cell_start) noexcept nogil:
+    """Rescale the object by a power of two, choose the cell size, bin the
+    points and store them sorted by cell (stable: ascending original index
+    within a cell)."""
+    cdef Py_ssize_t i, a
+    cdef double hi[3]
+    cdef double e[3]
+    cdef double m = 0.0, x, h, t, e1, e2, e3, tmp, h0, h1, pc0, pc1, d, tau
+    cdef int expo
+    cdef int64_t c, r
+    # Exact rescaling by a power of two: the largest |coordinate| lands in
+    # [0.5, 1), so squared distances neither overflow nor underflow, and every
+    # later quantity is the unscaled one times an exact power of two.
+    for i in range(3 * n):
+        x = fabs(pts[i])
+        if x > m:
+            m = x
+    g.scale = 1.0
+    if m > 0.0:
+        frexp(m, &expo)
+        if expo < -1000:
+            expo = -1000
+        g.scale = ldexp(1.0, -expo)
+    for a in range(3):
+        g.lo[a] = INFINITY
+        hi[a] = -INFINITY
+    for i in range(n):
+        for a in range(3):
+            x = pts[3 * i + a] * g.scale
+            if x < g.lo[a]:
+                g.lo[a] = x
+            if x > hi[a]:
+                hi[a] = x
+    for a in range(3):
+        e[a] = hi[a] - g.lo[a]
+    # First guess: about one cell per point of the bounding box, flat axes
+    # ignored.
+    t = <double>n
+    e1 = e[0]
+    e2 = e[1]
+    e3 = e[2]
+    if e1 < e2:
+        tmp = e1; e1 = e2; e2 = tmp
+    if e2 < e3:
+        tmp = e2; e2 = e3; e3 = tmp
+    if e1 < e2:
+        tmp = e1; e1 = e2; e2 = tmp
+    if e1 <= 0.0:
+        h = 1.0
+    else:
+        h = cbrt(e1 * e2 * e3 / t)
+        if not (e3 >= h):
+            h = sqrt(e1 * e2 / t)
+            if not (e2 >= h):
+                h = e1 / t
+    _set_resolution(g, e, h, cap)
+    # Then resize so that a cell is about _CELL_OVER_RADIUS times the radius of
+    # a k-neighbourhood. The local dimension d (1 for curves, 2 for surfaces,
+    # 3 for volumes) is read from how occupancy changes with the cell size.
+    h0 = g.h
+    pc0 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
+    _set_resolution(g, e, h0 * 1.5, cap)
+    h1 = g.h
+    pc1 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
+    d = 2.0
+    if pc1 > pc0 and h1 > h0:
+        d = log(pc1 / pc0) / log(h1 / h0)
+    if d < 1.0:
+        d = 1.0
+    if d > 3.0:
+        d = 3.0
+    # Points per occupied cell when the cell is the neighbourhood radius:
+    # about 0.7 k on curves and surfaces (a cell holds ~1.5 h^2 of surface)
+    # down to 0.24 k in volumes (k / (4 pi / 3)).
+    tau = 0.7 if d <= 2.0 else 0.7 - (0.7 - 0.24) * (d - 2.0)
+    tmp = (tau * k * pow(_CELL_OVER_RADIUS, d) / pc1) ** (1.0 / d)
+    if tmp < 0.125:
+        tmp = 0.125
+    if tmp > 8.0:
+        tmp = 8.0
+    _set_resolution(g, e, h1 * tmp, cap)
+    _count_cells(pts, n, g, cell_of, cell_start)
+    for c in range(g.ncells):
+        cell_start[c + 1] += cell_start[c]
+    for i in range(n):
+        c = cell_of[i]
+        r = cell_start[c]
+        cell_start[c] = r + 1
+        sidx[r] = i
+        spts[3 * r] = pts[3 * i] * g.scale
+        spts[3 * r + 1] = pts[3 * i + 1] * g.scale
+        spts[3 * r + 2] = pts[3 * i + 2] * g.scale
+    for c in range(g.ncells, 0, -1):
+        cell_start[c] = cell_start[c - 1]
+    cell_start[0] = 0
+
+
+cdef inline Py_ssize_t _scan_cell(const double* spts, int64_t begin, int64_t end,
+                                  double qx, double qy, double qz, Py_ssize_t k, Py_ssize_t count,
+                                  double* kd2, int64_t* kpos) noexcept nogil:
+    """Offer the points of one cell to the k-list, kept sorted by (squared
+    distance, grid-order position); return the new count."""
+    cdef int64_t p
+    cdef double dx, dy, dz, d2
+    cdef Py_ssize_t pos
+    for p in range(begin, end):
+        dx = spts[3 * p] - qx
+        dy = spts[3 * p + 1] - qy
+        dz = spts[3 * p + 2] - qz
+        d2 = dx * dx + dy * dy + dz * dz
+        if count < k:
+            pos = count
+            count += 1
+        elif d2 < kd2[k - 1] or (d2 == kd2[k - 1] and p < kpos[k - 1]):
+            pos = k - 1
+        else:
+            continue
+        while pos > 0 and (kd2[pos - 1] > d2 or (kd2[pos - 1] == d2 and kpos[pos - 1] > p)):
+            kd2[pos] = kd2[pos - 1]
+            kpos[pos] = kpos[pos - 1]
+            pos -= 1
+        kd2[pos] = d2
+        kpos[pos] = p
+    return count
+
+
+cdef inline double _gap(double q, double lo, double h, int64_t c, int64_t j) noexcept nogil:
+    """Distance along one axis from q (in cell c) to cell j's slab (0 for j == c)."""
+    if j < c:
+        return q - (lo + (j + 1) * h)
+    if j > c:
+        return (lo + j * h) - q
+    return 0.0
+
+
+cdef inline bint _block_done(const Grid* g, const double* q, const int64_t* c, int64_t r,
+                             double kth) noexcept nogil:
+    """True when the block of cells within Chebyshev distance ``r`` of cell
+    ``c`` holds every point closer to ``q`` than sqrt(kth) (or the whole
+    grid)."""
+    cdef bint full_cover = True
+    cdef double bound = INFINITY, b
+    cdef int a
+    for a in range(3):
+        if c[a] - r >= 1:
+            full_cover = False
+            b = q[a] - (g.lo[a] + (c[a] - r) * g.h)
+            if b < bound:
+                bound = b
+        if c[a] + r + 1 <= g.res[a] - 1:
+            full_cover = False
+            b = (g.lo[a] + (c[a] + r + 1) * g.h) - q[a]
+            if b < bound:
+                bound = b
+    if full_cover:
+        return True
+    bound -= g.margin
+    return bound > 0.0 and kth < bound * bound
+
+
+cdef void _knn_shells(const Grid* g, const double* spts, const int64_t* cell_start,
+                      const double* q, const int64_t* c, Py_ssize_t k,
+                      double* kd2, int64_t* kpos) noexcept nogil:
+    """Exact search over growing shells of cells with a sorted k-list."""
+    cdef double qx = q[0], qy = q[1], qz = q[2]
+    cdef int64_t r, jx, jy, jz, x0, x1, y0, y1, z0, z1, step, cell
+    cdef Py_ssize_t count = 0
+    cdef double gz, gy, gx, gz2, gyz2
+    cdef bint edge_y, edge_z
+    r = 0
+    while True:
+        # Visit the shell of cells at Chebyshev distance r from the query's
+        # cell, skipping slabs, rows and cells farther than the current k-th.
+        z0 = c[2] - r
+        z1 = c[2] + r
+        y0 = c[1] - r
+        y1 = c[1] + r
+        x0 = c[0] - r
+        x1 = c[0] + r
+        for jz in range(z0 if z0 > 0 else 0, (z1 if z1 < g.res[2] - 1 else g.res[2] - 1) + 1):
+            edge_z = jz == z0 or jz == z1
+            gz = _gap(qz, g.lo[2], g.h, c[2], jz) - g.margin
+            gz2 = gz * gz if gz > 0.0 else 0.0
+            if count == k and gz2 > kd2[k - 1]:
+                continue
+            for jy in range(y0 if y0 > 0 else 0, (y1 if y1 < g.res[1] - 1 else g.res[1] - 1) + 1):
+                edge_y = edge_z or jy == y0 or jy == y1
+                gy = _gap(qy, g.lo[1], g.h, c[1], jy) - g.margin
+                gyz2 = gz2 + (gy * gy if gy > 0.0 else 0.0)
+                if count == k and gyz2 > kd2[k - 1]:
+                    continue
+                # In the shell's interior rows only the two end cells are new.
+                step = 1 if (edge_y or r == 0) else 2 * r
+                jx = x0
+                while jx <= x1:
+                    if jx >= 0 and jx < g.res[0]:
+                        gx = _gap(qx, g.lo[0], g.h, c[0], jx) - g.margin
+                        if not (count == k and gyz2 + (gx * gx if gx > 0.0 else 0.0) > kd2[k - 1]):
+                            cell = (jz * g.res[1] + jy) * g.res[0] + jx
+                            count = _scan_cell(spts, cell_start[cell], cell_start[cell + 1],
+                                               qx, qy, qz, k, count, kd2, kpos)
+                    jx += step
+        if count == k and _block_done(g, q, c, r, kd2[k - 1]):
+            return
+        r += 1
+
+
+cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
+                     const double* q, const int64_t* c, Py_ssize_t k, double guess,
+                     double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
+                     int64_t* kpos) noexcept nogil:
+    """Fast path: select the k nearest among the points of the 3x3x3 block
+    within squared distance ``guess`` of the query. On success, ``kpos`` holds
+    their grid-order positions in ascending order and ``kd2[k - 1]`` the k-th
+    squared distance. Returns False (outputs undefined) when it cannot prove
+    the result exact; the caller then falls back to :func:`_knn_shells`."""
+    cdef int64_t jy, jz, row, x0, x1, p, b, e
+    cdef Py_ssize_t m = 0, i, j, rank, max_cand = _MAX_CAND_PER_K * k
+    cdef Py_ssize_t counts[_N_BUCKETS]
+    cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
+    cdef double to_bucket, kth
+    cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, di, gz, gz2, gy, gyz2, gx
+    for jz in range(c[2] - 1 if c[2] > 0 else 0, (c[2] + 1 if c[2] + 1 < g.res[2] else g.res[2] - 1) + 1):
+        gz = _gap(qz, g.lo[2], g.h, c[2], jz) - g.margin
+        gz2 = gz * gz if gz > 0.0 else 0.0
+        if gz2 > guess:
+            continue
+        for jy in range(c[1] - 1 if c[1] > 0 else 0, (c[1] + 1 if c[1] + 1 < g.res[1] else g.res[1] - 1) + 1):
+            gy = _gap(qy, g.lo[1], g.h, c[1], jy) - g.margin
+            gyz2 = gz2 + (gy * gy if gy > 0.0 else 0.0)
+            if gyz2 > guess:
+                continue
+            # Trim the row's end cells that lie beyond the guess; what is left
+            # is one contiguous run of grid-order positions, and runs come in
+            # ascending position order.
+            x0 = c[0]
+            if x0 > 0:
+                gx = qx - (g.lo[0] + x0 * g.h) - g.margin
+                if gyz2 + (gx * gx if gx > 0.0 else 0.0) <= guess:
+                    x0 -= 1
+            x1 = c[0]
+            if x1 + 1 < g.res[0]:
+                gx = (g.lo[0] + (x1 + 1) * g.h) - qx - g.margin
+                if gyz2 + (gx * gx if gx > 0.0 else 0.0) <= guess:
+                    x1 += 1
+            row = (jz * g.res[1] + jy) * g.res[0]
+            b = cell_start[row + x0]
+            e = cell_start[row + x1 + 1]
+            if m > max_cand:
+                return False
+            for p in range(b, e):
+                dx = spts[3 * p] - qx
+                dy = spts[3 * p + 1] - qy
+                dz = spts[3 * p + 2] - qz
+                d2 = dx * dx + dy * dy + dz * dz
+                cand_d2[m] = d2
+                cand_pos[m] = p
+                m += d2 <= guess
+    if m < k or m > max_cand:
+        return False
+    # The k-th smallest (d2, position) by a histogram of d2 over [0, guess]
+    # (the bucket is monotone in d2), then ranking inside its bucket only.
+    for i in range(_N_BUCKETS):
+        counts[i] = 0
+    to_bucket = _N_BUCKETS / guess
+    for i in range(m):
+        bk = <Py_ssize_t>(cand_d2[i] * to_bucket)
+        if bk >= _N_BUCKETS:
+            bk = _N_BUCKETS - 1
+        counts[bk] += 1
+    below = 0
+    bk = 0
+    while below + counts[bk] < k:
+        below += counts[bk]
+        bk += 1
+    need = k - below
+    n_in = 0
+    for i in range(m):
+        b2 = <Py_ssize_t>(cand_d2[i] * to_bucket)
+        if b2 >= _N_BUCKETS:
+            b2 = _N_BUCKETS - 1
+        sel[n_in] = i
+        n_in += b2 == bk
+    kth_i = sel[0]
+    for i in range(n_in):
+        di = cand_d2[sel[i]]
+        rank = 0
+        for j in range(i):
+            rank += cand_d2[sel[j]] <= di
+        for j in range(i + 1, n_in):
+            rank += cand_d2[sel[j]] < di
+        if rank == need - 1:
+            kth_i = sel[i]
+    kth = cand_d2[kth_i]
+    # Keep everything up to the k-th in (d2, position) order, in position
+    # order (candidates are in ascending position).
+    j = 0
+    for i in range(m):
+        d2 = cand_d2[i]
+        kpos[j] = cand_pos[i]
+        j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
+    kd2[k - 1] = kth
+    return _block_done(g, q, c, 1, kth)
+
+
+cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
+                        Py_ssize_t s, Py_ssize_t k, Scratch* sc, double* out) noexcept nogil:
+    """Normal of grid-order point ``s`` written to ``out`` (unoriented). The
+    covariance sums the k nearest in ascending grid position, whichever path
+    found them, so the result does not depend on the search path."""
+    cdef Py_ssize_t i, j, p
+    cdef double q[3]
+    cdef int64_t c[3]
+    cdef double mx = 0.0, my = 0.0, mz = 0.0, x, y, z, kth
+    cdef double cov[9]
+    cdef double* nb = sc.nb
+    cdef int a
+    for a in range(3):
+        q[a] = spts[3 * s + a]
+        c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
+    if sc.guess[0] < INFINITY and _knn_block(g, spts, cell_start, q, c, k, sc.guess[0], sc.cand_d2,
+                                             sc.cand_pos, sc.sel, sc.kd2, sc.kpos):
+        kth = sc.kd2[k - 1]
+    else:
+        _knn_shells(g, spts, cell_start, q, c, k, sc.kd2, sc.kpos)
+        kth = sc.kd2[k - 1]
+        # Same summation order as the fast path: ascending grid position.
+        for i in range(1, k):
+            p = sc.kpos[i]
+            j = i
+            while j > 0 and sc.kpos[j - 1] > p:
+                sc.kpos[j] = sc.kpos[j - 1]
+                j -= 1
+            sc.kpos[j] = p
+    sc.guess[0] = kth * _GUESS_FACTOR if kth > 0.0 else g.h * g.h
+    for i in range(k):
+        p = sc.kpos[i]
+        nb[3 * i] = spts[3 * p]
+        nb[3 * i + 1] = spts[3 * p + 1]
+        nb[3 * i + 2] = spts[3 * p + 2]
+        mx += nb[3 * i]
+        my += nb[3 * i + 1]
+        mz += nb[3 * i + 2]
+    mx /= k
+    my /= k
+    mz /= k
+    for i in range(9):
+        cov[i] = 0.0
+    for i in range(k):
+        x = nb[3 * i] - mx
+        y = nb[3 * i + 1] - my
+        z = nb[3 * i + 2] - mz
+        cov[0] += x * x
+        cov[1] += x * y
+        cov[2] += x * z
+        cov[4] += y * y
+        cov[5] += y * z
+        cov[8] += z * z
+    cov[3] = cov[1]
+    cov[6] = cov[2]
+    cov[7] = cov[5]
+    _smallest_eigvec(cov, out)
+
+
+cdef void _jacobi_smallest(const double* cov, double* out) noexcept nogil:
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix
+    (row-major ``cov``) by cyclic Jacobi rotations. Ties between
+    equal eigenvalues go to the lowest diagonal position, so a zero matrix
+    gives (1, 0, 0)."""
+    cdef double a[3][3]
+    cdef double v[3][3]
+    cdef int i, j, sweep, pair, p, qq, o
+    cdef double apq, theta, t, cs, sn, aop, aoq, vip, viq, nrm
+    cdef bint rotated
+    for i in range(3):
+        for j in range(3):
+            a[i][j] = cov[3 * i + j]
+            v[i][j] = 1.0 if i == j else 0.0
+    for sweep in range(64):
+        rotated = False
+        for pair in range(3):
+            if pair == 0:
+                p = 0; qq = 1; o = 2
+            elif pair == 1:
+                p = 0; qq = 2; o = 1
+            else:
+                p = 1; qq = 2; o = 0
+            apq = a[p][qq]
+            # Demmel-Veselic threshold: an off-diagonal entry negligible against
+            # the geometric mean of its diagonal entries is dropped.
+            if fabs(apq) <= 0.5 * DBL_EPSILON * sqrt(fabs(a[p][p]) * fabs(a[qq][qq])):
+                a[p][qq] = 0.0
+                a[qq][p] = 0.0
+                continue
+            rotated = True
+            theta = (a[qq][qq] - a[p][p]) / (2.0 * apq)
+            if fabs(theta) > 1e150:
+                t = 0.5 / theta
+            else:
+                t = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+            cs = 1.0 / sqrt(t * t + 1.0)
+            sn = t * cs
+            a[p][p] -= t * apq
+            a[qq][qq] += t * apq
+            a[p][qq] = 0.0
+            a[qq][p] = 0.0
+            aop = a[o][p]
+            aoq = a[o][qq]
+            a[o][p] = cs * aop - sn * aoq
+            a[p][o] = a[o][p]
+            a[o][qq] = sn * aop + cs * aoq
+            a[qq][o] = a[o][qq]
+            for i in range(3):
+                vip = v[i][p]
+                viq = v[i][qq]
+                v[i][p] = cs * vip - sn * viq
+                v[i][qq] = sn * vip + cs * viq
+        if not rotated:
+            break
+    j = 0
+    if a[1][1] < a[j][j]:
+        j = 1
+    if a[2][2] < a[j][j]:
+        j = 2
+    nrm = sqrt(v[0][j] * v[0][j] + v[1][j] * v[1][j] + v[2][j] * v[2][j])
+    for i in range(3):
+        out[i] = v[i][j] / nrm
+
+
+cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix
+    (row-major ``a``).
+
+    The eigenvalues come in closed form (trigonometric solution of the
+    characteristic cubic); the eigenvector is the longest cross product of two
+    rows of ``a - lambda_min I``, which spans its null space. When the two
+    smallest eigenvalues are within a factor ``_GAP_RATIO`` of the spread
+    (nearly collinear or isotropic neighbourhoods, where that construction
+    loses accuracy), cyclic Jacobi takes over.
+    """
+    cdef double q, p1, p2, p, d0, d1, d2, b00, b11, b22, b01, b02, b12, r, phi, sphi, lam
+    cdef double m00, m01, m02, m11, m12, m22
+    cdef double c0x, c0y, c0z, c1x, c1y, c1z, c2x, c2y, c2z, n0, n1, n2, nrm
+    q = (a[0] + a[4] + a[8]) / 3.0
+    p1 = a[1] * a[1] + a[2] * a[2] + a[5] * a[5]
+    d0 = a[0] - q
+    d1 = a[4] - q
+    d2 = a[8] - q
+    p2 = d0 * d0 + d1 * d1 + d2 * d2 + 2.0 * p1
+    p = sqrt(p2 / 6.0)
+    if not (p > 0.0):
+        _jacobi_smallest(a, out)
+        return
+    b00 = d0 / p
+    b11 = d1 / p
+    b22 = d2 / p
+    b01 = a[1] / p
+    b02 = a[2] / p
+    b12 = a[5] / p
+    r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
+               + b02 * (b01 * b12 - b11 * b02))
+    if r < -1.0:
+        r = -1.0
+    elif r > 1.0:
+        r = 1.0
+    phi = acos(r) / 3.0
+    # lambda_mid - lambda_min = 2 sqrt(3) p sin(phi) and
+    # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3).
+    sphi = sin(phi)
+    if sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
+        _jacobi_smallest(a, out)
+        return
+    lam = q + 2.0 * p * cos(phi + 2.0 * _PI / 3.0)
+    m00 = a[0] - lam
+    m11 = a[4] - lam
+    m22 = a[8] - lam
+    m01 = a[1]
+    m02 = a[2]
+    m12 = a[5]
+    # Rows (m00 m01 m02), (m01 m11 m12), (m02 m12 m22).
+    c0x = m01 * m12 - m02 * m11
+    c0y = m02 * m01 - m00 * m12
+    c0z = m00 * m11 - m01 * m01
+    c1x = m01 * m22 - m02 * m12
+    c1y = m02 * m02 - m00 * m22
+    c1z = m00 * m12 - m01 * m02
+    c2x = m11 * m22 - m12 * m12
+    c2y = m12 * m02 - m01 * m22
+    c2z = m01 * m12 - m11 * m02
+    n0 = c0x * c0x + c0y * c0y + c0z * c0z
+    n1 = c1x * c1x + c1y * c1y + c1z * c1z
+    n2 = c2x * c2x + c2y * c2y + c2z * c2z
+    if n0 >= n1 and n0 >= n2:
+        nrm = sqrt(n0)
+        out[0] = c0x / nrm
+        out[1] = c0y / nrm
+        out[2] = c0z / nrm
+    elif n1 >= n2:
+        nrm = sqrt(n1)
+        out[0] = c1x / nrm
+        out[1] = c1y / nrm
+        out[2] = c1z / nrm
+    else:
+        nrm = sqrt(n2)
+        out[0] = c2x / nrm
+        out[1] = c2y / nrm
+        out[2] = c2z / nrm
+    if not (nrm > 0.0):
+        _jacobi_smallest(a, out)
+
+
+cdef void _orient(const double* pts, Py_ssize_t n, int mode, const double* viewpoint,
+                  double* out) noexcept nogil:
+    """Flip normals of one object in place: away from its centroid (mode 1) or
+    towards ``viewpoint`` (mode 2). A normal exactly perpendicular to the
+    reference direction is left as it is."""
+    cdef Py_ssize_t i
+    cdef double cx = 0.0, cy = 0.0, cz = 0.0, dot, rx, ry, rz
+    if mode == ORIENT_NONE or n == 0:
+        return
+    if mode == ORIENT_CENTROID:
+        for i in range(n):
+            cx += pts[3 * i]
+            cy += pts[3 * i + 1]
+            cz += pts[3 * i + 2]
+        cx /= n
+        cy /= n
+        cz /= n
+    for i in range(n):
+        if mode == ORIENT_CENTROID:
+            rx = pts[3 * i] - cx
+            ry = pts[3 * i + 1] - cy
+            rz = pts[3 * i + 2] - cz
+        else:
+            rx = viewpoint[0] - pts[3 * i]
+            ry = viewpoint[1] - pts[3 * i + 1]
+            rz = viewpoint[2] - pts[3 * i + 2]
+        dot = out[3 * i] * rx + out[3 * i + 1] * ry + out[3 * i + 2] * rz
+        if dot < 0.0:
+            out[3 * i] = -out[3 * i]
+            out[3 * i + 1] = -out[3 * i + 1]
+            out[3 * i + 2] = -out[3 * i + 2]
+
+
+cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mode,
+                          const double* viewpoint, Py_ssize_t cap, Scratch* sc,
+                          double* out) noexcept nogil:
+    """All normals of one object, serially, using one thread's scratch."""
+    cdef Grid g
+    cdef Py_ssize_t s, kk = k if k < n else n
+    if n == 0:
+        return
+    _build_grid(pts, n, kk, cap, &g, sc.spts, sc.sidx, sc.cell_of, sc.cell_start)
+    sc.guess[0] = INFINITY
+    for s in range(n):
+        _point_normal(&g, sc.spts, sc.cell_start, s, kk, sc, out + 3 * sc.sidx[s])
+    _orient(pts, n, mode, viewpoint, out)
+
+
+def _check_scratch(fscratch, iscratch, Py_ssize_t max_n, Py_ssize_t k, int num_threads, name):
+    f_len, i_len = scratch_sizes(max_n, k)
+    if fscratch.shape[0] < num_threads or iscratch.shape[0] < num_threads:
+        raise ValueError(f"{name}: fewer scratch rows than threads")
+    if fscratch.shape[1] < f_len or iscratch.shape[1] < i_len:
+        raise ValueError(f"{name}: scratch rows too short")
+
+
+def normals_packed(const double[:, ::1] points, const int64_t[::1] offsets, Py_ssize_t k,
+                   int mode, const double[::1] viewpoint, double[:, ::1] out,
+                   double[:, ::1] fscratch, int64_t[:, ::1] iscratch,
+                   Py_ssize_t max_n, int num_threads):
+    """Fill ``out`` with the normals of every packed object.
+
+    Objects are spread over ``num_threads`` OpenMP threads (dynamic schedule);
+    ``fscratch``/``iscratch`` hold one row per thread, sized by
+    :func:`scratch_sizes` for ``max_n``, the size of the largest object.
+    Inputs are otherwise trusted: the Python layer validates them.
+    """
+    cdef Py_ssize_t n_obj = offsets.shape[0] - 1
+    cdef Py_ssize_t cap = max_cells(max_n)
+    cdef Py_ssize_t o, tid
+    cdef const double* pbase
+    cdef double* obase
+    cdef Scratch sc
+    if n_obj <= 0 or points.shape[0] == 0:
+        return
+    _check_scratch(fscratch, iscratch, max_n, k, num_threads, "normals_packed")
+    pbase = &points[0, 0]
+    obase = &out[0, 0]
+    with nogil:
+        for o in prange(n_obj, num_threads=num_threads, schedule="dynamic", chunksize=1):
+            tid = threadid()
+            _split_scratch(&fscratch[tid, 0], &iscratch[tid, 0], max_n, k, &sc)
+            _object_normals(pbase + 3 * offsets[o], offsets[o + 1] - offsets[o], k, mode,
+                            &viewpoint[0], cap, &sc, obase + 3 * offsets[o])
+
+
+def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
+                   const double[::1] viewpoint, double[:, ::1] out,
+                   double[:, ::1] fscratch, int64_t[:, ::1] iscratch, int num_threads):
+    """Fill ``out`` with the normals of one object, its points spread over
+    ``num_threads`` OpenMP threads after a serial grid build.
+
+    Thread 0's scratch row holds the shared grid; every row holds that
+    thread's query buffers (layout of :func:`scratch_sizes` with
+    ``max_n = len(points)``).
+    """
+    cdef Py_ssize_t n = points.shape[0]
+    cdef Py_ssize_t cap = max_cells(n)
+    cdef Py_ssize_t kk = k if k < n else n
+    cdef Py_ssize_t s, tid, t
+    cdef Grid g
+    cdef Scratch shared
+    cdef Scratch sc
+    cdef double* obase
+    if n == 0:
+        return
+    _check_scratch(fscratch, iscratch, n, k, num_threads, "normals_single")
+    _split_scratch(&fscratch[0, 0], &iscratch[0, 0], n, k, &shared)
+    obase = &out[0, 0]
+    with nogil:
+        _build_grid(&points[0, 0], n, kk, cap, &g, shared.spts, shared.sidx,
+                    shared.cell_of, shared.cell_start)
+        for t in range(num_threads):
+            _split_scratch(&fscratch[t, 0], &iscratch[t, 0], n, k, &sc)
+            sc.guess[0] = INFINITY
+        for s in prange(n, num_threads=num_threads, schedule="static", chunksize=64):
+            tid = threadid()
+            _split_scratch(&fscratch[tid, 0], &iscratch[tid, 0], n, k, &sc)
+            _point_normal(&g, shared.spts, shared.cell_start, s, kk, &sc, obase + 3 * shared.sidx[s])
+        _orient(&points[0, 0], n, mode, &viewpoint[0], obase)
+
+
+def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
+    """Unit eigenvector of the smallest eigenvalue of each symmetric 3x3
+    matrix, by the kernel's solver or, with ``jacobi=True``, by its Jacobi
+    fallback alone (exposed for tests)."""
+    cdef Py_ssize_t i, n = covs.shape[0]
+    cdef double buf[9]
+    cdef int a, b
+    out_arr = np.empty((n, 3), dtype=np.float64)
+    cdef double[:, ::1] out = out_arr
+    with nogil:
+        for i in range(n):
+            for a in range(3):
+                for b in range(3):
+                    buf[3 * a + b] = covs[i, a, b]
+            if jacobi:
+                _jacobi_smallest(buf, &out[i, 0])
+            else:
+                _smallest_eigvec(buf, &out[i, 0])
+    return out_arr
