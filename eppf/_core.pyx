@@ -1,6 +1,47 @@
 # cython: language_level=3
-"""Compiled kernels of eppf (EPPF kernel being written)."""
-from ._common cimport omp_get_max_threads, EPPF_HAVE_OPENMP
+"""Compiled EPPF kernels.
+
+Python allocates every array; the kernels fill them. Work is parallel over
+objects (``prange``), each object with its own generator seeded from one
+64-bit seed, so results never depend on the number of threads.
+
+Conventions (see ``DESIGN.md``):
+
+- f1 = |d| * scale on [0, f1_max]; bin = min(floor(n1 * f1 / f1_max), n1 - 1).
+- f2 = max(beta1, beta2), beta_k = arccos(n_k . d_hat) - pi/2 on [-pi/2, pi/2].
+  Because arccos decreases, f2 = arccos(min(n1 . d_hat, n2 . d_hat)) - pi/2,
+  and its bin is the number of inner edges e_k = cos(k pi / n2) with
+  m <= e_k: no arccos in the loop.
+- f3 = arccos(|n1 . n2|) on [0, pi/2], binned the same way.
+- f4 = occupied / total voxels on the integer 3D line between the two points'
+  voxels of a per-object ``grid_size``^3 bit grid over the bounding cube.
+  Step k (0..L, L the largest axis difference) visits
+  v1 + floor(k * delta / L + 1/2) on every axis, i.e. a Bresenham line with
+  ties rounded up; it is walked in 32.32 fixed point, which is exact for
+  grids up to 32768 (see ``_line_occupancy``). Both end voxels are occupied.
+  bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
+- A bin count of 1 switches a function off (its value is never computed).
+"""
+import numpy as np
+
+cimport numpy as cnp
+from cython.parallel cimport prange, threadid
+from libc.math cimport sqrt, cos, M_PI
+from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
+from libc.string cimport memset
+
+from ._common cimport omp_get_max_threads, EPPF_HAVE_OPENMP, splitmix64, rand_below
+
+cnp.import_array()
+
+# Consecutive zero-length pairs after which an object is declared degenerate.
+cdef enum:
+    MAX_REDRAWS = 10000
+    MAX_BINS = 64
+    FIX_SHIFT = 32
+    MAX_GRID = 1023
+
+cdef uint64_t LOW32 = 0xFFFFFFFF
 
 
 def openmp_max_threads():
@@ -11,3 +52,319 @@ def openmp_max_threads():
 def has_openmp():
     """Return True when the kernels were compiled with OpenMP."""
     return bool(EPPF_HAVE_OPENMP)
+
+
+cdef struct Params:
+    int n1, n2, n3, n4
+    int grid
+    double f1_max
+    double cos2[MAX_BINS]   # inner edges of f2 on the cosine scale, k = 1..n2-1
+    double cos3[MAX_BINS]   # inner edges of f3 on the cosine scale, k = 1..n3-1
+    const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
+
+
+cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
+    cdef double t = (v - lo) * inv
+    cdef int i
+    if t <= 0.0:
+        return 0
+    i = <int>t
+    if i >= grid:
+        return grid - 1
+    return i
+
+
+cdef inline void _fill_grid(const double* pts, int64_t n, int grid, uint64_t* bits,
+                            int32_t* vox) noexcept nogil:
+    """Voxelise ``n`` points on a grid over their bounding cube.
+
+    Writes each point's voxel coordinates to ``vox`` (n, 3) and sets the
+    occupied voxels in the bit grid ``bits`` (flat index (x * grid + y) * grid + z).
+    """
+    cdef int64_t i, idx
+    cdef double mnx = pts[0], mny = pts[1], mnz = pts[2]
+    cdef double mxx = mnx, mxy = mny, mxz = mnz
+    cdef double side, inv
+    for i in range(1, n):
+        if pts[3 * i] < mnx: mnx = pts[3 * i]
+        if pts[3 * i] > mxx: mxx = pts[3 * i]
+        if pts[3 * i + 1] < mny: mny = pts[3 * i + 1]
+        if pts[3 * i + 1] > mxy: mxy = pts[3 * i + 1]
+        if pts[3 * i + 2] < mnz: mnz = pts[3 * i + 2]
+        if pts[3 * i + 2] > mxz: mxz = pts[3 * i + 2]
+    side = mxx - mnx
+    if mxy - mny > side: side = mxy - mny
+    if mxz - mnz > side: side = mxz - mnz
+    inv = grid / side
+    memset(bits, 0, ((<int64_t>grid * grid * grid + 63) // 64) * sizeof(uint64_t))
+    for i in range(n):
+        vox[3 * i] = _voxel(pts[3 * i], mnx, inv, grid)
+        vox[3 * i + 1] = _voxel(pts[3 * i + 1], mny, inv, grid)
+        vox[3 * i + 2] = _voxel(pts[3 * i + 2], mnz, inv, grid)
+        idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * grid + vox[3 * i + 2]
+        bits[idx >> 6] |= (<uint64_t>1) << (idx & 63)
+
+
+cdef inline int _line_occupancy(const int32_t* va, const int32_t* vb, int grid,
+                                const uint64_t* bits, const int64_t* recip,
+                                int* total) noexcept nogil:
+    """Occupied voxels on the integer line between voxels ``va`` and ``vb``.
+
+    Step k = 0..L (L the largest axis difference) visits
+    v1 + floor(k * delta / L + 1/2) on each axis. It is walked in fixed point
+    with S = 2**32: position_k = v1 * S + S/2 + E + k * delta * floor(S / L),
+    E = grid**2. The accumulated error of the increment is below L**2 < E
+    units in either direction, so position_k lies in (exact, exact + 2E), and
+    a non-tie value of k * delta / L + 1/2 is at least 1 / (2L) from the next
+    integer: the floor is exact whenever 4 * grid**3 < S (grid < 1024).
+    Both end voxels hold a point, so only the inner L - 1 voxels are looked up.
+    """
+    cdef int64_t g = grid
+    cdef int64_t dx = vb[0] - va[0], dy = vb[1] - va[1], dz = vb[2] - va[2]
+    cdef int64_t L = dx if dx >= 0 else -dx
+    cdef int64_t t
+    t = dy if dy >= 0 else -dy
+    if t > L: L = t
+    t = dz if dz >= 0 else -dz
+    if t > L: L = t
+    total[0] = <int>(L + 1)
+    if L <= 1:
+        return <int>(L + 1)
+    cdef int64_t r = recip[L]
+    cdef int64_t ix = dx * r, iy = dy * r, iz = dz * r
+    cdef int64_t half = ((<int64_t>1) << (FIX_SHIFT - 1)) + g * g
+    cdef int64_t px = ((<int64_t>va[0]) << FIX_SHIFT) + half + ix
+    cdef int64_t py = ((<int64_t>va[1]) << FIX_SHIFT) + half + iy
+    cdef int64_t pz = ((<int64_t>va[2]) << FIX_SHIFT) + half + iz
+    cdef int64_t k, idx
+    cdef int occ = 2
+    for k in range(1, L):
+        idx = (((px >> FIX_SHIFT) * g) + (py >> FIX_SHIFT)) * g + (pz >> FIX_SHIFT)
+        occ += <int>((bits[idx >> 6] >> (idx & 63)) & 1)
+        px += ix
+        py += iy
+        pz += iz
+    return occ
+
+
+cdef inline int _pair_bin(const double* pts, const double* nrm, int64_t i, int64_t j,
+                          double scale, const int32_t* vox, const uint64_t* bits,
+                          Params* prm, int* parts) noexcept nogil:
+    """Flat histogram bin of the ordered pair (i, j); ``parts`` gets (b1, b2, b3, b4, occ, total)."""
+    cdef double dx = pts[3 * j] - pts[3 * i]
+    cdef double dy = pts[3 * j + 1] - pts[3 * i + 1]
+    cdef double dz = pts[3 * j + 2] - pts[3 * i + 2]
+    cdef double dist = sqrt(dx * dx + dy * dy + dz * dz)
+    cdef double v, m1, m2, inv
+    cdef int b1 = 0, b2 = 0, b3 = 0, b4 = 0, k, occ = 0, total = 0
+    if prm.n1 > 1:
+        v = dist * scale
+        b1 = <int>(prm.n1 * v / prm.f1_max)
+        if b1 >= prm.n1:
+            b1 = prm.n1 - 1
+    if prm.n2 > 1:
+        inv = 1.0 / dist
+        m1 = (nrm[3 * i] * dx + nrm[3 * i + 1] * dy + nrm[3 * i + 2] * dz) * inv
+        m2 = (nrm[3 * j] * dx + nrm[3 * j + 1] * dy + nrm[3 * j + 2] * dz) * inv
+        if m2 < m1:
+            m1 = m2
+        for k in range(prm.n2 - 1):
+            b2 += m1 <= prm.cos2[k]
+    if prm.n3 > 1:
+        v = nrm[3 * i] * nrm[3 * j] + nrm[3 * i + 1] * nrm[3 * j + 1] + nrm[3 * i + 2] * nrm[3 * j + 2]
+        if v < 0.0:
+            v = -v
+        for k in range(prm.n3 - 1):
+            b3 += v <= prm.cos3[k]
+    if prm.n4 > 1:
+        occ = _line_occupancy(vox + 3 * i, vox + 3 * j, prm.grid, bits, prm.recip, &total)
+        b4 = (prm.n4 * occ) // total
+        if b4 >= prm.n4:
+            b4 = prm.n4 - 1
+    if parts != NULL:
+        parts[0] = b1
+        parts[1] = b2
+        parts[2] = b3
+        parts[3] = b4
+        parts[4] = occ
+        parts[5] = total
+    return ((b1 * prm.n2 + b2) * prm.n3 + b3) * prm.n4 + b4
+
+
+cdef inline int _draw_pair(const double* pts, uint32_t n, uint64_t* state,
+                           int64_t* i_out, int64_t* j_out) noexcept nogil:
+    """Draw an ordered pair i != j with distinct coordinates; 0 on success."""
+    cdef uint32_t i, j
+    cdef uint64_t r
+    cdef int fails = 0
+    while True:
+        r = splitmix64(state)
+        i = <uint32_t>(((r >> 32) * <uint64_t>n) >> 32)
+        j = <uint32_t>(((r & LOW32) * <uint64_t>(n - 1)) >> 32)
+        if j >= i:
+            j += 1
+        if (pts[3 * i] != pts[3 * j] or pts[3 * i + 1] != pts[3 * j + 1]
+                or pts[3 * i + 2] != pts[3 * j + 2]):
+            i_out[0] = i
+            j_out[0] = j
+            return 0
+        fails += 1
+        if fails >= MAX_REDRAWS:
+            return 1
+
+
+cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double scale,
+                        uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
+                        int32_t* vox, int32_t* counts) noexcept nogil:
+    """Histogram counts of one object; returns 1 if pairs could not be drawn."""
+    cdef uint64_t state = seed
+    cdef int64_t t, i, j
+    if prm.n4 > 1:
+        _fill_grid(pts, n, prm.grid, bits, vox)
+    for t in range(n_pairs):
+        if _draw_pair(pts, <uint32_t>n, &state, &i, &j) != 0:
+            return 1
+        counts[_pair_bin(pts, nrm, i, j, scale, vox, bits, prm, NULL)] += 1
+    return 0
+
+
+cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, double f1_max,
+                       const int64_t* recip):
+    cdef int k
+    prm.recip = recip
+    prm.n1 = n1
+    prm.n2 = n2
+    prm.n3 = n3
+    prm.n4 = n4
+    prm.grid = grid
+    prm.f1_max = f1_max
+    for k in range(1, n2):
+        prm.cos2[k - 1] = cos(k * M_PI / n2)
+    for k in range(1, n3):
+        prm.cos3[k - 1] = cos(k * (M_PI / 2) / n3)
+
+
+def _check_bins(n_bins, int grid):
+    if len(n_bins) != 4:
+        raise ValueError("n_bins must have four entries")
+    for b in n_bins:
+        if not 1 <= b <= MAX_BINS:
+            raise ValueError(f"each bin count must lie in [1, {MAX_BINS}]")
+    if not 2 <= grid <= MAX_GRID:
+        raise ValueError(f"grid_size must lie in [2, {MAX_GRID}]")
+
+
+def _reciprocals(int grid):
+    """floor(2**32 / L) for L = 0..grid (entry 0 unused)."""
+    out = np.zeros(grid + 1, dtype=np.int64)
+    out[1:] = np.int64(2**32) // np.arange(1, grid + 1, dtype=np.int64)
+    return out
+
+
+def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
+                const int64_t[::1] offsets, const double[::1] scales,
+                const uint64_t[::1] seeds, int n_pairs, n_bins, int grid_size,
+                double f1_max, int num_threads):
+    """Unweighted EPPF histograms (counts) of every object.
+
+    Parameters
+    ----------
+    points, normals : (N, 3) float64, C-contiguous; normals unit length.
+    offsets : (n_objects + 1,) int64.
+    scales : (n_objects,) float64, multiplies distances for f1.
+    seeds : (n_objects,) uint64, one generator seed per object.
+    n_pairs : pairs drawn per object.
+    n_bins : four bin counts; 1 switches a function off.
+    grid_size, f1_max, num_threads : see module docstring.
+
+    Returns
+    -------
+    counts : (n_objects, prod(n_bins)) int32
+    status : (n_objects,) int32, non-zero where an object had too few
+        distinct points to draw pairs.
+    """
+    _check_bins(n_bins, grid_size)
+    recip_arr = _reciprocals(grid_size)
+    cdef const int64_t[::1] recip = recip_arr
+    cdef Params prm
+    _init_params(&prm, n_bins[0], n_bins[1], n_bins[2], n_bins[3], grid_size, f1_max, &recip[0])
+    cdef Py_ssize_t n_obj = offsets.shape[0] - 1
+    cdef Py_ssize_t n_feat = n_bins[0] * n_bins[1] * n_bins[2] * n_bins[3]
+    if num_threads < 1:
+        num_threads = 1
+    cdef Py_ssize_t words = (<int64_t>grid_size * grid_size * grid_size + 63) // 64
+    counts_arr = np.zeros((n_obj, n_feat), dtype=np.int32)
+    status_arr = np.zeros(n_obj, dtype=np.int32)
+    if n_obj == 0:
+        return counts_arr, status_arr
+    cdef int64_t max_n = np.max(np.diff(offsets))
+    grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
+    vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
+    cdef int32_t[:, ::1] counts = counts_arr
+    cdef int32_t[::1] status = status_arr
+    cdef uint64_t[:, ::1] grids = grids_arr
+    cdef int32_t[:, ::1] vox = vox_arr
+    cdef Py_ssize_t k, tid
+    cdef int64_t start
+    with nogil:
+        for k in prange(n_obj, num_threads=num_threads, schedule="dynamic", chunksize=1):
+            start = offsets[k]
+            tid = threadid()
+            status[k] = _object_counts(&points[start, 0], &normals[start, 0],
+                                       offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
+                                       &prm, &grids[tid, 0], &vox[tid, 0], &counts[k, 0])
+    return counts_arr, status_arr
+
+
+def eppf_pairs(const double[:, ::1] points, uint64_t seed, int n_pairs):
+    """The ordered pairs (i, j) that ``eppf_counts`` draws for one object.
+
+    Exposed so tests can rebuild a histogram independently from the same pairs.
+    """
+    cdef int64_t n = points.shape[0]
+    out_arr = np.empty((n_pairs, 2), dtype=np.int64)
+    cdef int64_t[:, ::1] out = out_arr
+    cdef uint64_t state = seed
+    cdef int64_t t, i, j
+    for t in range(n_pairs):
+        if _draw_pair(&points[0, 0], <uint32_t>n, &state, &i, &j) != 0:
+            raise ValueError("too few distinct points to draw pairs")
+        out[t, 0] = i
+        out[t, 1] = j
+    return out_arr
+
+
+def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals,
+                       const int64_t[:, ::1] pairs, double scale, n_bins,
+                       int grid_size, double f1_max):
+    """Per-pair bins for one object and given pairs.
+
+    Returns an (n_pairs, 6) int64 array: the four bin indices, then the
+    occupied and total voxel counts of f4 (0 when f4 is off).
+    """
+    _check_bins(n_bins, grid_size)
+    recip_arr = _reciprocals(grid_size)
+    cdef const int64_t[::1] recip = recip_arr
+    cdef Params prm
+    _init_params(&prm, n_bins[0], n_bins[1], n_bins[2], n_bins[3], grid_size, f1_max, &recip[0])
+    cdef int64_t n_p = pairs.shape[0], t
+    vox_arr = np.zeros((points.shape[0], 3), dtype=np.int32)
+    cdef int32_t[:, ::1] vox = vox_arr
+    cdef Py_ssize_t words = (<int64_t>grid_size * grid_size * grid_size + 63) // 64
+    grid_arr = np.zeros(words, dtype=np.uint64)
+    cdef uint64_t[::1] bits = grid_arr
+    out_arr = np.zeros((n_p, 6), dtype=np.int64)
+    cdef int64_t[:, ::1] out = out_arr
+    cdef int parts[6]
+    cdef int64_t n
+    n = points.shape[0]
+    for t in range(n_p):
+        if not (0 <= pairs[t, 0] < n and 0 <= pairs[t, 1] < n):
+            raise ValueError("pair indices out of range")
+    _fill_grid(&points[0, 0], n, grid_size, &bits[0], &vox[0, 0])
+    for t in range(n_p):
+        _pair_bin(&points[0, 0], &normals[0, 0], pairs[t, 0], pairs[t, 1], scale,
+                  &vox[0, 0], &bits[0], &prm, parts)
+        for k in range(6):
+            out[t, k] = parts[k]
+    return out_arr

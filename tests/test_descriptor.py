@@ -1,0 +1,400 @@
+"""Tests of EPPFTransformer and its compiled kernel."""
+
+import pickle
+import re
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from sklearn.base import clone
+from sklearn.exceptions import NotFittedError
+from sklearn.model_selection import GridSearchCV
+from sklearn.pipeline import Pipeline
+
+import eppf_reference as ref
+from eppf import FUNCTIONS, EPPFTransformer, KLNearestNeighbors
+from eppf._core import eppf_pair_features, eppf_pairs
+from eppf._validation import object_seeds
+
+
+def _sphere(n, rng, radius=1.0, center=(0.0, 0.0, 0.0)):
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return np.hstack([np.asarray(center) + radius * v, v])
+
+
+def _box(n, rng, size=(1.0, 0.6, 0.3)):
+    size = np.asarray(size)
+    pts = rng.uniform(-0.5, 0.5, size=(n, 3)) * size
+    axis = rng.integers(0, 3, size=n)
+    sign = rng.choice([-1.0, 1.0], size=n)
+    pts[np.arange(n), axis] = sign * size[axis] / 2
+    normals = np.zeros((n, 3))
+    normals[np.arange(n), axis] = sign
+    return np.hstack([pts, normals])
+
+
+@pytest.fixture
+def clouds():
+    rng = np.random.default_rng(42)
+    return [_sphere(300, rng), _box(250, rng), _sphere(120, rng, 0.4, (1, 2, 3)), _box(400, rng, (2, 0.2, 0.2))]
+
+
+def _rotation(rng):
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] *= -1
+    return q
+
+
+# ---------------------------------------------------------------- kernel vs reference
+@pytest.mark.parametrize("n_bins", [(20, 4, 5, 3), (15, 3, 4, 3), (7, 5, 2, 6)])
+@pytest.mark.parametrize("grid", [64, 8, 17])
+def test_pair_bins_match_numpy_reference(n_bins, grid):
+    rng = np.random.default_rng(grid)
+    cloud = np.vstack([_sphere(150, rng)[:, :6], _box(150, rng)])
+    cloud[:, :3] *= 0.5
+    points = np.ascontiguousarray(cloud[:, :3])
+    normals = np.ascontiguousarray(cloud[:, 3:])
+    pairs = eppf_pairs(points, 7, 4000)
+    got = eppf_pair_features(points, normals, pairs, 0.8, n_bins, grid, ref.F1_MAX)
+    want, occ, tot = ref.pair_bins(points, normals, pairs[:, 0], pairs[:, 1], 0.8, n_bins, grid)
+    assert_array_equal(got[:, :4], want)
+    assert_array_equal(got[:, 4], occ)
+    assert_array_equal(got[:, 5], tot)
+
+
+def test_transform_matches_reference_histogram(clouds):
+    est = EPPFTransformer(n_pairs=3000, scaling="object", random_state=3).fit(clouds)
+    X = est.transform(clouds)
+    seeds = object_seeds(3, len(clouds))
+    for k, cloud in enumerate(clouds):
+        points = np.ascontiguousarray(cloud[:, :3])
+        pairs = eppf_pairs(points, seeds[k], 3000)
+        scale = 1.0 / np.ptp(points, axis=0).max()
+        want = ref.descriptor(points, cloud[:, 3:], pairs, scale)
+        assert_allclose(X[k], want, rtol=1e-12, atol=0)
+
+
+def test_pairs_are_distinct_and_in_range():
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(50, 3))
+    pts[10:20] = pts[0]  # duplicates must never be paired with each other
+    pairs = eppf_pairs(pts, 11, 5000)
+    assert pairs.min() >= 0 and pairs.max() < 50
+    assert np.all(np.any(pts[pairs[:, 0]] != pts[pairs[:, 1]], axis=1))
+    # both orders occur: the pair order is never canonicalised
+    assert np.any(pairs[:, 0] < pairs[:, 1]) and np.any(pairs[:, 0] > pairs[:, 1])
+
+
+# ---------------------------------------------------------------- hand-computed cases
+def test_occupancy_hand_computed_paper_style():
+    # An 8-voxel grid over the unit cube: voxel (i, j, k) holds [i/8, (i+1)/8) etc.
+    # The line from voxel (0, 0, 0) to voxel (7, 3, 0) visits, for k = 0..7,
+    # x = k, y = floor(3k/7 + 1/2) = 0, 0, 1, 1, 2, 2, 3, 3.
+    centre = lambda i, j, k: [(i + 0.5) / 8, (j + 0.5) / 8, (k + 0.5) / 8]  # noqa: E731
+    pts = [centre(0, 0, 0), centre(7, 3, 0), centre(2, 1, 0), centre(5, 2, 0), centre(4, 0, 0)]
+    pts += [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]  # fix the bounding cube to [0, 1]^3
+    pts = np.ascontiguousarray(pts, dtype=float)
+    normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    pairs = np.array([[0, 1], [1, 0], [0, 4], [5, 6]], dtype=np.int64)
+    out = eppf_pair_features(pts, normals, pairs, 1.0, (2, 2, 2, 13), 8, ref.F1_MAX)
+    # (0,0,0) -> (7,3,0): 8 voxels, occupied: both ends, (2,1,0), (5,2,0) -> 4/8
+    assert out[0, 4:].tolist() == [4, 8]
+    assert out[1, 4:].tolist() == [4, 8]  # symmetric in the pair
+    assert out[0, 3] == (13 * 4) // 8
+    # (0,0,0) -> (4,0,0): 5 voxels, only the ends occupied: 2/5
+    assert out[2, 4:].tolist() == [2, 5]
+    # corner to corner (0,0,0) -> (7,7,7): 8 voxels; (0,0,0) and (7,7,7) occupied
+    assert out[3, 4:].tolist() == [2, 8]
+
+
+def test_occupancy_is_one_within_a_voxel():
+    pts = np.array([[0.0, 0, 0], [0.01, 0, 0], [1, 1, 1]])
+    normals = np.tile([1.0, 0, 0], (3, 1))
+    out = eppf_pair_features(pts, normals, np.array([[0, 1]]), 1.0, (2, 2, 2, 3), 64, ref.F1_MAX)
+    assert out[0, 4:].tolist() == [1, 1]
+    assert out[0, 3] == 2  # f4 = 1 falls in the last bin
+
+
+def test_line_walk_exact_for_all_directions():
+    # Every voxel step of the fixed-point walk equals floor(k * delta / L + 1/2);
+    # check all end voxels of an empty 64^3 grid reachable from a corner and the centre.
+    grid = 64
+    rng = np.random.default_rng(5)
+    for start in ([0, 0, 0], [31, 40, 7]):
+        ends = rng.integers(0, grid, size=(300, 3))
+        for end in ends:
+            line = ref.line_voxels(start, end)
+            # occupy exactly the reference line's voxels plus the far corner (to fix the grid)
+            cells = np.vstack([line, [[0, 0, 0], [grid - 1, grid - 1, grid - 1]]])
+            pts = (cells + 0.5) / grid
+            normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+            pts[-2] = 0.0
+            pts[-1] = 1.0
+            out = eppf_pair_features(np.ascontiguousarray(pts), normals, np.array([[0, len(line) - 1]]),
+                                     1.0, (1, 1, 1, 2), grid, ref.F1_MAX)
+            assert out[0, 4] == out[0, 5] == len(line), (start, end)
+
+
+@pytest.mark.parametrize(
+    "dist, expected",
+    [(0.0, 0), (np.sqrt(3) / 20 * 0.999, 0), (np.sqrt(3) / 20 * 1.001, 1), (np.sqrt(3), 19), (5.0, 19)],
+)
+def test_distance_bin_edges(dist, expected):
+    pts = np.array([[0.0, 0.0, 0.0], [dist + 1e-300, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    if dist == 0.0:
+        pts[1, 0] = 1e-12
+    normals = np.tile([0.0, 0.0, 1.0], (3, 1))
+    out = eppf_pair_features(pts, normals, np.array([[0, 1]]), 1.0, (20, 4, 5, 3), 64, ref.F1_MAX)
+    assert out[0, 0] == expected
+
+
+@pytest.mark.parametrize(
+    "n1, n2, expected",
+    [
+        # d = +x; beta_k = arccos(n_k . d) - pi/2; f2 = max -> bin of 4 over [-pi/2, pi/2]
+        ([1, 0, 0], [1, 0, 0], 0),  # both betas -pi/2
+        ([-1, 0, 0], [-1, 0, 0], 3),  # both +pi/2 -> top edge, last bin
+        ([0, 0, 1], [1, 0, 0], 2),  # max(0, -pi/2) = 0 -> bin 2
+        ([np.cos(0.3), np.sin(0.3), 0], [1, 0, 0], 0),  # beta1 = 0.3 - pi/2 -> bin 0
+        ([np.cos(2.0), np.sin(2.0), 0], [1, 0, 0], 2),  # beta1 = 2.0 - pi/2 = 0.43 -> bin 2
+    ],
+)
+def test_angle_bins_hand_computed(n1, n2, expected):
+    pts = np.array([[0.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0]])
+    normals = np.array([n1, n2, [0, 0, 1]], dtype=float)
+    out = eppf_pair_features(pts, normals, np.array([[0, 1]]), 1.0, (20, 4, 5, 3), 64, ref.F1_MAX)
+    assert out[0, 1] == expected
+
+
+@pytest.mark.parametrize(
+    "angle, expected",
+    [(0.0, 0), (np.pi, 0), (np.pi / 2, 4), (0.2, 0), (0.35, 1), (np.pi - 0.35, 1), (1.2, 3)],
+)
+def test_normal_bins_hand_computed(angle, expected):
+    # f3 = arccos(|n1 . n2|) in 5 bins of pi/10 over [0, pi/2]
+    pts = np.array([[0.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0]])
+    normals = np.array([[0, 0, 1.0], [0, np.sin(angle), np.cos(angle)], [0, 0, 1.0]])
+    out = eppf_pair_features(pts, normals, np.array([[0, 1]]), 1.0, (20, 4, 5, 3), 64, ref.F1_MAX)
+    assert out[0, 2] == expected
+
+
+# ---------------------------------------------------------------- transformer behaviour
+def test_output_shape_sum_and_dtype(clouds):
+    X = EPPFTransformer(n_pairs=2000, random_state=0).fit_transform(clouds)
+    assert X.shape == (4, 1200)
+    assert X.dtype == np.float64
+    assert np.all(X >= 0)
+    assert_allclose(X.sum(axis=1), 1.0)
+
+
+def test_weighting_follows_log_formula(clouds):
+    est = EPPFTransformer(n_pairs=2000, c=1.5, scaling="object", random_state=0).fit(clouds)
+    H = est.to_histogram(est.transform(clouds))
+    plain = EPPFTransformer(n_pairs=2000, c=1e9, scaling="object", random_state=0).fit(clouds)
+    P = plain.to_histogram(plain.transform(clouds))  # c -> inf: weights become equal
+    alpha = np.log(np.arange(20) / 20 + 1.5)
+    W = P * alpha[None, :, None, None, None]
+    W /= W.sum(axis=(1, 2, 3, 4), keepdims=True)
+    assert_allclose(H, W, rtol=1e-6)
+
+
+def test_thread_count_and_repeat_determinism(clouds):
+    X1 = EPPFTransformer(n_pairs=3000, random_state=1, n_jobs=1).fit_transform(clouds * 3)
+    X2 = EPPFTransformer(n_pairs=3000, random_state=1, n_jobs=2).fit_transform(clouds * 3)
+    X3 = EPPFTransformer(n_pairs=3000, random_state=1, n_jobs=2).fit_transform(clouds * 3)
+    assert_array_equal(X1, X2)
+    assert_array_equal(X2, X3)
+    X4 = EPPFTransformer(n_pairs=3000, random_state=2).fit_transform(clouds * 3)
+    assert not np.array_equal(X1, X4)
+
+
+def test_prefix_of_input_gives_prefix_of_output(clouds):
+    est = EPPFTransformer(n_pairs=1000, random_state=4, scaling="object").fit(clouds)
+    assert_array_equal(est.transform(clouds)[:2], est.transform(clouds[:2]))
+
+
+def test_rotation_invariance_of_f1_to_f3(clouds):
+    rng = np.random.default_rng(9)
+    funcs = ("distance", "angle", "normal")
+    est = EPPFTransformer(n_pairs=20000, functions=funcs, scaling="none", random_state=0).fit(clouds)
+    # curved objects only: on a box, pairs on one face have n . d == 0 exactly, on
+    # f2's bin edge, and rounding after a rotation moves them across it legitimately
+    small = [np.hstack([c[:, :3] / (2 * np.abs(c[:, :3]).max()), c[:, 3:]]) for c in clouds[::2]]
+    X = est.transform(small)
+    R = _rotation(rng)
+    rotated = [np.hstack([c[:, :3] @ R.T, c[:, 3:] @ R.T]) for c in small]
+    Xr = est.transform(rotated)
+    # the same pairs are drawn; only pairs within rounding of a bin edge may move
+    assert np.abs(X - Xr).sum(axis=1).max() < 2e-3
+
+
+@pytest.mark.parametrize("scaling", ["fit", "object"])
+def test_scaling_modes_are_invariant_to_exact_rescaling(clouds, scaling):
+    big = [np.hstack([c[:, :3] * 4.0, c[:, 3:]]) for c in clouds]
+    X = EPPFTransformer(n_pairs=2000, scaling=scaling, random_state=0).fit_transform(clouds)
+    Xb = EPPFTransformer(n_pairs=2000, scaling=scaling, random_state=0).fit_transform(big)
+    assert_array_equal(X, Xb)
+
+
+def test_fit_scale_is_learned_from_training_set(clouds):
+    est = EPPFTransformer(scaling="fit").fit(clouds)
+    assert est.scale_ == pytest.approx(1.0 / 2.0)  # the (2, 0.2, 0.2) box is the largest
+    assert EPPFTransformer(scaling="object").fit(clouds).scale_ is None
+
+
+def test_dropping_a_function_marginalises_the_histogram(clouds):
+    full = EPPFTransformer(n_pairs=3000, random_state=5, scaling="object").fit(clouds)
+    H = full.to_histogram(full.transform(clouds))
+    for axis, name in [(4, "occupancy"), (3, "normal"), (2, "angle")]:
+        funcs = tuple(f for f in FUNCTIONS if f != name)
+        part = EPPFTransformer(n_pairs=3000, random_state=5, scaling="object", functions=funcs).fit(clouds)
+        Xp = part.transform(clouds)
+        assert Xp.shape[1] == 1200 // full.n_bins_[axis - 1]
+        assert_allclose(part.to_histogram(Xp), H.sum(axis=axis), rtol=1e-12, atol=1e-15)
+
+
+def test_functions_subset_without_normals_needs_no_normals():
+    rng = np.random.default_rng(0)
+    clouds = [rng.normal(size=(2, 3)) for _ in range(2)]  # too small for normal estimation
+    X = EPPFTransformer(n_pairs=100, functions=("distance", "occupancy"), random_state=0).fit_transform(clouds)
+    assert X.shape == (2, 60)
+
+
+def test_estimated_normals_equal_given_normals(clouds):
+    from eppf import estimate_normals
+
+    xyz = [c[:, :3] for c in clouds]
+    given = [np.hstack([p, estimate_normals(p, 12)]) for p in xyz]
+    a = EPPFTransformer(n_pairs=2000, n_neighbors=12, random_state=0).fit(xyz).transform(xyz)
+    b = EPPFTransformer(n_pairs=2000, n_neighbors=12, random_state=0).fit(given).transform(given)
+    assert_array_equal(a, b)
+
+
+def test_feature_names_and_histogram_view(clouds):
+    est = EPPFTransformer(n_bins=(15, 3, 4, 3), n_pairs=500, random_state=0).fit(clouds)
+    names = est.get_feature_names_out()
+    assert names.shape == (540,)
+    assert names[0] == "eppf_d00_a0_n0_o0"
+    assert names[1] == "eppf_d00_a0_n0_o1"
+    assert names[-1] == "eppf_d14_a2_n3_o2"
+    X = est.transform(clouds)
+    assert est.to_histogram(X).shape == (4, 15, 3, 4, 3)
+    assert est.to_histogram(X[0]).shape == (15, 3, 4, 3)
+    # flat index = ((i1 * N2 + i2) * N3 + i3) * N4 + i4
+    H = est.to_histogram(X)
+    assert H[1, 2, 1, 3, 2] == X[1, ((2 * 3 + 1) * 4 + 3) * 3 + 2]
+
+
+def test_eppf_short_has_540_bins(clouds):
+    X = EPPFTransformer(n_bins=(15, 3, 4, 3), n_pairs=1000, random_state=0).fit_transform(clouds)
+    assert X.shape == (4, 540)
+    assert_allclose(X.sum(axis=1), 1.0)
+
+
+def test_accepts_3d_array_and_float32():
+    rng = np.random.default_rng(0)
+    arr = rng.normal(size=(3, 100, 3)).astype(np.float32)
+    X = EPPFTransformer(n_pairs=500, random_state=0).fit_transform(arr)
+    assert X.shape == (3, 1200)
+
+
+def test_pickle_and_clone_round_trip(clouds):
+    est = EPPFTransformer(n_pairs=1000, random_state=0).fit(clouds)
+    again = pickle.loads(pickle.dumps(est))
+    assert_array_equal(est.transform(clouds), again.transform(clouds))
+    assert clone(est).get_params() == est.get_params()
+
+
+def test_pipeline_and_grid_search_over_bins_and_c():
+    rng = np.random.default_rng(0)
+    X = [_sphere(200, rng)[:, :3] * rng.uniform(0.8, 1.2) for _ in range(8)]
+    X += [_box(200, rng)[:, :3] * rng.uniform(0.8, 1.2) for _ in range(8)]
+    y = np.array(["sphere"] * 8 + ["box"] * 8)
+    pipe = Pipeline([("eppf", EPPFTransformer(n_pairs=1000, random_state=0)), ("knn", KLNearestNeighbors())])
+    grid = GridSearchCV(
+        pipe, {"eppf__n_bins": [(20, 4, 5, 3), (15, 3, 4, 3)], "eppf__c": [1.2, 2.0]}, cv=2,
+    )
+    grid.fit(X, y)
+    assert set(grid.cv_results_["param_eppf__c"]) == {1.2, 2.0}
+    assert grid.best_score_ >= 0.9
+    assert set(grid.predict(X)) <= {"sphere", "box"}
+
+
+# ---------------------------------------------------------------- errors
+def _err(X, match, exc=ValueError, **params):
+    est = EPPFTransformer(n_pairs=100, **params)
+    with pytest.raises(exc, match=re.escape(match)):
+        est.fit_transform(X)
+
+
+@pytest.mark.parametrize(
+    "X, match, exc",
+    [
+        ([], "EPPFTransformer: X is empty", ValueError),
+        (None, "EPPFTransformer: X must be a list of point clouds", TypeError),
+        ("cloud.ply", "EPPFTransformer: X must be a list of point clouds", TypeError),
+        (np.zeros((10, 3)), "EPPFTransformer: X is a single 2D array of shape (10, 3)", ValueError),
+        ([np.zeros((0, 3))], "EPPFTransformer: point cloud 0 has 0 points; at least 2 are needed", ValueError),
+        ([np.ones((1, 3))], "EPPFTransformer: point cloud 0 has 1 point; at least 2 are needed", ValueError),
+        ([np.ones((5, 3))], "EPPFTransformer: point cloud 0 has all 5 points identical", ValueError),
+        ([np.ones((5, 2))], "EPPFTransformer: point cloud 0 must have shape (n_points, 3) or (n_points, 6)", ValueError),
+        ([np.ones(5)], "EPPFTransformer: point cloud 0 must have shape", ValueError),
+        ([np.array([["a", "b", "c"]] * 3)], "EPPFTransformer: point cloud 0 must hold numbers", TypeError),
+        ([np.eye(3), np.array([[0, 0, np.nan], [1, 1, 1]])], "EPPFTransformer: point cloud 1 contains NaN or infinite", ValueError),
+        ([np.array([[0, 0, np.inf], [1, 1, 1]])], "EPPFTransformer: point cloud 0 contains NaN or infinite", ValueError),
+        ([np.hstack([np.eye(3), np.zeros((3, 3))])], "EPPFTransformer: point cloud 0 has 3 zero-length normal(s)", ValueError),
+    ],
+)
+def test_bad_input_raises(X, match, exc):
+    _err(X, match, exc)
+
+
+@pytest.mark.parametrize(
+    "params, match, exc",
+    [
+        ({"n_bins": (20, 4, 5)}, "n_bins must have 4 entries (f1, f2, f3, f4), got 3", ValueError),
+        ({"n_bins": (20, 0, 5, 3)}, "n_bins entries must lie in [1, 64]", ValueError),
+        ({"n_bins": (20, 4.5, 5, 3)}, "n_bins entries must be ints", TypeError),
+        ({"n_bins": 20}, "n_bins must be a tuple of 4 ints", TypeError),
+        ({"n_pairs": 0}, "n_pairs must lie in [1, 2147483647], got 0", ValueError),
+        ({"n_pairs": 10.0}, "n_pairs must be an int", TypeError),
+        ({"c": 1.0}, "c must be a finite number greater than 1", ValueError),
+        ({"c": float("nan")}, "c must be a finite number greater than 1", ValueError),
+        ({"c": "1.2"}, "c must be a real number", TypeError),
+        ({"grid_size": 1}, "grid_size must lie in [2, 1023], got 1", ValueError),
+        ({"functions": ("distance", "colour")}, "unknown function(s) ['colour']", ValueError),
+        ({"functions": ()}, "functions must name at least one of", ValueError),
+        ({"functions": ("angle", "angle")}, "functions has duplicates", ValueError),
+        ({"scaling": "unit"}, "scaling must be one of ('fit', 'object', 'none'), got 'unit'", ValueError),
+        ({"n_neighbors": 2}, "n_neighbors must lie in [3, 1000000], got 2", ValueError),
+        ({"normal_orientation": "up"}, "normal_orientation must be 'centroid', 'origin' or None", ValueError),
+        ({"n_jobs": 0}, "n_jobs == 0 has no meaning", ValueError),
+        ({"n_jobs": 1.5}, "n_jobs must be an int or None", TypeError),
+    ],
+)
+def test_bad_parameters_raise(params, match, exc):
+    rng = np.random.default_rng(0)
+    _err([rng.normal(size=(20, 3))], "EPPFTransformer: " + match, exc, **params)
+
+
+def test_transform_before_fit_raises():
+    with pytest.raises(NotFittedError):
+        EPPFTransformer().transform([np.eye(3)])
+
+
+def test_to_histogram_rejects_wrong_length(clouds):
+    est = EPPFTransformer(n_pairs=100).fit(clouds)
+    with pytest.raises(ValueError, match=re.escape("descriptors must have 1200 values in the last axis")):
+        est.to_histogram(np.zeros((2, 540)))
+
+
+def test_degenerate_cloud_reports_object():
+    pts = np.zeros((200000, 3))
+    pts[0] = 1.0  # two distinct points among 200,000: pairs are almost never distinct
+    clouds = [np.random.default_rng(0).normal(size=(10, 3)), pts]
+    est = EPPFTransformer(n_pairs=50, functions=("distance",), random_state=0)
+    with pytest.raises(ValueError, match=re.escape("EPPFTransformer: point cloud 1 has too few distinct points")):
+        est.fit_transform(clouds)
