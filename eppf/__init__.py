@@ -7,6 +7,7 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 
 __version__ = "0.1.0"
 
+from ._descriptor import FUNCTIONS, EPPFTransformer
 from ._neighbors import KLNearestNeighbors, symmetric_kl_distances
 from ._cnn import EPPF4DClassifier
 
@@ -14,4 +15,4 @@ from ._esf import ESFTransformer
 from ._ourcvfh import OURCVFHTransformer
 from ._wahl import WahlTransformer
 
-__all__ = ["EPPF4DClassifier", "ESFTransformer", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "symmetric_kl_distances"]
+__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "symmetric_kl_distances"]
