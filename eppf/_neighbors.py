@@ -231,12 +231,14 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
     -----
     With ``h`` the floored histograms, ``d(x, y) = sum x ln x + sum y ln y -
     x . ln y - y . ln x``; the two cross terms are computed as matrix
-    products, chunk by chunk. Results agree with a direct evaluation to
-    about ``1e-15`` times ``sum |x ln x|``.
+    products, chunk by chunk. The cancellation between these terms limits
+    the absolute accuracy to a small multiple of machine precision times
+    the size of the terms (``sum |x ln y|``), e.g. about ``1e-13`` for
+    normalised histograms of 1,200 bins, however small ``d`` is.
 
     References
     ----------
-    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal, E. Steinbach,
+    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal and E. Steinbach,
        "Noise-resistant Deep Learning for Object Classification in 3D Point
        Clouds Using a Point Pair Descriptor", IEEE Robotics and Automation
        Letters, 2018.
@@ -443,7 +445,7 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
 
     References
     ----------
-    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal, E. Steinbach,
+    .. [1] D. Bobkov, S. Chen, R. Jian, M. Z. Iqbal and E. Steinbach,
        "Noise-resistant Deep Learning for Object Classification in 3D Point
        Clouds Using a Point Pair Descriptor", IEEE Robotics and Automation
        Letters, 2018.
