@@ -16,6 +16,13 @@ FUNCTIONS = ("distance", "angle", "normal", "occupancy")
 _SHORT = {"distance": "d", "angle": "a", "normal": "n", "occupancy": "o"}
 _SCALINGS = ("fit", "object", "none")
 _F1_MAX = float(np.sqrt(3.0))
+_CHUNK = 256  # objects per kernel call: bounds the memory of packed chunks
+
+
+def _progress(total, verbose, desc):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit="obj", disable=not verbose, leave=False)
 
 
 def _bounding_sides(clouds):
@@ -72,6 +79,8 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         Threads for the compiled kernel and normal estimation. ``None`` uses
         the OpenMP default, which honours ``OMP_NUM_THREADS`` and
         ``threadpoolctl`` limits; ``-1`` uses all cores.
+    verbose : int, default=0
+        Show a progress bar over objects when positive.
 
     Attributes
     ----------
@@ -147,6 +156,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         normal_orientation="centroid",
         random_state=None,
         n_jobs=None,
+        verbose=0,
     ):
         self.n_bins = n_bins
         self.n_pairs = n_pairs
@@ -158,6 +168,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         self.normal_orientation = normal_orientation
         self.random_state = random_state
         self.n_jobs = n_jobs
+        self.verbose = verbose
 
     # ------------------------------------------------------------------ params
     def _validate_params(self):
@@ -249,15 +260,27 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         name = type(self).__name__
         clouds = check_point_clouds(X, owner=name)
         n_threads = check_n_jobs(self.n_jobs, owner=name)
-        points, normals, offsets = self._points_and_normals(clouds, n_threads)
         if self.scaling == "fit":
             scales = np.full(len(clouds), self.scale_)
         elif self.scaling == "object":
             scales = 1.0 / _bounding_sides(clouds)
         else:
             scales = np.ones(len(clouds))
-        kernel_bins = tuple(b if f in self.functions_ else 1 for b, f in zip(self.n_bins_, FUNCTIONS))
+        # Seeds are drawn once for the whole input, so chunking never changes a result.
         seeds = object_seeds(self.random_state, len(clouds))
+        out = np.empty((len(clouds), self.n_features_out_), dtype=np.float64)
+        bounds = list(range(0, len(clouds), _CHUNK)) + [len(clouds)]
+        progress = _progress(len(clouds), self.verbose, "EPPF")
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            out[lo:hi] = self._describe(clouds[lo:hi], scales[lo:hi], seeds[lo:hi], n_threads, lo)
+            progress.update(hi - lo)
+        progress.close()
+        return out
+
+    def _describe(self, clouds, scales, seeds, n_threads, first_index):
+        """Descriptors of validated clouds with given per-object scales and seeds."""
+        points, normals, offsets = self._points_and_normals(clouds, n_threads)
+        kernel_bins = tuple(b if f in self.functions_ else 1 for b, f in zip(self.n_bins_, FUNCTIONS))
         counts, status = eppf_counts(
             points, normals, offsets, scales, seeds, int(self.n_pairs), kernel_bins,
             int(self.grid_size), _F1_MAX, n_threads,
@@ -265,8 +288,8 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         bad = np.flatnonzero(status)
         if bad.size:
             raise ValueError(
-                f"{name}: point cloud {bad[0]} has too few distinct points to draw {self.n_pairs} pairs "
-                "(almost all of its points coincide)"
+                f"{type(self).__name__}: point cloud {first_index + bad[0]} has too few distinct points to draw "
+                f"{self.n_pairs} pairs (almost all of its points coincide)"
             )
         return _weight_and_normalise(counts, kernel_bins, self.c, "distance" in self.functions_)
 
