@@ -9,13 +9,16 @@ __all__ = ["object_rng", "sample_mesh"]
 
 
 def object_rng(seed):
-    """A NumPy RandomState from one 64-bit object seed (all 64 bits kept).
+    """A NumPy RandomState from one 64-bit object seed.
 
-    The seeds come from :func:`eppf._validation.object_seeds`; each object
-    gets its own generator so its draws do not depend on the other objects.
+    The seeds come from :func:`eppf._validation.object_seeds` (or a loader's
+    per-file seeds); each object gets its own generator so its draws do not
+    depend on the other objects. The legacy ``RandomState`` interface runs
+    on a PCG64 bit generator, which is seeded from all 64 bits and is twenty
+    times cheaper to create than a Mersenne Twister (this matters once per
+    object).
     """
-    seed = int(seed)
-    return np.random.RandomState(np.array([seed & 0xFFFFFFFF, seed >> 32], dtype=np.uint32))
+    return np.random.RandomState(np.random.PCG64(int(seed)))
 
 
 def _check_mesh(vertices, faces, owner):

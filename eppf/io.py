@@ -526,14 +526,14 @@ def _read_off_fast(text):
     flines = lines[start + n_v:start + n_v + n_f]
     if len(vlines) != n_v or len(flines) != n_f or any(t.strip() for t in lines[start + n_v + n_f:]):
         return None
-    if any(len(t.split()) != 3 for t in vlines):
+    if set(map(len, map(str.split, vlines))) != {3}:
         return None
     verts = np.fromstring(" ".join(vlines), sep=" ")  # C parser; sizes checked below
     if verts.size != 3 * n_v:
         return None
     if n_f == 0:
         return Mesh(verts.reshape(n_v, 3), np.empty((0, 3), dtype=np.int64))
-    if any(len(t.split()) != 4 for t in flines):
+    if set(map(len, map(str.split, flines))) != {4}:
         return None
     ints = np.fromstring(" ".join(flines), dtype=np.int64, sep=" ")
     if ints.size != 4 * n_f:
