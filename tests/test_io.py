@@ -391,3 +391,26 @@ def test_argument_errors(tmp_path, monkeypatch, func, args, kwargs, exc, msg):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(exc, match=re.escape(msg)):
         func(*args, **kwargs)
+
+
+def test_missing_plyfile_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "plyfile", None)  # makes `import plyfile` fail
+    path = _write(tmp_path / "x.ply", "ply\nformat ascii 1.0\nend_header\n")
+    with pytest.raises(ImportError, match=re.escape("read_point_cloud: reading and writing PLY files needs the 'plyfile' package; install it with `pip install eppf[io]`")):
+        read_point_cloud(path)
+    with pytest.raises(ImportError, match=re.escape("write_mesh: reading and writing PLY files needs the 'plyfile' package")):
+        write_mesh(tmp_path / "m.ply", np.eye(3), [[0, 1, 2]])
+
+
+def test_core_import_needs_no_optional_dependency():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; import eppf, eppf.io, eppf.datasets, eppf.preprocessing; "
+        "bad = [m for m in ('plyfile', 'h5py', 'trimesh') if m in sys.modules]; "
+        "assert not bad, bad"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -361,3 +361,15 @@ def test_s3dis_errors(tmp_path, kwargs, exc, msg):
 def test_s3dis_empty_folder(tmp_path):
     with pytest.raises(ValueError, match="no Area_<n>/<room>/Annotations/<class>_<k>.txt files"):
         load_s3dis_objects(tmp_path)
+
+
+def test_hdf5_without_h5py_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    base = tmp_path / "h5"
+    base.mkdir()
+    (base / "shape_names.txt").write_text("chair\n")
+    (base / "ply_data_train0.h5").write_bytes(b"")
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    with pytest.raises(ImportError, match=re.escape("the HDF5 layout needs the 'h5py' package; install it with `pip install eppf[io]`")):
+        load_modelnet(base, n_points=None)
