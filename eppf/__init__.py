@@ -14,5 +14,6 @@ from ._cnn import EPPF4DClassifier
 from ._esf import ESFTransformer
 from ._ourcvfh import OURCVFHTransformer
 from ._wahl import WahlTransformer
+from ._normals import estimate_normals
 
-__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "symmetric_kl_distances"]
+__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "estimate_normals", "symmetric_kl_distances"]

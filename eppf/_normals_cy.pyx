@@ -30,7 +30,7 @@ import numpy as np
 
 # Modes of orientation understood by the kernel.
 cdef enum:
-    _N_BUCKETS = 64
+    _N_BUCKETS = 32
 
 cdef enum:
     ORIENT_NONE = 0
@@ -378,7 +378,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
     the result exact; the caller then falls back to :func:`_knn_shells`."""
     cdef int64_t jy, jz, row, x0, x1, p, b, e
     cdef Py_ssize_t m = 0, i, j, rank, max_cand = _MAX_CAND_PER_K * k
-    cdef Py_ssize_t counts[_N_BUCKETS]
+    cdef int counts[_N_BUCKETS]
     cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
     cdef double to_bucket, kth
     cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, di, gz, gz2, gy, gyz2, gx
@@ -707,18 +707,29 @@ cdef void _orient(const double* pts, Py_ssize_t n, int mode, const double* viewp
 
 
 cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mode,
-                          const double* viewpoint, Py_ssize_t cap, Scratch* sc,
+                          const double* viewpoint, double* fs, int64_t* its, Py_ssize_t max_n,
                           double* out) noexcept nogil:
-    """All normals of one object, serially, using one thread's scratch."""
+    """All normals of one object, serially, in one thread's scratch rows."""
     cdef Grid g
+    cdef Scratch sc
     cdef Py_ssize_t s, kk = k if k < n else n
     if n == 0:
         return
-    _build_grid(pts, n, kk, cap, &g, sc.spts, sc.sidx, sc.cell_of, sc.cell_start)
+    _split_scratch(fs, its, max_n, k, &sc)
+    _build_grid(pts, n, kk, 4 * max_n + 64, &g, sc.spts, sc.sidx, sc.cell_of, sc.cell_start)
     sc.guess[0] = INFINITY
     for s in range(n):
-        _point_normal(&g, sc.spts, sc.cell_start, s, kk, sc, out + 3 * sc.sidx[s])
+        _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, out + 3 * sc.sidx[s])
     _orient(pts, n, mode, viewpoint, out)
+
+
+cdef void _shared_grid_normal(const Grid* g, const Scratch* shared, Py_ssize_t s, Py_ssize_t k,
+                              double* fs, int64_t* its, Py_ssize_t n, double* out) noexcept nogil:
+    """Normal of grid-order point ``s`` of a grid built in ``shared``, with
+    this thread's scratch rows for the query buffers."""
+    cdef Scratch sc
+    _split_scratch(fs, its, n, k, &sc)
+    _point_normal(g, shared.spts, shared.cell_start, s, k, &sc, out + 3 * shared.sidx[s])
 
 
 def _check_scratch(fscratch, iscratch, Py_ssize_t max_n, Py_ssize_t k, int num_threads, name):
@@ -741,11 +752,9 @@ def normals_packed(const double[:, ::1] points, const int64_t[::1] offsets, Py_s
     Inputs are otherwise trusted: the Python layer validates them.
     """
     cdef Py_ssize_t n_obj = offsets.shape[0] - 1
-    cdef Py_ssize_t cap = max_cells(max_n)
     cdef Py_ssize_t o, tid
     cdef const double* pbase
     cdef double* obase
-    cdef Scratch sc
     if n_obj <= 0 or points.shape[0] == 0:
         return
     _check_scratch(fscratch, iscratch, max_n, k, num_threads, "normals_packed")
@@ -754,9 +763,9 @@ def normals_packed(const double[:, ::1] points, const int64_t[::1] offsets, Py_s
     with nogil:
         for o in prange(n_obj, num_threads=num_threads, schedule="dynamic", chunksize=1):
             tid = threadid()
-            _split_scratch(&fscratch[tid, 0], &iscratch[tid, 0], max_n, k, &sc)
             _object_normals(pbase + 3 * offsets[o], offsets[o + 1] - offsets[o], k, mode,
-                            &viewpoint[0], cap, &sc, obase + 3 * offsets[o])
+                            &viewpoint[0], &fscratch[tid, 0], &iscratch[tid, 0], max_n,
+                            obase + 3 * offsets[o])
 
 
 def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
@@ -788,10 +797,9 @@ def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
         for t in range(num_threads):
             _split_scratch(&fscratch[t, 0], &iscratch[t, 0], n, k, &sc)
             sc.guess[0] = INFINITY
-        for s in prange(n, num_threads=num_threads, schedule="static", chunksize=64):
+        for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
             tid = threadid()
-            _split_scratch(&fscratch[tid, 0], &iscratch[tid, 0], n, k, &sc)
-            _point_normal(&g, shared.spts, shared.cell_start, s, kk, &sc, obase + 3 * shared.sidx[s])
+            _shared_grid_normal(&g, &shared, s, kk, &fscratch[tid, 0], &iscratch[tid, 0], n, obase)
         _orient(&points[0, 0], n, mode, &viewpoint[0], obase)
 
 
