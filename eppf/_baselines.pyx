@@ -63,19 +63,27 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
                      int* n_in, int* n_total, double* ratio) noexcept nogil:
     """Classify the voxel line from ``a`` towards ``b`` like PCL's ``lci``.
 
-    A 3D Bresenham walk along the dominant axis (length L) that visits
-    max(L, 1) voxels: the start voxel and the next L - 1, not the end voxel
-    (PCL's count). Minor axes step when their error term is positive, before
-    the major step. Returns LINE_IN when at most one visited voxel is empty,
-    LINE_OUT when at most 7 are occupied, LINE_MIX otherwise (with ``ratio``
-    = occupied / visited).
+    PCL walks a 3D Bresenham line along the dominant axis (length L) and
+    visits max(L, 1) voxels: the start voxel and the next L - 1, not the end
+    voxel. Its minor coordinates after k steps are exactly
+    ``floor((2 D k + L - 1) / (2 L))`` (D the minor axis' length; checked
+    against PCL's loop for every L < 200), which is walked here in 32.32
+    fixed point with no loop-carried dependency but three additions:
+    ``P_k = floor((L - 1) 2**31 / L) + L + 2 + k floor(D 2**32 / L)`` lies in
+    (X_k, X_k + L + 2] for the exact X_k = (2 D k + L - 1) 2**31 / L, and a
+    non-integer X_k / 2**32 is at least 2**32 / (2 L) units below the next
+    integer, so ``P_k >> 32`` is exact for L < 2**20.
+
+    Returns LINE_IN when at most one visited voxel is empty, LINE_OUT when at
+    most 7 are occupied, LINE_MIX otherwise (with ``ratio`` = occupied /
+    visited).
     """
     cdef int d[3]
     cdef int s[3]
     cdef int64_t stride[3]
-    cdef int ax, m1, m2, L, i, occ = 0, cnt
+    cdef int ax, m1, m2, L, k, occ = 0, cnt
     cdef int64_t idx, st1, st2, stmaj
-    cdef int e1, e2, t1, t2, two1, two2, twoL
+    cdef uint64_t p1, p2, inc1, inc2
     stride[0] = <int64_t>grid * grid
     stride[1] = grid
     stride[2] = 1
@@ -92,24 +100,24 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
     else:
         ax = 2; m1 = 1; m2 = 0
     L = d[ax]
-    twoL = 2 * L
-    two1 = 2 * d[m1]
-    two2 = 2 * d[m2]
-    e1 = two1 - L
-    e2 = two2 - L
-    stmaj = s[ax] * stride[ax]
-    st1 = s[m1] * stride[m1]
-    st2 = s[m2] * stride[m2]
     idx = a[0] * stride[0] + a[1] * stride[1] + a[2]
-    for i in range(1, L):
-        occ += _bit(bits, idx)
-        t1 = e1 > 0
-        t2 = e2 > 0
-        idx += stmaj + t1 * st1 + t2 * st2
-        e1 += two1 - t1 * twoL
-        e2 += two2 - t2 * twoL
-    occ += _bit(bits, idx)
-    cnt = L if L > 1 else 1
+    if L <= 1:
+        occ = _bit(bits, idx)
+        cnt = 1
+    else:
+        cnt = L
+        stmaj = s[ax] * stride[ax]
+        st1 = s[m1] * stride[m1]
+        st2 = s[m2] * stride[m2]
+        inc1 = ((<uint64_t>d[m1]) << 32) // <uint64_t>L
+        inc2 = ((<uint64_t>d[m2]) << 32) // <uint64_t>L
+        p1 = (((<uint64_t>(L - 1)) << 31) // <uint64_t>L) + <uint64_t>(L + 2)
+        p2 = p1
+        for k in range(L):
+            occ += _bit(bits, idx + (<int64_t>(p1 >> 32)) * st1 + (<int64_t>(p2 >> 32)) * st2)
+            idx += stmaj
+            p1 += inc1
+            p2 += inc2
     n_in[0] = occ
     n_total[0] = cnt
     if occ >= cnt - 1:
@@ -118,6 +126,20 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
         return LINE_OUT
     ratio[0] = <double>occ / <double>cnt
     return LINE_MIX
+
+
+cdef inline int _angle_bin(double c, const double* edges, int n_pow2) noexcept nogil:
+    """round((n_bins - 1) * arccos(c) / (pi / 2)) without arccos.
+
+    ``edges[j] = cos((j + 1/2) (pi/2) / (n_bins - 1))`` decrease, padded with
+    -2 to ``n_pow2`` entries (a power of two); the bin is the number of edges
+    not below ``c``, found by a branch-free binary search.
+    """
+    cdef int lo = 0, step = n_pow2 >> 1
+    while step > 0:
+        lo += step * (edges[lo + step - 1] >= c)
+        step >>= 1
+    return lo
 
 
 cdef inline int _round_bin(double v, int n_bins) noexcept nogil:
@@ -139,8 +161,8 @@ cdef inline double _abs_cos(double ax, double ay, double az,
 
 cdef int _esf_object(const double* points, int64_t start, int64_t n,
                      uint64_t seed, int n_triplets, int grid, int n_bins,
-                     double area_eps,
-                     double* pts, uint64_t* bits, double* d2v, double* d3v,
+                     double area_eps, const double* edges, int n_pow2,
+                     double* pts, int32_t* cells, uint64_t* bits, double* d2v, double* d3v,
                      int8_t* cls2, int8_t* cls3, double* out) noexcept nogil:
     """One object's ESF into ``out`` (10 * n_bins, zeroed). Returns a status."""
     cdef int64_t i, k, idx, n_words
@@ -185,6 +207,7 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
     for i in range(n):
         for ax in range(3):
             cell[ax] = _pcl_cell(pts[3 * i + ax], half, grid)
+            cells[3 * i + ax] = cell[ax]
         for x in range(cell[0] - 1, cell[0] + 2):
             if x < 0 or x >= grid:
                 continue
@@ -222,14 +245,14 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
         if heron <= area_eps:
             continue
         # A3: the triangle's angles folded into [0, pi/2] (|cos|).
-        th1 = _round_bin(acos(_abs_cos(v21x, v21y, v21z, v31x, v31y, v31z, a * b)) / pih, n_bins)
-        th2 = _round_bin(acos(_abs_cos(v23x, v23y, v23z, v31x, v31y, v31z, c * b)) / pih, n_bins)
-        th3 = _round_bin(acos(_abs_cos(v23x, v23y, v23z, v21x, v21y, v21z, c * a)) / pih, n_bins)
+        th1 = _angle_bin(_abs_cos(v21x, v21y, v21z, v31x, v31y, v31z, a * b), edges, n_pow2)
+        th2 = _angle_bin(_abs_cos(v23x, v23y, v23z, v31x, v31y, v31z, c * b), edges, n_pow2)
+        th3 = _angle_bin(_abs_cos(v23x, v23y, v23z, v21x, v21y, v21z, c * a), edges, n_pow2)
         # D2 and the three lines.
         for ax in range(3):
-            c1[ax] = _pcl_cell(pts[3 * i1 + ax], half, grid)
-            c2[ax] = _pcl_cell(pts[3 * i2 + ax], half, grid)
-            c3[ax] = _pcl_cell(pts[3 * i3 + ax], half, grid)
+            c1[ax] = cells[3 * i1 + ax]
+            c2[ax] = cells[3 * i2 + ax]
+            c3[ax] = cells[3 * i3 + ax]
         d2v[3 * t] = a
         d2v[3 * t + 1] = b
         d2v[3 * t + 2] = c
@@ -250,14 +273,13 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
         in_sum = in12 + in13 + in23
         n_sum = n12 + n13 + n23
         if in_sum <= 21:
-            k = A3_OUT
-            cls3[t] = LINE_OUT
+            k = LINE_OUT
         elif n_sum - in_sum < 4:
-            k = A3_IN
-            cls3[t] = LINE_IN
+            k = LINE_IN
         else:
-            k = A3_MIX
-            cls3[t] = LINE_MIX
+            k = LINE_MIX
+        cls3[t] = <int8_t>k
+        k = A3_IN + k
         # Each angle weighted by the voxel count of the opposite side / 32.
         out[k * n_bins + th1] += n23 / 32.0
         out[k * n_bins + th2] += n12 / 32.0
@@ -267,11 +289,12 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
         if c > maxd2: maxd2 = c
         if d3v[t] > maxd3: maxd3 = d3v[t]
         t += 1
+    # Histogram k = first histogram of the family + line class (0 in, 1 out, 2 mixed).
     for i in range(n_triplets):
-        k = D3_IN if cls3[i] == LINE_IN else (D3_OUT if cls3[i] == LINE_OUT else D3_MIX)
+        k = D3_IN + cls3[i]
         out[k * n_bins + _round_bin(d3v[i] / maxd3, n_bins)] += 1.0
     for i in range(3 * <int64_t>n_triplets):
-        k = D2_IN if cls2[i] == LINE_IN else (D2_OUT if cls2[i] == LINE_OUT else D2_MIX)
+        k = D2_IN + cls2[i]
         out[k * n_bins + _round_bin(d2v[i] / maxd2, n_bins)] += 1.0
     # PCL's weights (the D2-in and ratio halves folded in), then sum to one.
     weights[A3_IN] = 0.5
@@ -313,16 +336,24 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
             max_n = offsets[k + 1] - offsets[k]
     cdef int64_t n_words = (<int64_t>grid * grid * grid + 63) // 64
     cdef double[:, ::1] pts = np.empty((num_threads, 3 * max_n), dtype=np.float64)
+    cdef int32_t[:, ::1] cells = np.empty((num_threads, 3 * max_n), dtype=np.int32)
     cdef uint64_t[:, ::1] bits = np.empty((num_threads, n_words), dtype=np.uint64)
     cdef double[:, ::1] d2v = np.empty((num_threads, 3 * <int64_t>n_triplets), dtype=np.float64)
     cdef double[:, ::1] d3v = np.empty((num_threads, n_triplets), dtype=np.float64)
     cdef int8_t[:, ::1] cls2 = np.empty((num_threads, 3 * <int64_t>n_triplets), dtype=np.int8)
     cdef int8_t[:, ::1] cls3 = np.empty((num_threads, n_triplets), dtype=np.int8)
+    # A3 bin edges on the cosine scale, padded with -2 to a power of two.
+    cdef int n_pow2 = 1
+    while n_pow2 < n_bins:
+        n_pow2 *= 2
+    edges_arr = np.full(n_pow2, -2.0)
+    edges_arr[: n_bins - 1] = np.cos((np.arange(n_bins - 1) + 0.5) / max(n_bins - 1, 1) * (np.pi / 2))
+    cdef double[::1] edges = edges_arr
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
         status[k] = <int8_t>_esf_object(
             &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
-            grid, n_bins, area_eps, &pts[tid, 0], &bits[tid, 0], &d2v[tid, 0],
+            grid, n_bins, area_eps, &edges[0], n_pow2, &pts[tid, 0], &cells[tid, 0], &bits[tid, 0], &d2v[tid, 0],
             &d3v[tid, 0], &cls2[tid, 0], &cls3[tid, 0], &out[k, 0])
         if status[k] != 0:
             memset(&out[k, 0], 0, 10 * n_bins * sizeof(double))
