@@ -154,15 +154,27 @@ def modelnet(args):
 
 
 def _epochs_within(clf, X, y, args):
-    """Cap max_epochs so the run fits in --time-limit, from one timed epoch."""
-    from sklearn.base import clone
+    """Cap max_epochs so a run fits in --time-limit, from a few timed batches."""
+    import torch
+    import torch.nn.functional as F
 
-    probe = clone(clf).set_params(max_epochs=1, early_stopping=False)
-    t0 = time.perf_counter()
-    probe.fit(X, y)
-    per_epoch = time.perf_counter() - t0
-    n = max(1, min(args.max_epochs, int(math.floor(args.time_limit / per_epoch)) - 1))
-    print(f"  ({clf.conv}: one epoch {per_epoch:.1f} s -> max_epochs {n})", flush=True)
+    from eppf.nn import EPPFNet2D, EPPFNet3D, EPPFNet4D
+
+    net = {"2d": EPPFNet2D, "3d": EPPFNet3D, "4d": EPPFNet4D}[clf.conv](n_classes=len(np.unique(y)))
+    opt = torch.optim.Adam(net.parameters(), lr=clf.lr)
+    xb = torch.rand(clf.batch_size, net.n_features)
+    yb = torch.randint(0, len(np.unique(y)), (clf.batch_size,))
+    for i in range(4):
+        if i == 1:
+            t0 = time.perf_counter()
+        opt.zero_grad()
+        F.cross_entropy(net(xb), yb).backward()
+        opt.step()
+    per_object = (time.perf_counter() - t0) / (3 * clf.batch_size)
+    n_train = X.shape[0] * (1 - (clf.validation_fraction if clf.early_stopping else 0.0))
+    per_epoch = per_object * n_train * 1.1  # + validation forward passes
+    n = max(1, min(args.max_epochs, int(args.time_limit // per_epoch)))
+    print(f"  ({clf.conv}: about {per_epoch:.0f} s per epoch -> max_epochs {n})", flush=True)
     return n
 
 

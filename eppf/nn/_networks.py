@@ -199,7 +199,7 @@ class EPPFNet4D(_EPPFNetBase):
     Notes
     -----
     The module docstring of ``eppf.nn._networks`` says how Table I is read.
-    With the default arguments the network has 14,870,954 parameters for 10
+    With the default arguments the network has 14,875,418 parameters for 10
     classes; the dense layer (14,400 x 1,024) holds 99% of them.
 
     Examples
@@ -290,7 +290,7 @@ class EPPFNet2D(_EPPFNetBase):
 
     Notes
     -----
-    14,886,314 parameters with the default arguments and 10 classes.
+    14,885,818 parameters with the default arguments and 10 classes.
 
     Examples
     --------
@@ -360,7 +360,7 @@ class EPPFNet3D(_EPPFNetBase):
     -----
     The 2x2 max-pool acts on the first two axes ((2, 2, 1)), so the dense
     layer sees 48 * 10 * 2 * 15 = 14,400 values for the default bins, as in
-    the other variants; 14,886,314 parameters with 10 classes.
+    the other variants; 14,885,818 parameters with 10 classes.
 
     Examples
     --------
