@@ -1,0 +1,360 @@
+"""Tests for eppf.estimate_normals and the packed batch kernel."""
+
+import re
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from scipy.spatial import cKDTree
+
+from eppf import estimate_normals
+from eppf._normals import estimate_normals_batch
+from eppf._normals_cy import smallest_eigvecs
+from eppf._validation import pack_point_clouds
+
+
+def reference_normals(points, k):
+    """Slow reference: cKDTree neighbours and np.linalg.eigh, unoriented.
+
+    Also returns each neighbourhood's relative eigen-gap and whether its k-th
+    distance is tied with the (k+1)-th (then the neighbourhood is ambiguous).
+    """
+    n = len(points)
+    kq = min(k + 1, n)
+    dist, idx = cKDTree(points).query(points, kq)
+    nb = points[idx[:, :k]]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", centred, centred)
+    w, v = np.linalg.eigh(cov)
+    gap = (w[:, 1] - w[:, 0]) / np.maximum(w[:, 2] - w[:, 0], 1e-300)
+    tied = np.zeros(n, dtype=bool) if kq == k else np.isclose(dist[:, k - 1], dist[:, k], rtol=1e-12, atol=0)
+    return v[:, :, 0], gap, tied
+
+
+def sine_angle(a, b):
+    """Sine of the angle between rows, ignoring sign."""
+    return np.linalg.norm(np.cross(a, b), axis=1)
+
+
+def random_surface(rng, n):
+    """Noisy points on a squashed, bumpy ellipsoid (an object-like surface)."""
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    r = 1 + 0.1 * np.sin(4 * u[:, 0]) * np.cos(3 * u[:, 1])
+    return u * r[:, None] * [1.0, 0.6, 0.3] + 0.002 * rng.normal(size=(n, 3))
+
+
+def unit_sphere(rng, n):
+    u = rng.normal(size=(n, 3))
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize(
+    "plane_normal", [(0, 0, 1), (1, 0, 0), (0, 1, 0), (1, 2, 3), (-0.3, 0.2, 0.9)]
+)
+@pytest.mark.parametrize("k", [3, 10, 30])
+def test_plane_normal_up_to_sign_then_oriented(plane_normal, k):
+    rng = np.random.default_rng(0)
+    n0 = np.asarray(plane_normal, dtype=float)
+    n0 /= np.linalg.norm(n0)
+    # Orthonormal basis of the plane.
+    t1 = np.cross(n0, [1.0, 0.0, 0.0] if abs(n0[0]) < 0.9 else [0.0, 1.0, 0.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n0, t1)
+    st = rng.uniform(-1, 1, size=(400, 2))
+    points = st[:, :1] * t1 + st[:, 1:] * t2 + [0.5, -2.0, 3.0]
+    normals = estimate_normals(points, k, orientation=None)
+    assert_allclose(np.abs(normals @ n0), 1.0, atol=1e-9)
+    # A viewpoint on the positive side of the plane makes them all equal n0.
+    viewpoint = points.mean(axis=0) + 5 * n0
+    oriented = estimate_normals(points, k, orientation=viewpoint)
+    assert_allclose(oriented, np.tile(n0, (len(points), 1)), atol=1e-9)
+
+
+def test_lattice_plane_with_tied_neighbours():
+    # A regular grid has many neighbours at equal distance; any tie choice
+    # lies in the plane, so the normal is exact.
+    xy = np.stack(np.meshgrid(np.arange(20.0), np.arange(15.0)), -1).reshape(-1, 2)
+    points = np.column_stack([xy, np.full(len(xy), 7.0)])
+    normals = estimate_normals(points, 9, orientation=[0, 0, 100])
+    assert_array_equal(normals, np.tile([0.0, 0.0, 1.0], (len(points), 1)))
+
+
+@pytest.mark.parametrize("center", [(0, 0, 0), (3.0, -1.0, 2.0)])
+def test_sphere_radial_and_outward_with_centroid(center):
+    rng = np.random.default_rng(1)
+    u = unit_sphere(rng, 3000)
+    points = 2.5 * u + center
+    normals = estimate_normals(points, 10)
+    assert (np.einsum("ij,ij->i", normals, u) > 0.99).all()
+
+
+def test_sphere_origin_orientation_points_inward():
+    rng = np.random.default_rng(2)
+    u = unit_sphere(rng, 2000)
+    # Sensor at the centre of the sphere: normals point towards it.
+    for orientation in ["origin", "viewpoint", (0, 0, 0)]:
+        normals = estimate_normals(u, 12, orientation=orientation)
+        assert (np.einsum("ij,ij->i", normals, u) < -0.99).all()
+
+
+def test_cylinder_normals_radial_and_horizontal():
+    rng = np.random.default_rng(3)
+    theta = rng.uniform(0, 2 * np.pi, 3000)
+    z = rng.uniform(-1, 1, 3000)
+    radial = np.column_stack([np.cos(theta), np.sin(theta), np.zeros_like(theta)])
+    points = 0.7 * radial + np.column_stack([np.zeros((3000, 2)), z])
+    normals = estimate_normals(points, 15)
+    # Away from the caps' missing rims the centroid rule points outwards.
+    inner = np.abs(z) < 0.8
+    assert (np.einsum("ij,ij->i", normals, radial)[inner] > 0.99).all()
+    assert np.abs(normals[inner, 2]).max() < 0.1
+
+
+@pytest.mark.parametrize("shape", ["cube", "surface"])
+@pytest.mark.parametrize("n, k", [(5, 3), (50, 3), (300, 10), (1024, 10), (2048, 20), (3000, 30), (40, 40)])
+def test_matches_slow_reference(shape, n, k):
+    rng = np.random.default_rng(n * 100 + k)
+    points = rng.random((n, 3)) if shape == "cube" else random_surface(rng, n)
+    normals = estimate_normals(points, k, orientation=None)
+    ref, gap, tied = reference_normals(points, k)
+    ok = (gap > 1e-6) & ~tied
+    assert ok.mean() > 0.95
+    assert sine_angle(normals, ref)[ok].max() < 1e-8
+    assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-14)
+
+
+def test_kernel_neighbourhoods_are_exact_on_clustered_data():
+    # Dense clusters next to sparse background stress the grid's cell size
+    # and its fall-back search.
+    rng = np.random.default_rng(4)
+    points = np.concatenate(
+        [
+            rng.normal(scale=0.001, size=(500, 3)),
+            rng.normal(scale=0.01, size=(300, 3)) + 1,
+            rng.random((200, 3)) * 10,
+            np.column_stack([np.linspace(0, 5, 100), np.zeros(100), np.zeros(100)])
+            + rng.normal(scale=1e-4, size=(100, 3)),
+        ]
+    )
+    for k in [3, 8, 25]:
+        normals = estimate_normals(points, k, orientation=None)
+        ref, gap, tied = reference_normals(points, k)
+        ok = (gap > 1e-6) & ~tied
+        assert ok.mean() > 0.9
+        assert sine_angle(normals, ref)[ok].max() < 1e-8
+
+
+def test_orientation_rules():
+    rng = np.random.default_rng(5)
+    points = random_surface(rng, 800) + [0.2, 0.1, -0.3]
+    free = estimate_normals(points, 10, orientation=None)
+    centroid = estimate_normals(points, 10, orientation="centroid")
+    origin = estimate_normals(points, 10, orientation="origin")
+    alias = estimate_normals(points, 10, orientation="viewpoint")
+    vp = np.array([3.0, -4.0, 5.0])
+    towards = estimate_normals(points, 10, orientation=list(vp))
+    # Same lines, only signs differ.
+    for other in (centroid, origin, towards):
+        assert_allclose(np.abs(np.einsum("ij,ij->i", free, other)), 1.0, atol=1e-12)
+    assert_array_equal(origin, alias)
+    assert_array_equal(origin, estimate_normals(points, 10, orientation=np.zeros(3)))
+    assert (np.einsum("ij,ij->i", centroid, points - points.mean(axis=0)) >= 0).all()
+    assert (np.einsum("ij,ij->i", origin, -points) >= 0).all()
+    assert (np.einsum("ij,ij->i", towards, vp - points) >= 0).all()
+    # Default is "centroid".
+    assert_array_equal(estimate_normals(points, 10), centroid)
+
+
+@pytest.mark.parametrize("n", [40, 1500])
+def test_deterministic_across_thread_counts(n):
+    rng = np.random.default_rng(6)
+    points = random_surface(rng, n)
+    expected = estimate_normals(points, 10, n_jobs=1)
+    for n_jobs in [2, 3, -1, None]:
+        assert_array_equal(estimate_normals(points, 10, n_jobs=n_jobs), expected)
+
+
+def test_batch_matches_single_and_threads():
+    rng = np.random.default_rng(7)
+    clouds = [random_surface(rng, int(m)) for m in rng.integers(3, 1500, size=12)]
+    clouds.append(rng.random((700, 3)))
+    points, _, offsets = pack_point_clouds(clouds)
+    expected = np.concatenate([estimate_normals(c, 14, orientation="origin") for c in clouds])
+    for n_jobs in [1, 2, 4]:
+        got = estimate_normals_batch(points, offsets, 14, "origin", n_jobs)
+        assert_array_equal(got, expected)
+
+
+def test_batch_single_object_uses_same_result():
+    rng = np.random.default_rng(8)
+    cloud = random_surface(rng, 900)
+    points, _, offsets = pack_point_clouds([cloud])
+    for n_jobs in [1, 2]:
+        assert_array_equal(estimate_normals_batch(points, offsets, 10, n_jobs=n_jobs), estimate_normals(cloud, 10))
+
+
+def test_batch_tiny_and_empty_objects_are_finite_units():
+    rng = np.random.default_rng(9)
+    clouds = [rng.random((1, 3)), rng.random((2, 3)), np.zeros((0, 3)), rng.random((3, 3)), rng.random((50, 3))]
+    points = np.concatenate(clouds)
+    offsets = np.r_[0, np.cumsum([len(c) for c in clouds])]
+    normals = estimate_normals_batch(points, offsets, 10, n_jobs=2)
+    assert normals.shape == points.shape
+    assert np.isfinite(normals).all()
+    assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-14)
+    # The two-point object's normal is perpendicular to its segment.
+    d = clouds[1][1] - clouds[1][0]
+    assert_allclose(normals[1:3] @ d, 0.0, atol=1e-12)
+
+
+def test_n_neighbors_larger_than_cloud_is_clipped():
+    rng = np.random.default_rng(10)
+    points = rng.random((25, 3))
+    assert_array_equal(estimate_normals(points, 100), estimate_normals(points, 25))
+    # Every neighbourhood is the whole cloud: one normal, up to orientation.
+    whole = reference_normals(points, 25)[0][0]
+    assert_allclose(np.abs(estimate_normals(points, 100) @ whole), 1.0, atol=1e-10)
+
+
+@pytest.mark.parametrize("orientation", ["centroid", None, "origin"])
+def test_degenerate_neighbourhoods_are_finite(orientation):
+    rng = np.random.default_rng(11)
+    line = np.outer(rng.random(60), [1.0, 2.0, -1.0]) + [5.0, 5.0, 5.0]
+    dupes = np.repeat(rng.random((4, 3)), 15, axis=0)
+    mixed = np.concatenate([dupes, [[9.0, 9.0, 9.0]]])
+    for points in (line, dupes, mixed):
+        normals = estimate_normals(points, 10, orientation=orientation)
+        assert np.isfinite(normals).all()
+        assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-14)
+    # On a line the normal is perpendicular to it.
+    normals = estimate_normals(line, 10, orientation=orientation)
+    assert_allclose(normals @ np.array([1.0, 2.0, -1.0]), 0.0, atol=1e-8)
+
+
+@pytest.mark.parametrize("exponent", [-1000, -60, 0, 60, 1000])
+def test_power_of_two_scaling_is_exact(exponent):
+    # The kernel rescales by a power of two internally, so tiny and huge
+    # coordinates neither underflow nor overflow and give the same normals.
+    rng = np.random.default_rng(12)
+    points = random_surface(rng, 500)
+    scaled = points * 2.0**exponent
+    assert np.isfinite(scaled).all() and (scaled != 0).all()
+    assert_array_equal(estimate_normals(scaled, 10), estimate_normals(points, 10))
+
+
+def test_translation_and_rotation_invariance():
+    rng = np.random.default_rng(13)
+    points = random_surface(rng, 700)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    moved = points @ q.T + [100.0, -50.0, 20.0]
+    base = estimate_normals(points, 10)
+    got = estimate_normals(moved, 10)
+    assert sine_angle(got, base @ q.T).max() < 1e-6
+    # The centroid rule is equivariant too, so the signs match.
+    assert (np.einsum("ij,ij->i", got, base @ q.T) > 0).all()
+
+
+def test_input_types_and_read_only_arrays():
+    rng = np.random.default_rng(14)
+    points = rng.random((200, 3))
+    expected = estimate_normals(points, 8)
+    ro = points.copy()
+    ro.setflags(write=False)
+    assert_array_equal(estimate_normals(ro, 8), expected)
+    assert_array_equal(estimate_normals(points.tolist(), 8), expected)
+    assert_array_equal(estimate_normals(np.asfortranarray(points), 8), expected)
+    got32 = estimate_normals(points.astype(np.float32), 8)
+    assert got32.dtype == np.float64 and got32.shape == (200, 3)
+
+
+def test_smallest_eigvecs_against_eigh():
+    rng = np.random.default_rng(15)
+    mats = []
+    for scales in ([1, 1, 1], [1, 1, 1e-3], [1, 1e-3, 1e-3], [1, 0.5, 0.1], [1, 1, 1 - 1e-9]):
+        a = rng.normal(size=(200, 3, 3)) * scales
+        q = np.linalg.qr(rng.normal(size=(200, 3, 3)))[0]
+        w = np.sort(np.abs(rng.normal(size=(200, 3))) * scales, axis=1)
+        mats.append(np.einsum("nij,nj,nkj->nik", q, w, q))
+        mats.append(np.einsum("nki,nkj->nij", a, a))
+    covs = np.ascontiguousarray(np.concatenate(mats))
+    w, v = np.linalg.eigh(covs)
+    gap = (w[:, 1] - w[:, 0]) / (w[:, 2] - w[:, 0])
+    well = gap > 1e-6
+    for jacobi in (False, True):
+        got = smallest_eigvecs(covs, jacobi)
+        assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-14)
+        assert sine_angle(got, v[:, :, 0])[well].max() < 1e-9
+        # Where the two smallest eigenvalues (nearly) coincide any vector of
+        # their eigenspace is right: the residual is what must be small.
+        residual = np.einsum("nij,nj->ni", covs, got) - w[:, :1] * got
+        assert (np.linalg.norm(residual, axis=1) <= 1e-9 * w[:, 2]).all()
+
+
+def test_smallest_eigvecs_special_matrices():
+    covs = np.ascontiguousarray(
+        [
+            np.zeros((3, 3)),
+            np.eye(3),
+            np.diag([3.0, 1.0, 2.0]),
+            np.diag([1.0, 1.0, 5.0]),
+            np.diag([2.0, 0.0, 0.0]),
+        ]
+    )
+    got = smallest_eigvecs(covs)
+    assert np.isfinite(got).all()
+    assert_allclose(np.linalg.norm(got, axis=1), 1.0, atol=1e-15)
+    assert_allclose(np.abs(got[2]), [0.0, 1.0, 0.0], atol=1e-15)
+    assert_allclose(got[3, 2], 0.0, atol=1e-15)
+    assert_allclose(got[4, 0], 0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize(
+    "points, kwargs, error, msg",
+    [
+        (np.zeros((10, 2)), {}, ValueError, "estimate_normals: point cloud must have shape (n_points, 3), got shape (10, 2)"),
+        (np.zeros((10, 6)), {}, ValueError, "estimate_normals: point cloud must have shape (n_points, 3), got shape (10, 6)"),
+        (np.zeros(30), {}, ValueError, "estimate_normals: point cloud must have shape (n_points, 3), got shape (30,)"),
+        (np.arange(6.0).reshape(2, 3), {}, ValueError, "estimate_normals: point cloud has 2 points; at least 3 are needed"),
+        (np.zeros((0, 3)), {}, ValueError, "estimate_normals: point cloud has 0 points; at least 3 are needed"),
+        (np.zeros((5, 3)), {}, ValueError, "estimate_normals: point cloud has all 5 points identical"),
+        (np.array([[0.0, 0, 0], [1, np.nan, 0], [0, 1, 0]]), {}, ValueError, "estimate_normals: point cloud contains NaN or infinite values"),
+        (np.array([[0.0, 0, 0], [1, np.inf, 0], [0, 1, 0]]), {}, ValueError, "estimate_normals: point cloud contains NaN or infinite values"),
+        ("abc", {}, TypeError, "estimate_normals: point cloud must be an array of shape (n_points, 3) or (n_points, 6), got str"),
+        (None, {}, TypeError, "estimate_normals: point cloud must be an array"),
+        (np.eye(3), {"n_neighbors": 2}, ValueError, "estimate_normals: n_neighbors must be >= 3 (a plane needs three points), got 2"),
+        (np.eye(3), {"n_neighbors": 0}, ValueError, "estimate_normals: n_neighbors must be >= 3 (a plane needs three points), got 0"),
+        (np.eye(3), {"n_neighbors": 10.0}, TypeError, "estimate_normals: n_neighbors must be an int, got float"),
+        (np.eye(3), {"n_neighbors": True}, TypeError, "estimate_normals: n_neighbors must be an int, got bool"),
+        (np.eye(3), {"orientation": "up"}, ValueError, "estimate_normals: orientation must be 'centroid', 'origin', 'viewpoint', None or a viewpoint of shape (3,), got 'up'"),
+        (np.eye(3), {"orientation": [1.0, 2.0]}, ValueError, "estimate_normals: a viewpoint orientation must have shape (3,), got shape (2,)"),
+        (np.eye(3), {"orientation": np.zeros((1, 3))}, ValueError, "estimate_normals: a viewpoint orientation must have shape (3,), got shape (1, 3)"),
+        (np.eye(3), {"orientation": [0.0, np.nan, 1.0]}, ValueError, "estimate_normals: the viewpoint contains NaN or infinite values"),
+        (np.eye(3), {"orientation": {"x": 1}}, TypeError, "estimate_normals: orientation must be 'centroid', 'origin', 'viewpoint', None or a viewpoint of shape (3,), got dict"),
+        (np.eye(3), {"n_jobs": 0}, ValueError, "estimate_normals: n_jobs == 0 has no meaning"),
+        (np.eye(3), {"n_jobs": 1.5}, TypeError, "estimate_normals: n_jobs must be an int or None, got float"),
+    ],
+)
+def test_estimate_normals_errors(points, kwargs, error, msg):
+    with pytest.raises(error, match=re.escape(msg)):
+        estimate_normals(points, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "points, offsets, kwargs, error, msg",
+    [
+        (np.zeros((4, 2)), [0, 4], {}, ValueError, "estimate_normals_batch: points must have shape (n_total, 3), got shape (4, 2)"),
+        (np.full((4, 3), np.nan), [0, 4], {}, ValueError, "estimate_normals_batch: points contain NaN or infinite values"),
+        (np.eye(3), [0, 2], {}, ValueError, "estimate_normals_batch: offsets must be non-decreasing from 0 to len(points) = 3, got offsets[0] = 0 and offsets[-1] = 2"),
+        (np.eye(3), [0, 2, 1, 3], {}, ValueError, "estimate_normals_batch: offsets must be non-decreasing from 0 to len(points) = 3"),
+        (np.eye(3), [1, 3], {}, ValueError, "estimate_normals_batch: offsets must be non-decreasing from 0 to len(points) = 3, got offsets[0] = 1"),
+        (np.eye(3), [3], {}, ValueError, "estimate_normals_batch: offsets must be a 1D integer array of length n_objects + 1 >= 2"),
+        (np.eye(3), [0.0, 3.0], {}, ValueError, "estimate_normals_batch: offsets must be a 1D integer array"),
+        (np.eye(3), [0, 3], {"n_neighbors": 1}, ValueError, "estimate_normals_batch: n_neighbors must be >= 3"),
+        (np.eye(3), [0, 3], {"owner": "EPPFTransformer", "n_neighbors": 1}, ValueError, "EPPFTransformer: n_neighbors must be >= 3"),
+        (np.eye(3), [0, 3], {"orientation": "away"}, ValueError, "estimate_normals_batch: orientation must be"),
+    ],
+)
+def test_estimate_normals_batch_errors(points, offsets, kwargs, error, msg):
+    with pytest.raises(error, match=re.escape(msg)):
+        estimate_normals_batch(points, np.asarray(offsets), **kwargs)
