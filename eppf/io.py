@@ -33,6 +33,11 @@ from collections import namedtuple
 
 import numpy as np
 
+try:  # compiled parser for plain OFF bodies; the pure-Python readers below do the rest
+    from ._io_cy import parse_off_body as _parse_off_body
+except ImportError:  # pragma: no cover - an uncompiled checkout
+    _parse_off_body = None
+
 __all__ = ["Mesh", "read_mesh", "read_point_cloud", "write_mesh", "write_point_cloud"]
 
 Mesh = namedtuple("Mesh", ["vertices", "faces"])
@@ -491,6 +496,51 @@ def _fan(polys):
     return np.array(tris, dtype=np.int64).reshape(-1, 3)
 
 
+def _next_line(data, pos):
+    """The next non-blank line of ``data`` from ``pos``, and the offset after it."""
+    n = len(data)
+    while pos < n:
+        end = data.find(b"\n", pos)
+        end = n if end < 0 else end
+        line = data[pos:end].strip()
+        pos = end + 1
+        if line:
+            return line, pos
+    return None, pos
+
+
+def _read_off_compiled(data):
+    """Header in Python, body in C; None for anything but a plain OFF file."""
+    if _parse_off_body is None or b"#" in data:
+        return None
+    first, pos = _next_line(data, 0)
+    if first is None or not first.startswith(b"OFF"):
+        return None
+    tokens = first.split()
+    if tokens[0] == b"OFF" and len(tokens) == 1:
+        counts, pos = _next_line(data, pos)
+        if counts is None:
+            return None
+        tokens = counts.split()
+    elif tokens[0] == b"OFF":
+        tokens = tokens[1:]
+    else:  # ModelNet's "OFF490 518 0"
+        tokens = [tokens[0][3:]] + tokens[1:]
+    try:
+        n_v, n_f = int(tokens[0]), int(tokens[1])
+    except (ValueError, IndexError):
+        return None
+    if n_v <= 0 or n_f < 0:
+        return None
+    parsed = _parse_off_body(data, pos, n_v, n_f)
+    if parsed is None:
+        return None
+    verts, faces, end = parsed
+    if data[end:].strip() or (n_f and (faces.min() < 0 or faces.max() >= n_v)):
+        return None
+    return Mesh(verts, faces)
+
+
 def _read_off_fast(text):
     """Vectorised reader for the common OFF file: no comments, triangles only.
 
@@ -546,6 +596,9 @@ def _read_off_fast(text):
 
 
 def _read_off(path, data, owner):
+    mesh = _read_off_compiled(data)
+    if mesh is not None:
+        return mesh
     try:
         mesh = _read_off_fast(data.decode("ascii"))
     except (UnicodeDecodeError, ValueError):

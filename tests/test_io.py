@@ -414,3 +414,58 @@ def test_core_import_needs_no_optional_dependency():
         "assert not bad, bad"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize(
+    "text, plain",
+    [
+        ("OFF\n4 2 0\n" + SQUARE + "3 0 1 2\n3 0 2 3\n", True),
+        ("OFF4 2 0\n" + SQUARE + "3 0 1 2\n3 0 2 3", True),  # no final newline
+        ("\n OFF 4 2 0\r\n" + SQUARE.replace("\n", "\r\n") + "\n\n3 0 1 2\r\n3\t0 2 3\n\n", True),
+        ("OFF\n4 2 0\n0 0 0\n1e0 -0 0\n+1 1.0 0\n.0 1 0\n3 0 1 2\n3 0 2 3\n", True),
+        ("OFF\n4 1 0\n" + SQUARE + "4 0 1 2 3\n", False),  # a quad: the general reader
+        ("OFF\n4 2 0\n" + SQUARE + "3 0 1 2 255 0 0\n3 0 2 3 255 0 0\n", False),  # face colours
+        ("OFF\n4 2 0\n0 0 0\n1 0 0\nnan 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", False),
+        ("OFF\n4 2 0 # counts\n" + SQUARE + "3 0 1 2\n3 0 2 3\n", False),
+    ],
+)
+def test_off_compiled_path_matches_general_reader(tmp_path, text, plain):
+    from eppf import io
+
+    if io._parse_off_body is None:
+        pytest.skip("eppf._io_cy is not compiled")
+    data = text.encode()
+    fast = io._read_off_compiled(data)
+    assert (fast is not None) == plain
+    # the reference: the line-by-line reader, with both fast paths switched off
+    path = _write(tmp_path / "m.off", text)
+    ref_parser, ref_fast = io._parse_off_body, io._read_off_fast
+    try:
+        io._parse_off_body, io._read_off_fast = None, lambda text: None
+        ref = read_mesh(path)
+    finally:
+        io._parse_off_body, io._read_off_fast = ref_parser, ref_fast
+    got = read_mesh(path)
+    assert_array_equal(got.faces, ref.faces)
+    assert_array_equal(got.vertices, ref.vertices)
+    if fast is not None:
+        assert_array_equal(fast.vertices, ref.vertices)
+        assert_array_equal(fast.faces, ref.faces)
+
+
+def test_off_compiled_path_random_mesh(tmp_path):
+    from eppf import io
+
+    if io._parse_off_body is None:
+        pytest.skip("eppf._io_cy is not compiled")
+    rng = np.random.RandomState(0)
+    v = rng.normal(size=(300, 3)) * 10 ** rng.uniform(-5, 5, size=(300, 1))
+    f = rng.randint(0, 300, size=(500, 3))
+    path = tmp_path / "r.off"
+    write_mesh(path, v, f)
+    data = path.read_bytes()
+    compiled = io._read_off_compiled(data)
+    numpy_path = io._read_off_fast(data.decode())
+    assert_array_equal(compiled.vertices, v)  # %.17g round-trips exactly
+    assert_array_equal(compiled.vertices, numpy_path.vertices)
+    assert_array_equal(compiled.faces, f)
