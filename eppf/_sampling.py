@@ -119,9 +119,10 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
 
     Notes
     -----
-    A point inside triangle (a, b, c) is ``a + u (b - a) + v (c - a)`` with
-    ``u, v ~ U(0, 1)``, reflected to ``(1 - u, 1 - v)`` when ``u + v > 1``;
-    this is uniform over the triangle. Zero-area faces are never chosen.
+    A point inside triangle (a, b, c) is
+    ``a + sqrt(r1) (1 - r2) (b - a) + sqrt(r1) r2 (c - a)`` with
+    ``r1, r2 ~ U(0, 1)``, which is uniform over the triangle (Osada et al.,
+    "Shape distributions", 2002). Zero-area faces are never chosen.
 
     Examples
     --------
@@ -152,17 +153,25 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
     total = cum[-1]
     if not total > 0:
         raise ValueError(f"{owner}: the mesh has zero surface area (all {f.shape[0]} faces are degenerate)")
-    pick = np.searchsorted(cum, rng.random_sample(count) * total, side="right")
+    draws = rng.random_sample((3, count))
+    pick = np.searchsorted(cum, draws[0] * total, side="right")
     np.minimum(pick, f.shape[0] - 1, out=pick)
-    uv = rng.random_sample((count, 2))
-    flip = uv.sum(axis=1) > 1.0
-    uv[flip] = 1.0 - uv[flip]
+    # uniform in the triangle without a branch: weights sqrt(r1) (1 - r2) and sqrt(r1) r2
+    root = np.sqrt(draws[1])
+    w_b = root * (1.0 - draws[2])
+    w_c = root * draws[2]
     keep_normals = return_normals or resolution is not None
-    # one gather of a per-face table [a, b - a, c - a, unit normal] instead of four
-    table = np.hstack([a, ab, ac, cross / np.maximum(double_area, 1e-300)[:, None]] if keep_normals else [a, ab, ac])
-    rows = table[pick]
-    points = rows[:, 0:3] + uv[:, :1] * rows[:, 3:6] + uv[:, 1:] * rows[:, 6:9]
-    cloud = np.hstack([points, rows[:, 9:12]]) if keep_normals else points
+    # one gather of a per-face table [a, b - a, c - a, unit normal], laid out by
+    # component so that every row of the arithmetic below is contiguous
+    parts = [a, ab, ac, cross / np.maximum(double_area, 1e-300)[:, None]] if keep_normals else [a, ab, ac]
+    rows = np.take(np.hstack(parts).T, pick, axis=1)
+    out = np.empty((6 if keep_normals else 3, count))
+    np.multiply(rows[3:6], w_b, out=out[:3])
+    out[:3] += rows[0:3]
+    out[:3] += w_c * rows[6:9]
+    if keep_normals:
+        out[3:] = rows[9:12]
+    cloud = out.T.copy()
     if resolution is not None:
         cloud = _voxel_average(cloud, float(resolution))
         if not return_normals:
