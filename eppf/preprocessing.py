@@ -18,7 +18,6 @@ The work on one cloud is done by the functions of :mod:`eppf._perturb`;
 
 import numbers
 
-import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
