@@ -60,64 +60,63 @@ cdef inline int _bit(const uint64_t* bits, int64_t idx) noexcept nogil:
 
 
 cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
-                     int* n_in, int* n_total, double* ratio) noexcept nogil:
+                     const uint64_t* recip, int* n_in, int* n_total, double* ratio) noexcept nogil:
     """Classify the voxel line from ``a`` towards ``b`` like PCL's ``lci``.
 
     PCL walks a 3D Bresenham line along the dominant axis (length L) and
     visits max(L, 1) voxels: the start voxel and the next L - 1, not the end
-    voxel. Its minor coordinates after k steps are exactly
-    ``floor((2 D k + L - 1) / (2 L))`` (D the minor axis' length; checked
-    against PCL's loop for every L < 200), which is walked here in 32.32
-    fixed point with no loop-carried dependency but three additions:
-    ``P_k = floor((L - 1) 2**31 / L) + L + 2 + k floor(D 2**32 / L)`` lies in
-    (X_k, X_k + L + 2] for the exact X_k = (2 D k + L - 1) 2**31 / L, and a
-    non-integer X_k / 2**32 is at least 2**32 / (2 L) units below the next
-    integer, so ``P_k >> 32`` is exact for L < 2**20.
+    voxel. After k steps its offset along an axis of length D is exactly
+    ``floor((2 D k + L - 1) / (2 L))`` (checked against PCL's loop for every
+    L < 200; for the dominant axis it is k, so PCL's tie order between axes
+    does not matter). Here every axis is walked in 32.32 fixed point with
+    R = floor(2**32 / L) = ``recip[L]``:
+    ``P_k = (L - 1) floor(R / 2) + L**2 + 2 + k D R``. The exact value
+    X_k = (2 D k + L - 1) 2**31 / L exceeds the products by less than L**2
+    units, so P_k lies in (X_k, X_k + L**2 + 2]; a non-integer X_k / 2**32 is
+    a multiple of 1 / (2 L), at least 2**31 / L units below the next integer,
+    so ``P_k >> 32`` is exact for L < 1290 (grids up to 1024).
 
     Returns LINE_IN when at most one visited voxel is empty, LINE_OUT when at
     most 7 are occupied, LINE_MIX otherwise (with ``ratio`` = occupied /
     visited).
     """
-    cdef int d[3]
-    cdef int s[3]
-    cdef int64_t stride[3]
-    cdef int ax, m1, m2, L, k, occ = 0, cnt
-    cdef int64_t idx, st1, st2, stmaj
-    cdef uint64_t p1, p2, inc1, inc2
-    stride[0] = <int64_t>grid * grid
-    stride[1] = grid
-    stride[2] = 1
-    for ax in range(3):
-        d[ax] = b[ax] - a[ax]
-        s[ax] = -1 if d[ax] < 0 else 1
-        if d[ax] < 0:
-            d[ax] = -d[ax]
-    # PCL's tie order: x if it is not smaller than y and z, then y, then z.
-    if d[0] >= d[1] and d[0] >= d[2]:
-        ax = 0; m1 = 1; m2 = 2
-    elif d[1] >= d[0] and d[1] >= d[2]:
-        ax = 1; m1 = 0; m2 = 2
-    else:
-        ax = 2; m1 = 1; m2 = 0
-    L = d[ax]
-    idx = a[0] * stride[0] + a[1] * stride[1] + a[2]
+    cdef int64_t g = grid
+    cdef int dx = b[0] - a[0], dy = b[1] - a[1], dz = b[2] - a[2]
+    cdef int64_t sx = g * g, sy = g, sz = 1
+    cdef int L, k, occ = 0, cnt
+    cdef int64_t idx = a[0] * sx + a[1] * sy + a[2]
+    cdef uint64_t R, px, py, pz, ix, iy, iz, start
+    if dx < 0:
+        dx = -dx
+        sx = -sx
+    if dy < 0:
+        dy = -dy
+        sy = -sy
+    if dz < 0:
+        dz = -dz
+        sz = -sz
+    L = dx
+    if dy > L: L = dy
+    if dz > L: L = dz
     if L <= 1:
         occ = _bit(bits, idx)
         cnt = 1
     else:
         cnt = L
-        stmaj = s[ax] * stride[ax]
-        st1 = s[m1] * stride[m1]
-        st2 = s[m2] * stride[m2]
-        inc1 = ((<uint64_t>d[m1]) << 32) // <uint64_t>L
-        inc2 = ((<uint64_t>d[m2]) << 32) // <uint64_t>L
-        p1 = (((<uint64_t>(L - 1)) << 31) // <uint64_t>L) + <uint64_t>(L + 2)
-        p2 = p1
+        R = recip[L]
+        start = <uint64_t>(L - 1) * (R >> 1) + <uint64_t>L * <uint64_t>L + 2
+        ix = <uint64_t>dx * R
+        iy = <uint64_t>dy * R
+        iz = <uint64_t>dz * R
+        px = start
+        py = start
+        pz = start
         for k in range(L):
-            occ += _bit(bits, idx + (<int64_t>(p1 >> 32)) * st1 + (<int64_t>(p2 >> 32)) * st2)
-            idx += stmaj
-            p1 += inc1
-            p2 += inc2
+            occ += _bit(bits, idx + (<int64_t>(px >> 32)) * sx + (<int64_t>(py >> 32)) * sy
+                        + (<int64_t>(pz >> 32)) * sz)
+            px += ix
+            py += iy
+            pz += iz
     n_in[0] = occ
     n_total[0] = cnt
     if occ >= cnt - 1:
@@ -128,25 +127,34 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
     return LINE_MIX
 
 
-cdef inline int _angle_bin(double c, const double* edges, int n_pow2) noexcept nogil:
-    """round((n_bins - 1) * arccos(c) / (pi / 2)) without arccos.
+cdef inline int _angle_bin(double c, const double* edges, const int32_t* lut,
+                           double lut_scale) noexcept nogil:
+    """round((n_bins - 1) * arccos(c) / (pi / 2)) for c in [0, 1], without arccos.
 
-    ``edges[j] = cos((j + 1/2) (pi/2) / (n_bins - 1))`` decrease, padded with
-    -2 to ``n_pow2`` entries (a power of two); the bin is the number of edges
-    not below ``c``, found by a branch-free binary search.
+    ``edges[j] = cos((j + 1/2) (pi/2) / (n_bins - 1))`` decrease (padded with
+    -2); the bin is the number of edges not below ``c``. With
+    u = sqrt((1 - c) / 2) = sin(angle / 2), nearly proportional to the angle,
+    ``lut`` holds for each of its cells in u a lower bound of the bin that is
+    at most one short (cells are narrower than a bin), fixed by one
+    comparison.
     """
-    cdef int lo = 0, step = n_pow2 >> 1
-    while step > 0:
-        lo += step * (edges[lo + step - 1] >= c)
-        step >>= 1
+    cdef double u = sqrt((1.0 - c) * 0.5)
+    cdef int lo = lut[<int>(u * lut_scale)]
+    lo += edges[lo] >= c
     return lo
 
 
 cdef inline int _round_bin(double v, int n_bins) noexcept nogil:
-    """PCL's ``round(v * (n_bins - 1))`` for v in [0, 1], clipped."""
-    cdef int i = <int>floor(v * (n_bins - 1) + 0.5)
-    if i < 0:
+    """PCL's ``round(v * (n_bins - 1))`` for v in [0, 1], clipped.
+
+    Truncation is the floor here (the argument is non-negative), and avoids
+    a libm call.
+    """
+    cdef double x = v * (n_bins - 1) + 0.5
+    cdef int i
+    if x <= 0.0:
         return 0
+    i = <int>x
     if i >= n_bins:
         return n_bins - 1
     return i
@@ -161,7 +169,8 @@ cdef inline double _abs_cos(double ax, double ay, double az,
 
 cdef int _esf_object(const double* points, int64_t start, int64_t n,
                      uint64_t seed, int n_triplets, int grid, int n_bins,
-                     double area_eps, const double* edges, int n_pow2,
+                     double area_eps, const double* edges, const int32_t* lut, double lut_scale,
+                     const uint64_t* recip,
                      double* pts, int32_t* cells, uint64_t* bits, double* d2v, double* d3v,
                      int8_t* cls2, int8_t* cls3, double* out) noexcept nogil:
     """One object's ESF into ``out`` (10 * n_bins, zeroed). Returns a status."""
@@ -245,9 +254,9 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
         if heron <= area_eps:
             continue
         # A3: the triangle's angles folded into [0, pi/2] (|cos|).
-        th1 = _angle_bin(_abs_cos(v21x, v21y, v21z, v31x, v31y, v31z, a * b), edges, n_pow2)
-        th2 = _angle_bin(_abs_cos(v23x, v23y, v23z, v31x, v31y, v31z, c * b), edges, n_pow2)
-        th3 = _angle_bin(_abs_cos(v23x, v23y, v23z, v21x, v21y, v21z, c * a), edges, n_pow2)
+        th1 = _angle_bin(_abs_cos(v21x, v21y, v21z, v31x, v31y, v31z, a * b), edges, lut, lut_scale)
+        th2 = _angle_bin(_abs_cos(v23x, v23y, v23z, v31x, v31y, v31z, c * b), edges, lut, lut_scale)
+        th3 = _angle_bin(_abs_cos(v23x, v23y, v23z, v21x, v21y, v21z, c * a), edges, lut, lut_scale)
         # D2 and the three lines.
         for ax in range(3):
             c1[ax] = cells[3 * i1 + ax]
@@ -256,13 +265,13 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
         d2v[3 * t] = a
         d2v[3 * t + 1] = b
         d2v[3 * t + 2] = c
-        w12 = _lci(bits, grid, c1, c2, &in12, &n12, &ratio)
+        w12 = _lci(bits, grid, c1, c2, recip, &in12, &n12, &ratio)
         if w12 == LINE_MIX:
             out[D2_RATIO * n_bins + _round_bin(ratio, n_bins)] += 1.0
-        w13 = _lci(bits, grid, c1, c3, &in13, &n13, &ratio)
+        w13 = _lci(bits, grid, c1, c3, recip, &in13, &n13, &ratio)
         if w13 == LINE_MIX:
             out[D2_RATIO * n_bins + _round_bin(ratio, n_bins)] += 1.0
-        w23 = _lci(bits, grid, c2, c3, &in23, &n23, &ratio)
+        w23 = _lci(bits, grid, c2, c3, recip, &in23, &n23, &ratio)
         if w23 == LINE_MIX:
             out[D2_RATIO * n_bins + _round_bin(ratio, n_bins)] += 1.0
         cls2[3 * t] = <int8_t>w12
@@ -349,11 +358,25 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     edges_arr = np.full(n_pow2, -2.0)
     edges_arr[: n_bins - 1] = np.cos((np.arange(n_bins - 1) + 0.5) / max(n_bins - 1, 1) * (np.pi / 2))
     cdef double[::1] edges = edges_arr
+    # Lower bounds of the A3 bin over cells of u = sqrt((1 - c) / 2) in
+    # [0, sin(pi/4)]: 2 * n_pow2 cells, each narrower than a bin (the angle
+    # is 2 asin(u), whose slope is at most 2 sqrt(2), so a cell spans at most
+    # 1 / n_pow2 radians, a bin (pi/2) / (n_bins - 1)). Each bound is
+    # taken a hundredth of a cell below the cell's start, against rounding.
+    cdef int n_cells = 2 * n_pow2
+    cdef double lut_scale = n_cells / np.sqrt(0.5)
+    u_lo = np.maximum(np.arange(n_cells + 1) - 0.01, 0.0) / lut_scale
+    c_hi = 1.0 - 2.0 * u_lo * u_lo
+    cdef int32_t[::1] lut = (edges_arr[None, :] >= c_hi[:, None]).sum(axis=1).astype(np.int32)
+    # recip[L] = floor(2**32 / L) for the fixed-point line walk.
+    recip_arr = np.zeros(grid + 1, dtype=np.uint64)
+    recip_arr[1:] = (2**32) // np.arange(1, grid + 1, dtype=np.uint64)
+    cdef uint64_t[::1] recip = recip_arr
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
         status[k] = <int8_t>_esf_object(
             &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
-            grid, n_bins, area_eps, &edges[0], n_pow2, &pts[tid, 0], &cells[tid, 0], &bits[tid, 0], &d2v[tid, 0],
+            grid, n_bins, area_eps, &edges[0], &lut[0], lut_scale, &recip[0], &pts[tid, 0], &cells[tid, 0], &bits[tid, 0], &d2v[tid, 0],
             &d3v[tid, 0], &cls2[tid, 0], &cls3[tid, 0], &out[k, 0])
         if status[k] != 0:
             memset(&out[k, 0], 0, 10 * n_bins * sizeof(double))

@@ -80,7 +80,7 @@ def _rbin(v, n_bins=64):
     return min(max(math.floor(v * (n_bins - 1) + 0.5), 0), n_bins - 1)
 
 
-def _esf_reference(cloud, seed, n_triplets, grid=64):
+def _esf_reference(cloud, seed, n_triplets, grid=64, n_bins=64):
     half = grid // 2
     p = cloud - cloud.mean(axis=0)
     p = p * (half / np.sqrt((p**2).sum(axis=1).max()))
@@ -94,7 +94,7 @@ def _esf_reference(cloud, seed, n_triplets, grid=64):
                     v = (c[0] + dx, c[1] + dy, c[2] + dz)
                     if all(0 <= x < grid for x in v):
                         occ.add(v)
-    h = np.zeros((10, 64))
+    h = np.zeros((10, n_bins))
     d2, d3 = [], []
     state, n, t = seed, len(pts), 0
     while t < n_triplets:
@@ -112,13 +112,13 @@ def _esf_reference(cloud, seed, n_triplets, grid=64):
             continue
 
         def ang(x, y, norm):
-            return _rbin(math.acos(min(abs(float(x @ y)) / norm, 1.0)) / (math.pi / 2))
+            return _rbin(math.acos(min(abs(float(x @ y)) / norm, 1.0)) / (math.pi / 2), n_bins)
 
         th1, th2, th3 = ang(v21, v31, a * b), ang(v23, v31, c * b), ang(v23, v21, c * a)
         lines = [_walk(occ, cells[i1], cells[i2]), _walk(occ, cells[i1], cells[i3]), _walk(occ, cells[i2], cells[i3])]
         for cls, _, _, ratio in lines:
             if cls == 2:
-                h[9, _rbin(ratio)] += 1
+                h[9, _rbin(ratio, n_bins)] += 1
         for side, (cls, _, _, _) in zip((a, b, c), lines):
             d2.append((side, cls))
         in_sum = sum(x[1] for x in lines)
@@ -131,20 +131,21 @@ def _esf_reference(cloud, seed, n_triplets, grid=64):
         t += 1
     m2, m3 = max(x for x, _ in d2), max(x for x, _ in d3)
     for v, k in d3:
-        h[3 + k, _rbin(v / m3)] += 1
+        h[3 + k, _rbin(v / m3, n_bins)] += 1
     for v, k in d2:
-        h[6 + k, _rbin(v / m2)] += 1
+        h[6 + k, _rbin(v / m2, n_bins)] += 1
     h *= np.array([0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 0.5, 2.0, 2.0, 1.0])[:, None]
     return (h / h.sum()).ravel()
 
 
-@pytest.mark.parametrize("random_state", [0, 7])
-def test_matches_slow_reference(random_state):
+@pytest.mark.parametrize("random_state, grid, n_bins", [(0, 64, 64), (7, 64, 64), (1, 32, 100), (2, 128, 7)])
+def test_matches_slow_reference(random_state, grid, n_bins):
     clouds = _clouds(3, seed=random_state)
-    X = ESFTransformer(n_triplets=300, random_state=random_state).fit_transform(clouds)
+    est = ESFTransformer(n_triplets=300, grid_size=grid, n_bins=n_bins, random_state=random_state)
+    X = est.fit_transform(clouds)
     seeds = object_seeds(random_state, len(clouds))
     for k, cloud in enumerate(clouds):
-        assert_allclose(X[k], _esf_reference(cloud, int(seeds[k]), 300), rtol=0, atol=1e-12)
+        assert_allclose(X[k], _esf_reference(cloud, int(seeds[k]), 300, grid, n_bins), rtol=0, atol=1e-12)
 
 
 def test_right_triangle_by_hand():
