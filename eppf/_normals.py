@@ -70,8 +70,9 @@ def estimate_normals(points, n_neighbors=10, *, orientation="centroid", n_jobs=N
     For each point, the covariance of its ``n_neighbors`` nearest neighbours
     (the point itself included, as its own nearest neighbour) is computed, and
     the normal is the eigenvector of its smallest eigenvalue. Neighbours are
-    exact Euclidean nearest neighbours; among points at equal distance the one
-    with the lower index wins.
+    exact Euclidean nearest neighbours; points at exactly equal distance are
+    taken in a fixed order that depends only on the cloud (grid cell, then
+    index), so the result is deterministic.
 
     Parameters
     ----------
@@ -126,9 +127,17 @@ default="centroid"
     -----
     With neighbours :math:`q_1, \\dots, q_k` and mean :math:`\\bar q`, the
     normal is the unit eigenvector of the smallest eigenvalue of
-    :math:`C = \\sum_i (q_i - \\bar q)(q_i - \\bar q)^T`. The kernel finds
-    exact neighbours on a uniform grid and diagonalises :math:`C` with cyclic
-    Jacobi rotations.
+    :math:`C = \\sum_i (q_i - \\bar q)(q_i - \\bar q)^T`.
+
+    The compiled kernel finds exact neighbours on a uniform grid whose cell
+    size adapts to the cloud and to ``n_neighbors``, takes the eigenvalues of
+    :math:`C` in closed form and the eigenvector as a cross product of two
+    rows of :math:`C - \\lambda_{min} I`, falling back to cyclic Jacobi
+    rotations when the two smallest eigenvalues nearly coincide. About 0.6 ms
+    for 1,024 points and ``n_neighbors=10`` on one core (see
+    ``benchmarks/bench_normals.py``). The grid's cost grows with the square
+    of the number of points that share one cell, so tens of thousands of
+    exact duplicates of one point are slow (seconds), though still exact.
 
     References
     ----------

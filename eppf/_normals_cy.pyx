@@ -51,13 +51,15 @@ cdef Py_ssize_t _MAX_CAND_PER_K = 8
 
 
 cdef struct Grid:
+    double scale          # grid coordinates are (x * scale - shift) * scale2
+    double shift[3]
+    double scale2
     double lo[3]
     double h
     double inv_h
     double margin
     int64_t res[3]
     int64_t ncells
-    double scale
 
 
 cdef struct Scratch:
@@ -105,6 +107,23 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     sc.kpos = sc.sel + max_n
 
 
+cdef inline double _pow2_below(double m) noexcept nogil:
+    """The power of two 2**-e that maps m > 0 into [0.5, 1) (1 for m == 0),
+    clamped so that it stays finite."""
+    cdef int expo
+    if not (m > 0.0):
+        return 1.0
+    frexp(m, &expo)
+    if expo < -1000:
+        expo = -1000
+    return ldexp(1.0, -expo)
+
+
+cdef inline double _tr(const Grid* g, double x, int a) noexcept nogil:
+    """Grid coordinate of input coordinate ``x`` along axis ``a``."""
+    return (x * g.scale - g.shift[a]) * g.scale2
+
+
 cdef inline int64_t _cell_coord(double x, double lo, double inv_h, int64_t res) noexcept nogil:
     cdef int64_t c = <int64_t>((x - lo) * inv_h)
     if c < 0:
@@ -148,9 +167,9 @@ cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cel
     for c in range(g.ncells + 1):
         counts[c] = 0
     for i in range(n):
-        cx = _cell_coord(pts[3 * i] * g.scale, g.lo[0], g.inv_h, g.res[0])
-        cy = _cell_coord(pts[3 * i + 1] * g.scale, g.lo[1], g.inv_h, g.res[1])
-        cz = _cell_coord(pts[3 * i + 2] * g.scale, g.lo[2], g.inv_h, g.res[2])
+        cx = _cell_coord(_tr(g, pts[3 * i], 0), g.lo[0], g.inv_h, g.res[0])
+        cy = _cell_coord(_tr(g, pts[3 * i + 1], 1), g.lo[1], g.inv_h, g.res[1])
+        cz = _cell_coord(_tr(g, pts[3 * i + 2], 2), g.lo[2], g.inv_h, g.res[2])
         c = (cz * g.res[1] + cy) * g.res[0] + cx
         cell_of[i] = c
         occupied += counts[c + 1] == 0
@@ -161,9 +180,9 @@ cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cel
 cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t cap,
                       Grid* g, double* spts, int64_t* sidx, int64_t* cell_of,
                       int64_t* cell_start) noexcept nogil:
-    """Rescale the object by a power of two, choose the cell size, bin the
-    points and store them sorted by cell (stable: ascending original index
-    within a cell)."""
+    """Move and rescale the object into the unit cube, choose the cell size,
+    bin the points and store them sorted by cell (stable: ascending original
+    index within a cell)."""
     cdef Py_ssize_t i, a
     cdef double hi[3]
     cdef double e[3]
@@ -171,30 +190,35 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     cdef int expo
     cdef int64_t c, r
     # Exact rescaling by a power of two: the largest |coordinate| lands in
-    # [0.5, 1), so squared distances neither overflow nor underflow, and every
-    # later quantity is the unscaled one times an exact power of two.
+    # [0.5, 1), so nothing below overflows or underflows.
     for i in range(3 * n):
         x = fabs(pts[i])
         if x > m:
             m = x
-    g.scale = 1.0
-    if m > 0.0:
-        frexp(m, &expo)
-        if expo < -1000:
-            expo = -1000
-        g.scale = ldexp(1.0, -expo)
+    g.scale = _pow2_below(m)
     for a in range(3):
-        g.lo[a] = INFINITY
+        g.shift[a] = INFINITY
         hi[a] = -INFINITY
     for i in range(n):
         for a in range(3):
             x = pts[3 * i + a] * g.scale
-            if x < g.lo[a]:
-                g.lo[a] = x
+            if x < g.shift[a]:
+                g.shift[a] = x
             if x > hi[a]:
                 hi[a] = x
+    # Then move the bounding box's corner to the origin and rescale, again by
+    # a power of two, so the largest extent lands in [0.5, 1): rounding slack
+    # in the grid's bounds is then relative to the object's size, not to its
+    # distance from the origin. Scaling the input by a power of two changes
+    # nothing downstream.
+    m = 0.0
     for a in range(3):
-        e[a] = hi[a] - g.lo[a]
+        if hi[a] - g.shift[a] > m:
+            m = hi[a] - g.shift[a]
+    g.scale2 = _pow2_below(m)
+    for a in range(3):
+        g.lo[a] = 0.0
+        e[a] = (hi[a] - g.shift[a]) * g.scale2
     # First guess: about one cell per point of the bounding box, flat axes
     # ignored.
     t = <double>n
@@ -249,9 +273,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
         r = cell_start[c]
         cell_start[c] = r + 1
         sidx[r] = i
-        spts[3 * r] = pts[3 * i] * g.scale
-        spts[3 * r + 1] = pts[3 * i + 1] * g.scale
-        spts[3 * r + 2] = pts[3 * i + 2] * g.scale
+        spts[3 * r] = _tr(g, pts[3 * i], 0)
+        spts[3 * r + 1] = _tr(g, pts[3 * i + 1], 1)
+        spts[3 * r + 2] = _tr(g, pts[3 * i + 2], 2)
     for c in range(g.ncells, 0, -1):
         cell_start[c] = cell_start[c - 1]
     cell_start[0] = 0
