@@ -358,3 +358,15 @@ def test_estimate_normals_errors(points, kwargs, error, msg):
 def test_estimate_normals_batch_errors(points, offsets, kwargs, error, msg):
     with pytest.raises(error, match=re.escape(msg)):
         estimate_normals_batch(points, np.asarray(offsets), **kwargs)
+
+
+@pytest.mark.parametrize("offset", [1e4, 1e9])
+def test_cloud_far_from_origin(offset):
+    rng = np.random.default_rng(16)
+    local = random_surface(rng, 1500)
+    normals = estimate_normals(local + offset, 10, orientation=None)
+    assert np.isfinite(normals).all()
+    ref, gap, tied = reference_normals(local, 10)
+    ok = gap > 1e-3
+    # The offset costs the coordinates' low bits, nothing more.
+    assert sine_angle(normals, ref)[ok].max() < 1e-13 * offset
