@@ -369,3 +369,11 @@ def test_validation_fraction_too_large_for_data():
     msg = "EPPF4DClassifier: validation_fraction=0.9 of 3 objects leaves no validation or no training objects"
     with pytest.raises(ValueError, match=re.escape(msg)):
         EPPF4DClassifier(n_bins=N_BINS, validation_fraction=0.9, **SMALL).fit(X, y)
+
+
+def test_tags():
+    tags = EPPF4DClassifier().__sklearn_tags__()
+    assert tags.estimator_type == "classifier"
+    assert tags.input_tags.three_d_array
+    assert not tags.non_deterministic
+    assert EPPF4DClassifier(device="cuda").__sklearn_tags__().non_deterministic
