@@ -34,9 +34,10 @@ from collections import namedtuple
 import numpy as np
 
 try:  # compiled parser for plain OFF bodies; the pure-Python readers below do the rest
+    from ._io_cy import parse_float_table as _parse_float_table
     from ._io_cy import parse_off_body as _parse_off_body
 except ImportError:  # pragma: no cover - an uncompiled checkout
-    _parse_off_body = None
+    _parse_off_body = _parse_float_table = None
 
 __all__ = ["Mesh", "read_mesh", "read_point_cloud", "write_mesh", "write_point_cloud"]
 
@@ -165,7 +166,25 @@ def _parse_float_rows(rows, idx, path, owner, what):
         raise
 
 
+def _xyz_compiled(data):
+    """The table of a plain numeric text file parsed in C, or None."""
+    if _parse_float_table is None or b"#" in data:
+        return None
+    first, pos = _next_line(data, 0)
+    if first is None:
+        return None
+    try:
+        float(first.replace(b",", b" ").replace(b";", b" ").split()[0])
+        start = 0
+    except (ValueError, IndexError):  # one header line of names
+        start = pos
+    return _parse_float_table(data, start)
+
+
 def _read_xyz(path, data, normals, owner, remove_nan):
+    arr = _xyz_compiled(data)
+    if arr is not None and arr.shape[1] >= 3:
+        return _xyz_columns(arr, path, normals, owner, remove_nan)
     lines = _text_lines(data, path, owner)
     idx, rows = _content(lines)
     rows = [r.replace(",", " ").replace(";", " ") for r in rows]
@@ -181,6 +200,11 @@ def _read_xyz(path, data, normals, owner, remove_nan):
     arr = _parse_float_rows(rows, idx, path, owner, "point")
     if arr.shape[1] < 3:
         raise ValueError(f"{owner}: {path!r} line {idx[0] + 1}: expected at least 3 columns (x y z), got {arr.shape[1]}")
+    return _xyz_columns(arr, path, normals, owner, remove_nan)
+
+
+def _xyz_columns(arr, path, normals, owner, remove_nan):
+    """Coordinates, and normals from columns 4 to 6 when asked or when they look like normals."""
     xyz, nrm = arr[:, :3], None
     if arr.shape[1] >= 6:
         cand = arr[:, 3:6]

@@ -469,3 +469,42 @@ def test_off_compiled_path_random_mesh(tmp_path):
     assert_array_equal(compiled.vertices, v)  # %.17g round-trips exactly
     assert_array_equal(compiled.vertices, numpy_path.vertices)
     assert_array_equal(compiled.faces, f)
+
+
+@pytest.mark.parametrize(
+    "text, plain",
+    [
+        ("1,2,3,0,0,1\n4,5,6,0.6,0.8,0\n", True),
+        ("x y z\n1 2 3\n\n4\t5  6\r\n7 8 9", True),
+        ("x;y;z\n-1e-3;+2.5;.5\n", True),
+        ("1 2 3 255 0 12\n4 5 6 0 128 7\n", True),
+        ("1 2 3\n4 nan 6\n", False),  # NaN: the general reader keeps it, remove_nan drops it
+        ("1 2 3 # a comment\n4 5 6\n", False),
+    ],
+)
+def test_text_compiled_path_matches_general_reader(tmp_path, text, plain):
+    from eppf import io
+
+    if io._parse_float_table is None:
+        pytest.skip("eppf._io_cy is not compiled")
+    assert (io._xyz_compiled(text.encode()) is not None) == plain
+    path = _write(tmp_path / "p.xyz", text)
+    saved = io._parse_float_table
+    try:
+        io._parse_float_table = None
+        ref = read_point_cloud(path)
+    finally:
+        io._parse_float_table = saved
+    assert_array_equal(read_point_cloud(path), ref)
+
+
+def test_text_compiled_path_random_table(tmp_path):
+    from eppf import io
+
+    if io._parse_float_table is None:
+        pytest.skip("eppf._io_cy is not compiled")
+    arr = np.random.RandomState(0).normal(size=(500, 6)) * 10.0 ** np.arange(-4, 2)
+    path = tmp_path / "t.csv"
+    write_point_cloud(path, arr)  # 17 significant digits: exact round trip
+    assert_array_equal(io._xyz_compiled(path.read_bytes()), arr)
+    assert_array_equal(read_point_cloud(path, normals=True), arr)

@@ -106,9 +106,10 @@ def _subset_splits(subset):
 
 
 def _guarded(func, args):
+    # the errors a bad file raises (readers: ValueError; OS and h5py: OSError, KeyError)
     try:
         return func(*args), None
-    except (ValueError, OSError, KeyError, TypeError) as exc:
+    except (ValueError, OSError, KeyError) as exc:
         return None, str(exc)
 
 
