@@ -18,7 +18,7 @@ Conventions (see ``DESIGN.md``):
   Step k (0..L, L the largest axis difference) visits
   v1 + floor(k * delta / L + 1/2) on every axis, i.e. a Bresenham line with
   ties rounded up; it is walked in 32.32 fixed point, which is exact for
-  grids up to 32768 (see ``_line_occupancy``). Both end voxels are occupied.
+  grids below 1024 (see ``_line_bin``). Both end voxels are occupied.
   bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
 - A bin count of 1 switches a function off (its value is never computed).
 """
@@ -40,6 +40,7 @@ cdef enum:
     MAX_BINS = 64
     FIX_SHIFT = 32
     MAX_GRID = 1023
+    BATCH = 64
 
 cdef uint64_t LOW32 = 0xFFFFFFFF
 
@@ -61,6 +62,7 @@ cdef struct Params:
     double cos2[MAX_BINS]   # inner edges of f2 on the cosine scale, k = 1..n2-1
     double cos3[MAX_BINS]   # inner edges of f3 on the cosine scale, k = 1..n3-1
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
+    const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -74,12 +76,21 @@ cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil
     return i
 
 
+cdef inline int64_t _row_words(int grid) noexcept nogil:
+    return (grid + 63) >> 6
+
+
+cdef inline int64_t _grid_words(int grid) noexcept nogil:
+    return <int64_t>grid * grid * _row_words(grid)
+
+
 cdef inline void _fill_grid(const double* pts, int64_t n, int grid, uint64_t* bits,
                             int32_t* vox) noexcept nogil:
     """Voxelise ``n`` points on a grid over their bounding cube.
 
     Writes each point's voxel coordinates to ``vox`` (n, 3) and sets the
-    occupied voxels in the bit grid ``bits`` (flat index (x * grid + y) * grid + z).
+    occupied voxels in the bit grid ``bits``: row (x, y) is ``_row_words``
+    64-bit words of z bits, so a 64^3 grid is one word per row (32 KiB).
     """
     cdef int64_t i, idx
     cdef double mnx = pts[0], mny = pts[1], mnz = pts[2]
@@ -96,19 +107,19 @@ cdef inline void _fill_grid(const double* pts, int64_t n, int grid, uint64_t* bi
     if mxy - mny > side: side = mxy - mny
     if mxz - mnz > side: side = mxz - mnz
     inv = grid / side
-    memset(bits, 0, ((<int64_t>grid * grid * grid + 63) // 64) * sizeof(uint64_t))
+    memset(bits, 0, _grid_words(grid) * sizeof(uint64_t))
     for i in range(n):
         vox[3 * i] = _voxel(pts[3 * i], mnx, inv, grid)
         vox[3 * i + 1] = _voxel(pts[3 * i + 1], mny, inv, grid)
         vox[3 * i + 2] = _voxel(pts[3 * i + 2], mnz, inv, grid)
-        idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * grid + vox[3 * i + 2]
-        bits[idx >> 6] |= (<uint64_t>1) << (idx & 63)
+        idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * _row_words(grid) + (vox[3 * i + 2] >> 6)
+        bits[idx] |= (<uint64_t>1) << (vox[3 * i + 2] & 63)
 
 
-cdef inline int _line_occupancy(const int32_t* va, const int32_t* vb, int grid,
-                                const uint64_t* bits, const int64_t* recip,
-                                int* total) noexcept nogil:
-    """Occupied voxels on the integer line between voxels ``va`` and ``vb``.
+cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* prm,
+                          const uint64_t* bits, int64_t g, int64_t row_words, bint early,
+                          int* occ_out, int* total_out) noexcept nogil:
+    """f4's bin for the integer line between voxels ``va`` and ``vb``.
 
     Step k = 0..L (L the largest axis difference) visits
     v1 + floor(k * delta / L + 1/2) on each axis. It is walked in fixed point
@@ -118,8 +129,12 @@ cdef inline int _line_occupancy(const int32_t* va, const int32_t* vb, int grid,
     a non-tie value of k * delta / L + 1/2 is at least 1 / (2L) from the next
     integer: the floor is exact whenever 4 * grid**3 < S (grid < 1024).
     Both end voxels hold a point, so only the inner L - 1 voxels are looked up.
+
+    With ``early``, the walk stops as soon as the bin is certain (the top bin
+    reached, or the bottom bin unavoidable); ``occ_out`` is then a partial
+    count. The bin is the number of thresholds ceil(b T / n4), b = 1..n4-1,
+    that the occupied count reaches, T = L + 1: no division per pair.
     """
-    cdef int64_t g = grid
     cdef int64_t dx = vb[0] - va[0], dy = vb[1] - va[1], dz = vb[2] - va[2]
     cdef int64_t L = dx if dx >= 0 else -dx
     cdef int64_t t
@@ -127,36 +142,57 @@ cdef inline int _line_occupancy(const int32_t* va, const int32_t* vb, int grid,
     if t > L: L = t
     t = dz if dz >= 0 else -dz
     if t > L: L = t
-    total[0] = <int>(L + 1)
-    if L <= 1:
-        return <int>(L + 1)
-    cdef int64_t r = recip[L]
-    cdef int64_t ix = dx * r, iy = dy * r, iz = dz * r
+    cdef const int32_t* thr = prm.thr + (L + 1) * prm.n4
+    cdef int occ = <int>(L + 1) if L <= 1 else 2
+    cdef int lo = thr[1], hi = thr[prm.n4 - 1]
+    cdef int64_t r, ix, iy, iz, px, py, pz, k, z
     cdef int64_t half = ((<int64_t>1) << (FIX_SHIFT - 1)) + g * g
-    cdef int64_t px = ((<int64_t>va[0]) << FIX_SHIFT) + half + ix
-    cdef int64_t py = ((<int64_t>va[1]) << FIX_SHIFT) + half + iy
-    cdef int64_t pz = ((<int64_t>va[2]) << FIX_SHIFT) + half + iz
-    cdef int64_t k, idx
-    cdef int occ = 2
-    for k in range(1, L):
-        idx = (((px >> FIX_SHIFT) * g) + (py >> FIX_SHIFT)) * g + (pz >> FIX_SHIFT)
-        occ += <int>((bits[idx >> 6] >> (idx & 63)) & 1)
-        px += ix
-        py += iy
-        pz += iz
-    return occ
+    cdef int64_t quiet
+    cdef int b = 0
+    total_out[0] = <int>(L + 1)
+    if L > 1:
+        r = prm.recip[L]
+        ix = dx * r
+        iy = dy * r
+        iz = dz * r
+        px = ((<int64_t>va[0]) << FIX_SHIFT) + half + ix
+        py = ((<int64_t>va[1]) << FIX_SHIFT) + half + iy
+        pz = ((<int64_t>va[2]) << FIX_SHIFT) + half + iz
+        # After inner step k the count can still grow by L - 1 - k, so the bottom
+        # bin is certain once occ + L - 1 - k < lo; that needs k >= L + 2 - lo,
+        # and steps before it are walked without checks.
+        quiet = L - 1 if not early else min(L - 1, L + 1 - lo)
+        for k in range(1, quiet + 1):
+            z = pz >> FIX_SHIFT
+            occ += <int>((bits[((px >> FIX_SHIFT) * g + (py >> FIX_SHIFT)) * row_words + (z >> 6)]
+                          >> (z & 63)) & 1)
+            px += ix
+            py += iy
+            pz += iz
+        for k in range(quiet + 1, L):
+            if occ >= hi or occ + <int>(L - k) < lo:
+                break
+            z = pz >> FIX_SHIFT
+            occ += <int>((bits[((px >> FIX_SHIFT) * g + (py >> FIX_SHIFT)) * row_words + (z >> 6)]
+                          >> (z & 63)) & 1)
+            px += ix
+            py += iy
+            pz += iz
+    occ_out[0] = occ
+    for k in range(1, prm.n4):
+        b += occ >= thr[k]
+    return b
 
 
-cdef inline int _pair_bin(const double* pts, const double* nrm, int64_t i, int64_t j,
-                          double scale, const int32_t* vox, const uint64_t* bits,
-                          Params* prm, int* parts) noexcept nogil:
-    """Flat histogram bin of the ordered pair (i, j); ``parts`` gets (b1, b2, b3, b4, occ, total)."""
+cdef inline int _bin_f123(const double* pts, const double* nrm, int64_t i, int64_t j,
+                          double scale, const Params* prm, int* parts) noexcept nogil:
+    """Bins of f1, f2, f3 of the ordered pair (i, j) combined as (b1 * n2 + b2) * n3 + b3."""
     cdef double dx = pts[3 * j] - pts[3 * i]
     cdef double dy = pts[3 * j + 1] - pts[3 * i + 1]
     cdef double dz = pts[3 * j + 2] - pts[3 * i + 2]
     cdef double dist = sqrt(dx * dx + dy * dy + dz * dz)
     cdef double v, m1, m2, inv
-    cdef int b1 = 0, b2 = 0, b3 = 0, b4 = 0, k, occ = 0, total = 0
+    cdef int b1 = 0, b2 = 0, b3 = 0, k
     if prm.n1 > 1:
         v = dist * scale
         b1 = <int>(prm.n1 * v / prm.f1_max)
@@ -176,19 +212,11 @@ cdef inline int _pair_bin(const double* pts, const double* nrm, int64_t i, int64
             v = -v
         for k in range(prm.n3 - 1):
             b3 += v <= prm.cos3[k]
-    if prm.n4 > 1:
-        occ = _line_occupancy(vox + 3 * i, vox + 3 * j, prm.grid, bits, prm.recip, &total)
-        b4 = (prm.n4 * occ) // total
-        if b4 >= prm.n4:
-            b4 = prm.n4 - 1
     if parts != NULL:
         parts[0] = b1
         parts[1] = b2
         parts[2] = b3
-        parts[3] = b4
-        parts[4] = occ
-        parts[5] = total
-    return ((b1 * prm.n2 + b2) * prm.n3 + b3) * prm.n4 + b4
+    return (b1 * prm.n2 + b2) * prm.n3 + b3
 
 
 cdef inline int _draw_pair(const double* pts, uint32_t n, uint64_t* state,
@@ -216,22 +244,56 @@ cdef inline int _draw_pair(const double* pts, uint32_t n, uint64_t* state,
 cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
                         int32_t* vox, int32_t* counts) noexcept nogil:
-    """Histogram counts of one object; returns 1 if pairs could not be drawn."""
+    """Histogram counts of one object; returns 1 if pairs could not be drawn.
+
+    Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
+    that the latency of one pair's square root and divisions overlaps with
+    the next pair's instead of stalling behind a voxel walk.
+    """
     cdef uint64_t state = seed
-    cdef int64_t t, i, j
+    cdef int64_t base, t, m, i, j
+    cdef int32_t I[BATCH]
+    cdef int32_t J[BATCH]
+    cdef int32_t B[BATCH]
+    cdef int occ, total
+    cdef int64_t row_words = _row_words(prm.grid)
     if prm.n4 > 1:
         _fill_grid(pts, n, prm.grid, bits, vox)
-    for t in range(n_pairs):
-        if _draw_pair(pts, <uint32_t>n, &state, &i, &j) != 0:
-            return 1
-        counts[_pair_bin(pts, nrm, i, j, scale, vox, bits, prm, NULL)] += 1
+    base = 0
+    while base < n_pairs:
+        m = n_pairs - base
+        if m > BATCH:
+            m = BATCH
+        base += m
+        for t in range(m):
+            if _draw_pair(pts, <uint32_t>n, &state, &i, &j) != 0:
+                return 1
+            I[t] = <int32_t>i
+            J[t] = <int32_t>j
+        for t in range(m):
+            B[t] = _bin_f123(pts, nrm, I[t], J[t], scale, prm, NULL) * prm.n4
+        # Literal grid sizes let the compiler turn the index arithmetic into shifts.
+        if prm.n4 > 1:
+            if prm.grid == 64:
+                for t in range(m):
+                    B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, 64, 1, True, &occ, &total)
+            elif row_words == 1:
+                for t in range(m):
+                    B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, prm.grid, 1, True, &occ, &total)
+            else:
+                for t in range(m):
+                    B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, prm.grid, row_words, True,
+                                      &occ, &total)
+        for t in range(m):
+            counts[B[t]] += 1
     return 0
 
 
 cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, double f1_max,
-                       const int64_t* recip):
+                       const int64_t* recip, const int32_t* thr):
     cdef int k
     prm.recip = recip
+    prm.thr = thr
     prm.n1 = n1
     prm.n2 = n2
     prm.n3 = n3
@@ -254,11 +316,15 @@ def _check_bins(n_bins, int grid):
         raise ValueError(f"grid_size must lie in [2, {MAX_GRID}]")
 
 
-def _reciprocals(int grid):
-    """floor(2**32 / L) for L = 0..grid (entry 0 unused)."""
-    out = np.zeros(grid + 1, dtype=np.int64)
-    out[1:] = np.int64(2**32) // np.arange(1, grid + 1, dtype=np.int64)
-    return out
+def _tables(int grid, int n4):
+    """Line-walk reciprocals floor(2**32 / L), L = 0..grid (entry 0 unused), and
+    f4 thresholds ceil(b * T / n4) laid out as [T, b], T = 0..grid + 1."""
+    recip = np.zeros(grid + 1, dtype=np.int64)
+    recip[1:] = np.int64(2**32) // np.arange(1, grid + 1, dtype=np.int64)
+    T = np.arange(grid + 2, dtype=np.int64)[:, None]
+    b = np.arange(max(n4, 2), dtype=np.int64)[None, :]
+    thr = np.ascontiguousarray(-((-b * T) // n4), dtype=np.int32)
+    return recip, thr
 
 
 def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
@@ -284,15 +350,16 @@ def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
         distinct points to draw pairs.
     """
     _check_bins(n_bins, grid_size)
-    recip_arr = _reciprocals(grid_size)
+    recip_arr, thr_arr = _tables(grid_size, n_bins[3])
     cdef const int64_t[::1] recip = recip_arr
+    cdef const int32_t[:, ::1] thr = thr_arr
     cdef Params prm
-    _init_params(&prm, n_bins[0], n_bins[1], n_bins[2], n_bins[3], grid_size, f1_max, &recip[0])
+    _init_params(&prm, n_bins[0], n_bins[1], n_bins[2], n_bins[3], grid_size, f1_max, &recip[0], &thr[0, 0])
     cdef Py_ssize_t n_obj = offsets.shape[0] - 1
     cdef Py_ssize_t n_feat = n_bins[0] * n_bins[1] * n_bins[2] * n_bins[3]
     if num_threads < 1:
         num_threads = 1
-    cdef Py_ssize_t words = (<int64_t>grid_size * grid_size * grid_size + 63) // 64
+    cdef Py_ssize_t words = _grid_words(grid_size)
     counts_arr = np.zeros((n_obj, n_feat), dtype=np.int32)
     status_arr = np.zeros(n_obj, dtype=np.int32)
     if n_obj == 0:
@@ -343,14 +410,15 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
     occupied and total voxel counts of f4 (0 when f4 is off).
     """
     _check_bins(n_bins, grid_size)
-    recip_arr = _reciprocals(grid_size)
+    recip_arr, thr_arr = _tables(grid_size, n_bins[3])
     cdef const int64_t[::1] recip = recip_arr
+    cdef const int32_t[:, ::1] thr = thr_arr
     cdef Params prm
-    _init_params(&prm, n_bins[0], n_bins[1], n_bins[2], n_bins[3], grid_size, f1_max, &recip[0])
+    _init_params(&prm, n_bins[0], n_bins[1], n_bins[2], n_bins[3], grid_size, f1_max, &recip[0], &thr[0, 0])
     cdef int64_t n_p = pairs.shape[0], t
     vox_arr = np.zeros((points.shape[0], 3), dtype=np.int32)
     cdef int32_t[:, ::1] vox = vox_arr
-    cdef Py_ssize_t words = (<int64_t>grid_size * grid_size * grid_size + 63) // 64
+    cdef Py_ssize_t words = _grid_words(grid_size)
     grid_arr = np.zeros(words, dtype=np.uint64)
     cdef uint64_t[::1] bits = grid_arr
     out_arr = np.zeros((n_p, 6), dtype=np.int64)
@@ -363,8 +431,11 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
             raise ValueError("pair indices out of range")
     _fill_grid(&points[0, 0], n, grid_size, &bits[0], &vox[0, 0])
     for t in range(n_p):
-        _pair_bin(&points[0, 0], &normals[0, 0], pairs[t, 0], pairs[t, 1], scale,
-                  &vox[0, 0], &bits[0], &prm, parts)
+        _bin_f123(&points[0, 0], &normals[0, 0], pairs[t, 0], pairs[t, 1], scale, &prm, parts)
+        parts[3] = parts[4] = parts[5] = 0
+        if prm.n4 > 1:
+            parts[3] = _line_bin(&vox[pairs[t, 0], 0], &vox[pairs[t, 1], 0], &prm, &bits[0],
+                                 grid_size, _row_words(grid_size), False, &parts[4], &parts[5])
         for k in range(6):
             out[t, k] = parts[k]
     return out_arr

@@ -325,7 +325,7 @@ def test_pipeline_and_grid_search_over_bins_and_c():
 
 # ---------------------------------------------------------------- errors
 def _err(X, match, exc=ValueError, **params):
-    est = EPPFTransformer(n_pairs=100, **params)
+    est = EPPFTransformer(**{"n_pairs": 100, **params})
     with pytest.raises(exc, match=re.escape(match)):
         est.fit_transform(X)
 
