@@ -74,7 +74,8 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
     X_k = (2 D k + L - 1) 2**31 / L exceeds the products by less than L**2
     units, so P_k lies in (X_k, X_k + L**2 + 2]; a non-integer X_k / 2**32 is
     a multiple of 1 / (2 L), at least 2**31 / L units below the next integer,
-    so ``P_k >> 32`` is exact for L < 1290 (grids up to 1024).
+    so ``P_k >> 32`` is exact for L < 1290 (grids up to 1024). The dominant
+    axis (offset k) simply steps by its stride.
 
     Returns LINE_IN when at most one visited voxel is empty, LINE_OUT when at
     most 7 are occupied, LINE_MIX otherwise (with ``ratio`` = occupied /
@@ -85,7 +86,8 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
     cdef int64_t sx = g * g, sy = g, sz = 1
     cdef int L, k, occ = 0, cnt
     cdef int64_t idx = a[0] * sx + a[1] * sy + a[2]
-    cdef uint64_t R, px, py, pz, ix, iy, iz, start
+    cdef uint64_t R, px, py, pz, ix, iy, iz, start, i1, i2
+    cdef int64_t smaj, s1, s2
     if dx < 0:
         dx = -dx
         sx = -sx
@@ -105,18 +107,20 @@ cdef inline int _lci(const uint64_t* bits, int grid, const int* a, const int* b,
         cnt = L
         R = recip[L]
         start = <uint64_t>(L - 1) * (R >> 1) + <uint64_t>L * <uint64_t>L + 2
-        ix = <uint64_t>dx * R
-        iy = <uint64_t>dy * R
-        iz = <uint64_t>dz * R
+        # dominant axis steps by its stride; the other two in fixed point
+        if L == dx:
+            smaj = sx; s1 = sy; s2 = sz; i1 = <uint64_t>dy * R; i2 = <uint64_t>dz * R
+        elif L == dy:
+            smaj = sy; s1 = sx; s2 = sz; i1 = <uint64_t>dx * R; i2 = <uint64_t>dz * R
+        else:
+            smaj = sz; s1 = sx; s2 = sy; i1 = <uint64_t>dx * R; i2 = <uint64_t>dy * R
         px = start
         py = start
-        pz = start
         for k in range(L):
-            occ += _bit(bits, idx + (<int64_t>(px >> 32)) * sx + (<int64_t>(py >> 32)) * sy
-                        + (<int64_t>(pz >> 32)) * sz)
-            px += ix
-            py += iy
-            pz += iz
+            occ += _bit(bits, idx + (<int64_t>(px >> 32)) * s1 + (<int64_t>(py >> 32)) * s2)
+            idx += smaj
+            px += i1
+            py += i2
     n_in[0] = occ
     n_total[0] = cnt
     if occ >= cnt - 1:
