@@ -3,6 +3,7 @@
 import numbers
 
 import numpy as np
+from joblib import Parallel, delayed
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
@@ -268,30 +269,21 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
             scales = np.ones(len(clouds))
         # Seeds are drawn once for the whole input, so chunking never changes a result.
         seeds = object_seeds(self.random_state, len(clouds))
-        out = np.empty((len(clouds), self.n_features_out_), dtype=np.float64)
         bounds = list(range(0, len(clouds), _CHUNK)) + [len(clouds)]
+        chunks = list(zip(bounds[:-1], bounds[1:]))
+        # Chunks go through joblib: in-process by default (the kernel is already
+        # multi-threaded), onto a cluster under joblib.parallel_config(backend="dask").
+        jobs = Parallel(return_as="generator")(
+            delayed(_describe)(self, clouds[lo:hi], scales[lo:hi], seeds[lo:hi], n_threads, lo)
+            for lo, hi in chunks
+        )
+        out = np.empty((len(clouds), self.n_features_out_), dtype=np.float64)
         progress = _progress(len(clouds), self.verbose, "EPPF")
-        for lo, hi in zip(bounds[:-1], bounds[1:]):
-            out[lo:hi] = self._describe(clouds[lo:hi], scales[lo:hi], seeds[lo:hi], n_threads, lo)
+        for (lo, hi), block in zip(chunks, jobs):
+            out[lo:hi] = block
             progress.update(hi - lo)
         progress.close()
         return out
-
-    def _describe(self, clouds, scales, seeds, n_threads, first_index):
-        """Descriptors of validated clouds with given per-object scales and seeds."""
-        points, normals, offsets = self._points_and_normals(clouds, n_threads)
-        kernel_bins = tuple(b if f in self.functions_ else 1 for b, f in zip(self.n_bins_, FUNCTIONS))
-        counts, status = eppf_counts(
-            points, normals, offsets, scales, seeds, int(self.n_pairs), kernel_bins,
-            int(self.grid_size), _F1_MAX, n_threads,
-        )
-        bad = np.flatnonzero(status)
-        if bad.size:
-            raise ValueError(
-                f"{type(self).__name__}: point cloud {first_index + bad[0]} has too few distinct points to draw "
-                f"{self.n_pairs} pairs (almost all of its points coincide)"
-            )
-        return _weight_and_normalise(counts, kernel_bins, self.c, "distance" in self.functions_)
 
     def _points_and_normals(self, clouds, n_threads):
         needs_normals = "angle" in self.functions_ or "normal" in self.functions_
@@ -363,6 +355,23 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         tags.requires_fit = True
         tags.non_deterministic = self.random_state is None
         return tags
+
+
+def _describe(est, clouds, scales, seeds, n_threads, first_index):
+    """Descriptors of one chunk of validated clouds with given scales and seeds (a joblib task)."""
+    points, normals, offsets = est._points_and_normals(clouds, n_threads)
+    kernel_bins = tuple(b if f in est.functions_ else 1 for b, f in zip(est.n_bins_, FUNCTIONS))
+    counts, status = eppf_counts(
+        points, normals, offsets, scales, seeds, int(est.n_pairs), kernel_bins,
+        int(est.grid_size), _F1_MAX, n_threads,
+    )
+    bad = np.flatnonzero(status)
+    if bad.size:
+        raise ValueError(
+            f"{type(est).__name__}: point cloud {first_index + bad[0]} has too few distinct points to draw "
+            f"{est.n_pairs} pairs (almost all of its points coincide)"
+        )
+    return _weight_and_normalise(counts, kernel_bins, est.c, "distance" in est.functions_)
 
 
 def _check_int(value, what, lo, hi, owner):
