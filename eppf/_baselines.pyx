@@ -15,7 +15,7 @@ import numpy as np
 
 cimport numpy as cnp
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, acos, atan2, floor, ceil, fabs, M_PI
+from libc.math cimport sqrt, atan2, floor, ceil, fabs, M_PI
 from libc.stdint cimport int8_t, int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 
@@ -193,7 +193,7 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
     cdef double v21x, v21y, v21z, v31x, v31y, v31z, v23x, v23y, v23z
     cdef int th1, th2, th3, w12, w13, w23
     cdef int in12, in13, in23, n12, n13, n23, in_sum, n_sum
-    cdef double ratio = 0.0, pih = M_PI / 2.0, maxd2 = 0.0, maxd3 = 0.0, total
+    cdef double ratio = 0.0, maxd2 = 0.0, maxd3 = 0.0, total
     cdef int t = 0
     cdef double weights[10]
     # Centre on the mean and scale the farthest point to radius grid / 2.

@@ -194,7 +194,7 @@ def _ourcvfh_object(points, normals, *, n_neighbors=10, curvature_threshold=0.03
     cos_eps = np.cos(eps_angle)
     raw = _smooth_clusters(points, normals, keep, cluster_tolerance, cos_eps, min_points)
     cos_refine = np.cos(eps_angle * refine)
-    clusters, frames = [], []
+    clusters = []
     for cl in raw:
         avg = normals[cl].mean(axis=0)
         norm = np.linalg.norm(avg)
