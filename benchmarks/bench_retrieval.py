@@ -47,19 +47,20 @@ from threadpoolctl import threadpool_info
 from eppf.metrics import leave_one_out_retrieval
 X = np.load(sys.argv[1]); y = np.load(sys.argv[2])
 compare = sys.argv[3] == "1"
+n_jobs = None if sys.argv[4] == "None" else int(sys.argv[4])
 def cpu():
     r = resource.getrusage(resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
 t, c = time.perf_counter(), cpu()
-y_pred, ind = leave_one_out_retrieval(X, y, return_indices=True)
+y_pred, ind = leave_one_out_retrieval(X, y, return_indices=True, n_jobs=n_jobs)
 t_loo, c_loo = time.perf_counter() - t, cpu() - c
 peak_loo = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 out = {"t_loo": t_loo, "cpu_loo": c_loo, "peak_mib": peak_loo, "acc": float(np.mean(y_pred == y)),
-       "blas_threads": max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=None)}
+       "blas_threads": n_jobs or max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=None)}
 if compare:
     from eppf import KLNearestNeighbors
     t = time.perf_counter()
-    ind2 = KLNearestNeighbors().fit(X, y).kneighbors(return_distance=False)[:, 0]
+    ind2 = KLNearestNeighbors(n_jobs=n_jobs).fit(X, y).kneighbors(return_distance=False)[:, 0]
     out["t_full"] = time.perf_counter() - t
     out["same"] = int(np.sum(ind2 == ind))
 print(json.dumps(out))
@@ -85,14 +86,14 @@ def make_descriptors(n, n_bins, n_classes=40, n_pairs=20000, seed=0):
     return X, y
 
 
-def run_size(n, n_bins, compare):
+def run_size(n, n_bins, compare, n_jobs=None):
     X, y = make_descriptors(n, n_bins)
     with tempfile.TemporaryDirectory() as tmp:
         xp, yp = os.path.join(tmp, "X.npy"), os.path.join(tmp, "y.npy")
         np.save(xp, X)
         np.save(yp, y)
         res = subprocess.run(
-            [sys.executable, "-c", CHILD, xp, yp, "1" if compare else "0"], capture_output=True, text=True, check=True
+            [sys.executable, "-c", CHILD, xp, yp, "1" if compare else "0", str(n_jobs)], capture_output=True, text=True, check=True
         )
     out = json.loads(res.stdout.strip().splitlines()[-1])
     out["zero_share"] = float(np.mean(X == 0))
@@ -121,6 +122,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[5000, 12000])
     parser.add_argument("--n-bins", type=int, default=1200)
+    parser.add_argument("--n-jobs", type=int, default=None, help="BLAS threads (default: BLAS's own setting)")
     parser.add_argument("--compare", action="store_true", help="also time KLNearestNeighbors.kneighbors()")
     parser.add_argument("--no-reference", action="store_true", help="skip the check on the PCL reference descriptors")
     args = parser.parse_args(argv)
@@ -133,7 +135,7 @@ def main(argv=None):
         header += f" {'kneighbors s':>12} {'same NN':>8}"
     print(header)
     for n in args.sizes:
-        r = run_size(n, args.n_bins, args.compare)
+        r = run_size(n, args.n_bins, args.compare, args.n_jobs)
         line = f"{n:>7} {args.n_bins:>5} {r['zero_share']:>6.2f} {str(r['blas_threads']):>7} {r['t_loo']:>7.2f} {r['cpu_loo']:>7.2f} {r['peak_mib']:>9.0f}"
         if args.compare:
             line += f" {r['t_full']:>12.2f} {r['same']:>8}"
