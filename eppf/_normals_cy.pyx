@@ -3,9 +3,9 @@
 points of one object) with OpenMP.
 
 - Exact k nearest neighbours on a uniform grid of cubic cells. The cell size
-  adapts to the object and to k (about ``_PTS_PER_CELL * k`` points per
-  occupied cell), so the 3x3x3 block of cells around a query usually holds its
-  neighbourhood. Fast path: candidates of that block closer than a guess of the
+  adapts to the object and to k (about ``_CELL_OVER_RADIUS`` times the radius
+  of a k-neighbourhood, from the grid's occupancy), so the 3x3x3 block of
+  cells around a query usually holds its neighbourhood. Fast path: candidates of that block closer than a guess of the
   k-th distance (taken from the previous query) are ranked without branches,
   and the result is accepted when the k-th distance is provably smaller than
   the distance to the block's boundary. Otherwise an exact search over growing
@@ -28,10 +28,11 @@ from libc.stdint cimport int64_t
 
 import numpy as np
 
-# Modes of orientation understood by the kernel.
+# Buckets of the fast path's histogram selection.
 cdef enum:
     _N_BUCKETS = 32
 
+# Modes of orientation understood by the kernel.
 cdef enum:
     ORIENT_NONE = 0
     ORIENT_CENTROID = 1
@@ -136,15 +137,15 @@ cdef inline int64_t _cell_coord(double x, double lo, double inv_h, int64_t res) 
 cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap) noexcept nogil:
     """Cells per axis for cell size ``h`` (grown until at most ``cap`` cells)."""
     cdef int64_t prod, r
+    cdef double x
     cdef int a
+    if not (h > 0.0):
+        h = 1.0
     while True:
         prod = 1
         for a in range(3):
-            r = <int64_t>floor(e[a] / h)
-            if r < 1:
-                r = 1
-            if r > 1 << 20:
-                r = 1 << 20
+            x = floor(e[a] / h)
+            r = 1 if not (x >= 1.0) else (<int64_t>x if x < 1048576.0 else 1048576)
             g.res[a] = r
             prod *= r
         if prod <= cap:
@@ -235,9 +236,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
         h = 1.0
     else:
         h = cbrt(e1 * e2 * e3 / t)
-        if not (e3 >= h):
+        if not (h > 0.0 and e3 >= h):
             h = sqrt(e1 * e2 / t)
-            if not (e2 >= h):
+            if not (h > 0.0 and e2 >= h):
                 h = e1 / t
     _set_resolution(g, e, h, cap)
     # Then resize so that a cell is about _CELL_OVER_RADIUS times the radius of
@@ -518,7 +519,11 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
                 sc.kpos[j] = sc.kpos[j - 1]
                 j -= 1
             sc.kpos[j] = p
-    sc.guess[0] = kth * _GUESS_FACTOR if kth > 0.0 else g.h * g.h
+    # Any positive guess keeps the result exact; a tiny one (duplicates)
+    # would overflow the histogram's scale, so fall back to a cell's size.
+    sc.guess[0] = kth * _GUESS_FACTOR
+    if not (sc.guess[0] > 1e-200):
+        sc.guess[0] = g.h * g.h
     for i in range(k):
         p = sc.kpos[i]
         nb[3 * i] = spts[3 * p]

@@ -221,9 +221,12 @@ def test_n_neighbors_larger_than_cloud_is_clipped():
 def test_degenerate_neighbourhoods_are_finite(orientation):
     rng = np.random.default_rng(11)
     line = np.outer(rng.random(60), [1.0, 2.0, -1.0]) + [5.0, 5.0, 5.0]
+    # Flat bounding boxes: zero extent along one or two axes.
+    x_axis = np.column_stack([rng.random(70), np.full(70, 2.0), np.zeros(70)])
+    xy_plane = np.column_stack([rng.random((90, 2)), np.full(90, -1.0)])
     dupes = np.repeat(rng.random((4, 3)), 15, axis=0)
     mixed = np.concatenate([dupes, [[9.0, 9.0, 9.0]]])
-    for points in (line, dupes, mixed):
+    for points in (line, x_axis, xy_plane, dupes, mixed):
         normals = estimate_normals(points, 10, orientation=orientation)
         assert np.isfinite(normals).all()
         assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-14)
