@@ -279,6 +279,9 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
     n_neighbors : int, default=10
         Neighbourhood size for PCA normals (of clouds given without normals)
         and for the curvature.
+    normal_orientation : {"centroid", "origin"} or None, default="centroid"
+        Sign of estimated normals: away from the object's centroid, towards
+        the origin, or unoriented (as in :class:`eppf.EPPFTransformer`).
     n_jobs : int, default=None
         Threads over objects (joblib); None means 1. Output does not depend
         on it.
@@ -342,6 +345,7 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         sigma=0.01,
         normalize=True,
         n_neighbors=10,
+        normal_orientation="centroid",
         n_jobs=None,
     ):
         self.aggregate = aggregate
@@ -354,6 +358,7 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         self.sigma = sigma
         self.normalize = normalize
         self.n_neighbors = n_neighbors
+        self.normal_orientation = normal_orientation
         self.n_jobs = n_jobs
 
     def _check_params(self):
@@ -373,6 +378,10 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
             sigma=_check_float(self.sigma, "sigma", owner),
             n_neighbors=_check_int(self.n_neighbors, "n_neighbors", owner, 3),
         )
+        if self.normal_orientation not in ("centroid", "origin", None):
+            raise ValueError(
+                f"{owner}: normal_orientation must be 'centroid', 'origin' or None, got {self.normal_orientation!r}"
+            )
         if not isinstance(self.normalize, (bool, np.bool_)):
             raise TypeError(f"{owner}: normalize must be a bool, got {type(self.normalize).__name__}")
         n_threads = 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=owner)
@@ -439,7 +448,9 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         params, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=3)
-        points, normals, offsets = _points_and_normals(clouds, params["n_neighbors"], "centroid", n_threads, owner)
+        points, normals, offsets = _points_and_normals(
+            clouds, params["n_neighbors"], self.normal_orientation, n_threads, owner
+        )
         spans = [(offsets[k], offsets[k + 1]) for k in range(len(clouds))]
         if n_threads == 1:
             rows = [self._one(points[a:b], normals[a:b], params) for a, b in spans]

@@ -75,9 +75,10 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         Neighbourhood size for PCA normals of clouds given without normals
         (see :func:`eppf.estimate_normals`); clouds with six columns use
         their own normals.
-    orientation : {"centroid", "origin"} or None, default="centroid"
+    normal_orientation : {"centroid", "origin"} or None, default="centroid"
         Sign of estimated normals: away from the object's centroid, towards
-        the origin, or unoriented.
+        the origin (a sensor there), or unoriented (as in
+        :class:`eppf.EPPFTransformer`).
     random_state : int, RandomState instance or None, default=None
         Draws one seed per object; each object's pairs come from a private
         generator seeded with it, so the output does not depend on ``n_jobs``.
@@ -139,7 +140,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         n_pairs=20000,
         source="perpendicular",
         n_neighbors=10,
-        orientation="centroid",
+        normal_orientation="centroid",
         random_state=None,
         n_jobs=None,
     ):
@@ -147,7 +148,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         self.n_pairs = n_pairs
         self.source = source
         self.n_neighbors = n_neighbors
-        self.orientation = orientation
+        self.normal_orientation = normal_orientation
         self.random_state = random_state
         self.n_jobs = n_jobs
 
@@ -158,8 +159,10 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         if self.source not in ("perpendicular", "parallel"):
             raise ValueError(f"{owner}: source must be 'perpendicular' or 'parallel', got {self.source!r}")
         n_neighbors = _check_int(self.n_neighbors, "n_neighbors", owner, 3)
-        if self.orientation not in ("centroid", "origin", None):
-            raise ValueError(f"{owner}: orientation must be 'centroid', 'origin' or None, got {self.orientation!r}")
+        if self.normal_orientation not in ("centroid", "origin", None):
+            raise ValueError(
+                f"{owner}: normal_orientation must be 'centroid', 'origin' or None, got {self.normal_orientation!r}"
+            )
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
         return n_bins, n_pairs, n_neighbors, n_threads
 
@@ -203,7 +206,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         n_bins, n_pairs, n_neighbors, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=2)
-        points, normals, offsets = _points_and_normals(clouds, n_neighbors, self.orientation, n_threads, owner)
+        points, normals, offsets = _points_and_normals(clouds, n_neighbors, self.normal_orientation, n_threads, owner)
         seeds = object_seeds(self.random_state, len(clouds))
         out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)
         status = np.zeros(len(clouds), dtype=np.int8)

@@ -169,6 +169,7 @@ def test_pipeline_and_grid_search():
         ({"sigma": np.nan}, ValueError, "sigma must be finite and > 0.0, got nan"),
         ({"normalize": 1}, TypeError, "normalize must be a bool, got int"),
         ({"n_neighbors": 2}, ValueError, "n_neighbors must be >= 3, got 2"),
+        ({"normal_orientation": "up"}, ValueError, "normal_orientation must be 'centroid', 'origin' or None, got 'up'"),
         ({"n_jobs": 0}, ValueError, "n_jobs == 0 has no meaning"),
     ],
 )

@@ -135,7 +135,7 @@ def test_pipeline_and_grid_search():
         ({"n_pairs": 0}, ValueError, "n_pairs must be in [1, 2147483647], got 0"),
         ({"source": "target"}, ValueError, "source must be 'perpendicular' or 'parallel', got 'target'"),
         ({"n_neighbors": 2}, ValueError, "n_neighbors must be >= 3, got 2"),
-        ({"orientation": "up"}, ValueError, "orientation must be 'centroid', 'origin' or None, got 'up'"),
+        ({"normal_orientation": "up"}, ValueError, "normal_orientation must be 'centroid', 'origin' or None, got 'up'"),
     ],
 )
 def test_bad_parameters(params, err, msg):
