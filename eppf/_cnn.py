@@ -353,7 +353,10 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
                 (
                     "early_stopping",
                     EarlyStopping(
-                        monitor="valid_loss", patience=self.n_iter_no_change, load_best=True, sink=print if self.verbose else _silent
+                        monitor="valid_loss",
+                        patience=self.n_iter_no_change,
+                        load_best=True,
+                        sink=print if self.verbose else _silent,
                     ),
                 )
             )
