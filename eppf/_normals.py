@@ -165,6 +165,9 @@ default="centroid"
     n_threads = check_n_jobs(n_jobs, owner=owner)
     n = cloud.shape[0]
     k = min(k, n)
+    # Below a few hundred points per thread, starting threads costs more than
+    # it saves (the result is the same either way).
+    n_threads = max(1, min(n_threads, n // 512))
     out = np.empty((n, 3), dtype=np.float64)
     fs, its = _scratch(n_threads, n, k)
     normals_single(cloud, k, mode, viewpoint, out, fs, its, n_threads)
@@ -235,6 +238,7 @@ default="centroid"
         return out
     n_objects = off.shape[0] - 1
     if n_objects == 1:
+        n_threads = max(1, min(n_threads, max_n // 512))
         fs, its = _scratch(n_threads, max_n, k)
         normals_single(pts, k, mode, viewpoint, out, fs, its, n_threads)
     else:
