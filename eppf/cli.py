@@ -159,7 +159,7 @@ def run_main_job(args, out=None):
     ms = 1e3 * np.mean(times) / n
     print("", file=out)
     print(f"Descriptor: {X_first.shape[1]} bins, {args.n_pairs} pairs, scaling={scaling}; "
-          f"{ms:.2f} ms per object (normal estimation included, {args.n_jobs} thread setting); "
+          f"{ms:.2f} ms per object (normal estimation included, n_jobs={args.n_jobs}); "
           f"leave-one-out search {loo_time:.2f} s", file=out)
     return {"retrieval": loo, "classification": test_scores, "ms_per_object": ms, "loo_seconds": loo_time}
 
