@@ -26,7 +26,7 @@ import numpy as np
 
 cimport numpy as cnp
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, cos, M_PI
+from libc.math cimport sqrt, cos, llrint, M_PI
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 
@@ -41,6 +41,15 @@ cdef enum:
     FIX_SHIFT = 32
     MAX_GRID = 1023
     BATCH = 64
+    # packed line walk for grids up to 64: lanes of 21 bits, 14 fraction bits
+    PK_FRAC = 14
+    PK_S = 1 << 14
+    PK_ZSHIFT = 14
+    PK_YSHIFT = 35
+    PK_XSHIFT = 56
+
+cdef int64_t PK_Y = (<int64_t>1) << 21
+cdef int64_t PK_X = (<int64_t>1) << 42
 
 cdef uint64_t LOW32 = 0xFFFFFFFF
 
@@ -63,6 +72,7 @@ cdef struct Params:
     double cos3[MAX_BINS]   # inner edges of f3 on the cosine scale, k = 1..n3-1
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
+    double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -149,8 +159,38 @@ cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* pr
     cdef int64_t half = ((<int64_t>1) << (FIX_SHIFT - 1)) + g * g
     cdef int64_t quiet
     cdef int b = 0
+    cdef int64_t P, I
+    cdef double q
     total_out[0] = <int>(L + 1)
-    if L > 1:
+    # After inner step k the count can still grow by L - 1 - k, so the bottom
+    # bin is certain once occ + L - 1 - k < lo; that needs k >= L + 2 - lo,
+    # and steps before it are walked without checks.
+    quiet = L - 1 if not early else min(L - 1, L + 1 - lo)
+    if L > 1 and g <= 64:
+        # Packed walk: x, y, z in three 21-bit lanes of one integer, each in
+        # fixed point with S = 2**14 and increments round(delta * S / L), so a
+        # step is one addition. The accumulated rounding error stays below
+        # L / 2 + tiny units, the offset E = grid keeps every position above
+        # the exact value, and 1.5 grid + 1 units < S / (2L): exact floors.
+        q = prm.recip_packed[L]
+        ix = llrint(dx * q)
+        iy = llrint(dy * q)
+        iz = llrint(dz * q)
+        P = ((va[0] * PK_S + PK_S // 2 + g) * PK_X + (va[1] * PK_S + PK_S // 2 + g) * PK_Y
+             + va[2] * PK_S + PK_S // 2 + g)
+        I = ix * PK_X + iy * PK_Y + iz
+        P += I
+        for k in range(1, quiet + 1):
+            z = (P >> PK_ZSHIFT) & 63
+            occ += <int>((bits[(P >> PK_XSHIFT) * g + ((P >> PK_YSHIFT) & 63)] >> z) & 1)
+            P += I
+        for k in range(quiet + 1, L):
+            if occ >= hi or occ + <int>(L - k) < lo:
+                break
+            z = (P >> PK_ZSHIFT) & 63
+            occ += <int>((bits[(P >> PK_XSHIFT) * g + ((P >> PK_YSHIFT) & 63)] >> z) & 1)
+            P += I
+    elif L > 1:
         r = prm.recip[L]
         ix = dx * r
         iy = dy * r
@@ -158,10 +198,6 @@ cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* pr
         px = ((<int64_t>va[0]) << FIX_SHIFT) + half + ix
         py = ((<int64_t>va[1]) << FIX_SHIFT) + half + iy
         pz = ((<int64_t>va[2]) << FIX_SHIFT) + half + iz
-        # After inner step k the count can still grow by L - 1 - k, so the bottom
-        # bin is certain once occ + L - 1 - k < lo; that needs k >= L + 2 - lo,
-        # and steps before it are walked without checks.
-        quiet = L - 1 if not early else min(L - 1, L + 1 - lo)
         for k in range(1, quiet + 1):
             z = pz >> FIX_SHIFT
             occ += <int>((bits[((px >> FIX_SHIFT) * g + (py >> FIX_SHIFT)) * row_words + (z >> 6)]
@@ -294,6 +330,9 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     cdef int k
     prm.recip = recip
     prm.thr = thr
+    prm.recip_packed[0] = 0.0
+    for k in range(1, 64):
+        prm.recip_packed[k] = (<double>PK_S) / k
     prm.n1 = n1
     prm.n2 = n2
     prm.n3 = n3

@@ -65,10 +65,15 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         files). ``"none"``: coordinates used as given (they should already lie
         in a unit cube). f1 is binned on ``[0, sqrt(3)]``; longer distances
         fall in the last bin.
-    n_neighbors : int, default=10
+    n_neighbors : int, default=20
         Neighbours for PCA normal estimation of clouds given without normals
         (see :func:`eppf.estimate_normals`). Clouds of shape (n, 6) carry their
-        own normals and are not re-estimated.
+        own normals and are not re-estimated. Chosen by measurement: on noisy
+        synthetic shapes (noise 0.03, occlusion 0.4) leave-one-out accuracy
+        was 70.3 / 85.8 / 91.5% for 10 / 20 / 30 neighbours, on ModelNet10
+        83.3 / 84.6 / 85.5%, on sparse aerial LiDAR objects (DALES, median
+        413 points) 97.0 / 97.0 / 95.2%; 20 gains most where normals are noisy
+        without blurring sparse clouds, and stays under 1 ms per 1,024 points.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         How estimated normals are oriented: away from the object's centroid,
         towards the origin (a sensor at the origin), or not at all.
@@ -153,7 +158,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         grid_size=64,
         functions=FUNCTIONS,
         scaling="fit",
-        n_neighbors=10,
+        n_neighbors=20,
         normal_orientation="centroid",
         random_state=None,
         n_jobs=None,
