@@ -3,10 +3,10 @@
 import numbers
 
 import numpy as np
-from joblib import Parallel, delayed
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
+from ._chunks import transform_in_chunks
 from ._core import eppf_counts
 from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
 
@@ -17,13 +17,6 @@ FUNCTIONS = ("distance", "angle", "normal", "occupancy")
 _SHORT = {"distance": "d", "angle": "a", "normal": "n", "occupancy": "o"}
 _SCALINGS = ("fit", "object", "none")
 _F1_MAX = float(np.sqrt(3.0))
-_CHUNK = 256  # objects per kernel call: bounds the memory of packed chunks
-
-
-def _progress(total, verbose, desc):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, unit="obj", disable=not verbose, leave=False)
 
 
 def _bounding_sides(clouds):
@@ -274,21 +267,10 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
             scales = np.ones(len(clouds))
         # Seeds are drawn once for the whole input, so chunking never changes a result.
         seeds = object_seeds(self.random_state, len(clouds))
-        bounds = list(range(0, len(clouds), _CHUNK)) + [len(clouds)]
-        chunks = list(zip(bounds[:-1], bounds[1:]))
-        # Chunks go through joblib: in-process by default (the kernel is already
-        # multi-threaded), onto a cluster under joblib.parallel_config(backend="dask").
-        jobs = Parallel(return_as="generator")(
-            delayed(_describe)(self, clouds[lo:hi], scales[lo:hi], seeds[lo:hi], n_threads, lo)
-            for lo, hi in chunks
+        return transform_in_chunks(
+            _describe, self, clouds, (scales, seeds, np.full(len(clouds), n_threads)),
+            n_features=self.n_features_out_, verbose=self.verbose, desc="EPPF",
         )
-        out = np.empty((len(clouds), self.n_features_out_), dtype=np.float64)
-        progress = _progress(len(clouds), self.verbose, "EPPF")
-        for (lo, hi), block in zip(chunks, jobs):
-            out[lo:hi] = block
-            progress.update(hi - lo)
-        progress.close()
-        return out
 
     def _points_and_normals(self, clouds, n_threads):
         needs_normals = "angle" in self.functions_ or "normal" in self.functions_
@@ -363,6 +345,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
 
 
 def _describe(est, clouds, scales, seeds, n_threads, first_index):
+    n_threads = int(n_threads[0])
     """Descriptors of one chunk of validated clouds with given scales and seeds (a joblib task)."""
     points, normals, offsets = est._points_and_normals(clouds, n_threads)
     kernel_bins = tuple(b if f in est.functions_ else 1 for b, f in zip(est.n_bins_, FUNCTIONS))

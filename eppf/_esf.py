@@ -7,6 +7,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ._baselines import esf_batch
+from ._chunks import transform_in_chunks
 from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["ESFTransformer"]
@@ -175,19 +176,8 @@ class ESFTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         n_triplets, grid_size, n_bins, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=3)
-        points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
         seeds = object_seeds(self.random_state, len(clouds))
-        out = np.zeros((len(clouds), 10 * n_bins), dtype=np.float64)
-        status = np.zeros(len(clouds), dtype=np.int8)
-        n_threads = max(1, min(n_threads, len(clouds)))
-        esf_batch(points, offsets, seeds, n_triplets, grid_size, n_bins, _AREA_EPS, out, status, n_threads)
-        bad = np.flatnonzero(status)
-        if bad.size:
-            raise ValueError(
-                f"{owner}: point cloud {bad[0]} has no triangles of non-zero area "
-                "(all points collinear or nearly so); ESF needs a surface"
-            )
-        return out
+        return transform_in_chunks(_esf_chunk, self, clouds, (seeds,), n_features=10 * n_bins)
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output columns, e.g. ``esf_a3_in_0``.
@@ -212,3 +202,21 @@ class ESFTransformer(TransformerMixin, BaseEstimator):
         tags.input_tags.three_d_array = True
         tags.non_deterministic = self.random_state is None
         return tags
+
+
+def _esf_chunk(est, clouds, seeds, first_index):
+    """ESF rows of one chunk of validated clouds (a joblib task)."""
+    owner = type(est).__name__
+    n_triplets, grid_size, n_bins, n_threads = est._check_params()
+    points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
+    out = np.zeros((len(clouds), 10 * n_bins), dtype=np.float64)
+    status = np.zeros(len(clouds), dtype=np.int8)
+    n_threads = max(1, min(n_threads, len(clouds)))
+    esf_batch(points, offsets, seeds, n_triplets, grid_size, n_bins, _AREA_EPS, out, status, n_threads)
+    bad = np.flatnonzero(status)
+    if bad.size:
+        raise ValueError(
+            f"{owner}: point cloud {first_index + bad[0]} has no triangles of non-zero area "
+            "(all points collinear or nearly so); ESF needs a surface"
+        )
+    return out

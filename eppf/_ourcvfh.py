@@ -11,6 +11,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ._esf import _check_int
+from ._chunks import transform_in_chunks
 from ._validation import check_n_jobs, check_point_clouds
 from ._wahl import _points_and_normals
 
@@ -448,17 +449,7 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         params, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=3)
-        points, normals, offsets = _points_and_normals(
-            clouds, params["n_neighbors"], self.normal_orientation, n_threads, owner
-        )
-        spans = [(offsets[k], offsets[k + 1]) for k in range(len(clouds))]
-        if n_threads == 1:
-            rows = [self._one(points[a:b], normals[a:b], params) for a, b in spans]
-        else:
-            rows = Parallel(n_jobs=n_threads, prefer="threads")(
-                delayed(self._one)(points[a:b], normals[a:b], params) for a, b in spans
-            )
-        return np.vstack(rows)
+        return transform_in_chunks(_ourcvfh_chunk, self, clouds, n_features=308)
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output columns.
@@ -485,3 +476,20 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         tags.input_tags.two_d_array = False
         tags.input_tags.three_d_array = True
         return tags
+
+
+def _ourcvfh_chunk(est, clouds, first_index):
+    """OUR-CVFH rows of one chunk of validated clouds (a joblib task)."""
+    owner = type(est).__name__
+    params, n_threads = est._check_params()
+    points, normals, offsets = _points_and_normals(
+        clouds, params["n_neighbors"], est.normal_orientation, n_threads, owner
+    )
+    spans = [(offsets[k], offsets[k + 1]) for k in range(len(clouds))]
+    if n_threads == 1:
+        rows = [est._one(points[a:b], normals[a:b], params) for a, b in spans]
+    else:
+        rows = Parallel(n_jobs=n_threads, prefer="threads")(
+            delayed(est._one)(points[a:b], normals[a:b], params) for a, b in spans
+        )
+    return np.vstack(rows)

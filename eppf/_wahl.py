@@ -8,6 +8,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._baselines import wahl_batch
 from ._esf import _check_int
+from ._chunks import transform_in_chunks
 from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["WahlTransformer"]
@@ -206,22 +207,8 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         n_bins, n_pairs, n_neighbors, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=2)
-        points, normals, offsets = _points_and_normals(clouds, n_neighbors, self.normal_orientation, n_threads, owner)
         seeds = object_seeds(self.random_state, len(clouds))
-        out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)
-        status = np.zeros(len(clouds), dtype=np.int8)
-        n_threads = max(1, min(n_threads, len(clouds)))
-        wahl_batch(
-            points, normals, offsets, seeds, n_pairs, np.asarray(n_bins, dtype=np.int32),
-            self.source == "parallel", out, status, n_threads,
-        )
-        bad = np.flatnonzero(status)
-        if bad.size:
-            raise ValueError(
-                f"{owner}: point cloud {bad[0]} has too few usable surflet pairs (coincident points, "
-                "or every normal parallel to the lines between points)"
-            )
-        return out
+        return transform_in_chunks(_wahl_chunk, self, clouds, (seeds,), n_features=int(np.prod(n_bins)))
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output columns, e.g. ``wahl_a0_b1_g2_d3``.
@@ -246,3 +233,24 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         tags.input_tags.three_d_array = True
         tags.non_deterministic = self.random_state is None
         return tags
+
+
+def _wahl_chunk(est, clouds, seeds, first_index):
+    """Wahl histograms of one chunk of validated clouds (a joblib task)."""
+    owner = type(est).__name__
+    n_bins, n_pairs, n_neighbors, n_threads = est._check_params()
+    points, normals, offsets = _points_and_normals(clouds, n_neighbors, est.normal_orientation, n_threads, owner)
+    out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)
+    status = np.zeros(len(clouds), dtype=np.int8)
+    n_threads = max(1, min(n_threads, len(clouds)))
+    wahl_batch(
+        points, normals, offsets, seeds, n_pairs, np.asarray(n_bins, dtype=np.int32),
+        est.source == "parallel", out, status, n_threads,
+    )
+    bad = np.flatnonzero(status)
+    if bad.size:
+        raise ValueError(
+            f"{owner}: point cloud {first_index + bad[0]} has too few usable surflet pairs (coincident points, "
+            "or every normal parallel to the lines between points)"
+        )
+    return out

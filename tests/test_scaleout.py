@@ -5,8 +5,8 @@ import pytest
 from joblib import parallel_config
 from numpy.testing import assert_array_equal
 
-import eppf._descriptor as descriptor_module
-from eppf import EPPFTransformer
+import eppf._chunks as chunks_module
+from eppf import EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
 
 
 def _clouds(n=12):
@@ -14,12 +14,21 @@ def _clouds(n=12):
     return [rng.normal(size=(rng.integers(30, 120), 3)) * rng.uniform(0.5, 2.0) for _ in range(n)]
 
 
+DESCRIPTORS = {
+    "eppf": lambda: EPPFTransformer(n_pairs=2000, random_state=7, n_jobs=1),
+    "esf": lambda: ESFTransformer(n_triplets=2000, random_state=7, n_jobs=1),
+    "wahl": lambda: WahlTransformer(n_pairs=2000, random_state=7, n_jobs=1),
+    "ourcvfh": lambda: OURCVFHTransformer(n_jobs=1),
+}
+
+
+@pytest.mark.parametrize("name", sorted(DESCRIPTORS))
 @pytest.mark.parametrize("backend", ["threading", "loky"])
-def test_chunked_joblib_run_is_bit_identical(monkeypatch, backend):
+def test_chunked_joblib_run_is_bit_identical(monkeypatch, backend, name):
     clouds = _clouds()
-    est = EPPFTransformer(n_pairs=2000, random_state=7, n_jobs=1).fit(clouds)
+    est = DESCRIPTORS[name]().fit(clouds)
     whole = est.transform(clouds)
-    monkeypatch.setattr(descriptor_module, "_CHUNK", 5)  # several chunks of uneven length
+    monkeypatch.setattr(chunks_module, "CHUNK", 5)  # several chunks of uneven length
     with parallel_config(backend=backend, n_jobs=2):
         chunked = est.transform(clouds)
     assert_array_equal(whole, chunked)
@@ -27,20 +36,32 @@ def test_chunked_joblib_run_is_bit_identical(monkeypatch, backend):
 
 def test_progress_bar_does_not_change_output(monkeypatch):
     clouds = _clouds(6)
-    monkeypatch.setattr(descriptor_module, "_CHUNK", 4)
+    monkeypatch.setattr(chunks_module, "CHUNK", 4)
     quiet = EPPFTransformer(n_pairs=500, random_state=1).fit_transform(clouds)
     loud = EPPFTransformer(n_pairs=500, random_state=1, verbose=1).fit_transform(clouds)
     assert_array_equal(quiet, loud)
 
 
-def test_dask_local_cluster_matches_local_run(monkeypatch):
+@pytest.mark.parametrize("name", ["eppf", "esf"])
+def test_dask_local_cluster_matches_local_run(monkeypatch, name):
     distributed = pytest.importorskip("dask.distributed")
     clouds = _clouds()
-    est = EPPFTransformer(n_pairs=2000, random_state=3, n_jobs=1).fit(clouds)
+    est = DESCRIPTORS[name]().fit(clouds)
     local = est.transform(clouds)
-    monkeypatch.setattr(descriptor_module, "_CHUNK", 4)
+    monkeypatch.setattr(chunks_module, "CHUNK", 4)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster, distributed.Client(cluster):
         with parallel_config(backend="dask"):
             remote = est.transform(clouds)
     assert_array_equal(local, remote)
+
+
+def test_error_in_a_later_chunk_names_the_global_index(monkeypatch):
+    import re
+
+    clouds = _clouds(7)
+    clouds[6] = np.vstack([np.zeros((3, 3)), [[1.0, 1.0, 1.0]] * 2])
+    clouds[6][:, :] = np.linspace(0, 1, 5)[:, None]  # five collinear points: no ESF triangle
+    monkeypatch.setattr(chunks_module, "CHUNK", 3)
+    with pytest.raises(ValueError, match=re.escape("ESFTransformer: point cloud 6 has no triangles")):
+        ESFTransformer(n_triplets=100, random_state=0).fit_transform(clouds)
