@@ -15,5 +15,6 @@ from ._esf import ESFTransformer
 from ._ourcvfh import OURCVFHTransformer
 from ._wahl import WahlTransformer
 from ._normals import estimate_normals
+from ._pointnet import PointNetClassifier
 
-__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "WahlTransformer", "estimate_normals", "symmetric_kl_distances"]
+__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "PointNetClassifier", "WahlTransformer", "estimate_normals", "symmetric_kl_distances"]
