@@ -223,3 +223,29 @@ def test_not_fitted():
 
     with pytest.raises(NotFittedError):
         PointNetClassifier().predict([np.eye(3)])
+
+
+def test_augmentation():
+    from eppf._pointnet import _make_dataset
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-0.5, 0.5, size=(2, 20, 3)).astype(np.float32)
+    y = np.array([0, 1])
+    rot = _make_dataset(pts, y, seed=0, rotation="z", jitter=False, scale=False)
+    a, label = rot[1]
+    a = a.numpy()
+    assert label == 1
+    # rotation about z: z kept, xy radii kept, xy changed
+    np.testing.assert_allclose(a[:, 2], pts[1, :, 2], atol=1e-6)
+    np.testing.assert_allclose(np.hypot(a[:, 0], a[:, 1]), np.hypot(pts[1, :, 0], pts[1, :, 1]), atol=1e-6)
+    assert not np.allclose(a, pts[1])
+    jit = _make_dataset(pts, y, seed=0, rotation=None, jitter=True, scale=False)
+    d = jit[0][0].numpy() - pts[0]
+    assert 0 < np.abs(d).max() <= 0.05 + 1e-6
+    sc = _make_dataset(pts, y, seed=0, rotation=None, jitter=False, scale=True)
+    ratio = sc[0][0].numpy() / pts[0]
+    assert np.allclose(ratio, ratio[0, 0], rtol=1e-5) and 0.8 <= ratio[0, 0] <= 1.25
+    # seeded: same seed, same stream
+    again = _make_dataset(pts, y, seed=0, rotation="z", jitter=True, scale=True)
+    same = _make_dataset(pts, y, seed=0, rotation="z", jitter=True, scale=True)
+    np.testing.assert_array_equal(again[0][0].numpy(), same[0][0].numpy())
