@@ -270,7 +270,8 @@ def build_subcommands(sub):
     _add_common(p)
 
     p = sub.add_parser("predict", help="classify point cloud files with a saved model",
-                       description="Load a model saved by 'eppf train' and classify point cloud files.")
+                       description="Load a model saved by 'eppf train' and classify point cloud files. Models "
+                                   "are joblib (pickle) files: load only models you trust.")
     p.add_argument("inputs", nargs="+", help="point cloud files or folders (searched recursively)")
     p.add_argument("--model", required=True, metavar="MODEL.joblib", help="a model saved by 'eppf train'")
     p.add_argument("-o", "--output", help="write a CSV file instead of printing a table")
@@ -322,6 +323,14 @@ def _read_clouds(inputs, progress):
     if len(inputs) == 1 and str(inputs[0]).lower().endswith(".npz") and Path(inputs[0]).is_file():
         from .datasets import load_npz
 
+        try:
+            with np.load(inputs[0], allow_pickle=False) as f:
+                is_data_set = "offsets" in f.files
+        except Exception as exc:  # not a zip, pickled, truncated...
+            raise ValueError(f"cannot read {inputs[0]} as .npz: {type(exc).__name__}") from None
+        if not is_data_set:  # a single point cloud stored as .npz
+            return [np.asarray(read_point_cloud(inputs[0], normals=False), dtype=np.float64)[:, :3]], \
+                np.array([str(inputs[0])]), None, None
         bunch = load_npz(inputs[0])
         ids = bunch.ids if bunch.ids is not None else [str(i) for i in range(len(bunch.data))]
         return list(bunch.data), np.asarray(ids, dtype=str), np.asarray(bunch.target), np.asarray(bunch.target_names)

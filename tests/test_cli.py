@@ -131,6 +131,12 @@ def test_describe_folder_matches_transformer_on_the_same_files(tmp_path, capsys)
     assert main(["describe", *map(str, paths), "-o", str(tmp_path / "d.npy"), "--n-pairs", N_PAIRS,
                  "--random-state", "3", "--no-progress"]) == 0
     np.testing.assert_array_equal(np.load(tmp_path / "d.npy"), expected)
+    # one point cloud stored as .npz is read as a cloud, not as a data set
+    write_point_cloud(tmp_path / "one.npz", clouds[0])
+    assert main(["describe", str(tmp_path / "one.npz"), "-o", str(tmp_path / "one.npy"), "--n-pairs", N_PAIRS,
+                 "--random-state", "3", "--no-progress"]) == 0
+    one = EPPFTransformer(n_pairs=1000, random_state=3).fit_transform(clouds[:1])
+    np.testing.assert_array_equal(np.load(tmp_path / "one.npy"), one)
 
 
 @pytest.mark.parametrize("descriptor, name", [("esf", "ESFTransformer"), ("wahl", "WahlTransformer"),
@@ -197,7 +203,7 @@ def test_train_save_load_predict_gives_in_memory_predictions(tmp_path, capsys, c
     _write_npz(tmp_path / "tiny.npz")
     paths = _write_files(tmp_path / "files")
     argv = ["train", "--data", str(tmp_path / "tiny.npz"), "-o", str(tmp_path / "m.joblib"), "--n-pairs", N_PAIRS,
-            "--classifier", classifier, "--max-epochs", "2", "--n-jobs", "1", "--random-state", "4", "--no-progress"]
+            "--classifier", classifier, "--max-epochs", "1", "--n-jobs", "1", "--random-state", "4", "--no-progress"]
     status, out, _ = _run(argv, capsys)
     assert status == 0 and "trained" in out
     saved = joblib.load(tmp_path / "m.joblib")
@@ -309,6 +315,7 @@ def test_bench_prints_one_row_per_setting(capsys):
     (["describe", "{tmp}/nowhere", "-o", "{tmp}/d.npz"], "no such file or folder"),
     (["describe", "{tmp}/empty", "-o", "{tmp}/d.npz"], "no point cloud files"),
     (["describe", "{tmp}/bad.xyz", "-o", "{tmp}/d.npz"], "bad.xyz"),
+    (["describe", "{tmp}/bad.npz", "-o", "{tmp}/d.npz"], "cannot read"),
     (["retrieve", "--database", "{tmp}/db.npz"], "give query files or --query-descriptors"),
     (["retrieve", "--database", "{tmp}/db.npz", "--query-descriptors", "{tmp}/wrong.npy"], "bins"),
     (["retrieve", "--database", "{tmp}/missing.npz", "--query-descriptors", "{tmp}/wrong.npy"], "no such file"),
@@ -319,6 +326,7 @@ def test_bad_input_gives_one_line_error_and_status_1(tmp_path, capsys, argv, mes
     _write_files(tmp_path / "files")
     (tmp_path / "empty").mkdir()
     (tmp_path / "bad.xyz").write_text("1 2 three\n")
+    (tmp_path / "bad.npz").write_text("not a zip\n")
     _write_npz(tmp_path / "tiny.npz")
     np.savez(tmp_path / "db.npz", descriptors=np.full((3, 8), 1 / 8))
     np.save(tmp_path / "wrong.npy", np.full((2, 5), 0.2))
