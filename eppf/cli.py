@@ -445,6 +445,8 @@ def run_retrieve(args, out=None):
     if X_db.ndim != 2 or len(X_db) == 0:
         raise ValueError(f"database descriptors must be a non-empty 2D array, got shape {X_db.shape}")
     db_ids = db.get("ids", np.array([str(i) for i in range(len(X_db))]))
+    if len(db_ids) != len(X_db):
+        raise ValueError(f"{args.database} has {len(db_ids)} ids for {len(X_db)} descriptors")
     db_labels = None
     if "labels" in db and "class_names" in db:
         db_labels = np.asarray(db["class_names"])[np.asarray(db["labels"])]

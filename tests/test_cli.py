@@ -319,6 +319,7 @@ def test_bench_prints_one_row_per_setting(capsys):
     (["retrieve", "--database", "{tmp}/db.npz"], "give query files or --query-descriptors"),
     (["retrieve", "--database", "{tmp}/db.npz", "--query-descriptors", "{tmp}/wrong.npy"], "bins"),
     (["retrieve", "--database", "{tmp}/missing.npz", "--query-descriptors", "{tmp}/wrong.npy"], "no such file"),
+    (["retrieve", "--database", "{tmp}/ids.npz", "--query-descriptors", "{tmp}/wrong.npy"], "2 ids for 3"),
     (["train", "--data", "{tmp}/tiny.npz", "-o", "{tmp}/m.joblib", "--test-size", "2"], "--test-size"),
     (["evaluate", "--data", "{tmp}/tiny.npz", "--no-retrieval"], "nothing to evaluate"),
 ])
@@ -330,6 +331,7 @@ def test_bad_input_gives_one_line_error_and_status_1(tmp_path, capsys, argv, mes
     _write_npz(tmp_path / "tiny.npz")
     np.savez(tmp_path / "db.npz", descriptors=np.full((3, 8), 1 / 8))
     np.save(tmp_path / "wrong.npy", np.full((2, 5), 0.2))
+    np.savez(tmp_path / "ids.npz", descriptors=np.full((3, 5), 0.2), ids=np.array(["a", "b"]))
     argv = [a.format(tmp=tmp_path) for a in argv] + ["--no-progress"]
     status, _, err = _run(argv, capsys)
     assert status == 1
