@@ -7,7 +7,8 @@ objects (``prange``), each object with its own generator seeded from one
 
 Conventions (see ``DESIGN.md``):
 
-- f1 = |d| * scale on [0, f1_max]; bin = min(floor(n1 * f1 / f1_max), n1 - 1).
+- f1 = |d| * scale on [0, f1_max]; bin = min(floor(f1 * (n1 / f1_max)), n1 - 1)
+  (one multiplication by a precomputed bin density: no division per pair).
 - f2 = max(beta1, beta2), beta_k = arccos(n_k . d_hat) - pi/2 on [-pi/2, pi/2].
   Because arccos decreases, f2 = arccos(min(n1 . d_hat, n2 . d_hat)) - pi/2,
   and its bin is the number of inner edges e_k = cos(k pi / n2) with
@@ -68,6 +69,7 @@ cdef struct Params:
     int n1, n2, n3, n4
     int grid
     double f1_max
+    double f1_density       # n1 / f1_max
     double cos2[MAX_BINS]   # inner edges of f2 on the cosine scale, k = 1..n2-1
     double cos3[MAX_BINS]   # inner edges of f3 on the cosine scale, k = 1..n3-1
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
@@ -231,7 +233,7 @@ cdef inline int _bin_f123(const double* pts, const double* nrm, int64_t i, int64
     cdef int b1 = 0, b2 = 0, b3 = 0, k
     if prm.n1 > 1:
         v = dist * scale
-        b1 = <int>(prm.n1 * v / prm.f1_max)
+        b1 = <int>(v * prm.f1_density)
         if b1 >= prm.n1:
             b1 = prm.n1 - 1
     if prm.n2 > 1:
@@ -339,6 +341,7 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.n4 = n4
     prm.grid = grid
     prm.f1_max = f1_max
+    prm.f1_density = n1 / f1_max
     for k in range(1, n2):
         prm.cos2[k - 1] = cos(k * M_PI / n2)
     for k in range(1, n3):

@@ -63,8 +63,10 @@ def pair_bins(points, normals, i, j, scale, n_bins=(20, 4, 5, 3), grid=64):
     f1, f2, f3, occ, tot = pair_functions(points, normals, i, j, scale, grid)
     n1, n2, n3, n4 = n_bins
     b4 = np.minimum((n4 * occ) // tot, n4 - 1)  # floor(n4 * f4) on [0, 1], exactly
+    # f1 bins by the bin density n1 / F1_MAX (the same real number as n1 (v - 0) / (F1_MAX - 0))
+    b1 = np.minimum(np.floor(f1 * (n1 / F1_MAX)).astype(np.int64), n1 - 1)
     return np.stack(
-        [bin_index(f1, 0.0, F1_MAX, n1), bin_index(f2, -np.pi / 2, np.pi / 2, n2),
+        [b1, bin_index(f2, -np.pi / 2, np.pi / 2, n2),
          bin_index(f3, 0.0, np.pi / 2, n3), b4], axis=1,
     ), occ, tot
 
