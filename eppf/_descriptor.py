@@ -252,7 +252,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
 
         Returns
         -------
-        X_new : ndarray of shape (n_objects, n_features_out_)
+        X_new : ndarray of shape (n_objects, `n_features_out_`)
             Descriptors, each row non-negative and summing to 1.
         """
         check_is_fitted(self, "n_bins_")
@@ -318,12 +318,12 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
 
         Parameters
         ----------
-        X : array-like of shape (n_objects, n_features_out_) or (n_features_out_,)
+        X : array-like of shape (n_objects, `n_features_out_`) or (`n_features_out_`,)
             Descriptors made by this transformer.
 
         Returns
         -------
-        H : ndarray of shape (n_objects, *histogram_shape_) or histogram_shape_
+        H : ndarray of shape ``(n_objects, *histogram_shape_)`` or ``histogram_shape_``
             The same values, reshaped (a view when possible).
         """
         check_is_fitted(self, "n_bins_")

@@ -410,7 +410,7 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         The floor used for all histograms.
     n_features_in_ : int
         Number of bins seen in :meth:`fit`.
-    feature_names_in_ : ndarray of shape (n_features_in_,)
+    feature_names_in_ : ndarray of shape (`n_features_in_`,)
         Names of features seen in :meth:`fit`, when ``X`` has string column
         names.
     n_samples_fit_ : int

@@ -104,11 +104,11 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
     ``d = p_t - p_s``, the Darboux frame ``u = n_s``,
     ``v = d x u / |d x u|``, ``w = u x v`` gives
 
-    - alpha = atan2(w . n_t, u . n_t) on [-pi, pi],
-    - beta = v . n_t on [-1, 1],
-    - gamma = u . d / |d| on [-1, 1],
-    - delta = |d| / max |d| on [0, 1], the maximum over the object's sampled
-      pairs (scale invariance).
+    - ``alpha = atan2(w . n_t, u . n_t)`` on ``[-pi, pi]``,
+    - ``beta = v . n_t`` on ``[-1, 1]``,
+    - ``gamma = u . d / |d|`` on ``[-1, 1]``,
+    - ``delta = |d| / max |d|`` on ``[0, 1]``, the maximum over the object's
+      sampled pairs (scale invariance).
 
     Each value is binned as ``clip(floor(N (v - lo) / (hi - lo)), 0, N - 1)``.
     Pairs whose source normal is parallel to ``d`` (the frame is undefined)
