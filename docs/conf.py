@@ -25,7 +25,17 @@ extensions = [
     "sphinx.ext.mathjax",
     "sphinx.ext.intersphinx",
     "numpydoc",
+    "sphinx_gallery.gen_gallery",
 ]
+
+sphinx_gallery_conf = {
+    "examples_dirs": "../examples",
+    "gallery_dirs": "auto_examples",
+    "filename_pattern": "/plot_",
+    # ``-D plot_gallery=0`` builds the pages without running the examples
+    "plot_gallery": "True",
+    "download_all_examples": False,
+}
 
 templates_path = ["_templates"]
 exclude_patterns = ["_build", "generated/*.examples"]

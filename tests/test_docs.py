@@ -13,9 +13,11 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 def test_docs_build_without_warnings(tmp_path):
     pytest.importorskip("sphinx")
     pytest.importorskip("numpydoc")
+    pytest.importorskip("sphinx_gallery")
+    pytest.importorskip("matplotlib")
     # -E: read every source afresh; -W: warnings are errors. The dummy builder
     # reads and resolves everything (autosummary, numpydoc, cross-references)
-    # but writes no HTML, which keeps the test fast.
+    # but writes no HTML, which keeps the test fast; the gallery examples run.
     cmd = [
         sys.executable, "-m", "sphinx", "-E", "-W", "--keep-going", "-q",
         "-b", "dummy", "-d", str(tmp_path / "doctrees"), str(DOCS), str(tmp_path / "out"),
