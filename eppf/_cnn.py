@@ -327,7 +327,9 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         train_idx = np.arange(X.shape[0])
         valid_idx = None
         if self.early_stopping:
-            train_idx, valid_idx = self._split(y_enc, seed_split)
+            train_idx, valid_idx = _validation_split(
+                y_enc, len(self.classes_), self.validation_fraction, seed_split, _OWNER
+            )
 
         if self.input_scaling == "global":
             values = X[train_idx].astype(np.float64)
@@ -395,21 +397,6 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         else:
             self.best_epoch_ = self.n_epochs_
         return self
-
-    def _split(self, y_enc, seed):
-        from sklearn.model_selection import train_test_split
-
-        n = y_enc.shape[0]
-        n_classes = len(self.classes_)
-        n_valid = int(math.ceil(self.validation_fraction * n))
-        if n_valid < 1 or n - n_valid < 1:
-            raise ValueError(
-                f"{_OWNER}: validation_fraction={self.validation_fraction} of {n} objects leaves no "
-                "validation or no training objects; use more data or early_stopping=False"
-            )
-        counts = np.bincount(y_enc, minlength=n_classes)
-        stratify = y_enc if (counts.min() >= 2 and n_valid >= n_classes and n - n_valid >= n_classes) else None
-        return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)
 
     # ----------------------------------------------------------------- predict
     def predict_proba(self, X):
@@ -479,3 +466,23 @@ class _torch_threads:
         if self.n is not None:
             torch.set_num_threads(self.previous)
         return False
+
+
+def _validation_split(y_enc, n_classes, fraction, seed, owner):
+    """Indices of a seeded hold-out of the training objects for early stopping.
+
+    Stratified by class when every class can appear on both sides; shared by
+    the descriptor CNN and PointNet so both hold out data the same way.
+    """
+    from sklearn.model_selection import train_test_split
+
+    n = y_enc.shape[0]
+    n_valid = int(math.ceil(fraction * n))
+    if n_valid < 1 or n - n_valid < 1:
+        raise ValueError(
+            f"{owner}: validation_fraction={fraction} of {n} objects leaves no "
+            "validation or no training objects; use more data or early_stopping=False"
+        )
+    counts = np.bincount(y_enc, minlength=n_classes)
+    stratify = y_enc if (counts.min() >= 2 and n_valid >= n_classes and n - n_valid >= n_classes) else None
+    return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)

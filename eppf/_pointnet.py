@@ -9,7 +9,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted
 
-from ._cnn import _silent, _torch_threads
+from ._cnn import _silent, _torch_threads, _validation_split
 from ._validation import check_point_clouds, object_seeds
 
 __all__ = ["PointNetClassifier"]
@@ -457,7 +457,9 @@ class PointNetClassifier(ClassifierMixin, BaseEstimator):
         train_idx = np.arange(pts.shape[0])
         valid_idx = None
         if self.early_stopping:
-            train_idx, valid_idx = self._split(y_enc, seed_split)
+            train_idx, valid_idx = _validation_split(
+                y_enc, len(self.classes_), self.validation_fraction, seed_split, _OWNER
+            )
         if train_idx.shape[0] < 2:
             raise ValueError(f"{_OWNER}: at least 2 training objects are needed (batch norm), got {train_idx.shape[0]}")
 
@@ -513,21 +515,6 @@ class PointNetClassifier(ClassifierMixin, BaseEstimator):
         else:
             self.best_epoch_ = self.n_epochs_
         return self
-
-    def _split(self, y_enc, seed):
-        from sklearn.model_selection import train_test_split
-
-        n = y_enc.shape[0]
-        n_classes = len(self.classes_)
-        n_valid = int(math.ceil(self.validation_fraction * n))
-        if n_valid < 1 or n - n_valid < 1:
-            raise ValueError(
-                f"{_OWNER}: validation_fraction={self.validation_fraction} of {n} objects leaves no "
-                "validation or no training objects; use more data or early_stopping=False"
-            )
-        counts = np.bincount(y_enc, minlength=n_classes)
-        stratify = y_enc if (counts.min() >= 2 and n_valid >= n_classes and n - n_valid >= n_classes) else None
-        return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)
 
     # ----------------------------------------------------------------- predict
     def predict_proba(self, X):
