@@ -16,21 +16,21 @@ _CONVS = ("2d", "3d", "4d")
 _INPUT_SCALINGS = ("global", "bin", "none")
 
 
-def _check_int(name, value, low, *, allow_none=False):
+def _check_int(name, value, low, *, allow_none=False, owner=_OWNER):
     if value is None and allow_none:
         return None
     if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < low:
-        raise ValueError(f"{_OWNER}: {name} must be an int >= {low}, got {value!r}")
+        raise ValueError(f"{owner}: {name} must be an int >= {low}, got {value!r}")
     return int(value)
 
 
-def _check_float(name, value, low, high, *, low_open=True, high_open=True):
+def _check_float(name, value, low, high, *, low_open=True, high_open=True, owner=_OWNER):
     ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
     if ok:
         ok = (value > low if low_open else value >= low) and (value < high if high_open else value <= high)
     if not ok:
         lo, hi = ("(" if low_open else "["), (")" if high_open else "]")
-        raise ValueError(f"{_OWNER}: {name} must be a float in {lo}{low}, {high}{hi}, got {value!r}")
+        raise ValueError(f"{owner}: {name} must be a float in {lo}{low}, {high}{hi}, got {value!r}")
     return float(value)
 
 

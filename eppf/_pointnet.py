@@ -1,5 +1,6 @@
 """PointNetClassifier: PointNet (Qi et al. 2017) on raw point clouds, via skorch."""
 
+import functools
 import math
 import numbers
 
@@ -9,6 +10,8 @@ from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted
 
+from ._cnn import _check_float as _cnn_check_float
+from ._cnn import _check_int as _cnn_check_int
 from ._cnn import _silent, _torch_threads, _validation_split
 from ._validation import check_point_clouds, object_seeds
 
@@ -18,20 +21,9 @@ _OWNER = "PointNetClassifier"
 _ROTATIONS = ("z", None)
 
 
-def _check_int(name, value, low):
-    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < low:
-        raise ValueError(f"{_OWNER}: {name} must be an int >= {low}, got {value!r}")
-    return int(value)
-
-
-def _check_float(name, value, low, high, *, low_open=True, high_open=True):
-    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-    if ok:
-        ok = (value > low if low_open else value >= low) and (value < high if high_open else value <= high)
-    if not ok:
-        lo, hi = ("(" if low_open else "["), (")" if high_open else "]")
-        raise ValueError(f"{_OWNER}: {name} must be a float in {lo}{low}, {high}{hi}, got {value!r}")
-    return float(value)
+# The descriptor CNN's parameter checks, with this estimator's name in their messages.
+_check_int = functools.partial(_cnn_check_int, owner=_OWNER)
+_check_float = functools.partial(_cnn_check_float, owner=_OWNER)
 
 
 def _check_bool(name, value):
