@@ -50,6 +50,17 @@ vertices : ndarray of shape (n_vertices, 3), dtype float64
     Vertex coordinates.
 faces : ndarray of shape (n_faces, 3), dtype int64
     Vertex indices of each triangle.
+
+Examples
+--------
+>>> import numpy as np
+>>> from eppf.io import Mesh, read_mesh, write_mesh
+>>> square = Mesh(np.array([[0., 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+...               np.array([[0, 1, 2], [0, 2, 3]]))
+>>> write_mesh("square.off", *square)
+>>> mesh = read_mesh("square.off")
+>>> mesh.vertices.shape, mesh.faces.tolist()
+((4, 3), [[0, 1, 2], [0, 2, 3]])
 """
 
 _CLOUD_FORMATS = {

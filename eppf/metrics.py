@@ -218,6 +218,16 @@ class RepeatedRetrievalResult:
         Mean of each metric over the draws.
     std : dict of str to float
         Standard deviation of each metric over the draws (``ddof=0``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.metrics import RepeatedRetrievalResult
+    >>> result = RepeatedRetrievalResult(
+    ...     per_repeat={"total_accuracy": np.array([0.8, 0.9])}, seeds=np.array([0, 1]))
+    >>> mean, std = result["total_accuracy"]
+    >>> round(mean, 2), round(std, 2)
+    (0.85, 0.05)
     """
 
     per_repeat: dict

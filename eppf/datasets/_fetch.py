@@ -63,6 +63,17 @@ def clear_data_home(data_home=None):
     ----------
     data_home : str or path-like, default=None
         The folder; see :func:`get_data_home`.
+
+    Examples
+    --------
+    >>> import os
+    >>> from eppf.datasets import clear_data_home, get_data_home
+    >>> home = get_data_home("my_eppf_data")
+    >>> os.path.isdir(home)
+    True
+    >>> clear_data_home(home)
+    >>> os.path.isdir(home)
+    False
     """
     shutil.rmtree(get_data_home(data_home))
 
@@ -264,6 +275,21 @@ def fetch_modelnet(version=40, *, data_home=None, url=None, sha256=None, downloa
     -------
     data : :class:`~sklearn.utils.Bunch` or tuple
         What :func:`load_modelnet` returns.
+
+    Examples
+    --------
+    The first call downloads the archive (ModelNet10: about 450 MB); later
+    calls load the extracted folder:
+
+    >>> from eppf.datasets import fetch_modelnet
+    >>> train = fetch_modelnet(10, subset="train", n_points=1024)  # doctest: +SKIP
+
+    Offline, ``download_if_missing=False`` fails with a clear error instead:
+
+    >>> fetch_modelnet(10, data_home="empty_home", download_if_missing=False)
+    Traceback (most recent call last):
+    ...
+    OSError: fetch_file: '...ModelNet10.zip' is missing and download_if_missing=False
     """
     owner = "fetch_modelnet"
     if version not in (10, 40) or isinstance(version, bool):

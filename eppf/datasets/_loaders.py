@@ -505,6 +505,23 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
         ``filenames``, ``skipped``.
     (data, target) : tuple
         If ``return_X_y`` is True.
+
+    Examples
+    --------
+    A folder in the ``<split>/<class>/<object>`` layout, written here from
+    two built-in shapes per class:
+
+    >>> import os
+    >>> from eppf.datasets import load_scannet_objects, make_shapes
+    >>> from eppf.io import write_point_cloud
+    >>> clouds, y = make_shapes(2, n_points=200, classes=["box", "sphere"], return_X_y=True)
+    >>> for k, (cloud, label) in enumerate(zip(clouds, y)):
+    ...     folder = os.path.join("scans", ("train", "test")[k % 2], ("cabinet", "basket")[label])
+    ...     os.makedirs(folder, exist_ok=True)
+    ...     write_point_cloud(os.path.join(folder, f"obj{k}.xyz"), cloud)
+    >>> train = load_scannet_objects("scans", subset="train")
+    >>> len(train.data), train.data[0].shape, set(train.split.tolist())
+    (2, (200, 3), {'train'})
     """
     owner = "load_scannet_objects"
     root = _check_dir(path, owner)
@@ -610,6 +627,24 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
         ``ids`` (``Area_1/office_1/chair_3``), ``filenames``, ``skipped``.
     (data, target) : tuple
         If ``return_X_y`` is True.
+
+    Examples
+    --------
+    One room whose annotation files (``x y z r g b`` rows) hold two chairs
+    and two tables, written here from built-in shapes:
+
+    >>> import os
+    >>> import numpy as np
+    >>> from eppf.datasets import load_s3dis_objects, make_shapes
+    >>> clouds, y = make_shapes(2, n_points=200, classes=["box", "sphere"], return_X_y=True)
+    >>> folder = os.path.join("s3dis", "Area_1", "office_1", "Annotations")
+    >>> os.makedirs(folder)
+    >>> for k, (cloud, label) in enumerate(zip(clouds, y)):
+    ...     rows = np.hstack([cloud, np.full((len(cloud), 3), 128.0)])
+    ...     np.savetxt(os.path.join(folder, f"{('chair', 'table')[label]}_{k}.txt"), rows)
+    >>> data = load_s3dis_objects("s3dis", train_size=0.5)
+    >>> len(data.data), sorted(set(data.split.tolist())), str(data.ids[0])
+    (4, ['test', 'train'], 'Area_1/office_1/chair_0')
     """
     owner = "load_s3dis_objects"
     root = _check_dir(path, owner)

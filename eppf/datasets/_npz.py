@@ -40,6 +40,21 @@ def load_npz(path, *, return_X_y=False):
         If the file does not exist.
     ValueError
         If the file is not a readable ``.npz`` or its arrays are inconsistent.
+
+    Examples
+    --------
+    Two objects of 3 and 2 points, one per class:
+
+    >>> import numpy as np
+    >>> from eppf.datasets import load_npz
+    >>> points = np.arange(15, dtype=float).reshape(5, 3)
+    >>> np.savez("two.npz", points=points, offsets=[0, 3, 5], labels=[1, 0],
+    ...          class_names=["chair", "table"], split=["train", "test"])
+    >>> data = load_npz("two.npz")
+    >>> [cloud.shape for cloud in data.data]
+    [(3, 3), (2, 3)]
+    >>> data.target_names[data.target].tolist(), data.split.tolist()
+    (['table', 'chair'], ['train', 'test'])
     """
     path = os.fspath(path)
     if not os.path.exists(path):
