@@ -64,9 +64,10 @@ def _add_run_arguments(parser, defaults_only=False):
     def h(text):
         return kw.get("help", text)
 
-    parser.add_argument("--data", metavar="FILE.npz", default=None,
-                        help=h("a .npz of point clouds (points, offsets, labels, class_names[, split]); "
-                               "default: the built-in synthetic shapes"))
+    parser.add_argument("--data", metavar="FILE.npz|FOLDER", default=None,
+                        help=h("a .npz of point clouds (points, offsets, labels, class_names[, split]) or a "
+                               "folder with one subfolder of files per class; default: the built-in "
+                               "synthetic shapes"))
     parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,
                         help=h("descriptor scaling (default: 'fit', the paper's data-set scale; use 'object' "
                                "for data in mixed units such as raw CAD files)"))
@@ -93,9 +94,7 @@ def _load(args):
         bunch = make_shapes(random_state=args.random_state)
         name = "built-in synthetic shapes"
     else:
-        from .datasets import load_npz
-
-        bunch = load_npz(args.data)
+        bunch = _load_labelled(args.data)
         name = args.data
     y = np.asarray(bunch.target)
     split = getattr(bunch, "split", None)
@@ -219,8 +218,10 @@ def _add_common(parser, n_pairs=True, scaling=True):
 
 def _add_data_source(parser):
     group = parser.add_mutually_exclusive_group(required=True)
-    group.add_argument("--data", metavar="FILE.npz",
-                       help="a .npz data set (points, offsets, labels, class_names[, split][, ids])")
+    group.add_argument("--data", metavar="FILE.npz|FOLDER",
+                       help="a .npz data set (points, offsets, labels, class_names[, split][, ids]) or a folder "
+                            "with one subfolder of point cloud or mesh files per class (optionally inside "
+                            "train/ and test/)")
     group.add_argument("--built-in", action="store_true", help="the built-in synthetic shapes")
 
 
@@ -298,6 +299,12 @@ def build_subcommands(sub):
     p.add_argument("--n-jobs", type=_n_jobs, nargs="+", default=[-1], help="thread counts to time")
     p.add_argument("--random-state", type=int, default=0, help="seed of everything random")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+    p = sub.add_parser("experiment", add_help=False,
+                       help="the paper's experiments (retrieval, classification, ablation, noise, runtime): "
+                            "table, CSV and plot; 'eppf experiment --help' for their options",
+                       description="Forwarded to python -m eppf.experiments.")
+    p.add_argument("experiment_args", nargs=argparse.REMAINDER)
 
 
 def _find_files(inputs):
@@ -499,6 +506,15 @@ def _emit(rows, header, output, out):
         print(" | ".join(v.ljust(w) for v, w in zip(c, widths)), file=out)
 
 
+def _load_labelled(path):
+    """A labelled data set from a .npz file or a folder of class subfolders."""
+    from .datasets import load_folder, load_npz
+
+    if Path(path).is_dir():
+        return load_folder(path)
+    return load_npz(path)
+
+
 def _load_data(args):
     """(name, clouds, y, class_names, split or None, ids) of --data or --built-in."""
     if args.built_in:
@@ -507,9 +523,7 @@ def _load_data(args):
         bunch = make_shapes(random_state=args.random_state)
         name = "built-in synthetic shapes"
     else:
-        from .datasets import load_npz
-
-        bunch = load_npz(args.data)
+        bunch = _load_labelled(args.data)
         name = args.data
     split = getattr(bunch, "split", None)
     ids = getattr(bunch, "ids", None)
@@ -799,6 +813,12 @@ def main(argv=None):
     status : int
         0 on success, 1 on bad input (with a one-line message on stderr).
     """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["experiment"]:
+        # The experiments have their own parser (and their own --help).
+        from eppf.experiments import main as run_experiment
+
+        return run_experiment(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

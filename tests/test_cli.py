@@ -337,3 +337,34 @@ def test_bad_input_gives_one_line_error_and_status_1(tmp_path, capsys, argv, mes
     assert status == 1
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("eppf: error:") and message in lines[0], err
+
+
+def test_train_on_a_folder_of_class_subfolders(tmp_path, capsys):
+    """Own files, one subfolder per class: train from the folder, predict new files."""
+    rng = np.random.default_rng(5)
+    for split, n in (("train", 4), ("test", 2)):
+        for name, scale in (("blob", [1.0, 1.0, 1.0]), ("stick", [2.0, 0.3, 0.3])):
+            os.makedirs(tmp_path / "objects" / split / name)
+            for i in range(n):
+                write_point_cloud(tmp_path / "objects" / split / name / f"{i}.ply", rng.normal(size=(90, 3)) * scale)
+    status, out, _ = _run(["train", "--data", tmp_path / "objects", "-o", tmp_path / "m.joblib", "--n-pairs",
+                           N_PAIRS, "--no-progress"], capsys)
+    assert status == 0 and "on 8 objects" in out
+    saved = joblib.load(tmp_path / "m.joblib")
+    assert saved["classes"] == ["blob", "stick"]
+    status, _, _ = _run(["predict", tmp_path / "objects" / "test", "--model", tmp_path / "m.joblib",
+                         "-o", tmp_path / "p.csv", "--no-progress"], capsys)
+    assert status == 0
+    rows = _read_csv(tmp_path / "p.csv")
+    assert [r["class"] for r in rows] == [os.path.basename(os.path.dirname(r["file"])) for r in rows]
+
+
+def test_experiment_subcommand_forwards_to_the_experiments(capsys):
+    pytest.importorskip("matplotlib")
+    from eppf.experiments import main as experiments_main
+
+    status = main(["experiment", "no-such-experiment"])
+    err = capsys.readouterr().err
+    assert status != 0
+    assert experiments_main(["no-such-experiment"]) == status
+    assert "no-such-experiment" in err

@@ -5,6 +5,7 @@ from ._synthetic import make_shapes
 from ._loaders import load_modelnet, load_s3dis_objects, load_scannet_objects
 from ._fetch import clear_data_home, fetch_file, fetch_modelnet, get_data_home
 from ._cache import CachedTransformer
+from ._folder import load_folder
 
 __all__ = [
     "CachedTransformer",
@@ -12,6 +13,7 @@ __all__ = [
     "fetch_file",
     "fetch_modelnet",
     "get_data_home",
+    "load_folder",
     "load_modelnet",
     "load_npz",
     "load_s3dis_objects",

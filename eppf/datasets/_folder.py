@@ -1,0 +1,185 @@
+"""A labelled data set from a folder of point cloud or mesh files, one
+subfolder per class: the layout most users already have for their own scans."""
+
+import glob
+import os
+
+import numpy as np
+from sklearn.utils import Bunch
+
+from .._sampling import object_rng, sample_mesh
+from ..io import read_mesh
+from ._loaders import _CLOUD_EXT, _MESH_EXT, _check_choice, _check_dir, _check_n_points, _file_seeds, \
+    _from_cloud_file, _load_all
+
+__all__ = ["load_folder"]
+
+_EXTENSIONS = _MESH_EXT + _CLOUD_EXT + (".ply",)
+_SPLITS = ("train", "test")
+MESH_POINTS = 2048
+
+
+def _object_files(folder):
+    """Object files under ``folder``, searched recursively, in sorted order."""
+    found = []
+    for dirpath, dirnames, filenames in os.walk(folder):
+        dirnames.sort()
+        found += [os.path.join(dirpath, f) for f in sorted(filenames)
+                  if os.path.splitext(f)[1].lower() in _EXTENSIONS and not f.startswith(".")]
+    return sorted(found)
+
+
+def _read_object(filename, n_points, normals, seed):
+    """One object: meshes sampled (``n_points`` or 2,048 points), point files read."""
+    ext = os.path.splitext(filename)[1].lower()
+    if ext in _MESH_EXT or ext == ".ply":
+        mesh = read_mesh(filename)
+        if mesh.faces.shape[0]:
+            return sample_mesh(mesh.vertices, mesh.faces, n_points=n_points or MESH_POINTS,
+                               return_normals=normals is not False, random_state=object_rng(seed))
+        if ext != ".ply":
+            raise ValueError(f"{filename!r} has no faces")
+    return _from_cloud_file(filename, n_points, normals, seed)
+
+
+def _subfolders(folder):
+    return sorted(d for d in glob.glob(os.path.join(folder, "*")) if os.path.isdir(d)
+                  and not os.path.basename(d).startswith("."))
+
+
+def load_folder(path, *, classes=None, subset="all", n_points=None, normals="auto", on_error="raise",
+                n_jobs=None, random_state=0, return_X_y=False):
+    """Load a labelled data set from a folder with one subfolder per class.
+
+    Three layouts are recognised, the class of an object being the name of
+    its class folder:
+
+    - ``<class>/<object file>`` (files may sit in deeper subfolders): no split;
+    - ``train/<class>/<object file>`` and ``test/<class>/<object file>``;
+    - ``<class>/train/<object file>`` and ``<class>/test/<object file>``.
+
+    Point files (PLY without faces, PCD, XYZ, TXT, CSV, PTS, NPY, NPZ) are read
+    as they are; meshes (OFF, OBJ, PLY with faces) are sampled
+    area-uniformly. Hidden files and other extensions are ignored.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The folder.
+    classes : sequence of str, default=None
+        Class folders to keep, in the order of ``target_names``; None keeps
+        every class folder, sorted by name.
+    subset : {"all", "train", "test"}, default="all"
+        Which part of the split to load; only "all" for a folder without a
+        split.
+    n_points : int, default=None
+        If given, every object is resampled (point files) or sampled (meshes)
+        to this many points. If None, point files are kept as they are and
+        meshes are sampled with 2,048 points.
+    normals : {"auto", True, False}, default="auto"
+        Whether to return normals (columns 3 to 5) when the files have them
+        (face normals for meshes).
+    on_error : {"raise", "skip"}, default="raise"
+        Stop at an unreadable file, or skip it with a warning.
+    n_jobs : int, default=None
+        Files read in parallel through joblib.
+    random_state : int, RandomState instance or None, default=0
+        Seed of sampling; one seed per file, from its path relative to
+        ``path``, so an object is the same cloud in every call.
+    return_X_y : bool, default=False
+        Return ``(data, target)`` instead of a Bunch.
+
+    Returns
+    -------
+    data : :class:`~sklearn.utils.Bunch`
+        ``data`` (list of float64 arrays), ``target``, ``target_names``,
+        ``split`` (None without a split), ``ids`` (paths relative to
+        ``path`` without the extension), ``filenames``, ``skipped``.
+    (data, target) : tuple
+        If ``return_X_y`` is True.
+
+    Raises
+    ------
+    ValueError
+        If the folder holds no class folders or no object files of the
+        requested classes, if a requested class has no folder, or if a file
+        cannot be read and ``on_error="raise"``.
+
+    Examples
+    --------
+    >>> import os
+    >>> from eppf.datasets import load_folder, make_shapes
+    >>> from eppf.io import write_point_cloud
+    >>> clouds, y = make_shapes(2, n_points=300, classes=["box", "sphere"], return_X_y=True)
+    >>> for k, (cloud, label) in enumerate(zip(clouds, y)):
+    ...     os.makedirs(os.path.join("my_objects", ("crate", "ball")[label]), exist_ok=True)
+    ...     write_point_cloud(os.path.join("my_objects", ("crate", "ball")[label], f"scan{k}.ply"), cloud)
+    >>> data = load_folder("my_objects")
+    >>> data.target_names.tolist(), data.target.tolist(), data.data[0].shape
+    (['ball', 'crate'], [0, 0, 1, 1], (300, 3))
+    """
+    owner = "load_folder"
+    root = _check_dir(path, owner)
+    _check_choice(subset, "subset", ("all", "train", "test"), owner)
+    _check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    _check_choice(normals, "normals", ("auto", True, False), owner)
+    n_points = _check_n_points(n_points, owner)
+    if classes is not None and (isinstance(classes, str) or len(classes) == 0):
+        raise ValueError(f"{owner}: classes must be None or a non-empty sequence of class names, got {classes!r}")
+
+    entries = []  # (file, class, split)
+    if any(os.path.isdir(os.path.join(root, s)) for s in _SPLITS):
+        has_split = True
+        for s in _SPLITS:
+            for cls_dir in _subfolders(os.path.join(root, s)):
+                entries += [(f, os.path.basename(cls_dir), s) for f in _object_files(cls_dir)]
+    else:
+        class_dirs = _subfolders(root)
+        has_split = any(os.path.isdir(os.path.join(d, s)) for d in class_dirs for s in _SPLITS)
+        for d in class_dirs:
+            if has_split:
+                for s in _SPLITS:
+                    entries += [(f, os.path.basename(d), s) for f in _object_files(os.path.join(d, s))]
+            else:
+                entries += [(f, os.path.basename(d), "") for f in _object_files(d)]
+    found = sorted({e[1] for e in entries})
+    if not found:
+        raise ValueError(f"{owner}: {root!r} holds no class folders with object files "
+                         f"({', '.join(_EXTENSIONS)}); expected <class>/<file>, train|test/<class>/<file> "
+                         "or <class>/train|test/<file>")
+    if classes is None:
+        names = found
+    else:
+        names = [str(c) for c in classes]
+        absent = [c for c in names if c not in found]
+        if absent:
+            raise ValueError(f"{owner}: no object files for the classes {absent} under {root!r}; "
+                             f"its class folders are {found}")
+    if not has_split and subset != "all":
+        raise ValueError(f"{owner}: {root!r} has no train/test split, so subset must be 'all', got {subset!r}")
+    index = {n: k for k, n in enumerate(names)}
+    entries = [e for e in entries if e[1] in index and (subset == "all" or e[2] == subset)]
+    if not entries:
+        raise ValueError(f"{owner}: {root!r} holds no object files for subset={subset!r}")
+
+    files = [e[0] for e in entries]
+    seeds = _file_seeds(random_state, root, files)
+    jobs = [(f, _read_object, (f, n_points, normals, seed)) for f, seed in zip(files, seeds)]
+    clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
+    keep = [k for k, c in enumerate(clouds) if c is not None]
+    if not keep:
+        raise ValueError(f"{owner}: no object could be loaded ({len(skipped)} files skipped)")
+    data = [np.asarray(clouds[k], dtype=np.float64) for k in keep]
+    target = np.asarray([index[entries[k][1]] for k in keep], dtype=np.int64)
+    if return_X_y:
+        return data, target
+    ids = [os.path.splitext(os.path.relpath(files[k], root))[0].replace(os.sep, "/") for k in keep]
+    return Bunch(
+        data=data,
+        target=target,
+        target_names=np.asarray(names, dtype=str),
+        split=np.asarray([entries[k][2] for k in keep], dtype=str) if has_split else None,
+        ids=np.asarray(ids, dtype=str),
+        filenames=np.asarray([files[k] for k in keep], dtype=str),
+        skipped=skipped,
+    )

@@ -1,0 +1,110 @@
+"""load_folder: a labelled data set from one subfolder per class."""
+
+import os
+import re
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from eppf.datasets import load_folder
+from eppf.io import read_point_cloud, write_mesh, write_point_cloud
+
+RNG = np.random.default_rng(0)
+CLOUDS = {name: [RNG.normal(size=(50 + 10 * k, 3)) for k in range(3)] for name in ("mug", "box")}
+
+
+def _write_flat(root, ext=".xyz"):
+    for name, clouds in CLOUDS.items():
+        os.makedirs(root / name / "deeper", exist_ok=True)
+        for k, cloud in enumerate(clouds):
+            sub = "deeper" if k == 2 else ""
+            write_point_cloud(root / name / sub / f"o{k}{ext}", cloud)
+
+
+def test_flat_layout_reads_files_as_they_are(tmp_path):
+    _write_flat(tmp_path)
+    (tmp_path / "box" / "notes.md").write_text("not an object")
+    (tmp_path / "box" / ".hidden.xyz").write_text("1 2 3\n")
+    data = load_folder(tmp_path)
+    assert data.target_names.tolist() == ["box", "mug"]
+    assert data.split is None
+    assert data.ids.tolist() == ["box/deeper/o2", "box/o0", "box/o1", "mug/deeper/o2", "mug/o0", "mug/o1"]
+    assert data.target.tolist() == [0, 0, 0, 1, 1, 1]
+    for cloud, ident in zip(data.data, data.ids):
+        name, k = ident.split("/")[0], int(ident[-1])
+        assert_array_equal(cloud, read_point_cloud(tmp_path / f"{ident}.xyz"))
+        np.testing.assert_allclose(cloud, CLOUDS[name][k], rtol=1e-6)
+
+
+@pytest.mark.parametrize("layout", ["split_first", "class_first"])
+def test_split_layouts(tmp_path, layout):
+    for name, clouds in CLOUDS.items():
+        for k, cloud in enumerate(clouds):
+            split = "test" if k == 0 else "train"
+            folder = tmp_path / (f"{split}/{name}" if layout == "split_first" else f"{name}/{split}")
+            os.makedirs(folder, exist_ok=True)
+            write_point_cloud(folder / f"o{k}.pcd", cloud)
+    data = load_folder(tmp_path)
+    assert sorted(data.split.tolist()) == ["test"] * 2 + ["train"] * 4
+    test = load_folder(tmp_path, subset="test")
+    assert len(test.data) == 2 and set(test.split.tolist()) == {"test"}
+    assert test.target_names.tolist() == ["box", "mug"]
+
+
+def test_classes_select_and_order(tmp_path):
+    _write_flat(tmp_path)
+    data = load_folder(tmp_path, classes=["mug", "box"])
+    assert data.target_names.tolist() == ["mug", "box"]
+    assert data.target.tolist() == [1, 1, 1, 0, 0, 0]
+    X, y = load_folder(tmp_path, classes=["mug"], return_X_y=True)
+    assert len(X) == 3 and set(y.tolist()) == {0}
+
+
+def test_meshes_are_sampled_deterministically(tmp_path):
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    faces = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+    for name in ("a", "b"):
+        os.makedirs(tmp_path / name)
+        write_mesh(tmp_path / name / "tet.off", vertices, faces)
+        write_mesh(tmp_path / name / "tet.ply", vertices, faces)
+    data = load_folder(tmp_path)
+    assert [c.shape for c in data.data] == [(2048, 6)] * 4
+    for cloud in data.data:  # on the tetrahedron's surface: x, y, z >= 0, x + y + z <= 1
+        assert cloud[:, :3].min() >= -1e-12 and cloud[:, :3].sum(axis=1).max() <= 1 + 1e-9
+    again = load_folder(tmp_path, n_points=100, normals=False)
+    assert [c.shape for c in again.data] == [(100, 3)] * 4
+    assert_array_equal(again.data[0], load_folder(tmp_path, n_points=100, normals=False).data[0])
+    assert not np.array_equal(again.data[0], load_folder(tmp_path, n_points=100, normals=False,
+                                                        random_state=1).data[0])
+
+
+def test_bad_file_raise_and_skip(tmp_path):
+    _write_flat(tmp_path)
+    (tmp_path / "mug" / "broken.xyz").write_text("1 2\n3 4 5 6\n")
+    with pytest.raises(ValueError, match="load_folder: could not read .*broken.xyz"):
+        load_folder(tmp_path)
+    with pytest.warns(UserWarning, match="skipped 1 of 7 files"):
+        data = load_folder(tmp_path, on_error="skip")
+    assert len(data.data) == 6 and len(data.skipped) == 1
+
+
+@pytest.mark.parametrize("kwargs, msg", [
+    (dict(classes=["cat"]), "load_folder: no object files for the classes ['cat']"),
+    (dict(classes="mug"), "load_folder: classes must be None or a non-empty sequence"),
+    (dict(subset="train"), "load_folder: "),
+    (dict(subset="val"), "subset"),
+    (dict(n_points=0), "n_points"),
+    (dict(on_error="ignore"), "on_error"),
+])
+def test_parameter_errors(tmp_path, kwargs, msg):
+    _write_flat(tmp_path)
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        load_folder(tmp_path, **kwargs)
+
+
+def test_empty_or_missing_folder(tmp_path):
+    with pytest.raises(ValueError, match=re.escape("load_folder: ") + ".*holds no class folders"):
+        load_folder(tmp_path)
+    with pytest.raises((ValueError, FileNotFoundError), match="load_folder"):
+        load_folder(tmp_path / "absent")
