@@ -1,0 +1,564 @@
+"""Shared pieces of the experiments: data, descriptor cache, seeds, reports."""
+
+import csv
+import hashlib
+import io
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.utils import check_random_state
+
+__all__ = [
+    "Dataset",
+    "DescriptorCache",
+    "ExperimentError",
+    "Logger",
+    "draw_seeds",
+    "load_data",
+    "machine_info",
+    "write_report",
+]
+
+#: Parameters that change speed or chattiness, never the descriptor.
+_NEUTRAL = ("n_jobs", "verbose", "chunk_size", "batch_size")
+
+
+class ExperimentError(ValueError):
+    """A bad argument or input of an experiment (reported as one line)."""
+
+
+# ------------------------------------------------------------------ logging
+class Logger:
+    """Print progress lines with the time since the experiment started.
+
+    Parameters
+    ----------
+    name : str
+        Prefix of every line (the experiment's name).
+    verbose : bool, default=True
+        Whether to print at all.
+    """
+
+    def __init__(self, name, verbose=True):
+        self.name = name
+        self.verbose = verbose
+        self.start = time.perf_counter()
+
+    def __call__(self, msg):
+        """Print ``msg`` with the elapsed time."""
+        if self.verbose:
+            print(f"[{self.name} {time.perf_counter() - self.start:7.1f}s] {msg}", flush=True)
+
+    def elapsed(self):
+        """Seconds since the logger was made."""
+        return time.perf_counter() - self.start
+
+
+# --------------------------------------------------------------------- data
+@dataclass
+class Dataset:
+    """Point clouds of one data set, ready for the experiments.
+
+    Attributes
+    ----------
+    name : str
+        Short name (``"builtin"`` or the file's stem); names output folders.
+    source : str
+        Where the data came from, with the settings that made it.
+    clouds : list of ndarray of shape (n_i, 3)
+        Coordinates only (float64); normals are always estimated.
+    y : ndarray of shape (n_objects,)
+        Integer labels.
+    target_names : ndarray of shape (n_classes,)
+        Class names.
+    split : ndarray of shape (n_objects,)
+        ``"train"`` or ``"test"``.
+    split_source : str
+        How the split was made.
+    default_scaling : str
+        EPPF ``scaling`` used when the experiment is given ``scaling="auto"``.
+    """
+
+    name: str
+    source: str
+    clouds: list
+    y: np.ndarray
+    target_names: np.ndarray
+    split: np.ndarray
+    split_source: str
+    default_scaling: str
+    _hashes: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def train(self):
+        """Indices of the training objects."""
+        return np.flatnonzero(self.split == "train")
+
+    @property
+    def test(self):
+        """Indices of the test objects."""
+        return np.flatnonzero(self.split == "test")
+
+    def summary(self):
+        """Markdown lines describing the data set."""
+        sizes = np.array([len(c) for c in self.clouds])
+        counts = np.bincount(self.y, minlength=len(self.target_names))
+        per_class = ", ".join(f"{n} {c}" for n, c in zip(self.target_names, counts))
+        return [
+            f"- data: {self.source}",
+            f"- objects: {len(self.clouds)} ({self.train.size} train / {self.test.size} test; split: {self.split_source})",
+            f"- classes ({len(self.target_names)}): {per_class}",
+            f"- points per object: median {int(np.median(sizes))}, min {sizes.min()}, max {sizes.max()}",
+        ]
+
+
+def _stratified_split(y, test_size, random_state):
+    from sklearn.model_selection import train_test_split
+
+    idx = np.arange(y.size)
+    _, test = train_test_split(idx, test_size=test_size, stratify=y, random_state=random_state)
+    split = np.full(y.size, "train", dtype="<U5")
+    split[test] = "test"
+    return split
+
+
+def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=None):
+    """Load the data set named by ``spec``.
+
+    Parameters
+    ----------
+    spec : str or path-like
+        ``"builtin"``: :func:`eppf.datasets.make_shapes` (ten synthetic
+        classes, its own stratified split); otherwise a ``.npz`` file in the
+        flat layout read by :func:`eppf.datasets.load_npz` (its ``split`` is
+        used; a file without one gets a seeded stratified 70/30 split).
+    quick : bool, default=False
+        Smaller built-in set (6 objects per class, 256 points).
+    random_state : int, default=0
+        Seed of the built-in set and of a missing split.
+    n_per_class, n_points : int, default=None
+        Size of the built-in set (defaults: 40 and 1024, or 6 and 256 with
+        ``quick``).
+
+    Returns
+    -------
+    data : Dataset
+        The clouds (xyz only), labels and split.
+    """
+    spec = os.fspath(spec)
+    if spec == "builtin":
+        from ..datasets import make_shapes
+
+        n_per_class = n_per_class or (6 if quick else 40)
+        n_points = n_points or (256 if quick else 1024)
+        b = make_shapes(n_per_class, n_points=n_points, random_state=random_state)
+        source = f"built-in synthetic shapes (make_shapes({n_per_class}, n_points={n_points}, random_state={random_state}))"
+        return Dataset(
+            name="builtin",
+            source=source,
+            clouds=[np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data],
+            y=np.asarray(b.target, dtype=np.int64),
+            target_names=np.asarray(b.target_names).astype(str),
+            split=np.asarray(b.split).astype(str),
+            split_source="make_shapes' stratified split (test_size=0.25)",
+            default_scaling="fit",
+        )
+    if os.path.isdir(spec):
+        raise ExperimentError(
+            f"--data {spec!r} is a folder; pass 'builtin' or a .npz file (convert a folder with "
+            "eppf.datasets.load_modelnet and save it in the .npz layout)"
+        )
+    if not os.path.exists(spec):
+        raise ExperimentError(f"--data: no such file: {spec!r}")
+    from ..datasets import load_npz
+
+    try:
+        b = load_npz(spec)
+    except (ValueError, OSError) as exc:
+        raise ExperimentError(str(exc)) from None
+    y = np.asarray(b.target, dtype=np.int64)
+    if b.split is not None:
+        split = np.asarray(b.split).astype(str)
+        bad = sorted(set(split) - {"train", "test"})
+        if bad:
+            raise ExperimentError(f"--data {spec!r}: split holds values other than 'train'/'test': {bad}")
+        split_source = "the file's split"
+    else:
+        split = _stratified_split(y, 0.3, random_state)
+        split_source = f"seeded stratified 70/30 split (random_state={random_state})"
+    clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
+    name = os.path.splitext(os.path.basename(spec))[0]
+    return Dataset(
+        name=name,
+        source=f"`{os.path.abspath(spec)}`",
+        clouds=clouds,
+        y=y,
+        target_names=np.asarray(b.target_names).astype(str),
+        split=split,
+        split_source=split_source,
+        default_scaling="object",
+    )
+
+
+def subsample_train(data, per_class, random_state):
+    """Indices of at most ``per_class`` training objects of every class (seeded)."""
+    train = data.train
+    if per_class is None:
+        return train
+    rng = check_random_state(random_state)
+    keep = []
+    for label in np.unique(data.y[train]):
+        members = train[data.y[train] == label]
+        if members.size > per_class:
+            members = np.sort(rng.choice(members, per_class, replace=False))
+        keep.append(members)
+    return np.sort(np.concatenate(keep))
+
+
+def draw_seeds(random_state, n):
+    """The ``n`` descriptor seeds of an experiment (as :func:`eppf.metrics.repeated_retrieval` draws them)."""
+    rng = check_random_state(random_state)
+    return [int(s) for s in rng.randint(np.iinfo(np.int32).max, size=n)]
+
+
+# -------------------------------------------------------------------- cache
+def clouds_hash(clouds):
+    """A digest of a list of clouds (shapes and values)."""
+    h = hashlib.blake2b(digest_size=16)
+    h.update(str(len(clouds)).encode())
+    for c in clouds:
+        c = np.ascontiguousarray(c, dtype=np.float64)
+        h.update(str(c.shape).encode())
+        h.update(c.data)
+    return h.hexdigest()
+
+
+def _params_key(est):
+    params = est.get_params(deep=False)
+    items = sorted((k, repr(v)) for k, v in params.items() if k not in _NEUTRAL)
+    return f"{type(est).__module__}.{type(est).__qualname__}{items}"
+
+
+class DescriptorCache:
+    """Descriptors on disk, keyed by transformer parameters and input clouds.
+
+    Parameters
+    ----------
+    folder : str or None
+        Where ``.npz`` files go; None disables caching.
+    log : callable, default=None
+        Receives one line per hit or computation.
+
+    Attributes
+    ----------
+    n_computed : int
+        Descriptor sets computed (cache misses) so far.
+    n_loaded : int
+        Descriptor sets read from the cache so far.
+    """
+
+    def __init__(self, folder, log=None):
+        self.folder = folder
+        self.log = log or (lambda msg: None)
+        self.n_computed = 0
+        self.n_loaded = 0
+        self.seconds = 0.0
+        if folder is not None:
+            os.makedirs(folder, exist_ok=True)
+
+    def describe(self, est, fit_clouds, sets, label):
+        """Fit ``est`` on ``fit_clouds`` and transform every set of clouds.
+
+        Parameters
+        ----------
+        est : transformer
+            Unfitted descriptor transformer (its ``random_state`` fixed).
+        fit_clouds : list of ndarray
+            Clouds passed to ``fit``.
+        sets : dict of str to list of ndarray
+            Clouds to transform, by name.
+        label : str
+            Name in progress lines and in the cache file name.
+
+        Returns
+        -------
+        descriptors : dict of str to ndarray
+            One descriptor matrix per set.
+        """
+        key_parts = [_params_key(est), clouds_hash(fit_clouds)]
+        key_parts += [f"{k}:{clouds_hash(v)}" for k, v in sorted(sets.items())]
+        key = hashlib.blake2b("|".join(key_parts).encode(), digest_size=12).hexdigest()
+        # the file name depends on what was computed only, so experiments share files
+        path = None if self.folder is None else os.path.join(self.folder, f"{type(est).__name__}-{key}.npz")
+        if path is not None and os.path.exists(path):
+            try:
+                with np.load(path, allow_pickle=False) as f:
+                    out = {k: f[k] for k in sets}
+                self.n_loaded += 1
+                self.log(f"{label}: descriptors from cache {os.path.basename(path)}")
+                return out
+            except (OSError, KeyError, ValueError):
+                self.log(f"{label}: unreadable cache file {path}, recomputing")
+        t = time.perf_counter()
+        est.fit(fit_clouds)
+        out = {k: np.asarray(est.transform(v)) for k, v in sets.items()}
+        dt = time.perf_counter() - t
+        self.seconds += dt
+        self.n_computed += 1
+        n = sum(len(v) for v in sets.values())
+        self.log(f"{label}: computed {n} descriptors in {dt:.1f} s")
+        if path is not None:
+            tmp = f"{path}.{os.getpid()}.tmp.npz"
+            np.savez(tmp, **out)
+            os.replace(tmp, path)
+        return out
+
+
+# ------------------------------------------------------------------ machine
+def machine_info():
+    """CPU model, core count and library versions, as Markdown lines."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    try:
+        n_cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        n_cores = os.cpu_count()
+    versions = []
+    from importlib.metadata import PackageNotFoundError, version
+
+    for pkg in ("eppf", "numpy", "scikit-learn", "torch", "skorch"):
+        try:
+            versions.append(f"{pkg} {version(pkg)}")
+        except PackageNotFoundError:
+            pass
+    load = ""
+    if hasattr(os, "getloadavg"):
+        load = ", load average at the end {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
+    return [
+        f"- CPU: {cpu}, {n_cores} cores available{load}",
+        f"- {platform.platform()}, Python {sys.version.split()[0]}",
+        f"- {', '.join(versions)}",
+    ]
+
+
+def cpu_model():
+    """The CPU model name (first line of the machine description)."""
+    return machine_info()[0]
+
+
+# ------------------------------------------------------------------ reports
+def fmt_pct(values):
+    """``mean ± std`` in percent of an array of fractions (no ± for one value)."""
+    v = 100 * np.asarray(values, dtype=float)
+    if v.size == 1:
+        return f"{v[0]:.2f}"
+    return f"{v.mean():.2f} ± {v.std():.2f}"
+
+
+def markdown_table(header, rows):
+    """A GitHub Markdown table."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def write_report(out, name, *, title, command, data, protocol, table, csv_rows, plot=None, notes=(), log=None,
+                 elapsed=None):
+    """Write ``NAME.md``, ``NAME.csv`` and ``NAME.png`` into ``out``.
+
+    Parameters
+    ----------
+    out : str
+        Output folder (made if missing).
+    name : str
+        File stem.
+    title : str
+        Heading of the Markdown file.
+    command : str
+        The command line (or call) that made the results.
+    data : Dataset
+        Described in the Markdown file.
+    protocol : dict
+        Settings, one Markdown bullet each.
+    table : str
+        The results as a Markdown table.
+    csv_rows : list of dict
+        Rows of the CSV file (the keys of the first row are the columns).
+    plot : callable, default=None
+        ``plot(plotting, plt)`` draws and returns a matplotlib figure;
+        skipped with a warning when matplotlib or ``eppf.plotting`` is missing.
+    notes : sequence of str
+        Paragraphs after the table.
+    log : callable, default=None
+        Progress printer.
+    elapsed : float, default=None
+        Wall seconds of the experiment.
+
+    Returns
+    -------
+    paths : dict
+        ``"md"``, ``"csv"`` and (when drawn) ``"png"`` file paths.
+    """
+    log = log or print
+    os.makedirs(out, exist_ok=True)
+    paths = {"md": os.path.join(out, f"{name}.md"), "csv": os.path.join(out, f"{name}.csv")}
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(csv_rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(csv_rows)
+    with open(paths["csv"], "w", newline="") as f:
+        f.write(buf.getvalue())
+    png = None
+    if plot is not None:
+        png = _draw(plot, os.path.join(out, f"{name}.png"), log)
+        if png:
+            paths["png"] = png
+    md = [f"# {title}", "", "Made by:", "", "```", command, "```", "", "## Data", ""]
+    md += data.summary()
+    md += ["", "## Protocol", ""]
+    md += [f"- {k}: {v}" for k, v in protocol.items()]
+    if elapsed is not None:
+        md.append(f"- wall time of the whole experiment: {elapsed:.0f} s")
+    md += ["", "## Results", "", table, ""]
+    for n in notes:
+        md += [n, ""]
+    if png:
+        md += [f"![{name}]({os.path.basename(png)})", ""]
+    md += ["## Machine", ""]
+    md += machine_info()
+    md.append("")
+    with open(paths["md"], "w") as f:
+        f.write("\n".join(md))
+    log(f"wrote {', '.join(paths.values())}")
+    return paths
+
+
+def _draw(plot, path, log):
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        log("warning: matplotlib is not installed; no plot written")
+        return None
+    try:
+        from .. import plotting
+    except ImportError as exc:
+        log(f"warning: eppf.plotting is unavailable ({exc}); drawing a plain plot")
+        plotting = _PlainPlots(plt)
+    fig = plot(plotting, plt)
+    fig.savefig(path, dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+# -------------------------------------------------------------- descriptors
+#: Descriptor keys and their names in the tables (the paper's Table II order).
+DESCRIPTORS = {"ourcvfh": "OUR-CVFH", "esf": "ESF", "wahl": "Wahl", "eppf_short": "EPPF short", "eppf": "EPPF"}
+#: Descriptors without random sampling (one draw suffices).
+DETERMINISTIC = ("ourcvfh",)
+SCALINGS = ("auto", "fit", "object", "none")
+
+
+def resolve_scaling(scaling, data):
+    """EPPF's ``scaling`` for ``data``: ``"auto"`` is the data set's default.
+
+    The built-in shapes share one unit (``"fit"``, the paper's data-set
+    scaling); files may hold raw CAD units spanning orders of magnitude, so
+    they default to per-object scaling (``"object"``). Pass ``"fit"`` for a
+    file in one physical unit (e.g. metres) to keep size information.
+    """
+    if scaling not in SCALINGS:
+        raise ExperimentError(f"--scaling must be one of {SCALINGS}, got {scaling!r}")
+    return data.default_scaling if scaling == "auto" else scaling
+
+
+def n_samples_setting(quick):
+    """Random pairs (EPPF, Wahl) or triplets (ESF) per object: 20,000, or 5,000 with ``quick``."""
+    return 5000 if quick else 20000
+
+
+def make_descriptor(name, *, scaling, random_state, n_jobs, quick, functions=None):
+    """An unfitted descriptor transformer by key (see :data:`DESCRIPTORS`)."""
+    from .. import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
+
+    n = n_samples_setting(quick)
+    if name in ("eppf", "eppf_short"):
+        kw = {"n_bins": (15, 3, 4, 3)} if name == "eppf_short" else {}
+        return EPPFTransformer(n_pairs=n, scaling=scaling, functions=functions or FUNCTIONS,
+                               random_state=random_state, n_jobs=n_jobs, **kw)
+    if name == "esf":
+        return ESFTransformer(n_triplets=n, random_state=random_state, n_jobs=n_jobs)
+    if name == "wahl":
+        return WahlTransformer(n_pairs=n, random_state=random_state, n_jobs=n_jobs)
+    if name == "ourcvfh":
+        return OURCVFHTransformer(n_jobs=n_jobs)
+    raise ExperimentError(f"unknown descriptor {name!r}; choose from {list(DESCRIPTORS)}")
+
+
+def params_text(est):
+    """The parameters of an estimator that matter, for the protocol."""
+    p = {k: v for k, v in est.get_params(deep=False).items() if k not in _NEUTRAL + ("random_state", "device")}
+    return f"{type(est).__name__}(" + ", ".join(f"{k}={v!r}" for k, v in p.items()) + ")"
+
+
+class _PlainPlots:
+    """Minimal stand-ins for the two ``eppf.plotting`` functions the experiments use."""
+
+    def __init__(self, plt):
+        self.plt = plt
+
+    def _ax(self, ax):
+        return ax if ax is not None else self.plt.subplots(figsize=(6, 4))[1]
+
+    def plot_scores_bar(self, scores, *, ax=None, ylabel="F1", errors=None, sort=False):
+        ax = self._ax(ax)
+        names = list(scores)
+        vals = [scores[n][0] if isinstance(scores[n], tuple) else scores[n] for n in names]
+        errs = [scores[n][1] if isinstance(scores[n], tuple) else 0.0 for n in names]
+        ax.bar(range(len(names)), vals, yerr=errs, capsize=3)
+        ax.set_xticks(range(len(names)), names, rotation=20, ha="right")
+        ax.set_ylabel(ylabel)
+        return ax
+
+    def plot_noise_curve(self, sigmas, scores, *, ax=None, ylabel="accuracy", xlabel="noise sigma"):
+        ax = self._ax(ax)
+        for name, v in scores.items():
+            v = np.asarray(v, dtype=float)
+            ax.plot(sigmas, v if v.ndim == 1 else v.mean(axis=1), marker="o", label=name)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.legend()
+        return ax
+
+
+# ------------------------------------------------------------------ helpers
+def check_positive_int(value, name):
+    """``value`` as an int >= 1, or an ExperimentError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ExperimentError(f"{name} must be a positive int, got {value!r}")
+    return int(value)
+
+
+def command_text(name, **kwargs):
+    """How a function call is recorded when no command line is given."""
+    return f"eppf.experiments.run_{name}(...)  # function call; see the protocol for its settings"
+
+
+def load_or_pass(data, *, quick, random_state):
+    """``data`` itself if it is a :class:`Dataset`, else :func:`load_data` of it."""
+    if isinstance(data, Dataset):
+        return data
+    return load_data(data, quick=quick, random_state=random_state)
