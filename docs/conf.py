@@ -38,7 +38,7 @@ sphinx_gallery_conf = {
 }
 
 templates_path = ["_templates"]
-exclude_patterns = ["_build", "generated/*.examples"]
+exclude_patterns = ["_build", "generated/*.examples", "generated/results", "results"]
 root_doc = "index"
 # single backticks render as code, as in scikit-learn's docstrings
 default_role = "literal"
@@ -139,3 +139,35 @@ def _skip_member(app, what, name, obj, skip, options):
 def setup(app):
     app.connect("autodoc-process-docstring", _data_docstring)
     app.connect("autodoc-skip-member", _skip_member)
+
+
+def _write_results_pages(docs_dir):
+    """Turn the experiment reports under results/ into reST for reproducing.rst."""
+    sys.path.insert(0, docs_dir)
+    from _md2rst import write_results
+
+    generated = os.path.join(docs_dir, "generated", "results")
+    done = write_results(os.path.join(docs_dir, "results"), generated)
+    titles = {"retrieval": "Retrieval (Table II)", "classification": "Classification (Table III)",
+              "ablation": "Function ablation", "noise": "Noise robustness", "runtime": "Runtime"}
+    data_titles = {"modelnet10_1024": "ModelNet10 (1,024 points per object)",
+                   "dales_objects": "DALES objects (aerial LiDAR)", "builtin": "Built-in synthetic shapes"}
+    lines = []
+    for data in sorted({d for d, _ in done}, key=lambda d: (d not in data_titles, d)):
+        title = data_titles.get(data, data)
+        lines += [title, "-" * len(title), ""]
+        names = [n for d, n in done if d == data]
+        for name in sorted(names, key=lambda n: (list(titles).index(n) if n in titles else 99, n)):
+            sub = titles.get(name, name)
+            lines += [sub, "~" * len(sub), "", f".. include:: /generated/results/{data}_{name}.rst", ""]
+    if not lines:
+        lines = ["No experiment results have been written to ``docs/results`` yet.", ""]
+    text = "\n".join(lines)
+    path = os.path.join(generated, "all.rst")
+    if not os.path.exists(path) or open(path).read() != text:
+        os.makedirs(generated, exist_ok=True)
+        with open(path, "w") as f:
+            f.write(text)
+
+
+_write_results_pages(os.path.dirname(os.path.abspath(__file__)))
