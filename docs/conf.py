@@ -85,6 +85,16 @@ def _write_cli_help(directory):
         if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
                 texts[name] = sub.format_help()
+    from eppf.experiments._cli import build_parser as build_experiments_parser
+
+    exp = build_experiments_parser()
+    exp.prog = "eppf experiment"
+    texts["experiment"] = exp.format_help()
+    for action in exp._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                sub.prog = f"eppf experiment {name}"
+                texts[f"experiment-{name}"] = sub.format_help()
     for name, text in texts.items():
         path = os.path.join(directory, f"{name}.txt")
         old = None
