@@ -167,12 +167,13 @@ def modelnet(args):
             max_epochs=args.max_epochs,
             batch_size=args.batch_size,
             n_iter_no_change=args.patience,
+            lr=args.lr,
+            max_time=args.max_time or None,
             validation_fraction=args.validation_fraction,
             random_state=args.seed,
             verbose=args.verbose,
         )
         t0 = time.perf_counter()
-        clf.max_epochs = _epochs_within(clf, X_train, y[train], args) if args.time_limit else args.max_epochs
         clf.fit(X_train, y[train])
         wall = time.perf_counter() - t0
         total, mean = scores(clf.predict(X[test, 0]))  # one descriptor draw per test object
@@ -183,31 +184,6 @@ def modelnet(args):
             f"{val:8.3f} {total:9.2f}% {mean:8.2f}% {tta_total:9.2f}% {tta_mean:8.2f}%",
             flush=True,
         )
-
-
-def _epochs_within(clf, X, y, args):
-    """Cap max_epochs so a run fits in --time-limit, from a few timed batches."""
-    import torch
-    import torch.nn.functional as F
-
-    from eppf.nn import EPPFNet2D, EPPFNet3D, EPPFNet4D
-
-    net = {"2d": EPPFNet2D, "3d": EPPFNet3D, "4d": EPPFNet4D}[clf.conv](n_classes=len(np.unique(y)))
-    opt = torch.optim.Adam(net.parameters(), lr=clf.lr)
-    xb = torch.rand(clf.batch_size, net.n_features)
-    yb = torch.randint(0, len(np.unique(y)), (clf.batch_size,))
-    for i in range(4):
-        if i == 1:
-            t0 = time.perf_counter()
-        opt.zero_grad()
-        F.cross_entropy(net(xb), yb).backward()
-        opt.step()
-    per_object = (time.perf_counter() - t0) / (3 * clf.batch_size)
-    n_train = X.shape[0] * (1 - (clf.validation_fraction if clf.early_stopping else 0.0))
-    per_epoch = per_object * n_train * 1.1  # + validation forward passes
-    n = max(1, min(args.max_epochs, int(args.time_limit // per_epoch)))
-    print(f"  ({clf.conv}: about {per_epoch:.0f} s per epoch -> max_epochs {n})", flush=True)
-    return n
 
 
 def main(argv=None):
@@ -224,7 +200,10 @@ def main(argv=None):
     parser.add_argument("--max-epochs", type=int, default=30)
     parser.add_argument("--patience", type=int, default=5)
     parser.add_argument("--validation-fraction", type=float, default=0.1)
-    parser.add_argument("--time-limit", type=float, default=0.0, help="seconds per variant (0: no cap)")
+    parser.add_argument("--lr", type=float, default=5e-4)
+    parser.add_argument(
+        "--max-time", type=float, default=0.0, help="training budget per variant in seconds (0: none); best epoch kept"
+    )
     parser.add_argument("--augment", action="store_true")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--verbose", type=int, default=0)

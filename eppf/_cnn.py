@@ -2,6 +2,7 @@
 
 import math
 import numbers
+import time
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -84,6 +85,12 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         Share of the training objects held out when ``early_stopping``.
     n_iter_no_change : int, default=10
         Patience of early stopping, in epochs.
+    max_time : float, default=None
+        Wall-clock budget of ``fit`` in seconds: training ends after the
+        first epoch that finishes past it (with early stopping, the best
+        epoch's weights are still the ones kept). None sets no budget. The
+        number of epochs then depends on the machine's speed, so a run with
+        a budget is reproducible only as far as it trains the same epochs.
     input_scaling : {"global", "bin", "none"}, default="global"
         Standardisation learned in ``fit``. EPPF histograms sum to 1, so their
         values are tiny (mean ``1 / prod(n_bins)``). ``"global"`` subtracts the
@@ -180,6 +187,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         early_stopping=True,
         validation_fraction=0.1,
         n_iter_no_change=10,
+        max_time=None,
         input_scaling="global",
         device="cpu",
         n_jobs=None,
@@ -198,6 +206,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         self.early_stopping = early_stopping
         self.validation_fraction = validation_fraction
         self.n_iter_no_change = n_iter_no_change
+        self.max_time = max_time
         self.input_scaling = input_scaling
         self.device = device
         self.n_jobs = n_jobs
@@ -229,6 +238,8 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
             raise ValueError(f"{_OWNER}: early_stopping must be True or False, got {self.early_stopping!r}")
         _check_float("validation_fraction", self.validation_fraction, 0.0, 1.0)
         _check_int("n_iter_no_change", self.n_iter_no_change, 1)
+        if self.max_time is not None:
+            _check_float("max_time", self.max_time, 0.0, math.inf)
         if self.input_scaling not in _INPUT_SCALINGS:
             raise ValueError(
                 f"{_OWNER}: input_scaling must be one of 'global', 'bin', 'none', got {self.input_scaling!r}"
@@ -363,6 +374,9 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
                 )
             )
 
+        if self.max_time is not None:
+            callbacks.append(("time_budget", _TimeBudget(float(self.max_time), print if self.verbose else _silent)))
+
         module = {"4d": EPPFNet4D, "3d": EPPFNet3D, "2d": EPPFNet2D}[self.conv]
         self.net_ = NeuralNetClassifier(
             module,
@@ -374,6 +388,9 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
             criterion=torch.nn.CrossEntropyLoss,
             optimizer=torch.optim.Adam,
             optimizer__weight_decay=float(self.weight_decay),
+            # One fused kernel instead of a dozen passes over the 15 M
+            # parameters: the same Adam update, 8x faster on CPU.
+            optimizer__fused=torch.device(self.device).type in ("cpu", "cuda"),
             lr=float(self.lr),
             max_epochs=int(self.max_epochs),
             batch_size=int(self.batch_size),
@@ -445,6 +462,52 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         tags.input_tags.three_d_array = True
         tags.non_deterministic = self.device != "cpu"
         return tags
+
+
+class _TimeBudget:
+    """skorch callback that ends training after the epoch that passes a deadline.
+
+    Raising ``KeyboardInterrupt`` is how skorch's own ``EarlyStopping`` stops
+    a fit; skorch still runs ``on_train_end``, so the best weights are loaded.
+    """
+
+    def __init__(self, seconds, sink):
+        self.seconds = seconds
+        self.sink = sink
+
+    def initialize(self):
+        return self
+
+    def get_params(self, deep=True):
+        return {"seconds": self.seconds, "sink": self.sink}
+
+    def set_params(self, **params):
+        for key, value in params.items():
+            setattr(self, key, value)
+        return self
+
+    def on_train_begin(self, net, **kwargs):
+        self.start_ = time.monotonic()
+
+    def on_epoch_end(self, net, **kwargs):
+        if time.monotonic() - self.start_ > self.seconds:
+            self.sink(f"Stopping: time budget of {self.seconds:g} s used after {len(net.history)} epochs.")
+            raise KeyboardInterrupt
+
+    def on_train_end(self, net, **kwargs):
+        pass
+
+    def on_batch_begin(self, net, **kwargs):
+        pass
+
+    def on_batch_end(self, net, **kwargs):
+        pass
+
+    def on_epoch_begin(self, net, **kwargs):
+        pass
+
+    def on_grad_computed(self, net, named_parameters, **kwargs):
+        pass
 
 
 class _torch_threads:

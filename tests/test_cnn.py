@@ -218,6 +218,32 @@ def test_early_stopping_uses_validation_from_training_data():
     assert sum(b["train_batch_size"] for b in history[0]["batches"] if "train_batch_size" in b) == 60
 
 
+@pytest.mark.parametrize("early_stopping", [True, False])
+def test_max_time_ends_training_after_the_epoch_past_the_budget(early_stopping):
+    rng = np.random.default_rng(11)
+    X, y = _toy(40, rng)
+    clf = EPPF4DClassifier(
+        n_bins=N_BINS, max_epochs=50, max_time=1e-9, early_stopping=early_stopping, random_state=0, **SMALL
+    ).fit(X, y)
+    assert clf.n_epochs_ == clf.best_epoch_ == 1
+    # The same single epoch as a run capped by max_epochs.
+    ref = EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=early_stopping, random_state=0, **SMALL).fit(X, y)
+    assert_allclose(clf.predict_proba(X), ref.predict_proba(X), rtol=1e-6)
+    pickle.loads(pickle.dumps(clf)).predict(X)
+    # A generous budget changes nothing.
+    long = clone(clf).set_params(max_epochs=3, max_time=1e6).fit(X, y)
+    assert long.n_epochs_ == 3 or early_stopping
+
+
+def test_adam_is_the_fused_kernel_on_cpu():
+    rng = np.random.default_rng(12)
+    X, y = _toy(30, rng)
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=False, random_state=0, **SMALL).fit(X, y)
+    opt = clf.net_.optimizer_
+    assert isinstance(opt, torch.optim.Adam) and opt.defaults["fused"] is True
+    assert opt.defaults["lr"] == 5e-4
+
+
 def test_n_jobs_restores_torch_threads():
     rng = np.random.default_rng(7)
     X, y = _toy(30, rng)
@@ -321,6 +347,8 @@ def test_pipeline_with_eppf_transformer():
         ({"early_stopping": "yes"}, ValueError, "EPPF4DClassifier: early_stopping must be True or False, got 'yes'"),
         ({"validation_fraction": 1.0}, ValueError, "EPPF4DClassifier: validation_fraction must be a float in (0.0, 1.0), got 1.0"),
         ({"n_iter_no_change": 0}, ValueError, "EPPF4DClassifier: n_iter_no_change must be an int >= 1, got 0"),
+        ({"max_time": 0}, ValueError, "EPPF4DClassifier: max_time must be a float in (0.0, inf), got 0"),
+        ({"max_time": "1h"}, ValueError, "EPPF4DClassifier: max_time must be a float in (0.0, inf), got '1h'"),
         ({"input_scaling": "minmax"}, ValueError, "EPPF4DClassifier: input_scaling must be one of 'global', 'bin', 'none', got 'minmax'"),
         ({"device": None}, ValueError, "EPPF4DClassifier: device must be a str such as 'cpu' or 'cuda', got None"),
         ({"n_jobs": 0}, ValueError, "EPPF4DClassifier: n_jobs must be None or a non-zero int, got 0"),
