@@ -27,7 +27,7 @@ import numpy as np
 
 cimport numpy as cnp
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, cos, llrint, M_PI
+from libc.math cimport sqrt, cos, llrint, isfinite, M_PI
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 
@@ -481,3 +481,110 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
         for k in range(6):
             out[t, k] = parts[k]
     return out_arr
+
+
+
+def scan_clouds(const double[:, ::1] data, const int64_t[::1] offsets):
+    """One validation pass over packed clouds: finiteness and bounding boxes.
+
+    ``data`` is (N, 3) or (N, 6) float64, object ``k`` its rows
+    ``offsets[k]:offsets[k + 1]`` (at least one row each).
+
+    Returns
+    -------
+    lo, hi : (n_objects, 3) float64
+        Per-axis minimum and maximum of the coordinates (columns 0-2).
+    status : (n_objects,) int8
+        0 valid, 1 a NaN or infinite value in any column, 2 all points
+        identical.
+    """
+    cdef Py_ssize_t n_obj = offsets.shape[0] - 1
+    cdef Py_ssize_t cols = data.shape[1]
+    cdef Py_ssize_t k, i, a, b, c
+    cdef const double* row
+    cdef double v
+    cdef double mn[3]
+    cdef double mx[3]
+    cdef signed char st
+    if cols != 3 and cols != 6:
+        raise ValueError("data must have 3 or 6 columns")
+    lo_arr = np.zeros((n_obj, 3), dtype=np.float64)
+    hi_arr = np.zeros((n_obj, 3), dtype=np.float64)
+    status_arr = np.zeros(n_obj, dtype=np.int8)
+    if n_obj <= 0:
+        return lo_arr, hi_arr, status_arr
+    if offsets[0] != 0 or offsets[n_obj] != data.shape[0]:
+        raise ValueError("offsets do not match the data")
+    for k in range(n_obj):
+        if offsets[k + 1] <= offsets[k]:
+            raise ValueError("every object needs at least one row")
+    cdef double[:, ::1] lo = lo_arr
+    cdef double[:, ::1] hi = hi_arr
+    cdef signed char[::1] status = status_arr
+    with nogil:
+        for k in range(n_obj):
+            a = offsets[k]
+            b = offsets[k + 1]
+            st = 0
+            for i in range(a, b):
+                row = &data[i, 0]
+                for c in range(cols):
+                    if not isfinite(row[c]):
+                        st = 1
+            if st == 0:
+                row = &data[a, 0]
+                for c in range(3):
+                    mn[c] = row[c]
+                    mx[c] = row[c]
+                for i in range(a + 1, b):
+                    row = &data[i, 0]
+                    for c in range(3):
+                        v = row[c]
+                        if v < mn[c]:
+                            mn[c] = v
+                        if v > mx[c]:
+                            mx[c] = v
+                for c in range(3):
+                    lo[k, c] = mn[c]
+                    hi[k, c] = mx[c]
+                if mn[0] == mx[0] and mn[1] == mx[1] and mn[2] == mx[2]:
+                    st = 2
+            status[k] = st
+    return lo_arr, hi_arr, status_arr
+
+
+def divide_normals(double[:, ::1] data, const double[::1] norms):
+    """Divide columns 3-5 of each row of ``data`` (N, 6) by ``norms[row]`` in place.
+
+    The same correctly rounded divisions as ``data[:, 3:] / norms[:, None]``.
+    """
+    cdef Py_ssize_t i, n = data.shape[0]
+    cdef double d
+    if data.shape[1] != 6 or norms.shape[0] != n:
+        raise ValueError("data must be (N, 6) and norms (N,)")
+    with nogil:
+        for i in range(n):
+            d = norms[i]
+            data[i, 3] = data[i, 3] / d
+            data[i, 4] = data[i, 4] / d
+            data[i, 5] = data[i, 5] / d
+
+
+def split_columns(const double[:, ::1] data):
+    """C-contiguous copies of columns 0-2 and 3-5 of ``data`` (N, 6)."""
+    cdef Py_ssize_t i, n = data.shape[0]
+    if data.shape[1] != 6:
+        raise ValueError("data must be (N, 6)")
+    points_arr = np.empty((n, 3), dtype=np.float64)
+    normals_arr = np.empty((n, 3), dtype=np.float64)
+    cdef double[:, ::1] points = points_arr
+    cdef double[:, ::1] normals = normals_arr
+    with nogil:
+        for i in range(n):
+            points[i, 0] = data[i, 0]
+            points[i, 1] = data[i, 1]
+            points[i, 2] = data[i, 2]
+            normals[i, 0] = data[i, 3]
+            normals[i, 1] = data[i, 4]
+            normals[i, 2] = data[i, 5]
+    return points_arr, normals_arr

@@ -8,7 +8,8 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._chunks import transform_in_chunks
 from ._core import eppf_counts
-from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
+from ._validation import _bounding_sides, _stacked_view, check_n_jobs, check_point_clouds, object_seeds
+from ._validation import pack_point_clouds
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
 
@@ -17,10 +18,6 @@ FUNCTIONS = ("distance", "angle", "normal", "occupancy")
 _SHORT = {"distance": "d", "angle": "a", "normal": "n", "occupancy": "o"}
 _SCALINGS = ("fit", "object", "none")
 _F1_MAX = float(np.sqrt(3.0))
-
-
-def _bounding_sides(clouds):
-    return np.array([np.ptp(c[:, :3], axis=0).max() for c in clouds], dtype=np.float64)
 
 
 class EPPFTransformer(TransformerMixin, BaseEstimator):
@@ -275,7 +272,8 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
     def _points_and_normals(self, clouds, n_threads):
         needs_normals = "angle" in self.functions_ or "normal" in self.functions_
         if not needs_normals:
-            points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
+            # Clouds validated in one block are packed without a per-cloud copy.
+            points, _, offsets = pack_point_clouds(clouds if _stacked_view(clouds) else [c[:, :3] for c in clouds])
             return points, np.zeros_like(points), offsets
         missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
         if missing:

@@ -122,10 +122,106 @@ def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True):
             raise TypeError(f"{pre}X must be a list of point clouds, got {type(X).__name__}") from None
     if len(items) == 0:
         raise ValueError(f"{pre}X is empty: at least one point cloud is needed")
+    fast = _check_stacked(items, min_points, allow_normals)
+    if fast is not None:
+        return fast
+    # Per-cloud path: mixed or unusual input, and every error message.
     return [
         check_point_cloud(c, owner=owner, index=i, min_points=min_points, allow_normals=allow_normals)
         for i, c in enumerate(items)
     ]
+
+
+class _CloudList(list):
+    """Validated clouds that are consecutive row blocks of one float64 array.
+
+    It remembers that array, the offsets and the bounding boxes, so that
+    packing and bounding sizes need no per-cloud NumPy call. The memory is
+    trusted only while the list still holds the very arrays it was made with
+    (:func:`_stacked_view` checks), and slices keep it; copies and pickles are
+    plain lists.
+    """
+
+    def __init__(self, views, stacked, offsets, lo, hi):
+        super().__init__(views)
+        self._views = tuple(views)
+        self._stacked = stacked
+        self._offsets = offsets
+        self._lo = lo
+        self._hi = hi
+
+    def __getitem__(self, key):
+        items = list.__getitem__(self, key)
+        if not isinstance(key, slice):
+            return items
+        start, stop, step = key.indices(len(self))
+        if step != 1 or stop <= start or _stacked_view(self) is None:
+            return items
+        a, b = int(self._offsets[start]), int(self._offsets[stop])
+        return _CloudList(
+            items, self._stacked[a:b], self._offsets[start:stop + 1] - a, self._lo[start:stop], self._hi[start:stop]
+        )
+
+    def __reduce__(self):
+        return (list, (list(self),))
+
+
+def _stacked_view(clouds):
+    """``(stacked, offsets, lo, hi)`` of clouds validated in one block, or None."""
+    if type(clouds) is not _CloudList or len(clouds) != len(clouds._views):
+        return None
+    for a, b in zip(clouds, clouds._views):
+        if a is not b:
+            return None
+    return clouds._stacked, clouds._offsets, clouds._lo, clouds._hi
+
+
+def _check_stacked(items, min_points, allow_normals):
+    """Validate plain float/int arrays of one width with a few whole-collection calls.
+
+    Returns a :class:`_CloudList` of views into one new float64 array, bit for
+    bit what :func:`check_point_cloud` returns for each cloud, or None when
+    some item is not such an array or is invalid (the per-cloud path then
+    finds the first problem and words the error).
+    """
+    from ._core import divide_normals, scan_clouds
+
+    allowed = (3, 6) if allow_normals else (3,)
+    cols = None
+    sizes = np.empty(len(items), dtype=np.int64)
+    for k, c in enumerate(items):
+        if type(c) is not np.ndarray or c.ndim != 2 or c.dtype.kind not in "biuf":
+            return None
+        n, m = c.shape
+        if cols is None:
+            cols = m
+        if m != cols or n < max(min_points, 2):
+            return None
+        sizes[k] = n
+    if cols not in allowed:
+        return None
+    offsets = np.zeros(len(items) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    stacked = np.concatenate(items, axis=0, dtype=np.float64, casting="unsafe")
+    lo, hi, status = scan_clouds(stacked, offsets)
+    if status.any():
+        return None
+    if cols == 6:
+        normals = stacked[:, 3:]
+        norms = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+        if (norms < 1e-12).any():
+            return None
+        divide_normals(stacked, norms)  # = normals / norms[:, None], without a temporary
+    views = [stacked[a:b] for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())]
+    return _CloudList(views, stacked, offsets, lo, hi)
+
+
+def _bounding_sides(clouds):
+    """Largest bounding-box side of each validated cloud (``np.ptp`` over the coordinates)."""
+    packed = _stacked_view(clouds)
+    if packed is not None:
+        return (packed[3] - packed[2]).max(axis=1)
+    return np.array([np.ptp(c[:, :3], axis=0).max() for c in clouds], dtype=np.float64)
 
 
 def pack_point_clouds(clouds):
@@ -144,6 +240,14 @@ def pack_point_clouds(clouds):
     offsets : ndarray of shape (n_objects + 1,), int64
         Object ``k`` is ``points[offsets[k]:offsets[k + 1]]``.
     """
+    packed = _stacked_view(clouds)
+    if packed is not None:
+        from ._core import split_columns
+
+        stacked, offsets = packed[0], packed[1].copy()
+        if stacked.shape[1] == 6:
+            return (*split_columns(stacked), offsets)
+        return stacked, None, offsets
     sizes = np.fromiter((c.shape[0] for c in clouds), dtype=np.int64, count=len(clouds))
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
