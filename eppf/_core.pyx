@@ -35,6 +35,15 @@ from ._common cimport omp_get_max_threads, EPPF_HAVE_OPENMP, splitmix64, rand_be
 
 cnp.import_array()
 
+cdef extern from "_walk.h":
+    int eppf_walk_has_avx2() noexcept nogil
+    void eppf_f4_batch_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
+                            const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
+                            const double* recip_packed, int32_t* B) noexcept nogil
+
+# The AVX2 line walk (``_walk.h``) where the CPU has it; ``_set_simd`` turns it off for tests.
+cdef bint _simd = eppf_walk_has_avx2() != 0
+
 # Consecutive zero-length pairs after which an object is declared degenerate.
 cdef enum:
     MAX_REDRAWS = 10000
@@ -53,6 +62,14 @@ cdef int64_t PK_Y = (<int64_t>1) << 21
 cdef int64_t PK_X = (<int64_t>1) << 42
 
 cdef uint64_t LOW32 = 0xFFFFFFFF
+
+
+def _set_simd(enabled):
+    """Use the AVX2 line walk when ``enabled`` and available; return the previous setting."""
+    global _simd
+    old = bool(_simd)
+    _simd = bool(enabled) and eppf_walk_has_avx2() != 0
+    return old
 
 
 def openmp_max_threads():
@@ -75,6 +92,7 @@ cdef struct Params:
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
+    bint simd               # walk f4 in AVX2 lanes (grids up to 64)
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -312,7 +330,9 @@ cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double 
             B[t] = _bin_f123(pts, nrm, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
-            if prm.grid == 64:
+            if prm.simd:
+                eppf_f4_batch_avx2(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
+            elif prm.grid == 64:
                 for t in range(m):
                     B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, 64, 1, True, &occ, &total)
             elif row_words == 1:
@@ -340,6 +360,7 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.n3 = n3
     prm.n4 = n4
     prm.grid = grid
+    prm.simd = _simd and grid <= 64
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max
     for k in range(1, n2):

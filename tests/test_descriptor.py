@@ -13,7 +13,7 @@ from sklearn.pipeline import Pipeline
 
 import eppf_reference as ref
 from eppf import FUNCTIONS, EPPFTransformer, KLNearestNeighbors
-from eppf._core import eppf_pair_features, eppf_pairs
+from eppf._core import _set_simd, eppf_counts, eppf_pair_features, eppf_pairs
 from eppf._validation import (
     _bounding_sides,
     _stacked_view,
@@ -82,6 +82,64 @@ def test_transform_matches_reference_histogram(clouds):
         scale = 1.0 / np.ptp(points, axis=0).max()
         want = ref.descriptor(points, cloud[:, 3:], pairs, scale)
         assert_allclose(X[k], want, rtol=1e-12, atol=0)
+
+
+def _reference_counts(cloud, seed, n_pairs, scale, n_bins, grid):
+    points = np.ascontiguousarray(cloud[:, :3])
+    pairs = eppf_pairs(points, seed, n_pairs)
+    bins, _, _ = ref.pair_bins(points, cloud[:, 3:], pairs[:, 0], pairs[:, 1], scale, n_bins, grid)
+    counts = np.zeros(n_bins, dtype=np.int64)
+    np.add.at(counts, tuple(bins.T), 1)
+    return counts.ravel()
+
+
+def _packed(clouds):
+    points = np.ascontiguousarray(np.vstack([c[:, :3] for c in clouds]))
+    normals = np.ascontiguousarray(np.vstack([c[:, 3:] for c in clouds]))
+    offsets = np.cumsum([0] + [len(c) for c in clouds]).astype(np.int64)
+    return points, normals, offsets
+
+
+# Grids 64 and <= 64 take the AVX2 walk (where the CPU has it), 100 the generic
+# walk; odd pair counts leave partial batches of 64 and partial groups of 4 lanes.
+@pytest.mark.parametrize("grid, n_bins, n_pairs", [
+    (64, (20, 4, 5, 3), 1001), (64, (3, 2, 2, 2), 67), (64, (2, 1, 1, 7), 1),
+    (8, (7, 5, 2, 6), 130), (17, (15, 3, 4, 3), 999), (100, (20, 4, 5, 3), 515), (2, (3, 1, 1, 3), 66),
+])
+def test_counts_match_reference_on_every_walk(clouds, grid, n_bins, n_pairs):
+    seeds = object_seeds(5, len(clouds))
+    points, normals, offsets = _packed(clouds)
+    scales = np.full(len(clouds), 0.3)
+    for simd in (True, False):
+        old = _set_simd(simd)
+        try:
+            got, status = eppf_counts(points, normals, offsets, scales, seeds, n_pairs, n_bins, grid, ref.F1_MAX, 2)
+        finally:
+            _set_simd(old)
+        assert not status.any()
+        for k, cloud in enumerate(clouds):
+            want = _reference_counts(cloud, seeds[k], n_pairs, 0.3, n_bins, grid)
+            assert_array_equal(got[k], want)
+
+
+@pytest.mark.parametrize("grid", [64, 33, 5, 128])
+@pytest.mark.parametrize("n4", [2, 3, 6, 64])
+def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
+    # Dense and sparse occupancy, long and short lines: every stopping rule of the walk.
+    rng = np.random.default_rng(grid * n4)
+    clouds = [_sphere(600, rng), _box(900, rng), np.hstack([rng.uniform(size=(3000, 3)), _sphere(3000, rng)[:, 3:]])]
+    points, normals, offsets = _packed(clouds)
+    seeds = object_seeds(grid, len(clouds))
+    args = (points, normals, offsets, np.ones(len(clouds)), seeds, 3001, (4, 1, 1, n4), grid, ref.F1_MAX, 1)
+    old = _set_simd(True)
+    try:
+        fast, _ = eppf_counts(*args)
+        _set_simd(False)
+        slow, _ = eppf_counts(*args)
+    finally:
+        _set_simd(old)
+    assert_array_equal(fast, slow)
+    assert (fast.reshape(len(clouds), 4, n4)[:, :, 1:].sum() > 0)  # not every pair in the bottom f4 bin
 
 
 def test_pairs_are_distinct_and_in_range():
