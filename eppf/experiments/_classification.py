@@ -166,6 +166,7 @@ def run_classification(
     validation_fraction=0.1,
     patience=None,
     train_per_class=None,
+    test_per_class=None,
     scaling="auto",
     random_state=0,
     n_jobs=-1,
@@ -203,6 +204,9 @@ def run_classification(
     train_per_class : int, default=None
         Train on at most this many objects per class (seeded), to fit a CPU
         budget; None uses the whole training split.
+    test_per_class : int, default=None
+        Score on at most this many test objects per class (seeded); None uses
+        the whole test split.
     scaling : {"auto", "fit", "object", "none"}, default="auto"
         EPPF scaling (see :func:`run_retrieval`).
     random_state : int, default=0
@@ -225,14 +229,18 @@ def run_classification(
     """
     log = Logger("classification", verbose)
     models = check_models(models, DEFAULT_MODELS)
-    ds = load_or_pass(data, quick=quick, random_state=random_state)
     settings = TrainingSettings.resolve(
         epochs=epochs, pointnet_epochs=pointnet_epochs, pointnet_points=pointnet_points,
-        validation_fraction=validation_fraction, patience=patience, scaling=resolve_scaling(scaling, ds),
+        validation_fraction=validation_fraction, patience=patience, scaling=None,
         quick=quick, n_jobs=n_jobs, random_state=random_state)
     if train_per_class is not None:
         train_per_class = check_positive_int(train_per_class, "--train-per-class")
-    train, test = subsample_train(ds, train_per_class, random_state), ds.test
+    if test_per_class is not None:
+        test_per_class = check_positive_int(test_per_class, "--test-per-class")
+    ds = load_or_pass(data, quick=quick, random_state=random_state)
+    settings.scaling = resolve_scaling(scaling, ds)
+    train = subsample_train(ds, train_per_class, random_state)
+    test = subsample_train(ds, test_per_class, random_state, part="test")
     if train.size < 2 or test.size < 1:
         raise ExperimentError(f"--data: need training and test objects, got {train.size} and {test.size}")
     cache = DescriptorCache(cache_dir if cache_dir is not None else (out and f"{out}/cache"), log)
@@ -256,7 +264,8 @@ def run_classification(
     protocol = {
         "task": f"train on the training split ({train.size} objects"
                 + (f", at most {train_per_class} per class" if train_per_class else "")
-                + f"), score once on the test split ({test.size} objects)",
+                + f"), score once on the test split ({test.size} objects"
+                + (f", at most {test_per_class} per class" if test_per_class else "") + ")",
         **settings.protocol(models),
         "pairs per object": n_samples_setting(quick),
         "descriptor sets computed / read from cache": f"{cache.n_computed} / {cache.n_loaded}",

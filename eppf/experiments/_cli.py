@@ -53,6 +53,8 @@ def _add_training(p, models, default_models):
     p.add_argument("--patience", type=int, default=None, help="early-stopping patience in epochs (default 5, 1 with --quick)")
     p.add_argument("--train-per-class", type=int, default=None,
                    help="use at most this many training objects per class (seeded; default: all)")
+    p.add_argument("--test-per-class", type=int, default=None,
+                   help="score on at most this many test objects per class (seeded; default: all)")
 
 
 def build_parser():
@@ -111,15 +113,18 @@ def main(argv=None):
                   cache_dir=args.cache_dir, verbose=not args.quiet, command=command, scaling=args.scaling)
     from . import run_ablation, run_classification, run_noise, run_retrieval, run_runtime
 
+    draws = getattr(args, "draws", None)
+    draws = draws if draws is not None else (2 if args.quick else 10)
     try:
         if args.experiment == "retrieval":
-            run_retrieval(descriptors=args.descriptors, draws=args.draws or (2 if args.quick else 10), **common)
+            run_retrieval(descriptors=args.descriptors, draws=draws, **common)
         elif args.experiment == "ablation":
-            run_ablation(draws=args.draws or (2 if args.quick else 10), **common)
+            run_ablation(draws=draws, **common)
         elif args.experiment in ("classification", "noise"):
             kw = dict(models=args.models, epochs=args.epochs, pointnet_epochs=args.pointnet_epochs,
                       pointnet_points=args.pointnet_points, validation_fraction=args.validation_fraction,
-                      patience=args.patience, train_per_class=args.train_per_class, **common)
+                      patience=args.patience, train_per_class=args.train_per_class,
+                      test_per_class=args.test_per_class, **common)
             if args.experiment == "noise":
                 run_noise(levels=args.levels, **kw)
             else:

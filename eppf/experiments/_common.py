@@ -117,12 +117,13 @@ class Dataset:
 
 
 def _stratified_split(y, test_size, random_state):
-    from sklearn.model_selection import train_test_split
-
-    idx = np.arange(y.size)
-    _, test = train_test_split(idx, test_size=test_size, stratify=y, random_state=random_state)
+    """``round(test_size * n_c)`` random test objects of every class ``c``, at least one left for training."""
+    rng = check_random_state(random_state)
     split = np.full(y.size, "train", dtype="<U5")
-    split[test] = "test"
+    for label in np.unique(y):
+        members = np.flatnonzero(y == label)
+        n_test = min(int(round(test_size * members.size)), members.size - 1)
+        split[rng.permutation(members)[:n_test]] = "test"
     return split
 
 
@@ -189,7 +190,7 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
         split_source = "the file's split"
     else:
         split = _stratified_split(y, 0.3, random_state)
-        split_source = f"seeded stratified 70/30 split (random_state={random_state})"
+        split_source = f"seeded per-class 70/30 split (random_state={random_state})"
     clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
     name = os.path.splitext(os.path.basename(spec))[0]
     return Dataset(
@@ -204,9 +205,9 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
     )
 
 
-def subsample_train(data, per_class, random_state):
-    """Indices of at most ``per_class`` training objects of every class (seeded)."""
-    train = data.train
+def subsample_train(data, per_class, random_state, part="train"):
+    """Indices of at most ``per_class`` objects of every class of one split (seeded)."""
+    train = data.train if part == "train" else data.test
     if per_class is None:
         return train
     rng = check_random_state(random_state)

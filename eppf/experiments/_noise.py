@@ -57,6 +57,7 @@ def run_noise(
     validation_fraction=0.1,
     patience=None,
     train_per_class=None,
+    test_per_class=None,
     scaling="auto",
     random_state=0,
     n_jobs=-1,
@@ -88,7 +89,7 @@ def run_noise(
         ``quick``) when None.
     models : list of str, default=None
         Keys of the classification models; None runs ``4d pointnet kl``.
-    epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, train_per_class
+    epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, train_per_class, test_per_class
         As in :func:`run_classification`.
     scaling : {"auto", "fit", "object", "none"}, default="auto"
         EPPF scaling.
@@ -117,14 +118,18 @@ def run_noise(
     log = Logger("noise", verbose)
     models = check_models(models, DEFAULT_NOISE_MODELS)
     levels = check_levels(levels if levels is not None else (QUICK_LEVELS if quick else DEFAULT_LEVELS))
-    ds = load_or_pass(data, quick=quick, random_state=random_state)
     settings = TrainingSettings.resolve(
         epochs=epochs, pointnet_epochs=pointnet_epochs, pointnet_points=pointnet_points,
-        validation_fraction=validation_fraction, patience=patience, scaling=resolve_scaling(scaling, ds),
+        validation_fraction=validation_fraction, patience=patience, scaling=None,
         quick=quick, n_jobs=n_jobs, random_state=random_state)
     if train_per_class is not None:
         train_per_class = check_positive_int(train_per_class, "--train-per-class")
-    train, test = subsample_train(ds, train_per_class, random_state), ds.test
+    if test_per_class is not None:
+        test_per_class = check_positive_int(test_per_class, "--test-per-class")
+    ds = load_or_pass(data, quick=quick, random_state=random_state)
+    settings.scaling = resolve_scaling(scaling, ds)
+    train = subsample_train(ds, train_per_class, random_state)
+    test = subsample_train(ds, test_per_class, random_state, part="test")
     used = np.concatenate([train, test])
     cache = DescriptorCache(cache_dir if cache_dir is not None else (out and f"{out}/cache"), log)
     noise_seeds = draw_seeds(random_state + 1, len(levels))
@@ -174,7 +179,8 @@ def run_noise(
         "normals": "re-estimated from the noisy points (PCA, 20 neighbours); clean normals are never used",
         "data used": f"{train.size} training objects"
                      + (f" (at most {train_per_class} per class)" if train_per_class else "")
-                     + f", {test.size} test objects",
+                     + f", {test.size} test objects"
+                     + (f" (at most {test_per_class} per class)" if test_per_class else ""),
         **settings.protocol(models),
         "descriptor sets computed / read from cache": f"{cache.n_computed} / {cache.n_loaded}",
     }

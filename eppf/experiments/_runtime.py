@@ -101,12 +101,12 @@ def run_runtime(
     from .. import estimate_normals
 
     log = Logger("runtime", verbose)
-    ds = load_or_pass(data, quick=quick, random_state=random_state)
-    scaling = resolve_scaling(scaling, ds)
     n_objects = check_positive_int(n_objects if n_objects is not None else (20 if quick else 200), "--n-objects")
     repeats = check_positive_int(repeats if repeats is not None else (1 if quick else 3), "--repeats")
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, (int, np.integer)) or n_jobs == 0:
         raise ExperimentError(f"--n-jobs must be a non-zero int, got {n_jobs!r}")
+    ds = load_or_pass(data, quick=quick, random_state=random_state)
+    scaling = resolve_scaling(scaling, ds)
     stride = max(1, len(ds.clouds) // n_objects)
     clouds = ds.clouds[::stride][:n_objects]
     n = len(clouds)
