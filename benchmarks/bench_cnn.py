@@ -111,6 +111,134 @@ def throughput(args):
         print(f"  {path:8s} {1000 * dt:8.1f} ms per batch")
 
 
+def _best_time(fn, repeats):
+    """Fastest of ``repeats`` calls, in process CPU seconds and wall seconds.
+
+    CPU time is what a shared machine does not distort by time-slicing; with
+    more than one thread it sums the threads' time.
+    """
+    fn()
+    cpu, wall = [], []
+    for _ in range(repeats):
+        c0, w0 = time.process_time(), time.perf_counter()
+        fn()
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - w0)
+    return min(cpu), min(wall)
+
+
+def profile(args):
+    """Per-layer forward and backward time of the 4D network, against the GEMM roofline."""
+    import torch
+    import torch.nn.functional as F
+
+    from eppf.nn import EPPFNet4D
+
+    torch.set_num_threads(args.threads)
+    torch.backends.mkldnn.enabled = not args.no_mkldnn
+    torch.manual_seed(0)
+    B, R = args.batch_size, args.repeats
+    n = 2048
+    a, b = torch.randn(n, n), torch.randn(n, n)
+    cpu, wall = _best_time(lambda: a @ b, R)
+    peak = 2 * n**3 / cpu / 1e9  # per CPU-second, the unit of every rate below
+    print(f"torch {torch.__version__}, {args.threads} threads, batch {B}, mkldnn {torch.backends.mkldnn.enabled}")
+    print(f"roofline: {n}x{n} fp32 mm {peak:.1f} GFLOP per CPU-second ({2 * n**3 / wall / 1e9:.1f} GFLOP/s wall)")
+    net = EPPFNet4D(n_classes=10)
+    n1, n2, n3, n4 = net.n_bins
+    folded = B * n4
+    rows = []
+
+    def layer(name, f, x, params, macs, input_grad=True):
+        out = f(x)
+        g = torch.randn_like(out)
+        wrt = ([x] if input_grad else []) + params
+        fwd = _best_time(lambda: f(x), R)[0]
+        both = _best_time(lambda: torch.autograd.grad(f(x), wrt, g), R)[0]
+        rows.append((name, fwd, max(both - fwd, 0.0), macs, macs * (2 if input_grad else 1) if macs else 0))
+
+    pad = lambda t: F.pad(t, (0, 1, 0, 1, 2, 2))  # noqa: E731  TF "same" for (5, 2, 2)
+    w1 = net.conv1.weight[..., 0].detach().requires_grad_()
+    b1 = net.conv1.bias.detach().requires_grad_()
+    spatial = n1 * n2 * n3
+    layer("conv1 4D 1->32 (5,2,2,1)", lambda t: F.conv3d(pad(t), w1, b1), torch.randn(folded, 1, n1, n2, n3),
+          [w1, b1], folded * 32 * 20 * spatial, input_grad=False)
+    w2 = net.conv2.weight[..., 0].detach().requires_grad_()
+    b2 = net.conv2.bias.detach().requires_grad_()
+    layer("conv2 4D 32->64 (5,2,2,1)", lambda t: F.conv3d(pad(t), w2, b2),
+          torch.randn(folded, 32, n1, n2, n3, requires_grad=True), [w2, b2], folded * 64 * 32 * 20 * spatial)
+    rows_, cols_ = net.plane
+    layer("relu + reshape to plane", lambda t: torch.relu(t).reshape(B, n4, 64, n1, n2, n3).permute(0, 3, 4, 5, 1, 2)
+          .reshape(B, rows_, cols_, 64).permute(0, 3, 1, 2), torch.randn(folded, 64, n1, n2, n3, requires_grad=True), [], 0)
+    layer("conv3 2D 64->48 5x5", net.conv3, torch.randn(B, rows_, cols_, 64).permute(0, 3, 1, 2).requires_grad_(),
+          list(net.conv3.parameters()), B * 48 * 64 * 25 * rows_ * cols_)
+    layer("relu + maxpool + flatten", lambda t: torch.flatten(net.pool(torch.relu(t)), 1),
+          torch.randn(B, 48, rows_, cols_).contiguous(memory_format=torch.channels_last).requires_grad_(), [], 0)
+    layer(f"fc1 {net.n_flat}->1024 + relu + dropout", lambda t: net.dropout(torch.relu(net.fc1(t))),
+          torch.randn(B, net.n_flat, requires_grad=True), list(net.fc1.parameters()), B * net.n_flat * 1024)
+    layer("fc2 1024->10 + loss", lambda t: net.fc2(t).logsumexp(1).sum(), torch.randn(B, 1024, requires_grad=True),
+          list(net.fc2.parameters()), B * 1024 * 10)
+    per_epoch = 4000 / B
+    print(f"\nCPU ms per batch of {B} (best of {R}); epoch = 4,000 objects = {per_epoch:.1f} batches")
+    print("GF/s: GFLOP per CPU-second; % peak: of the mm roofline; s/epoch: CPU seconds")
+    print(f"{'layer':36s} {'fwd ms':>7s} {'bwd ms':>7s} {'fwd GMAC':>8s} {'bwd GMAC':>8s} {'fwd GF/s':>8s} "
+          f"{'bwd GF/s':>8s} {'% peak':>6s} {'s/epoch':>7s}")
+    total_t = total_macs = 0.0
+    for name, tf, tb, mf, mb in rows:
+        total_t += tf + tb
+        total_macs += mf + mb
+        rate = lambda m, t: f"{2 * m / t / 1e9:8.1f}" if m and t > 0 else f"{'-':>8s}"  # noqa: E731
+        eff = f"{100 * 2 * (mf + mb) / (tf + tb) / 1e9 / peak:6.0f}" if mf else f"{'-':>6s}"
+        print(f"{name:36s} {1e3 * tf:7.1f} {1e3 * tb:7.1f} {mf / 1e9:8.3f} {mb / 1e9:8.3f} {rate(mf, tf)} "
+              f"{rate(mb, tb)} {eff} {(tf + tb) * per_epoch:7.2f}")
+    for fused in (False, True):
+        opt = torch.optim.Adam(net.parameters(), lr=5e-4, fused=fused)
+        for prm in net.parameters():
+            prm.grad = torch.randn_like(prm)
+        t = _best_time(opt.step, R)[0]
+        total_t += t if fused else 0.0
+        print(f"{'Adam step, fused=' + str(fused):36s} {1e3 * t:7.1f} {'':7s} {'':8s} {'':8s} {'':8s} {'':8s} {'':6s} "
+              f"{t * per_epoch:7.2f}")
+    x, y = torch.randn(B, net.n_features), torch.randint(0, 10, (B,))
+    opt = torch.optim.Adam(net.parameters(), lr=5e-4, fused=True)
+
+    def step():
+        opt.zero_grad()
+        F.cross_entropy(net(x), y).backward()
+        opt.step()
+
+    cpu, wall = _best_time(step, R)
+    print(f"sum of the parts (fused Adam): {total_t * per_epoch:.1f} CPU s per epoch")
+    print(f"whole training step: {1e3 * cpu:.0f} CPU ms, {1e3 * wall:.0f} wall ms -> "
+          f"{wall * per_epoch:.1f} s per 4,000-object epoch (wall)")
+    flops = 2 * total_macs * per_epoch
+    print(f"multiply-adds per epoch (fwd + bwd): {total_macs * per_epoch / 1e12:.2f} T: {flops / peak / 1e9:.1f} CPU s "
+          f"at the roofline, i.e. {flops / peak / 1e9 / args.threads:.1f} s wall on {args.threads} fully used cores")
+
+
+def epoch(args):
+    """Wall time of real EPPF4DClassifier epochs over 4,000 random descriptors."""
+    import os as _os
+
+    from eppf import EPPF4DClassifier
+
+    rng = np.random.default_rng(0)
+    X = rng.dirichlet(np.ones(1200), size=4000).astype(np.float32)
+    y = rng.integers(0, 10, 4000)
+    for conv in args.variants:
+        clf = EPPF4DClassifier(
+            conv=conv, max_epochs=args.max_epochs, early_stopping=False, batch_size=args.batch_size,
+            n_jobs=args.threads, random_state=0,
+        )
+        load = _os.getloadavg()[0]
+        c0, w0 = time.process_time(), time.perf_counter()
+        clf.fit(X, y)
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        print(f"{conv}: {wall / clf.n_epochs_:.1f} s wall, {cpu / clf.n_epochs_:.1f} s CPU per 4,000-object epoch "
+              f"({args.threads} threads, batch {args.batch_size}, {clf.n_epochs_} epochs, load average at start "
+              f"{load:.2f}, at end {_os.getloadavg()[0]:.2f})", flush=True)
+
+
 def descriptors(args):
     import eppf
     from eppf.datasets import load_npz
@@ -188,7 +316,7 @@ def modelnet(args):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("throughput", "descriptors", "modelnet"))
+    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet"))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=5)
@@ -207,8 +335,10 @@ def main(argv=None):
     parser.add_argument("--augment", action="store_true")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--verbose", type=int, default=0)
+    parser.add_argument("--no-mkldnn", action="store_true", help="profile: disable oneDNN convolutions")
     args = parser.parse_args(argv)
-    {"throughput": throughput, "descriptors": descriptors, "modelnet": modelnet}[args.part](args)
+    parts = {"throughput": throughput, "profile": profile, "epoch": epoch, "descriptors": descriptors, "modelnet": modelnet}
+    parts[args.part](args)
 
 
 if __name__ == "__main__":
