@@ -55,7 +55,6 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 """
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -296,6 +295,7 @@ def modelnet(args):
             batch_size=args.batch_size,
             n_iter_no_change=args.patience,
             lr=args.lr,
+            lr_schedule=args.lr_schedule,
             max_time=args.max_time or None,
             validation_fraction=args.validation_fraction,
             random_state=args.seed,
@@ -329,6 +329,7 @@ def main(argv=None):
     parser.add_argument("--patience", type=int, default=5)
     parser.add_argument("--validation-fraction", type=float, default=0.1)
     parser.add_argument("--lr", type=float, default=5e-4)
+    parser.add_argument("--lr-schedule", choices=("constant", "plateau"), default="constant")
     parser.add_argument(
         "--max-time", type=float, default=0.0, help="training budget per variant in seconds (0: none); best epoch kept"
     )

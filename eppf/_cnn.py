@@ -15,6 +15,7 @@ __all__ = ["EPPF4DClassifier"]
 _OWNER = "EPPF4DClassifier"
 _CONVS = ("2d", "3d", "4d")
 _INPUT_SCALINGS = ("global", "bin", "none")
+_LR_SCHEDULES = ("constant", "plateau")
 
 
 def _check_int(name, value, low, *, allow_none=False, owner=_OWNER):
@@ -65,6 +66,11 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         GPU; early stopping usually ends far sooner).
     lr : float, default=5e-4
         Adam learning rate (the paper's value).
+    lr_schedule : {"constant", "plateau"}, default="constant"
+        ``"constant"`` keeps ``lr`` throughout (the paper). ``"plateau"``
+        halves the learning rate whenever the monitored loss (validation
+        loss with early stopping, training loss without) has not improved
+        for ``max(1, n_iter_no_change // 3)`` epochs.
     batch_size : int, default=64
         Minibatch size.
     dropout : float, default=0.5
@@ -179,6 +185,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         *,
         max_epochs=100,
         lr=5e-4,
+        lr_schedule="constant",
         batch_size=64,
         dropout=0.5,
         weight_decay=0.0,
@@ -198,6 +205,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         self.conv = conv
         self.max_epochs = max_epochs
         self.lr = lr
+        self.lr_schedule = lr_schedule
         self.batch_size = batch_size
         self.dropout = dropout
         self.weight_decay = weight_decay
@@ -222,6 +230,8 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
             raise ValueError(f"{_OWNER}: conv must be one of '4d', '3d', '2d', got {self.conv!r}")
         _check_int("max_epochs", self.max_epochs, 1)
         _check_float("lr", self.lr, 0.0, math.inf)
+        if self.lr_schedule not in _LR_SCHEDULES:
+            raise ValueError(f"{_OWNER}: lr_schedule must be 'constant' or 'plateau', got {self.lr_schedule!r}")
         _check_int("batch_size", self.batch_size, 1)
         _check_float("dropout", self.dropout, 0.0, 1.0, low_open=False)
         _check_float("weight_decay", self.weight_decay, 0.0, math.inf, low_open=False)
@@ -374,6 +384,21 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
                 )
             )
 
+        if self.lr_schedule == "plateau":
+            from skorch.callbacks import LRScheduler
+
+            callbacks.append(
+                (
+                    "lr_scheduler",
+                    LRScheduler(
+                        policy=torch.optim.lr_scheduler.ReduceLROnPlateau,
+                        monitor="valid_loss" if valid_idx is not None else "train_loss",
+                        mode="min",
+                        factor=0.5,
+                        patience=max(1, self.n_iter_no_change // 3),
+                    ),
+                )
+            )
         if self.max_time is not None:
             callbacks.append(("time_budget", _TimeBudget(float(self.max_time), print if self.verbose else _silent)))
 

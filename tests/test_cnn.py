@@ -235,6 +235,23 @@ def test_max_time_ends_training_after_the_epoch_past_the_budget(early_stopping):
     assert long.n_epochs_ == 3 or early_stopping
 
 
+@pytest.mark.parametrize("early_stopping", [True, False])
+def test_plateau_schedule_halves_lr_after_stalled_epochs(early_stopping):
+    rng = np.random.default_rng(13)
+    X, y = _toy(40, rng)
+    # lr so small that the monitored loss stalls (relative improvement < 1e-4);
+    # not below 1e-8, the smallest change ReduceLROnPlateau makes.
+    clf = EPPF4DClassifier(
+        n_bins=N_BINS, max_epochs=8, lr=1e-6, lr_schedule="plateau", n_iter_no_change=3,
+        early_stopping=early_stopping, random_state=0, **SMALL,
+    ).fit(X, y)
+    lrs = [group["lr"] for group in clf.net_.optimizer_.param_groups]
+    assert clf.n_epochs_ >= 3
+    assert all(lr <= 0.5e-6 for lr in lrs)
+    const = clone(clf).set_params(lr_schedule="constant").fit(X, y)
+    assert [group["lr"] for group in const.net_.optimizer_.param_groups] == [1e-6]
+
+
 def test_adam_is_the_fused_kernel_on_cpu():
     rng = np.random.default_rng(12)
     X, y = _toy(30, rng)
@@ -339,6 +356,7 @@ def test_pipeline_with_eppf_transformer():
         ({"max_epochs": 0}, ValueError, "EPPF4DClassifier: max_epochs must be an int >= 1, got 0"),
         ({"lr": -1.0}, ValueError, "EPPF4DClassifier: lr must be a float in (0.0, inf), got -1.0"),
         ({"lr": float("nan")}, ValueError, "EPPF4DClassifier: lr must be a float in (0.0, inf), got nan"),
+        ({"lr_schedule": "cosine"}, ValueError, "EPPF4DClassifier: lr_schedule must be 'constant' or 'plateau', got 'cosine'"),
         ({"batch_size": 0}, ValueError, "EPPF4DClassifier: batch_size must be an int >= 1, got 0"),
         ({"dropout": 1.0}, ValueError, "EPPF4DClassifier: dropout must be a float in [0.0, 1.0), got 1.0"),
         ({"weight_decay": -0.1}, ValueError, "EPPF4DClassifier: weight_decay must be a float in [0.0, inf), got -0.1"),
