@@ -26,8 +26,8 @@ from eppf.metrics import leave_one_out_retrieval, retrieval_scores
 from eppf.plotting import plot_noise_curve
 from eppf.preprocessing import GaussianNoise
 
-shapes = make_shapes(n_samples_per_class=15, n_points=512, noise=0.0, random_state=0)
-sigmas = [0.0, 0.01, 0.02, 0.04, 0.08]
+shapes = make_shapes(n_samples_per_class=12, n_points=512, noise=0.0, random_state=0)
+sigmas = [0.0, 0.02, 0.04, 0.08]
 n_draws = 2
 
 descriptors = {
