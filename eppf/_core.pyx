@@ -37,11 +37,15 @@ cnp.import_array()
 
 cdef extern from "_walk.h":
     int eppf_walk_has_avx2() noexcept nogil
+    void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts,
+                              const double* nrm, double scale, int n1, int n2, int n3, int n4,
+                              double f1_density, const double* cos2, const double* cos3,
+                              int32_t* B) noexcept nogil
     void eppf_f4_batch_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
                             const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                             const double* recip_packed, int32_t* B) noexcept nogil
 
-# The AVX2 line walk (``_walk.h``) where the CPU has it; ``_set_simd`` turns it off for tests.
+# The AVX2 kernels (``_walk.h``) where the CPU has them; ``_set_simd`` turns them off for tests.
 cdef bint _simd = eppf_walk_has_avx2() != 0
 
 # Consecutive zero-length pairs after which an object is declared degenerate.
@@ -65,7 +69,7 @@ cdef uint64_t LOW32 = 0xFFFFFFFF
 
 
 def _set_simd(enabled):
-    """Use the AVX2 line walk when ``enabled`` and available; return the previous setting."""
+    """Use the AVX2 kernels when ``enabled`` and available; return the previous setting."""
     global _simd
     old = bool(_simd)
     _simd = bool(enabled) and eppf_walk_has_avx2() != 0
@@ -93,6 +97,7 @@ cdef struct Params:
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
     bint simd               # walk f4 in AVX2 lanes (grids up to 64)
+    bint simd123            # f1-f3 bins in AVX2 lanes
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -250,9 +255,12 @@ cdef inline int _bin_f123(const double* pts, const double* nrm, int64_t i, int64
     cdef double v, m1, m2, inv
     cdef int b1 = 0, b2 = 0, b3 = 0, k
     if prm.n1 > 1:
+        # Clamped before the conversion, so that huge distances cannot overflow the int.
         v = dist * scale
-        b1 = <int>(v * prm.f1_density)
-        if b1 >= prm.n1:
+        v = v * prm.f1_density
+        if v < prm.n1 - 1:
+            b1 = <int>v
+        else:
             b1 = prm.n1 - 1
     if prm.n2 > 1:
         inv = 1.0 / dist
@@ -326,8 +334,12 @@ cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double 
                 return 1
             I[t] = <int32_t>i
             J[t] = <int32_t>j
-        for t in range(m):
-            B[t] = _bin_f123(pts, nrm, I[t], J[t], scale, prm, NULL) * prm.n4
+        if prm.simd123:
+            eppf_f123_batch_avx2(<int>m, I, J, pts, nrm, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                 prm.f1_density, prm.cos2, prm.cos3, B)
+        else:
+            for t in range(m):
+                B[t] = _bin_f123(pts, nrm, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
             if prm.simd:
@@ -361,6 +373,7 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.n4 = n4
     prm.grid = grid
     prm.simd = _simd and grid <= 64
+    prm.simd123 = _simd
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max
     for k in range(1, n2):

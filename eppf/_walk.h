@@ -1,4 +1,9 @@
-/* f4 line walks of a batch of pairs, four pairs at a time in AVX2 lanes.
+/* AVX2 kernels of a batch of pairs, four pairs at a time: the f1-f3 bins
+ * (``eppf_f123_batch_avx2``) and the f4 line walks (``eppf_f4_batch_avx2``).
+ *
+ * f1-f3: the same IEEE operations in the same order as _core.pyx's
+ * ``_bin_f123`` (no FMA: the target is plain "avx2" and the build passes
+ * -ffp-contract=off), so the bins are bit-identical.
  *
  * Used by _core.pyx for grids of at most 64 voxels a side, where a voxel
  * position fits the packed fixed-point form of _core.pyx's ``_line_bin``:
@@ -50,6 +55,93 @@ static int eppf_walk_has_avx2(void)
 }
 
 #if EPPF_WALK_SIMD
+
+/* 4 points (x, y, z) at rows r[0..3] of an (n, 3) array, as x, y, z vectors. */
+__attribute__((target("avx2")))
+static inline void eppf_load3x4(const double *a, const int32_t *r, __m256d *x, __m256d *y, __m256d *z)
+{
+    const __m256i keep3 = _mm256_set_epi64x(0, -1, -1, -1);
+    __m256d p0 = _mm256_maskload_pd(a + 3 * (int64_t)r[0], keep3);  /* x0 y0 z0 0 */
+    __m256d p1 = _mm256_maskload_pd(a + 3 * (int64_t)r[1], keep3);
+    __m256d p2 = _mm256_maskload_pd(a + 3 * (int64_t)r[2], keep3);
+    __m256d p3 = _mm256_maskload_pd(a + 3 * (int64_t)r[3], keep3);
+    __m256d t0 = _mm256_unpacklo_pd(p0, p1);  /* x0 x1 z0 z1 */
+    __m256d t1 = _mm256_unpackhi_pd(p0, p1);  /* y0 y1 0 0 */
+    __m256d t2 = _mm256_unpacklo_pd(p2, p3);  /* x2 x3 z2 z3 */
+    __m256d t3 = _mm256_unpackhi_pd(p2, p3);  /* y2 y3 0 0 */
+    *x = _mm256_permute2f128_pd(t0, t2, 0x20);
+    *y = _mm256_permute2f128_pd(t1, t3, 0x20);
+    *z = _mm256_permute2f128_pd(t0, t2, 0x31);
+}
+
+/* B[t] = ((b1 * n2 + b2) * n3 + b3) * n4 for the pairs (ii[t], jj[t]), t < m,
+ * exactly as _core.pyx's ``_bin_f123``; cos2 / cos3 hold the n2 - 1 / n3 - 1
+ * inner bin edges on the cosine scale. */
+__attribute__((target("avx2")))
+static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const double *pts,
+                                 const double *nrm, double scale, int n1, int n2, int n3, int n4,
+                                 double f1_density, const double *cos2, const double *cos3, int32_t *B)
+{
+    int32_t ri[4], rj[4];
+    int32_t out[4];
+    const __m256d vscale = _mm256_set1_pd(scale), vdens = _mm256_set1_pd(f1_density);
+    const __m256d top1 = _mm256_set1_pd((double)(n1 - 1)), one = _mm256_set1_pd(1.0);
+    const __m256d sign = _mm256_set1_pd(-0.0);
+    int t, l, k;
+    for (t = 0; t < m; t += 4) {
+        __m256d pix, piy, piz, pjx, pjy, pjz, nix, niy, niz, njx, njy, njz;
+        __m256d dx, dy, dz, dist, inv, m1, m2, v;
+        __m128i b1, b2, b3, b;
+        for (l = 0; l < 4; l++) {  /* a partial last group repeats its last pair */
+            int u = t + l < m ? t + l : m - 1;
+            ri[l] = ii[u];
+            rj[l] = jj[u];
+        }
+        eppf_load3x4(pts, ri, &pix, &piy, &piz);
+        eppf_load3x4(pts, rj, &pjx, &pjy, &pjz);
+        dx = _mm256_sub_pd(pjx, pix);
+        dy = _mm256_sub_pd(pjy, piy);
+        dz = _mm256_sub_pd(pjz, piz);
+        dist = _mm256_sqrt_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                                            _mm256_mul_pd(dz, dz)));
+        /* f1: min(v * density, n1 - 1) truncated (a NaN lands in the top bin). */
+        v = _mm256_mul_pd(_mm256_mul_pd(dist, vscale), vdens);
+        b1 = _mm256_cvttpd_epi32(_mm256_min_pd(v, top1));
+        b2 = _mm_setzero_si128();
+        b3 = _mm_setzero_si128();
+        if (n2 > 1 || n3 > 1) {
+            eppf_load3x4(nrm, ri, &nix, &niy, &niz);
+            eppf_load3x4(nrm, rj, &njx, &njy, &njz);
+        }
+        if (n2 > 1) {
+            inv = _mm256_div_pd(one, dist);
+            m1 = _mm256_mul_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nix, dx), _mm256_mul_pd(niy, dy)),
+                                             _mm256_mul_pd(niz, dz)), inv);
+            m2 = _mm256_mul_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(njx, dx), _mm256_mul_pd(njy, dy)),
+                                             _mm256_mul_pd(njz, dz)), inv);
+            m1 = _mm256_min_pd(m2, m1);  /* m2 < m1 ? m2 : m1 */
+            for (k = 0; k < n2 - 1; k++) {
+                __m256d le = _mm256_cmp_pd(m1, _mm256_set1_pd(cos2[k]), _CMP_LE_OQ);
+                b2 = _mm_add_epi32(b2, _mm256_cvtpd_epi32(_mm256_and_pd(le, one)));  /* 1 where m1 <= edge */
+            }
+        }
+        if (n3 > 1) {
+            v = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nix, njx), _mm256_mul_pd(niy, njy)),
+                              _mm256_mul_pd(niz, njz));
+            v = _mm256_andnot_pd(sign, v);
+            for (k = 0; k < n3 - 1; k++) {
+                __m256d le = _mm256_cmp_pd(v, _mm256_set1_pd(cos3[k]), _CMP_LE_OQ);
+                b3 = _mm_add_epi32(b3, _mm256_cvtpd_epi32(_mm256_and_pd(le, one)));
+            }
+        }
+        b = _mm_add_epi32(_mm_mullo_epi32(b1, _mm_set1_epi32(n2)), b2);
+        b = _mm_add_epi32(_mm_mullo_epi32(b, _mm_set1_epi32(n3)), b3);
+        b = _mm_mullo_epi32(b, _mm_set1_epi32(n4));
+        _mm_storeu_si128((__m128i *)out, b);
+        for (l = 0; l < 4 && t + l < m; l++)
+            B[t + l] = out[l];
+    }
+}
 
 /* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m (m <= 64).
  *
@@ -208,6 +300,14 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
 }
 
 #else
+
+static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const double *pts,
+                                 const double *nrm, double scale, int n1, int n2, int n3, int n4,
+                                 double f1_density, const double *cos2, const double *cos3, int32_t *B)
+{
+    (void)m; (void)ii; (void)jj; (void)pts; (void)nrm; (void)scale; (void)n1; (void)n2; (void)n3;
+    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
+}
 
 static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
                                const uint64_t *bits, int64_t g, const int32_t *thr, int n4,

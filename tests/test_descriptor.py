@@ -122,6 +122,22 @@ def test_counts_match_reference_on_every_walk(clouds, grid, n_bins, n_pairs):
             assert_array_equal(got[k], want)
 
 
+@pytest.mark.parametrize("simd", [True, False])
+def test_huge_distances_fall_in_the_last_distance_bin(clouds, simd):
+    # dist * scale * density far beyond the int range must clamp, not wrap around.
+    seeds = object_seeds(8, len(clouds))
+    points, normals, offsets = _packed(clouds)
+    old = _set_simd(simd)
+    try:
+        got, _ = eppf_counts(points, normals, offsets, np.full(len(clouds), 1e15), seeds, 500, (20, 4, 5, 3), 64,
+                             ref.F1_MAX, 1)
+    finally:
+        _set_simd(old)
+    for k, cloud in enumerate(clouds):
+        assert_array_equal(got[k], _reference_counts(cloud, seeds[k], 500, 1e15, (20, 4, 5, 3), 64))
+    assert got.reshape(len(clouds), 20, -1)[:, 19].sum() == 500 * len(clouds)
+
+
 @pytest.mark.parametrize("grid", [64, 33, 5, 128])
 @pytest.mark.parametrize("n4", [2, 3, 6, 64])
 def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
