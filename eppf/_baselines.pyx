@@ -16,10 +16,47 @@ import numpy as np
 cimport numpy as cnp
 from cython.parallel cimport prange, threadid
 from libc.math cimport sqrt, atan2, floor, ceil, fabs, M_PI
-from libc.stdint cimport int8_t, int32_t, int64_t, uint32_t, uint64_t
+from libc.stdint cimport int8_t, int16_t, int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 
 from ._common cimport splitmix64, rand_below
+
+cdef extern from "_esf_kernel.h" nogil:
+    enum:
+        ESF_BATCH
+        ESF_LAYOUT_WORDS
+    ctypedef struct esf_const:
+        int n_bins
+        int grid
+        double area_eps
+        const double* edges
+        const int32_t* lut
+        double lut_scale
+        int lut_on_cos
+        const int64_t* rs
+        const int64_t* st
+        const int16_t* ratio_bin
+    ctypedef struct esf_state:
+        const double* pts
+        const int32_t* cells
+        const uint64_t* g3
+        int64_t* acc
+        double* out
+        double* d2v
+        double* d3v
+        int8_t* cls2
+        int8_t* cls3
+        double maxd2, maxd3
+        int64_t attempts, max_attempts
+        int t, n_triplets
+    void esf_fill_layouts(const int32_t* cells, int64_t n, int grid, uint64_t* g3)
+    void esf_fill_ratio_bins(int n_bins, int16_t* ratio_bin)
+    int esf_take(const esf_const* k, esf_state* s, const uint32_t* i1, const uint32_t* i2,
+                 const uint32_t* i3, int n_cand)
+    void esf_finish(const esf_state* s, int n_bins)
+    int esf_line_setup(const int32_t* a, const int32_t* b, const int64_t* rs,
+                       const int64_t* st, uint64_t* pos_out, uint64_t* inc_out)
+    int esf_walk(const uint64_t* g3, uint64_t pos, uint64_t inc, int n)
 
 cnp.import_array()
 
@@ -171,32 +208,12 @@ cdef inline double _abs_cos(double ax, double ay, double az,
     return c if c < 1.0 else 1.0
 
 
-cdef int _esf_object(const double* points, int64_t start, int64_t n,
-                     uint64_t seed, int n_triplets, int grid, int n_bins,
-                     double area_eps, const double* edges, const int32_t* lut, double lut_scale,
-                     const uint64_t* recip,
-                     double* pts, int32_t* cells, uint64_t* bits, double* d2v, double* d3v,
-                     int8_t* cls2, int8_t* cls3, double* out) noexcept nogil:
-    """One object's ESF into ``out`` (10 * n_bins, zeroed). Returns a status."""
-    cdef int64_t i, k, idx, n_words
+cdef void _esf_centre(const double* points, int64_t start, int64_t n, int grid,
+                      double* pts, int32_t* cells) noexcept nogil:
+    """Centre on the mean, scale the farthest point to radius grid / 2, voxels."""
+    cdef int64_t i
     cdef int half = grid // 2
     cdef double cx = 0.0, cy = 0.0, cz = 0.0, r2, rmax = 0.0, sc
-    cdef int cell[3]
-    cdef int c1[3]
-    cdef int c2[3]
-    cdef int c3[3]
-    cdef int x, y, z, ax, bin_, ok
-    cdef uint64_t state = seed
-    cdef int64_t attempts = 0, max_attempts = 1000 + <int64_t>200 * n_triplets
-    cdef uint32_t i1, i2, i3
-    cdef double a, b, c, s, heron, inv
-    cdef double v21x, v21y, v21z, v31x, v31y, v31z, v23x, v23y, v23z
-    cdef int th1, th2, th3, w12, w13, w23
-    cdef int in12, in13, in23, n12, n13, n23, in_sum, n_sum
-    cdef double ratio = 0.0, maxd2 = 0.0, maxd3 = 0.0, total
-    cdef int t = 0
-    cdef double weights[10]
-    # Centre on the mean and scale the farthest point to radius grid / 2.
     for i in range(n):
         cx += points[3 * (start + i) + 0]
         cy += points[3 * (start + i) + 1]
@@ -214,13 +231,82 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
     sc = half / sqrt(rmax)
     for i in range(3 * n):
         pts[i] *= sc
+        cells[i] = _pcl_cell(pts[i], half, grid)
+
+
+cdef int _esf_object_fast(const double* points, int64_t start, int64_t n,
+                          uint64_t seed, int n_triplets, const esf_const* kc,
+                          double* pts, int32_t* cells, uint64_t* g3, int64_t* acc,
+                          double* d2v, double* d3v, int8_t* cls2, int8_t* cls3,
+                          double* out) noexcept nogil:
+    """One object's ESF for grids up to 64 (``eppf/_esf_kernel.h``)."""
+    cdef esf_state st
+    cdef uint32_t i1[ESF_BATCH]
+    cdef uint32_t i2[ESF_BATCH]
+    cdef uint32_t i3[ESF_BATCH]
+    cdef uint64_t state = seed
+    cdef int j
+    _esf_centre(points, start, n, kc.grid, pts, cells)
+    esf_fill_layouts(cells, n, kc.grid, g3)
+    memset(acc, 0, 19 * kc.n_bins * sizeof(int64_t))
+    st.pts = pts
+    st.cells = cells
+    st.g3 = g3
+    st.acc = acc
+    st.out = out
+    st.d2v = d2v
+    st.d3v = d3v
+    st.cls2 = cls2
+    st.cls3 = cls3
+    st.maxd2 = 0.0
+    st.maxd3 = 0.0
+    st.attempts = 0
+    st.max_attempts = 1000 + <int64_t>200 * n_triplets
+    st.t = 0
+    st.n_triplets = n_triplets
+    while st.t < n_triplets:
+        # candidates in the generator's order; the kernel takes them in order
+        for j in range(ESF_BATCH):
+            i1[j] = rand_below(&state, <uint32_t>n)
+            i2[j] = rand_below(&state, <uint32_t>n)
+            i3[j] = rand_below(&state, <uint32_t>n)
+        if esf_take(kc, &st, i1, i2, i3, ESF_BATCH):
+            return 1
+    esf_finish(&st, kc.n_bins)
+    return 0
+
+
+cdef int _esf_object(const double* points, int64_t start, int64_t n,
+                     uint64_t seed, int n_triplets, int grid, int n_bins,
+                     double area_eps, const double* edges, const int32_t* lut, double lut_scale,
+                     const uint64_t* recip,
+                     double* pts, int32_t* cells, uint64_t* bits, double* d2v, double* d3v,
+                     int8_t* cls2, int8_t* cls3, double* out) noexcept nogil:
+    """One object's ESF into ``out`` (10 * n_bins, zeroed), triplet by triplet,
+    for any grid size. Returns a status."""
+    cdef int64_t i, k, idx, n_words
+    cdef int cell[3]
+    cdef int c1[3]
+    cdef int c2[3]
+    cdef int c3[3]
+    cdef int x, y, z, ax
+    cdef uint64_t state = seed
+    cdef int64_t attempts = 0, max_attempts = 1000 + <int64_t>200 * n_triplets
+    cdef uint32_t i1, i2, i3
+    cdef double a, b, c, s, heron, inv
+    cdef double v21x, v21y, v21z, v31x, v31y, v31z, v23x, v23y, v23z
+    cdef int th1, th2, th3, w12, w13, w23
+    cdef int in12, in13, in23, n12, n13, n23, in_sum, n_sum
+    cdef double ratio = 0.0, maxd2 = 0.0, maxd3 = 0.0, total
+    cdef int t = 0
+    cdef double weights[10]
+    _esf_centre(points, start, n, grid, pts, cells)
     # Occupancy: every point's voxel and its 26 neighbours (PCL's voxelize9).
     n_words = (<int64_t>grid * grid * grid + 63) // 64
     memset(bits, 0, n_words * sizeof(uint64_t))
     for i in range(n):
         for ax in range(3):
-            cell[ax] = _pcl_cell(pts[3 * i + ax], half, grid)
-            cells[3 * i + ax] = cell[ax]
+            cell[ax] = cells[3 * i + ax]
         for x in range(cell[0] - 1, cell[0] + 2):
             if x < 0 or x >= grid:
                 continue
@@ -339,18 +425,22 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
 
     Parameters are validated by the caller. ``area_eps`` is the threshold on
     Heron's s(s-a)(s-b)(s-c) (grid units) under which a triplet is redrawn.
+    Grids up to 64 go through the batched kernel of ``_esf_kernel.h``, larger
+    ones through ``_esf_object``; both give the same histograms.
     """
     cdef Py_ssize_t n_objects = offsets.shape[0] - 1
     cdef Py_ssize_t k
     cdef int64_t max_n = 0
     cdef int tid
+    cdef bint fast = grid <= 64
     for k in range(n_objects):
         if offsets[k + 1] - offsets[k] > max_n:
             max_n = offsets[k + 1] - offsets[k]
-    cdef int64_t n_words = (<int64_t>grid * grid * grid + 63) // 64
+    cdef int64_t n_words = 3 * ESF_LAYOUT_WORDS if fast else (<int64_t>grid * grid * grid + 63) // 64
     cdef double[:, ::1] pts = np.empty((num_threads, 3 * max_n), dtype=np.float64)
     cdef int32_t[:, ::1] cells = np.empty((num_threads, 3 * max_n), dtype=np.int32)
     cdef uint64_t[:, ::1] bits = np.empty((num_threads, n_words), dtype=np.uint64)
+    cdef int64_t[:, ::1] acc = np.empty((num_threads, 19 * n_bins), dtype=np.int64)
     cdef double[:, ::1] d2v = np.empty((num_threads, 3 * <int64_t>n_triplets), dtype=np.float64)
     cdef double[:, ::1] d3v = np.empty((num_threads, n_triplets), dtype=np.float64)
     cdef int8_t[:, ::1] cls2 = np.empty((num_threads, 3 * <int64_t>n_triplets), dtype=np.int8)
@@ -362,28 +452,90 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     edges_arr = np.full(n_pow2, -2.0)
     edges_arr[: n_bins - 1] = np.cos((np.arange(n_bins - 1) + 0.5) / max(n_bins - 1, 1) * (np.pi / 2))
     cdef double[::1] edges = edges_arr
-    # Lower bounds of the A3 bin over cells of u = sqrt((1 - c) / 2) in
-    # [0, sin(pi/4)]: 2 * n_pow2 cells, each narrower than a bin (the angle
-    # is 2 asin(u), whose slope is at most 2 sqrt(2), so a cell spans at most
-    # 1 / n_pow2 radians, a bin (pi/2) / (n_bins - 1)). Each bound is
-    # taken a hundredth of a cell below the cell's start, against rounding.
-    cdef int n_cells = 2 * n_pow2
-    cdef double lut_scale = n_cells / np.sqrt(0.5)
-    u_lo = np.maximum(np.arange(n_cells + 1) - 0.01, 0.0) / lut_scale
-    c_hi = 1.0 - 2.0 * u_lo * u_lo
-    cdef int32_t[::1] lut = (edges_arr[None, :] >= c_hi[:, None]).sum(axis=1).astype(np.int32)
-    # recip[L] = floor(2**32 / L) for the fixed-point line walk.
+    cdef int32_t[::1] lut
+    cdef int32_t[::1] lut_u
+    cdef double lut_scale, lut_u_scale
+    cdef int lut_on_cos
+    lut_u, lut_u_scale = _a3_table_sin(edges_arr, n_pow2)
+    cos_table = _a3_table_cos(edges_arr, n_bins)
+    if cos_table is None:
+        lut, lut_scale, lut_on_cos = lut_u, lut_u_scale, 0
+    else:
+        lut, lut_scale, lut_on_cos = cos_table[0], cos_table[1], 1
+    # recip[L] = floor(2**32 / L) for the general line walk.
     recip_arr = np.zeros(grid + 1, dtype=np.uint64)
     recip_arr[1:] = (2**32) // np.arange(1, grid + 1, dtype=np.uint64)
     cdef uint64_t[::1] recip = recip_arr
+    # rs[L] = floor(2**22 / L) and the walk's start offsets for the packed walk.
+    L_arr = np.arange(65, dtype=np.int64)
+    rs_arr = np.zeros(65, dtype=np.int64)
+    rs_arr[1:] = (2**22) // L_arr[1:]
+    st_arr = (L_arr - 1) * (rs_arr >> 1) + L_arr * L_arr + 2
+    cdef int64_t[::1] rs = rs_arr
+    cdef int64_t[::1] st = st_arr
+    cdef int16_t[::1] ratio_bin = np.empty(64 * 64, dtype=np.int16)
+    esf_fill_ratio_bins(n_bins, &ratio_bin[0])
+    cdef esf_const kc
+    kc.n_bins = n_bins
+    kc.grid = grid
+    kc.area_eps = area_eps
+    kc.edges = &edges[0]
+    kc.lut = &lut[0]
+    kc.lut_scale = lut_scale
+    kc.lut_on_cos = lut_on_cos
+    kc.rs = &rs[0]
+    kc.st = &st[0]
+    kc.ratio_bin = &ratio_bin[0]
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
-        status[k] = <int8_t>_esf_object(
-            &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
-            grid, n_bins, area_eps, &edges[0], &lut[0], lut_scale, &recip[0], &pts[tid, 0], &cells[tid, 0], &bits[tid, 0], &d2v[tid, 0],
-            &d3v[tid, 0], &cls2[tid, 0], &cls3[tid, 0], &out[k, 0])
+        if fast:
+            status[k] = <int8_t>_esf_object_fast(
+                &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
+                &kc, &pts[tid, 0], &cells[tid, 0], &bits[tid, 0], &acc[tid, 0], &d2v[tid, 0],
+                &d3v[tid, 0], &cls2[tid, 0], &cls3[tid, 0], &out[k, 0])
+        else:
+            status[k] = <int8_t>_esf_object(
+                &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
+                grid, n_bins, area_eps, &edges[0], &lut_u[0], lut_u_scale, &recip[0], &pts[tid, 0],
+                &cells[tid, 0], &bits[tid, 0], &d2v[tid, 0], &d3v[tid, 0], &cls2[tid, 0],
+                &cls3[tid, 0], &out[k, 0])
         if status[k] != 0:
             memset(&out[k, 0], 0, 10 * n_bins * sizeof(double))
+
+
+def _a3_table_sin(edges_arr, int n_pow2):
+    """A3 table over u = sqrt((1 - c) / 2) in [0, sin(pi/4)].
+
+    2 * n_pow2 cells, each narrower than a bin (the angle is 2 asin(u), whose
+    slope is at most 2 sqrt(2), so a cell spans at most 1 / n_pow2 radians, a
+    bin (pi/2) / (n_bins - 1)); each entry is the number of edges not below
+    the cosine at the cell's start taken a hundredth of a cell lower, against
+    rounding: a lower bound of the bin at most one short.
+    """
+    n_cells = 2 * n_pow2
+    scale = n_cells / np.sqrt(0.5)
+    u_lo = np.maximum(np.arange(n_cells + 1) - 0.01, 0.0) / scale
+    c_hi = 1.0 - 2.0 * u_lo * u_lo
+    return (edges_arr[None, :] >= c_hi[:, None]).sum(axis=1).astype(np.int32), scale
+
+
+def _a3_table_cos(edges_arr, int n_bins, int max_cells=65536):
+    """A3 table over the cosine c in [0, 1], or None when it would be too large.
+
+    N cells (a power of two) at most half as wide as the narrowest gap between
+    edges, so a cell with a 1e-12 margin either side holds at most one edge;
+    entry j counts the edges at or above (j + 1) / N + 1e-12: a lower bound
+    of the bin for every c with int(c * N) == j, at most one short.
+    """
+    inner = edges_arr[: max(n_bins - 1, 0)]
+    gap = np.min(-np.diff(inner)) if inner.size > 1 else 1.0
+    n_cells = 1
+    while n_cells < 2.0 / gap:
+        n_cells *= 2
+        if n_cells > max_cells:
+            return None
+    hi = (np.arange(n_cells + 1) + 1.0) / n_cells + 1e-12
+    return np.searchsorted(-edges_arr, -hi, side="right").astype(np.int32), float(n_cells)
 
 
 # ---------------------------------------------------------------------------
@@ -526,3 +678,30 @@ def wahl_batch(const double[:, ::1] points, const double[:, ::1] normals,
             &out[k, 0])
         if status[k] != 0:
             memset(&out[k, 0], 0, n_out * sizeof(double))
+
+
+def esf_line_counts(const int32_t[:, ::1] occupied, const int32_t[:, ::1] starts,
+                    const int32_t[:, ::1] ends, int grid):
+    """Occupied and visited voxels of ESF's packed line walk (grids up to 64).
+
+    The grid is the 3x3x3 dilation of the voxels ``occupied``; line k runs
+    from voxel ``starts[k]`` towards ``ends[k]``. For the tests: an
+    independent Bresenham loop must give the same counts.
+    """
+    cdef Py_ssize_t k, n_lines = starts.shape[0]
+    cdef uint64_t[::1] g3 = np.empty(3 * ESF_LAYOUT_WORDS, dtype=np.uint64)
+    L_arr = np.arange(65, dtype=np.int64)
+    rs_arr = np.zeros(65, dtype=np.int64)
+    rs_arr[1:] = (2**22) // L_arr[1:]
+    cdef int64_t[::1] rs = rs_arr
+    cdef int64_t[::1] st = (L_arr - 1) * (rs_arr >> 1) + L_arr * L_arr + 2
+    cdef int32_t[::1] occ = np.empty(n_lines, dtype=np.int32)
+    cdef int32_t[::1] cnt = np.empty(n_lines, dtype=np.int32)
+    cdef uint64_t pos, inc
+    if grid > 64:
+        raise ValueError("esf_line_counts: grid must be at most 64")
+    esf_fill_layouts(&occupied[0, 0], occupied.shape[0], grid, &g3[0])
+    for k in range(n_lines):
+        cnt[k] = esf_line_setup(&starts[k, 0], &ends[k, 0], &rs[0], &st[0], &pos, &inc)
+        occ[k] = esf_walk(&g3[0], pos, inc, cnt[k])
+    return np.asarray(occ), np.asarray(cnt)

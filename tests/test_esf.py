@@ -138,7 +138,12 @@ def _esf_reference(cloud, seed, n_triplets, grid=64, n_bins=64):
     return (h / h.sum()).ravel()
 
 
-@pytest.mark.parametrize("random_state, grid, n_bins", [(0, 64, 64), (7, 64, 64), (1, 32, 100), (2, 128, 7)])
+# (64, 64): the batched kernel with the A3 table over the cosine; (64, 300):
+# with the table over sin(angle / 2) (bins too fine for the cosine table);
+# (128, 7): the triplet-by-triplet kernel of larger grids.
+@pytest.mark.parametrize(
+    "random_state, grid, n_bins", [(0, 64, 64), (7, 64, 64), (1, 32, 100), (3, 64, 300), (2, 128, 7)]
+)
 def test_matches_slow_reference(random_state, grid, n_bins):
     clouds = _clouds(3, seed=random_state)
     est = ESFTransformer(n_triplets=300, grid_size=grid, n_bins=n_bins, random_state=random_state)
@@ -269,3 +274,46 @@ def test_collinear_cloud_is_rejected():
 def test_not_fitted():
     with pytest.raises(NotFittedError):
         ESFTransformer().transform(_clouds())
+
+
+def _dilated(cells, grid):
+    occ = set()
+    for c in cells:
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    v = (int(c[0]) + dx, int(c[1]) + dy, int(c[2]) + dz)
+                    if all(0 <= x < grid for x in v):
+                        occ.add(v)
+    return occ
+
+
+def test_packed_line_walk_matches_bresenham_for_every_length_and_slope():
+    # The batched kernel walks lines in packed fixed point over three grid
+    # layouts; every dominant axis, direction, length 0..63 and minor slope
+    # -L..L must visit exactly PCL's voxels (about 40% of them occupied).
+    from eppf._baselines import esf_line_counts
+
+    rng = np.random.default_rng(0)
+    grid = 64
+    occupied = rng.integers(0, grid, size=(5000, 3)).astype(np.int32)
+    occ = _dilated(occupied, grid)
+    starts, ends = [], []
+    for major in range(3):
+        for sign in (1, -1):
+            for L in range(grid):
+                for d1 in range(-L, L + 1):
+                    d2 = (d1 * 7 + 3) % (2 * L + 1) - L
+                    a, b = [0, 0, 0], [0, 0, 0]
+                    a[major] = 0 if sign > 0 else grid - 1
+                    b[major] = a[major] + sign * L
+                    for ax, d in zip([x for x in range(3) if x != major], (d1, d2)):
+                        a[ax] = int(rng.integers(0, grid - d)) if d >= 0 else int(rng.integers(-d, grid))
+                        b[ax] = a[ax] + d
+                    starts.append(a)
+                    ends.append(b)
+    got_occ, got_cnt = esf_line_counts(occupied, np.array(starts, np.int32), np.array(ends, np.int32), grid)
+    ref = [_walk(occ, tuple(a), tuple(b)) for a, b in zip(starts, ends)]
+    assert_array_equal(got_cnt, [r[2] for r in ref])
+    assert_array_equal(got_occ, [r[1] for r in ref])
+    assert 0.2 < np.mean(got_occ / got_cnt) < 0.6

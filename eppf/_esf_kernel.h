@@ -1,0 +1,338 @@
+/* ESF's per-triplet work for grids up to 64 voxels, in batches.
+ *
+ * Used by eppf/_baselines.pyx, which draws the candidate triplets with the
+ * shared per-object generator and hands them over ESF_BATCH at a time. Each
+ * batch goes through separate loops (geometry of every candidate, then the
+ * accepted ones in draw order, their line set-up, the line walks, the
+ * histogram updates), so the latencies of one triplet's square roots,
+ * divisions and voxel walks overlap with its neighbours' instead of stalling
+ * one after the other. The output is the same as a triplet-by-triplet loop.
+ *
+ * The occupancy grid is kept three times, once with each axis as the outer
+ * index u of a 64-bit word index 64 * u + v (the bit in the word being the
+ * third axis w): layout m = 0 has (u, v, w) = (x, y, z), m = 1 (y, x, z),
+ * m = 2 (z, x, y). A line is walked in the layout whose u is its dominant
+ * axis, which steps by exactly one voxel per step, so the word index needs
+ * only one fixed-point field: position = 4096 m + 64 u + v in a 36-bit lane
+ * and w in a 28-bit lane of one 64-bit integer, both with ESF_FRAC fraction
+ * bits. A step is one 64-bit addition; a voxel test is two shifts, a load, a
+ * variable shift and an AND.
+ *
+ * PCL's lci visits, after k steps of a line of dominant length L >= 2, the
+ * offset floor((2 D k + L - 1) / (2 L)) from the start on an axis of length
+ * D, for k = 0 .. L - 1 (the end voxel is not visited). With S = 2**ESF_FRAC
+ * and R = floor(S / L), the lane value start + k D R with
+ * start = (L - 1) floor(R / 2) + L**2 + 2 lies in (X, X + L**2 + 2] units,
+ * X = S (2 D k + L - 1) / (2 L) the exact value (the truncation of R loses
+ * less than k D (L - 1) / L <= (L - 1)**2 units, the start gains at least
+ * L**2 - L + 3). A non-integer X / S is at least S / (2 L) units below the
+ * next integer, so the floor is exact while 2 L**3 + 4 L < S (L <= 63 needs
+ * S > 500346: ESF_FRAC = 22 is ample). A negative direction uses
+ * S (a + 1) - start - k D R, whose floor is a - floor(X / S) because the
+ * positive-direction value never equals X. The walk is checked against a
+ * plain Bresenham loop for every L, D and sign by the tests.
+ */
+#ifndef EPPF_ESF_KERNEL_H
+#define EPPF_ESF_KERNEL_H
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#define ESF_BATCH 64
+#define ESF_FRAC 22
+#define ESF_WLANE (ESF_FRAC + 6)               /* w: 6 integer bits + fraction */
+#define ESF_WORD_SHIFT (ESF_WLANE + ESF_FRAC)  /* word index: the top 14 bits */
+#define ESF_LAYOUT_WORDS 4096                  /* 64 * 64 words per layout */
+
+typedef struct {
+    int n_bins;
+    int grid;
+    double area_eps;
+    const double *edges;   /* A3 bin edges on the cosine scale (padded) */
+    const int32_t *lut;    /* A3 bin lower bounds over u = sin(angle / 2) */
+    double lut_scale;
+    int lut_on_cos;        /* table over c (1) or over sin(angle / 2) (0) */
+    const int64_t *rs;     /* rs[L] = floor(2**ESF_FRAC / L), rs[0] = 0 */
+    const int64_t *st;     /* st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2 */
+    const int16_t *ratio_bin; /* [64 * cnt + occ]: bin of occ / cnt, cnt < 64 */
+} esf_const;
+
+typedef struct {
+    const double *pts;     /* centred, scaled points (3 n) */
+    const int32_t *cells;  /* their voxels (3 n) */
+    const uint64_t *g3;    /* the three grid layouts, 3 * 4096 words */
+    int64_t *acc;          /* 19 * n_bins integer counts (A3: in 32nds): the
+                            * ten histograms, then three more copies of the
+                            * ratio one and two more of the three A3 ones */
+    double *out;           /* 10 * n_bins, the result */
+    double *d2v;           /* 3 n_triplets side lengths */
+    double *d3v;           /* n_triplets sqrt(area) */
+    int8_t *cls2;          /* line classes of the sides */
+    int8_t *cls3;          /* classes of the triangles */
+    double maxd2, maxd3;
+    int64_t attempts, max_attempts;
+    int t, n_triplets;
+} esf_state;
+
+enum { ESF_IN = 0, ESF_OUT = 1, ESF_MIX = 2 };
+
+/* Layout m: axis roles (u, v, w). */
+static const int esf_vax[3] = {1, 0, 0};
+static const int esf_wax[3] = {2, 2, 1};
+
+/* Fill the three layouts from the voxels of the points and their 26
+ * neighbours (PCL's voxelize9). */
+static void esf_fill_layouts(const int32_t *cells, int64_t n, int grid, uint64_t *g3)
+{
+    int64_t i;
+    int x, y, z;
+    memset(g3, 0, 3 * ESF_LAYOUT_WORDS * sizeof(uint64_t));
+    for (i = 0; i < n; i++) {
+        const int32_t *c = cells + 3 * i;
+        int x0 = c[0] > 0 ? c[0] - 1 : 0, x1 = c[0] + 1 < grid ? c[0] + 1 : grid - 1;
+        int y0 = c[1] > 0 ? c[1] - 1 : 0, y1 = c[1] + 1 < grid ? c[1] + 1 : grid - 1;
+        int z0 = c[2] > 0 ? c[2] - 1 : 0, z1 = c[2] + 1 < grid ? c[2] + 1 : grid - 1;
+        /* layout 0: word 64 x + y, bit z: the z run is one mask */
+        uint64_t zmask = ((~(uint64_t)0) >> (63 - (z1 - z0))) << z0;
+        for (x = x0; x <= x1; x++)
+            for (y = y0; y <= y1; y++) {
+                g3[64 * x + y] |= zmask;
+                g3[ESF_LAYOUT_WORDS + 64 * y + x] |= zmask;
+            }
+        /* layout 2: word 64 z + x, bit y */
+        {
+            uint64_t ymask = ((~(uint64_t)0) >> (63 - (y1 - y0))) << y0;
+            for (z = z0; z <= z1; z++)
+                for (x = x0; x <= x1; x++)
+                    g3[2 * ESF_LAYOUT_WORDS + 64 * z + x] |= ymask;
+        }
+    }
+}
+
+/* Packed start and increment of the line from voxel a towards voxel b,
+ * without data-dependent branches or indexed loads but the two tables
+ * (rs[L] = floor(S / L), st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2).
+ * Returns the number of voxels PCL visits, max(L, 1). L = 1 and L = 0 come
+ * out right from the same formulas (one step from the start voxel). */
+static inline int esf_line_setup(const int32_t *a, const int32_t *b, const int64_t *rs,
+                                 const int64_t *st, uint64_t *pos_out, uint64_t *inc_out)
+{
+    int64_t d0 = b[0] - a[0], d1 = b[1] - a[1], d2 = b[2] - a[2];
+    int64_t n0 = d0 >> 63, n1 = d1 >> 63, n2 = d2 >> 63; /* -1 when negative */
+    int64_t ad0 = (d0 ^ n0) - n0, ad1 = (d1 ^ n1) - n1, ad2 = (d2 ^ n2) - n2;
+    /* dominant axis m, the first one on ties (as PCL); layout m's (u, v, w)
+     * are (x, y, z), (y, x, z), (z, x, y) */
+    int64_t m1 = ad1 > ad0 && ad1 >= ad2, m2 = ad2 > ad0 && ad2 > ad1;
+    int64_t L = m2 ? ad2 : (m1 ? ad1 : ad0);
+    int64_t au = m2 ? a[2] : (m1 ? a[1] : a[0]);
+    int64_t nu = m2 ? n2 : (m1 ? n1 : n0);
+    int64_t av = (m1 | m2) ? a[0] : a[1], dv = (m1 | m2) ? d0 : d1, nv = (m1 | m2) ? n0 : n1;
+    int64_t aw = m2 ? a[1] : a[2], dw = m2 ? d1 : d2, nw = m2 ? n1 : n2;
+    int64_t R = rs[L], start = st[L], flip = ((int64_t)1 << ESF_FRAC) - 2 * start;
+    int64_t pu = (m1 + 2 * m2) * ESF_LAYOUT_WORDS + 64 * au;
+    int64_t pv = (av << ESF_FRAC) + start + (nv & flip); /* S (a + 1) - start when negative */
+    int64_t pw = (aw << ESF_FRAC) + start + (nw & flip);
+    int64_t iu = (((int64_t)64 << ESF_FRAC) ^ nu) - nu;
+    *pos_out = ((uint64_t)((pu << ESF_FRAC) + pv) << ESF_WLANE) + (uint64_t)pw;
+    *inc_out = ((uint64_t)(iu + dv * R) << ESF_WLANE) + (uint64_t)(dw * R);
+    return (int)(L + (L == 0));
+}
+
+/* Occupied voxels among the n steps of a packed line. */
+static inline int esf_walk(const uint64_t *g3, uint64_t pos, uint64_t inc, int n)
+{
+    int occ = 0;
+    uint64_t end = pos + (uint64_t)n * inc;
+    do {
+        occ += (int)((g3[pos >> ESF_WORD_SHIFT] >> ((pos >> ESF_FRAC) & 63)) & 1);
+        pos += inc;
+    } while (pos != end);
+    return occ;
+}
+
+/* round((n_bins - 1) arccos(c) / (pi / 2)) for c in [0, 1] without arccos:
+ * the number of bin edges (cosines, decreasing, padded with -2) not below c.
+ * The table gives, per cell of its argument, a lower bound that is at most
+ * one short (no cell holds two edges); one comparison completes it. The
+ * argument is c itself when the cells can be that fine (coarse bins), else
+ * u = sqrt((1 - c) / 2) = sin(angle / 2). */
+static inline int esf_angle_bin(double c, const esf_const *k)
+{
+    double arg = k->lut_on_cos ? c : sqrt((1.0 - c) * 0.5);
+    int lo = k->lut[(int)(arg * k->lut_scale)];
+    lo += k->edges[lo] >= c;
+    return lo;
+}
+
+static inline int esf_round_bin(double v, int n_bins)
+{
+    double x = v * (n_bins - 1) + 0.5;
+    int i;
+    if (x <= 0.0)
+        return 0;
+    i = (int)x;
+    if (i >= n_bins)
+        return n_bins - 1;
+    return i;
+}
+
+/* esf_round_bin(v / vmax, n_bins) with a multiplication by
+ * scale = (n_bins - 1) / vmax instead of a division; the rare values within
+ * 1e-9 of a bin boundary (where the two could round differently) take the
+ * division. */
+static inline int esf_scaled_bin(double v, double vmax, double scale, int n_bins)
+{
+    double x = v * scale + 0.5;
+    int i;
+    if (x <= 0.0)
+        return 0;
+    i = (int)x;
+    if (x - i < 1e-9 || i + 1 - x < 1e-9)
+        return esf_round_bin(v / vmax, n_bins);
+    if (i >= n_bins)
+        return n_bins - 1;
+    return i;
+}
+
+/* ratio_bin[64 * c + o] = esf_round_bin(o / c, n_bins) for 1 <= c < 64, o <= c. */
+static void esf_fill_ratio_bins(int n_bins, int16_t *ratio_bin)
+{
+    int c, o;
+    for (c = 0; c < 64; c++)
+        for (o = 0; o < 64; o++)
+            ratio_bin[64 * c + o] = (int16_t)(c > 0 && o <= c ? esf_round_bin((double)o / (double)c, n_bins) : 0);
+}
+
+/* D3 and D2 histograms from the stored values, then weights and division by
+ * the sum into out. */
+static void esf_finish(const esf_state *s, int n_bins)
+{
+    static const double weights[10] = {0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 0.5, 2.0, 2.0, 1.0};
+    int64_t *acc = s->acc;
+    double *out = s->out, total = 0.0, inv, sc3 = (n_bins - 1) / s->maxd3,
+           sc2 = (n_bins - 1) / s->maxd2;
+    int64_t i;
+    int h;
+    for (i = 0; i < s->n_triplets; i++)
+        acc[(3 + s->cls3[i]) * n_bins + esf_scaled_bin(s->d3v[i], s->maxd3, sc3, n_bins)] += 1;
+    for (i = 0; i < 3 * (int64_t)s->n_triplets; i++)
+        acc[(6 + s->cls2[i]) * n_bins + esf_scaled_bin(s->d2v[i], s->maxd2, sc2, n_bins)] += 1;
+    for (i = 0; i < n_bins; i++)
+        acc[9 * n_bins + i] += acc[10 * n_bins + i] + acc[11 * n_bins + i] + acc[12 * n_bins + i];
+    for (i = 0; i < 3 * n_bins; i++)
+        acc[i] += acc[13 * n_bins + i] + acc[16 * n_bins + i];
+    for (h = 0; h < 10; h++)
+        for (i = 0; i < n_bins; i++) {
+            /* A3 sums are multiples of 1/32: exact in either order */
+            out[h * n_bins + i] = (h < 3 ? (double)acc[h * n_bins + i] / 32.0 : (double)acc[h * n_bins + i]) * weights[h];
+            total += out[h * n_bins + i];
+        }
+    inv = 1.0 / total;
+    for (i = 0; i < 10 * n_bins; i++)
+        out[i] *= inv;
+}
+
+/* Take the candidates i1, i2, i3 (n_cand of them, in draw order): accept
+ * those of three distinct points and Heron product above area_eps until
+ * n_triplets are accepted. Returns 1 when the attempts run out. */
+static int esf_take(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2,
+                    const uint32_t *i3, int n_cand)
+{
+    double A[ESF_BATCH], B[ESF_BATCH], C[ESF_BATCH], H[ESF_BATCH], D3[ESF_BATCH];
+    double c1[ESF_BATCH], c2[ESF_BATCH], c3[ESF_BATCH];
+    int sel[ESF_BATCH];
+    uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
+    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH];
+    const double *pts = s->pts;
+    const int n_bins = k->n_bins;
+    int j, q, nsel = 0, fail = 0;
+    /* squared sides and dot products of every candidate (gathers) ... */
+    for (j = 0; j < n_cand; j++) {
+        const double *p1 = pts + 3 * (int64_t)i1[j], *p2 = pts + 3 * (int64_t)i2[j],
+                     *p3 = pts + 3 * (int64_t)i3[j];
+        double v21x = p2[0] - p1[0], v21y = p2[1] - p1[1], v21z = p2[2] - p1[2];
+        double v31x = p3[0] - p1[0], v31y = p3[1] - p1[1], v31z = p3[2] - p1[2];
+        double v23x = p2[0] - p3[0], v23y = p2[1] - p3[1], v23z = p2[2] - p3[2];
+        A[j] = v21x * v21x + v21y * v21y + v21z * v21z;
+        B[j] = v31x * v31x + v31y * v31y + v31z * v31z;
+        C[j] = v23x * v23x + v23y * v23y + v23z * v23z;
+        c1[j] = fabs(v21x * v31x + v21y * v31y + v21z * v31z);
+        c2[j] = fabs(v23x * v31x + v23y * v31y + v23z * v31z);
+        c3[j] = fabs(v23x * v21x + v23y * v21y + v23z * v21z);
+    }
+    /* ... then the square roots and divisions, element-wise (vectorised) */
+    for (j = 0; j < n_cand; j++) {
+        double a = sqrt(A[j]), b = sqrt(B[j]), c = sqrt(C[j]);
+        double hs = (a + b + c) * 0.5, x;
+        A[j] = a;
+        B[j] = b;
+        C[j] = c;
+        H[j] = hs * (hs - a) * (hs - b) * (hs - c);
+        D3[j] = sqrt(sqrt(H[j])); /* NaN for a rejected candidate, unused */
+        /* |cos| clipped to 1 (NaN, from a repeated point, becomes 1) */
+        x = c1[j] / (a * b);
+        c1[j] = x < 1.0 ? x : 1.0;
+        x = c2[j] / (c * b);
+        c2[j] = x < 1.0 ? x : 1.0;
+        x = c3[j] / (c * a);
+        c3[j] = x < 1.0 ? x : 1.0;
+    }
+    /* the accepted ones, in draw order */
+    for (j = 0; j < n_cand && s->t + nsel < s->n_triplets; j++) {
+        s->attempts++;
+        if (s->attempts > s->max_attempts) {
+            fail = 1;
+            break;
+        }
+        if (i1[j] != i2[j] && i1[j] != i3[j] && i2[j] != i3[j] && H[j] > k->area_eps)
+            sel[nsel++] = j;
+    }
+    /* line set-up: sides 12, 13, 23 */
+    for (q = 0; q < nsel; q++) {
+        j = sel[q];
+        const int32_t *a1 = s->cells + 3 * (int64_t)i1[j], *a2 = s->cells + 3 * (int64_t)i2[j],
+                      *a3 = s->cells + 3 * (int64_t)i3[j];
+        cnt[3 * q] = esf_line_setup(a1, a2, k->rs, k->st, &pos[3 * q], &inc[3 * q]);
+        cnt[3 * q + 1] = esf_line_setup(a1, a3, k->rs, k->st, &pos[3 * q + 1], &inc[3 * q + 1]);
+        cnt[3 * q + 2] = esf_line_setup(a2, a3, k->rs, k->st, &pos[3 * q + 2], &inc[3 * q + 2]);
+    }
+    for (q = 0; q < 3 * nsel; q++)
+        occ[q] = esf_walk(s->g3, pos[q], inc[q], cnt[q]);
+    /* histograms, in integers (A3 in 32nds of a voxel), without branches */
+    for (q = 0; q < nsel; q++) {
+        int t = s->t, l, cls, in_sum, n_sum, h, o, c;
+        j = sel[q];
+        for (l = 0; l < 3; l++) {
+            o = occ[3 * q + l];
+            c = cnt[3 * q + l];
+            /* in: at most one empty voxel; out: at most 7 occupied; else mixed */
+            cls = (o < c - 1) * (2 - (o <= 7));
+            /* one copy of the ratio histogram per side: no chains of
+             * read-modify-writes on one bin */
+            s->acc[(10 + l) * n_bins + k->ratio_bin[c * 64 + o]] += cls == ESF_MIX;
+            s->cls2[3 * t + l] = (int8_t)cls;
+        }
+        s->d2v[3 * t] = A[j];
+        s->d2v[3 * t + 1] = B[j];
+        s->d2v[3 * t + 2] = C[j];
+        s->d3v[t] = D3[j];
+        in_sum = occ[3 * q] + occ[3 * q + 1] + occ[3 * q + 2];
+        n_sum = cnt[3 * q] + cnt[3 * q + 1] + cnt[3 * q + 2];
+        /* out: at most 21 occupied in all; in: fewer than 4 empty; else mixed */
+        cls = in_sum <= 21 ? ESF_OUT : 2 * (n_sum - in_sum >= 4);
+        s->cls3[t] = (int8_t)cls;
+        h = cls * n_bins; /* A3 histograms 0, 1, 2 */
+        s->acc[h + esf_angle_bin(c1[j], k)] += cnt[3 * q + 2];
+        s->acc[13 * n_bins + h + esf_angle_bin(c2[j], k)] += cnt[3 * q];
+        s->acc[16 * n_bins + h + esf_angle_bin(c3[j], k)] += cnt[3 * q + 1];
+        s->maxd2 = A[j] > s->maxd2 ? A[j] : s->maxd2;
+        s->maxd2 = B[j] > s->maxd2 ? B[j] : s->maxd2;
+        s->maxd2 = C[j] > s->maxd2 ? C[j] : s->maxd2;
+        s->maxd3 = D3[j] > s->maxd3 ? D3[j] : s->maxd3;
+        s->t = t + 1;
+    }
+    return fail;
+}
+
+#endif
