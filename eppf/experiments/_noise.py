@@ -23,7 +23,7 @@ from ._common import (
 __all__ = ["run_noise"]
 
 DEFAULT_LEVELS = (0.0, 0.02, 0.04, 0.06, 0.08, 0.1)
-QUICK_LEVELS = (0.0, 0.06, 0.1)
+QUICK_LEVELS = (0.0, 0.06)
 DEFAULT_NOISE_MODELS = ("4d", "pointnet", "kl")
 #: The level at which the paper says PointNet starts to break down.
 REPORTED_LEVEL = 0.06
@@ -85,7 +85,7 @@ def run_noise(
         Folder for ``noise.md``/``.csv``/``.png``.
     levels : sequence of float, default=None
         Noise sigmas as fractions of the unit cube, in [0, 1];
-        ``(0, 0.02, 0.04, 0.06, 0.08, 0.1)`` (``(0, 0.06, 0.1)`` with
+        ``(0, 0.02, 0.04, 0.06, 0.08, 0.1)`` (``(0, 0.06)`` with
         ``quick``) when None.
     models : list of str, default=None
         Keys of the classification models; None runs ``4d pointnet kl``.
