@@ -114,6 +114,19 @@ def test_ablation(tiny, tmp_path):
     f1 = retrieval_scores(tiny.y, leave_one_out_retrieval(X, tiny.y))["macro_f1"]
     assert_allclose(float(rows[1]["macro_f1_mean"]), f1, atol=1e-6)
     assert_allclose(float(rows[1]["f1_drop"]), float(rows[0]["macro_f1_mean"]) - f1, atol=1e-5)
+    assert "occupancy: " in md and "Mean share of the" in md
+
+
+def test_module_entry_point():
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.run([sys.executable, "-m", "eppf.experiments", "nope"], capture_output=True, text=True, env=env,
+                          cwd=root, timeout=120)
+    assert proc.returncode == 2
+    assert "invalid choice: 'nope'" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
 
 
 def test_classification(tiny, tmp_path):
