@@ -170,3 +170,21 @@ def test_degenerate_pairs_are_rejected():
 def test_not_fitted():
     with pytest.raises(NotFittedError):
         WahlTransformer().transform([_surflets()])
+
+
+@pytest.mark.parametrize("n_bins", [1, 2, 5, 6, 7, 64, 1000])
+def test_alpha_bins_without_atan2_match_atan2(n_bins):
+    # The kernel bins alpha from a polynomial atan and falls back on atan2
+    # near bin boundaries: every bin must be atan2's, including at the
+    # boundaries themselves, on the axes and for signed zeros.
+    from eppf._baselines import wahl_alpha_bins
+
+    rng = np.random.default_rng(n_bins)
+    edges = -np.pi + 2 * np.pi * np.arange(n_bins + 1) / n_bins
+    ang = np.concatenate([rng.uniform(-np.pi, np.pi, 20000), edges, np.nextafter(edges, 0), [0.0, np.pi / 2]])
+    r = np.concatenate([rng.uniform(0.01, 10.0, ang.size - 2), [1.0, 1.0]])
+    y = np.concatenate([r * np.sin(ang), [0.0, -0.0, 0.0, -0.0, 1.0, -1.0, 0.0]])
+    x = np.concatenate([r * np.cos(ang), [-1.0, -1.0, 1.0, 1.0, 0.0, 0.0, 0.0]])
+    got = wahl_alpha_bins(y, x, n_bins)
+    assert_array_equal(got, wahl_alpha_bins(y, x, n_bins, True))
+    assert got.min() >= 0 and got.max() == n_bins - 1
