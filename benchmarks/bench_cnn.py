@@ -1,6 +1,6 @@
 """Benchmark of the paper's CNN variants (EPPF4DClassifier) on CPU.
 
-Three parts, each printed as a table:
+Five parts, each printed as a table:
 
 ``throughput``
     Training (forward + backward + Adam step) and inference throughput of the
@@ -8,6 +8,14 @@ Three parts, each printed as a table:
     second, plus the time of one training epoch over 4,000 descriptors; and
     the speed of ``Conv4d``'s fast path against its general path on the 4D
     network's second layer.
+``profile``
+    Forward and backward time of every layer of the 4D network for one batch,
+    in CPU time (robust to time-slicing on a shared machine), with its
+    multiply-adds and achieved GFLOP/s against the fp32 roofline of a big
+    ``torch.mm``; the Adam step fused and unfused; the whole training step.
+``epoch``
+    Wall and CPU time of real ``EPPF4DClassifier`` epochs over 4,000 random
+    descriptors (the classifier's default batch size), with the load average.
 ``descriptors``
     Computes and caches EPPF descriptors of ModelNet10 (``--draws`` draws per
     object with different random pairs, per-object unit-cube scaling because
@@ -24,6 +32,8 @@ Three parts, each printed as a table:
 Run, e.g.::
 
     nice -n 10 python benchmarks/bench_cnn.py throughput
+    nice -n 10 python benchmarks/bench_cnn.py profile --threads 1
+    nice -n 10 python benchmarks/bench_cnn.py epoch --threads 2 --max-epochs 1 --variants 4d
     nice -n 10 python benchmarks/bench_cnn.py descriptors --draws 4
     nice -n 10 python benchmarks/bench_cnn.py modelnet --threads 1 --max-epochs 5 --patience 4
 
@@ -46,12 +56,39 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
   ==========================  ======  =====  ===============  ===============
 
   1-NN symmetric KL on the same descriptors (train -> test): 80.62%.
-* Training cost of the 4D network: about 157 M multiply-adds per object
-  forward (conv2 49 M, the 2D conv 92 M, dense 15 M), about 3x that for a
-  training step, i.e. 1.9 T multiply-adds per epoch of 4,000 objects; at the
-  fp32 peak of two Zen 3 cores (about 78 G multiply-adds/s) that alone is
-  24 s. Measured: 44 s per 4,000-object epoch on a quiet machine (2 threads),
-  60 to 120 s per epoch under the load above (1 thread).
+* Training cost of the 4D network (``profile --threads 1``, load average 6.9,
+  CPU ms per batch of 64; 2048x2048 mm roofline 86.9 GFLOP per CPU-second,
+  one Zen 3 core's AVX2 FMA peak at about 2.7 GHz):
+
+  ============================  ======  ======  ========  ========  ======  =======
+  layer                         fwd ms  bwd ms  fwd GMAC  bwd GMAC  % peak  s/epoch
+  ============================  ======  ======  ========  ========  ======  =======
+  conv1 4D 1->32 (5,2,2,1)         4.4    17.1     0.049     0.049      14     1.34
+  conv2 4D 32->64 (5,2,2,1)      147.7   164.9     3.146     6.291      93    19.53
+  relu + reshape to 40x30          8.3     9.4         -         -       -     1.11
+  conv3 2D 64->48 5x5            133.5   320.4     5.898    11.796     120    28.37
+  relu + maxpool + flatten         5.3    16.7         -         -       -     1.37
+  fc1 14400->1024                 31.3    60.5     0.944     1.887      95     5.74
+  fc2 1024->10 + loss              0.1     0.2     0.001     0.001      18     0.02
+  Adam, unfused (before)         112.4                                         7.03
+  Adam, fused (now)               14.5                                         0.91
+  ============================  ======  ======  ========  ========  ======  =======
+
+  (fwd/bwd splits are noisy under load, their sums less so; "% peak" over
+  100 is that noise.) The whole step takes 942 CPU ms, 58.9 CPU s per
+  4,000-object epoch; its 1.88 T multiply-adds (3.76 TFLOP) take 43.3 CPU s
+  at the roofline, so the network runs at 74% of the core's fp32 peak, and
+  even two fully used cores at peak would need 21.6 s per epoch: the 20 s
+  target is out of reach for this network with direct convolution on this
+  CPU. oneDNN off (``--no-mkldnn``): 2,173 CPU ms per step. Tried and
+  dropped (no gain or slower, all exact up to rounding): channels_last_3d for
+  the 4D layers, (n2, n3) taps as channels + a (5, 1) conv2d, explicit
+  im2col + one GEMM for conv2 (3x slower) and conv1 (no gain), FFT
+  convolution for the 5x5 layer (9.5x fewer multiply-adds, but 2x slower:
+  small FFTs run at a few GFLOP/s and the frequency-major layout costs
+  copies). Fused Adam is the one change kept: 7.0 -> 0.9 CPU s per epoch.
+  Epoch wall time, 2 threads: 44 s on a quiet machine before; under load
+  (``epoch --threads 2``, load 6.3 to 9.0) 196 s wall, 99 s CPU.
 """
 
 import argparse
