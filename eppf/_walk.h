@@ -146,102 +146,121 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
 /* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m (m <= 64).
  *
  * vox: (n, 3) voxel coordinates; bits: the grid, one 64-bit word per (x, y)
- * row (g <= 64); thr[T * n4 + b] = ceil(b T / n4); recip_packed[L] = 2**14 / L.
+ * row (g <= 64); thr[T * n4 + b] = ceil(b T / n4). The setup of every pair
+ * (line length L, the packed start and increment, the thresholds lo and hi)
+ * runs four pairs at a time in original order; the walks then take the pairs
+ * longest line first, in groups of four, so that the lanes of a group need
+ * similar numbers of steps.
  */
 __attribute__((target("avx2")))
 static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
                                const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
                                const double *recip_packed, int32_t *B)
 {
-    int64_t P[EPPF_WALK_BATCH + 4], INC[EPPF_WALK_BATCH + 4];
-    int64_t OCC[EPPF_WALK_BATCH + 4], REM[EPPF_WALK_BATCH + 4];
-    int64_t LO[EPPF_WALK_BATCH + 4], HI[EPPF_WALK_BATCH + 4];
-    int32_t Ls[EPPF_WALK_BATCH];
+    int64_t P[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
+    int64_t INC[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
+    int32_t Ls[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t LO[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t HI[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t ri[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t rj[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
     int order[EPPF_WALK_BATCH + 4];
-    int count[65];
-    int t, k, n_walk = 0;
+    int count[65], start[65];
+    int t, k, n_walk;
+    (void)recip_packed;
 
+    /* Row offsets of the two points of each pair, padded to a multiple of 4
+       with the first pair (its lanes are computed and ignored). */
+    for (t = 0; t < m; t++) {
+        ri[t] = 3 * ii[t];
+        rj[t] = 3 * jj[t];
+    }
+    for (; t < ((m + 3) & ~3); t++) {
+        ri[t] = ri[0];
+        rj[t] = rj[0];
+    }
+    {
+        const __m128i n4v = _mm_set1_epi32(n4), onev = _mm_set1_epi32(1), n4m1 = _mm_set1_epi32(n4 - 1);
+        const __m256d S = _mm256_set1_pd((double)EPPF_PK_S);
+        const __m256i off = _mm256_set1_epi64x(EPPF_PK_S / 2 + g);
+        for (t = 0; t < m; t += 4) {
+            __m128i ra = _mm_load_si128((const __m128i *)(ri + t)), rb = _mm_load_si128((const __m128i *)(rj + t));
+            __m128i ax = _mm_i32gather_epi32(vox, ra, 4);
+            __m128i ay = _mm_i32gather_epi32(vox + 1, ra, 4);
+            __m128i az = _mm_i32gather_epi32(vox + 2, ra, 4);
+            __m128i dx = _mm_sub_epi32(_mm_i32gather_epi32(vox, rb, 4), ax);
+            __m128i dy = _mm_sub_epi32(_mm_i32gather_epi32(vox + 1, rb, 4), ay);
+            __m128i dz = _mm_sub_epi32(_mm_i32gather_epi32(vox + 2, rb, 4), az);
+            __m128i L = _mm_max_epi32(_mm_max_epi32(_mm_abs_epi32(dx), _mm_abs_epi32(dy)), _mm_abs_epi32(dz));
+            __m128i row = _mm_mullo_epi32(_mm_add_epi32(L, onev), n4v);
+            /* 2**14 / L, the same correctly rounded division as recip_packed[L]
+               (L <= 1 lanes are never walked: their values do not matter) */
+            __m256d q = _mm256_div_pd(S, _mm256_cvtepi32_pd(L));
+            __m128i ix = _mm256_cvtpd_epi32(_mm256_mul_pd(_mm256_cvtepi32_pd(dx), q));  /* = llrint */
+            __m128i iy = _mm256_cvtpd_epi32(_mm256_mul_pd(_mm256_cvtepi32_pd(dy), q));
+            __m128i iz = _mm256_cvtpd_epi32(_mm256_mul_pd(_mm256_cvtepi32_pd(dz), q));
+            __m256i inc = _mm256_add_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ix), 42),
+                                                            _mm256_slli_epi64(_mm256_cvtepi32_epi64(iy), 21)),
+                                           _mm256_cvtepi32_epi64(iz));
+            __m256i p0 = _mm256_add_epi64(
+                _mm256_add_epi64(_mm256_slli_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ax), 14), off), 42),
+                                 _mm256_slli_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ay), 14), off), 21)),
+                _mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(az), 14), off));
+            _mm256_store_si256((__m256i *)(P + t), _mm256_add_epi64(p0, inc));
+            _mm256_store_si256((__m256i *)(INC + t), inc);
+            _mm_store_si128((__m128i *)(Ls + t), L);
+            _mm_store_si128((__m128i *)(LO + t), _mm_i32gather_epi32(thr + 1, row, 4));
+            _mm_store_si128((__m128i *)(HI + t), _mm_i32gather_epi32(thr, _mm_add_epi32(row, n4m1), 4));
+        }
+    }
+    /* Walk order: L descending; L <= 1 (no inner voxel, occ = L + 1) last, unwalked. */
     for (k = 0; k < 65; k++)
         count[k] = 0;
-    /* Setup (same expressions as _line_bin), and a count of line lengths. */
-    for (t = 0; t < m; t++) {
-        const int32_t *va = vox + 3 * (int64_t)ii[t], *vb = vox + 3 * (int64_t)jj[t];
-        int64_t dx = vb[0] - va[0], dy = vb[1] - va[1], dz = vb[2] - va[2];
-        int64_t L = dx >= 0 ? dx : -dx, a;
-        a = dy >= 0 ? dy : -dy;
-        if (a > L) L = a;
-        a = dz >= 0 ? dz : -dz;
-        if (a > L) L = a;
-        Ls[t] = (int32_t)L;
-        count[L]++;
-    }
-    /* Pairs with L <= 1 have no inner voxel: occ = L + 1 exactly. The others
-       are walked, longest lines first, grouped by length. */
+    for (t = 0; t < m; t++)
+        count[Ls[t]]++;
     {
-        int start[65], s = 0;
+        int s = 0;
         for (k = 64; k >= 2; k--) {
             start[k] = s;
             s += count[k];
         }
         n_walk = s;
-        for (t = 0; t < m; t++) {
-            int L = Ls[t];
-            if (L > 1)
-                order[start[L]++] = t;
-        }
     }
-    for (k = 0; k < n_walk; k++) {
-        t = order[k];
-        {
-            const int32_t *va = vox + 3 * (int64_t)ii[t], *vb = vox + 3 * (int64_t)jj[t];
-            int64_t dx = vb[0] - va[0], dy = vb[1] - va[1], dz = vb[2] - va[2];
-            int64_t L = Ls[t];
-            const int32_t *th = thr + (L + 1) * n4;
-            double q = recip_packed[L];
-            int64_t ix = llrint(dx * q), iy = llrint(dy * q), iz = llrint(dz * q);
-            int64_t inc = ix * EPPF_PK_X + iy * EPPF_PK_Y + iz;
-            int64_t p = ((va[0] * EPPF_PK_S + EPPF_PK_S / 2 + g) * EPPF_PK_X
-                         + (va[1] * EPPF_PK_S + EPPF_PK_S / 2 + g) * EPPF_PK_Y
-                         + va[2] * EPPF_PK_S + EPPF_PK_S / 2 + g);
-            P[k] = p + inc;
-            INC[k] = inc;
-            OCC[k] = 2;
-            REM[k] = L - 1;
-            LO[k] = th[1];
-            HI[k] = th[n4 - 1];
-        }
+    for (t = 0; t < m; t++) {
+        int L = Ls[t];
+        if (L > 1)
+            order[start[L]++] = t;
     }
-    /* Pad the last group with lanes that have nothing to walk. */
-    for (k = n_walk; k < n_walk + 4; k++) {
-        P[k] = 0;
-        INC[k] = 0;
-        OCC[k] = 0;
-        REM[k] = 0;
-        LO[k] = 0;
-        HI[k] = 0;
-    }
+    for (k = n_walk; k < n_walk + 4; k++)
+        order[k] = -1;
 
     {
-        const __m256i one = _mm256_set1_epi64x(1), m63 = _mm256_set1_epi64x(63);
+        const __m256i one = _mm256_set1_epi64x(1), two = _mm256_set1_epi64x(2), m63 = _mm256_set1_epi64x(63);
         const __m256i zero = _mm256_setzero_si256();
         const __m256i vg = _mm256_set1_epi64x(g);
         const long long *base = (const long long *)bits;
         int grp;
         for (grp = 0; grp < n_walk; grp += 4) {
-            __m256i p = _mm256_loadu_si256((const __m256i *)(P + grp));
-            __m256i inc = _mm256_loadu_si256((const __m256i *)(INC + grp));
-            __m256i occ = _mm256_loadu_si256((const __m256i *)(OCC + grp));
-            __m256i rem = _mm256_loadu_si256((const __m256i *)(REM + grp));
-            __m256i lo = _mm256_loadu_si256((const __m256i *)(LO + grp));
-            __m256i hi = _mm256_loadu_si256((const __m256i *)(HI + grp));
+            const int o0 = order[grp], o1 = order[grp + 1], o2 = order[grp + 2], o3 = order[grp + 3];
+            /* Missing lanes of the last group: nothing to walk (rem = 0, occ = lo = hi = 0). */
+            const int u1 = o1 >= 0 ? o1 : o0, u2 = o2 >= 0 ? o2 : o0, u3 = o3 >= 0 ? o3 : o0;
+            const __m256i valid = _mm256_set_epi64x(o3 >= 0 ? -1 : 0, o2 >= 0 ? -1 : 0, o1 >= 0 ? -1 : 0, -1);
+            __m256i p = _mm256_set_epi64x(P[u3], P[u2], P[u1], P[o0]);
+            __m256i inc = _mm256_set_epi64x(INC[u3], INC[u2], INC[u1], INC[o0]);
+            __m256i lo = _mm256_and_si256(valid, _mm256_set_epi64x(LO[u3], LO[u2], LO[u1], LO[o0]));
+            __m256i hi = _mm256_and_si256(valid, _mm256_set_epi64x(HI[u3], HI[u2], HI[u1], HI[o0]));
+            __m256i rem = _mm256_and_si256(valid, _mm256_set_epi64x(Ls[u3] - 1, Ls[u2] - 1, Ls[u1] - 1, Ls[o0] - 1));
+            __m256i occ = _mm256_and_si256(valid, two);
+            int64_t res[4] __attribute__((aligned(32)));
+            int l;
             for (;;) {
                 /* steps = occ < hi ? clamp(occ + rem - lo + 1, 0, rem) : 0 */
                 __m256i need = _mm256_add_epi64(_mm256_sub_epi64(_mm256_add_epi64(occ, rem), lo), one);
                 __m256i steps = _mm256_blendv_epi8(rem, need, _mm256_cmpgt_epi64(rem, need));
                 __m256i live = _mm256_cmpgt_epi64(hi, occ);
-                int64_t st[4], nmax, s;
+                int64_t st[4] __attribute__((aligned(32))), nmax, s;
                 steps = _mm256_and_si256(steps, _mm256_and_si256(live, _mm256_cmpgt_epi64(steps, zero)));
-                _mm256_storeu_si256((__m256i *)st, steps);
+                _mm256_store_si256((__m256i *)st, steps);
                 nmax = st[0];
                 if (st[1] > nmax) nmax = st[1];
                 if (st[2] > nmax) nmax = st[2];
@@ -271,30 +290,44 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
                     }
                 }
             }
-            _mm256_storeu_si256((__m256i *)(OCC + grp), occ);
+            /* The bin: how many thresholds ceil(b T / n4), b = 1..n4-1, the count reaches. */
+            if (n4 <= 3) {
+                /* lo and hi are all the thresholds (one and the same for n4 = 2). */
+                /* occ >= lo is 1 + (lo > occ ? -1 : 0) */
+                __m256i b = _mm256_add_epi64(one, _mm256_cmpgt_epi64(lo, occ));
+                if (n4 == 3)
+                    b = _mm256_add_epi64(b, _mm256_add_epi64(one, _mm256_cmpgt_epi64(hi, occ)));
+                _mm256_store_si256((__m256i *)res, b);
+                B[o0] += (int32_t)res[0];
+                if (o1 >= 0) B[o1] += (int32_t)res[1];
+                if (o2 >= 0) B[o2] += (int32_t)res[2];
+                if (o3 >= 0) B[o3] += (int32_t)res[3];
+            } else {
+                _mm256_store_si256((__m256i *)res, occ);
+                for (l = 0; l < 4; l++) {
+                    int o = order[grp + l], b = 0, j;
+                    const int32_t *th;
+                    if (o < 0)
+                        break;
+                    th = thr + (int64_t)(Ls[o] + 1) * n4;
+                    for (j = 1; j < n4; j++)
+                        b += res[l] >= th[j];
+                    B[o] += b;
+                }
+            }
         }
     }
-
-    /* Bins: the thresholds the count reaches. */
-    for (k = 0; k < n_walk; k++) {
-        int64_t L, o = OCC[k];
-        const int32_t *th;
-        int b = 0, j;
-        t = order[k];
-        L = Ls[t];
-        th = thr + (L + 1) * n4;
-        for (j = 1; j < n4; j++)
-            b += o >= th[j];
-        B[t] += b;
-    }
-    for (t = 0; t < m; t++) {
-        int64_t L = Ls[t];
-        if (L <= 1) {
-            const int32_t *th = thr + (L + 1) * n4;
-            int b = 0, j;
-            for (j = 1; j < n4; j++)
-                b += (L + 1) >= th[j];
-            B[t] += b;
+    /* Lines without inner voxels: occ = T = L + 1, all voxels occupied. */
+    if (n_walk < m) {
+        for (t = 0; t < m; t++) {
+            int64_t L = Ls[t];
+            if (L <= 1) {
+                const int32_t *th = thr + (L + 1) * n4;
+                int b = 0, j;
+                for (j = 1; j < n4; j++)
+                    b += (L + 1) >= th[j];
+                B[t] += b;
+            }
         }
     }
 }
