@@ -9,7 +9,12 @@ Clouds come from ``../shared/data/modelnet10_1024.npz`` when it is there (real
 CAD objects; larger sizes are drawn by resampling their points with a small
 jitter) and from the built-in synthetic shapes otherwise.
 
-Usage: ``python benchmarks/bench_descriptor.py [--objects 200] [--repeats 3] [--quick]``
+The load average is printed with the table: wall-clock speed-ups over threads
+only mean something on an otherwise idle machine, CPU time per object is robust
+to other load.
+
+Usage: ``python benchmarks/bench_descriptor.py [--objects 200] [--repeats 3] [--quick]
+[--sizes 1024 2048 10000] [--no-retrieval]``
 """
 
 import argparse
@@ -55,12 +60,12 @@ def _best(fn, repeats):
     return best, best_cpu
 
 
-def bench_descriptor(n_objects, repeats):
+def bench_descriptor(n_objects, repeats, sizes=(1024, 2048, 10000)):
     from eppf import EPPFTransformer, estimate_normals
 
     rng = np.random.default_rng(0)
     rows = []
-    for n_points in (1024, 2048, 10000):
+    for n_points in sizes:
         clouds, source = _clouds(n_objects, n_points, rng)
         with_normals = [np.hstack([c, estimate_normals(c, 20)]) for c in clouds]
         for threads in (1, 2):
@@ -108,6 +113,8 @@ def main():
     parser.add_argument("--objects", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="fewer objects and no 12,000-descriptor search")
+    parser.add_argument("--sizes", nargs="+", type=int, default=[1024, 2048, 10000], help="points per object")
+    parser.add_argument("--no-retrieval", action="store_true", help="skip the leave-one-out retrieval timing")
     parser.add_argument("--loo-child", nargs=2, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.loo_child:
@@ -119,8 +126,11 @@ def main():
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"OpenMP {'on' if core.has_openmp() else 'off'}")
-    rows, source = bench_descriptor(args.objects, args.repeats)
+    load_before = os.getloadavg()[0]
+    rows, source = bench_descriptor(args.objects, args.repeats, tuple(args.sizes))
     print(f"\nEPPF descriptor, 20,000 pairs, 64^3 grid, {args.objects} objects from {source}, best of {args.repeats}")
+    print(f"(1-minute load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after; "
+          f"SIMD kernels {'on' if core._simd_enabled() else 'off'})")
     print("(wall ms per object; 'CPU ms/obj' is the process CPU time per object summed over threads: the")
     print(" per-core cost, meaningful even when other processes share the cores; normals: PCA, 20 neighbours)")
     print(f"{'points':>7} | {'threads':>7} | {'ms/obj (normals given)':>22} | {'CPU ms/obj':>10} | "
@@ -132,6 +142,8 @@ def main():
             one[n_points] = t_desc
         speed = one[n_points] / t_desc
         print(f"{n_points:>7} | {threads:>7} | {t_desc:>22.3f} | {cpu:>10.3f} | {t_full:>18.3f} | {speed:>7.2f}x")
+    if args.no_retrieval:
+        return
     sizes = (5000,) if args.quick else (5000, 12000)
     print("\nLeave-one-out symmetric-KL 1-NN retrieval (1,200 bins, all cores)")
     print(f"{'descriptors':>11} | {'seconds':>8} | {'peak RSS (MB)':>13}")

@@ -68,6 +68,11 @@ cdef int64_t PK_X = (<int64_t>1) << 42
 cdef uint64_t LOW32 = 0xFFFFFFFF
 
 
+def _simd_enabled():
+    """Whether the AVX2 kernels of ``_walk.h`` are in use."""
+    return bool(_simd)
+
+
 def _set_simd(enabled):
     """Use the AVX2 kernels when ``enabled`` and available; return the previous setting."""
     global _simd

@@ -258,7 +258,7 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
                 __m256i need = _mm256_add_epi64(_mm256_sub_epi64(_mm256_add_epi64(occ, rem), lo), one);
                 __m256i steps = _mm256_blendv_epi8(rem, need, _mm256_cmpgt_epi64(rem, need));
                 __m256i live = _mm256_cmpgt_epi64(hi, occ);
-                int64_t st[4] __attribute__((aligned(32))), nmax, s;
+                int64_t st[4] __attribute__((aligned(32))), nmax, nmin, s;
                 steps = _mm256_and_si256(steps, _mm256_and_si256(live, _mm256_cmpgt_epi64(steps, zero)));
                 _mm256_store_si256((__m256i *)st, steps);
                 nmax = st[0];
@@ -268,12 +268,27 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
                 if (nmax == 0)
                     break;
                 rem = _mm256_sub_epi64(rem, steps);
+                nmin = st[0];
+                if (st[1] < nmin) nmin = st[1];
+                if (st[2] < nmin) nmin = st[2];
+                if (st[3] < nmin) nmin = st[3];
+                /* Every lane position is a voxel of its line (or of a valid
+                   pair for padding lanes), so the gathers need no mask: lanes
+                   past their steps drop the word and stand still. */
                 if (g == 64) {
-                    for (s = 0; s < nmax; s++) {
+                    for (s = 0; s < nmin; s++) {
+                        __m256i row = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p, 56), 6),
+                                                       _mm256_and_si256(_mm256_srli_epi64(p, 35), m63));
+                        __m256i w = _mm256_i64gather_epi64(base, row, 8);
+                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, 14), m63);
+                        occ = _mm256_add_epi64(occ, _mm256_and_si256(_mm256_srlv_epi64(w, z), one));
+                        p = _mm256_add_epi64(p, inc);
+                    }
+                    for (; s < nmax; s++) {
                         __m256i on = _mm256_cmpgt_epi64(steps, _mm256_set1_epi64x(s));
                         __m256i row = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p, 56), 6),
                                                        _mm256_and_si256(_mm256_srli_epi64(p, 35), m63));
-                        __m256i w = _mm256_mask_i64gather_epi64(zero, base, row, on, 8);
+                        __m256i w = _mm256_and_si256(_mm256_i64gather_epi64(base, row, 8), on);
                         __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, 14), m63);
                         occ = _mm256_add_epi64(occ, _mm256_and_si256(_mm256_srlv_epi64(w, z), one));
                         p = _mm256_add_epi64(p, _mm256_and_si256(inc, on));
@@ -283,7 +298,7 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
                         __m256i on = _mm256_cmpgt_epi64(steps, _mm256_set1_epi64x(s));
                         __m256i row = _mm256_add_epi64(_mm256_mul_epu32(_mm256_srli_epi64(p, 56), vg),
                                                        _mm256_and_si256(_mm256_srli_epi64(p, 35), m63));
-                        __m256i w = _mm256_mask_i64gather_epi64(zero, base, row, on, 8);
+                        __m256i w = _mm256_and_si256(_mm256_i64gather_epi64(base, row, 8), on);
                         __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, 14), m63);
                         occ = _mm256_add_epi64(occ, _mm256_and_si256(_mm256_srlv_epi64(w, z), one));
                         p = _mm256_add_epi64(p, _mm256_and_si256(inc, on));
