@@ -44,6 +44,8 @@
 #define ESF_WLANE (ESF_FRAC + 6)               /* w: 6 integer bits + fraction */
 #define ESF_WORD_SHIFT (ESF_WLANE + ESF_FRAC)  /* word index: the top 14 bits */
 #define ESF_LAYOUT_WORDS 4096                  /* 64 * 64 words per layout */
+/* x where the mask is all ones, y where it is zero */
+#define ESF_SEL(mask, x, y) ((y) ^ (((x) ^ (y)) & (mask)))
 
 typedef struct {
     int n_bins;
@@ -122,20 +124,26 @@ static inline int esf_line_setup(const int32_t *a, const int32_t *b, const int64
     int64_t n0 = d0 >> 63, n1 = d1 >> 63, n2 = d2 >> 63; /* -1 when negative */
     int64_t ad0 = (d0 ^ n0) - n0, ad1 = (d1 ^ n1) - n1, ad2 = (d2 ^ n2) - n2;
     /* dominant axis m, the first one on ties (as PCL); layout m's (u, v, w)
-     * are (x, y, z), (y, x, z), (z, x, y) */
-    int64_t m1 = ad1 > ad0 && ad1 >= ad2, m2 = ad2 > ad0 && ad2 > ad1;
-    int64_t L = m2 ? ad2 : (m1 ? ad1 : ad0);
-    int64_t au = m2 ? a[2] : (m1 ? a[1] : a[0]);
-    int64_t nu = m2 ? n2 : (m1 ? n1 : n0);
-    int64_t av = (m1 | m2) ? a[0] : a[1], dv = (m1 | m2) ? d0 : d1, nv = (m1 | m2) ? n0 : n1;
-    int64_t aw = m2 ? a[1] : a[2], dw = m2 ? d1 : d2, nw = m2 ? n1 : n2;
+     * are (x, y, z), (y, x, z), (z, x, y). Selections by masks (all ones
+     * or zero), which the compiler cannot turn into unpredictable jumps. */
+    int64_t m1 = -(int64_t)((ad1 > ad0) & (ad1 >= ad2)), m2 = -(int64_t)((ad2 > ad0) & (ad2 > ad1));
+    int64_t m12 = m1 | m2;
+    int64_t L = ESF_SEL(m2, ad2, ESF_SEL(m1, ad1, ad0));
     int64_t R = rs[L], start = st[L], flip = ((int64_t)1 << ESF_FRAC) - 2 * start;
-    int64_t pu = (m1 + 2 * m2) * ESF_LAYOUT_WORDS + 64 * au;
-    int64_t pv = (av << ESF_FRAC) + start + (nv & flip); /* S (a + 1) - start when negative */
-    int64_t pw = (aw << ESF_FRAC) + start + (nw & flip);
+    /* each axis as a minor one: S a + start, or S (a + 1) - start when
+     * negative; increment d R */
+    int64_t l0 = ((int64_t)a[0] << ESF_FRAC) + start + (n0 & flip);
+    int64_t l1 = ((int64_t)a[1] << ESF_FRAC) + start + (n1 & flip);
+    int64_t l2 = ((int64_t)a[2] << ESF_FRAC) + start + (n2 & flip);
+    /* the dominant one exactly: 64 u in the word index, 64 per step */
+    int64_t au = ESF_SEL(m2, (int64_t)a[2], ESF_SEL(m1, (int64_t)a[1], (int64_t)a[0]));
+    int64_t nu = ESF_SEL(m2, n2, ESF_SEL(m1, n1, n0));
+    int64_t word = (((m1 & 1) + (m2 & 2)) * ESF_LAYOUT_WORDS + 64 * au) << ESF_FRAC;
     int64_t iu = (((int64_t)64 << ESF_FRAC) ^ nu) - nu;
-    *pos_out = ((uint64_t)((pu << ESF_FRAC) + pv) << ESF_WLANE) + (uint64_t)pw;
-    *inc_out = ((uint64_t)(iu + dv * R) << ESF_WLANE) + (uint64_t)(dw * R);
+    int64_t pv = ESF_SEL(m12, l0, l1), iv = ESF_SEL(m12, d0, d1) * R;
+    int64_t pw = ESF_SEL(m2, l1, l2), iw = ESF_SEL(m2, d1, d2) * R;
+    *pos_out = ((uint64_t)(word + pv) << ESF_WLANE) + (uint64_t)pw;
+    *inc_out = ((uint64_t)(iu + iv) << ESF_WLANE) + (uint64_t)iw;
     return (int)(L + (L == 0));
 }
 
@@ -214,10 +222,13 @@ static void esf_finish(const esf_state *s, int n_bins)
            sc2 = (n_bins - 1) / s->maxd2;
     int64_t i;
     int h;
-    for (i = 0; i < s->n_triplets; i++)
-        acc[(3 + s->cls3[i]) * n_bins + esf_scaled_bin(s->d3v[i], s->maxd3, sc3, n_bins)] += 1;
-    for (i = 0; i < 3 * (int64_t)s->n_triplets; i++)
-        acc[(6 + s->cls2[i]) * n_bins + esf_scaled_bin(s->d2v[i], s->maxd2, sc2, n_bins)] += 1;
+    const int8_t *cls2 = s->cls2, *cls3 = s->cls3;
+    const double *d2v = s->d2v, *d3v = s->d3v, maxd2 = s->maxd2, maxd3 = s->maxd3;
+    const int64_t n_triplets = s->n_triplets;
+    for (i = 0; i < n_triplets; i++)
+        acc[(3 + cls3[i]) * n_bins + esf_scaled_bin(d3v[i], maxd3, sc3, n_bins)] += 1;
+    for (i = 0; i < 3 * n_triplets; i++)
+        acc[(6 + cls2[i]) * n_bins + esf_scaled_bin(d2v[i], maxd2, sc2, n_bins)] += 1;
     for (i = 0; i < n_bins; i++)
         acc[9 * n_bins + i] += acc[10 * n_bins + i] + acc[11 * n_bins + i] + acc[12 * n_bins + i];
     for (i = 0; i < 3 * n_bins; i++)
@@ -299,38 +310,48 @@ static int esf_take(const esf_const *k, esf_state *s, const uint32_t *i1, const 
     }
     for (q = 0; q < 3 * nsel; q++)
         occ[q] = esf_walk(s->g3, pos[q], inc[q], cnt[q]);
-    /* histograms, in integers (A3 in 32nds of a voxel), without branches */
-    for (q = 0; q < nsel; q++) {
-        int t = s->t, l, cls, in_sum, n_sum, h, o, c;
-        j = sel[q];
-        for (l = 0; l < 3; l++) {
-            o = occ[3 * q + l];
-            c = cnt[3 * q + l];
-            /* in: at most one empty voxel; out: at most 7 occupied; else mixed */
-            cls = (o < c - 1) * (2 - (o <= 7));
-            /* one copy of the ratio histogram per side: no chains of
-             * read-modify-writes on one bin */
-            s->acc[(10 + l) * n_bins + k->ratio_bin[c * 64 + o]] += cls == ESF_MIX;
-            s->cls2[3 * t + l] = (int8_t)cls;
+    /* histograms, in integers (A3 in 32nds of a voxel), without branches;
+     * the state's fields in locals (the int8 stores could alias them) */
+    {
+        int64_t *acc = s->acc;
+        const int16_t *ratio_bin = k->ratio_bin;
+        int8_t *cls2 = s->cls2, *cls3 = s->cls3;
+        double *d2v = s->d2v, *d3v = s->d3v, maxd2 = s->maxd2, maxd3 = s->maxd3;
+        int t = s->t;
+        for (q = 0; q < nsel; q++, t++) {
+            int l, cls, in_sum, n_sum, h, o, c;
+            j = sel[q];
+            for (l = 0; l < 3; l++) {
+                o = occ[3 * q + l];
+                c = cnt[3 * q + l];
+                /* in: at most one empty voxel; out: at most 7 occupied; else mixed */
+                cls = (o < c - 1) * (2 - (o <= 7));
+                /* one copy of the ratio histogram per side: no chains of
+                 * read-modify-writes on one bin */
+                acc[(10 + l) * n_bins + ratio_bin[c * 64 + o]] += cls == ESF_MIX;
+                cls2[3 * t + l] = (int8_t)cls;
+            }
+            d2v[3 * t] = A[j];
+            d2v[3 * t + 1] = B[j];
+            d2v[3 * t + 2] = C[j];
+            d3v[t] = D3[j];
+            in_sum = occ[3 * q] + occ[3 * q + 1] + occ[3 * q + 2];
+            n_sum = cnt[3 * q] + cnt[3 * q + 1] + cnt[3 * q + 2];
+            /* out: at most 21 occupied in all; in: fewer than 4 empty; else mixed */
+            cls = in_sum <= 21 ? ESF_OUT : 2 * (n_sum - in_sum >= 4);
+            cls3[t] = (int8_t)cls;
+            h = cls * n_bins; /* A3 histograms 0, 1, 2 */
+            acc[h + esf_angle_bin(c1[j], k)] += cnt[3 * q + 2];
+            acc[13 * n_bins + h + esf_angle_bin(c2[j], k)] += cnt[3 * q];
+            acc[16 * n_bins + h + esf_angle_bin(c3[j], k)] += cnt[3 * q + 1];
+            maxd2 = A[j] > maxd2 ? A[j] : maxd2;
+            maxd2 = B[j] > maxd2 ? B[j] : maxd2;
+            maxd2 = C[j] > maxd2 ? C[j] : maxd2;
+            maxd3 = D3[j] > maxd3 ? D3[j] : maxd3;
         }
-        s->d2v[3 * t] = A[j];
-        s->d2v[3 * t + 1] = B[j];
-        s->d2v[3 * t + 2] = C[j];
-        s->d3v[t] = D3[j];
-        in_sum = occ[3 * q] + occ[3 * q + 1] + occ[3 * q + 2];
-        n_sum = cnt[3 * q] + cnt[3 * q + 1] + cnt[3 * q + 2];
-        /* out: at most 21 occupied in all; in: fewer than 4 empty; else mixed */
-        cls = in_sum <= 21 ? ESF_OUT : 2 * (n_sum - in_sum >= 4);
-        s->cls3[t] = (int8_t)cls;
-        h = cls * n_bins; /* A3 histograms 0, 1, 2 */
-        s->acc[h + esf_angle_bin(c1[j], k)] += cnt[3 * q + 2];
-        s->acc[13 * n_bins + h + esf_angle_bin(c2[j], k)] += cnt[3 * q];
-        s->acc[16 * n_bins + h + esf_angle_bin(c3[j], k)] += cnt[3 * q + 1];
-        s->maxd2 = A[j] > s->maxd2 ? A[j] : s->maxd2;
-        s->maxd2 = B[j] > s->maxd2 ? B[j] : s->maxd2;
-        s->maxd2 = C[j] > s->maxd2 ? C[j] : s->maxd2;
-        s->maxd3 = D3[j] > s->maxd3 ? D3[j] : s->maxd3;
-        s->t = t + 1;
+        s->maxd2 = maxd2;
+        s->maxd3 = maxd3;
+        s->t = t;
     }
     return fail;
 }
