@@ -49,7 +49,9 @@ extensions = [
     Extension(
         "eppf." + os.path.splitext(os.path.basename(path))[0],
         [path],
-        include_dirs=[np.get_include()],
+        include_dirs=[np.get_include(), "eppf"],
+        # C headers and the shared .pxd: editing one rebuilds the extensions
+        depends=sorted(glob.glob(os.path.join("eppf", "*.h"))) + [os.path.join("eppf", "_common.pxd")],
         extra_compile_args=base_args + omp_compile,
         extra_link_args=omp_link,
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
