@@ -33,8 +33,8 @@ cdef extern from "_esf_kernel.h" nogil:
         const int32_t* lut
         double lut_scale
         int lut_on_cos
-        const int64_t* rs
-        const int64_t* st
+        const int32_t* rs
+        const int32_t* st
         const int16_t* ratio_bin
     ctypedef struct esf_state:
         const double* pts
@@ -54,8 +54,8 @@ cdef extern from "_esf_kernel.h" nogil:
     int esf_take(const esf_const* k, esf_state* s, const uint32_t* i1, const uint32_t* i2,
                  const uint32_t* i3, int n_cand)
     void esf_finish(const esf_state* s, int n_bins)
-    int esf_line_setup(const int32_t* a, const int32_t* b, const int64_t* rs,
-                       const int64_t* st, uint64_t* pos_out, uint64_t* inc_out)
+    int esf_line_setup(int32_t a0, int32_t a1, int32_t a2, int32_t b0, int32_t b1, int32_t b2,
+                       const int32_t* rs, const int32_t* st, uint64_t* pos_out, uint64_t* inc_out)
     int esf_walk(const uint64_t* g3, uint64_t pos, uint64_t inc, int n)
 
 cnp.import_array()
@@ -466,13 +466,9 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     recip_arr = np.zeros(grid + 1, dtype=np.uint64)
     recip_arr[1:] = (2**32) // np.arange(1, grid + 1, dtype=np.uint64)
     cdef uint64_t[::1] recip = recip_arr
-    # rs[L] = floor(2**22 / L) and the walk's start offsets for the packed walk.
-    L_arr = np.arange(65, dtype=np.int64)
-    rs_arr = np.zeros(65, dtype=np.int64)
-    rs_arr[1:] = (2**22) // L_arr[1:]
-    st_arr = (L_arr - 1) * (rs_arr >> 1) + L_arr * L_arr + 2
-    cdef int64_t[::1] rs = rs_arr
-    cdef int64_t[::1] st = st_arr
+    rs_arr, st_arr = _walk_tables()
+    cdef int32_t[::1] rs = rs_arr
+    cdef int32_t[::1] st = st_arr
     cdef int16_t[::1] ratio_bin = np.empty(64 * 64, dtype=np.int16)
     esf_fill_ratio_bins(n_bins, &ratio_bin[0])
     cdef esf_const kc
@@ -501,6 +497,16 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
                 &cls3[tid, 0], &out[k, 0])
         if status[k] != 0:
             memset(&out[k, 0], 0, 10 * n_bins * sizeof(double))
+
+
+def _walk_tables():
+    """rs[L] = floor(2**22 / L) and st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2,
+    L = 0..64, the packed line walk's increments and start offsets."""
+    L = np.arange(65, dtype=np.int64)
+    rs = np.zeros(65, dtype=np.int64)
+    rs[1:] = (2**22) // L[1:]
+    st = (L - 1) * (rs >> 1) + L * L + 2
+    return rs.astype(np.int32), st.astype(np.int32)
 
 
 def _a3_table_sin(edges_arr, int n_pow2):
@@ -735,11 +741,9 @@ def esf_line_counts(const int32_t[:, ::1] occupied, const int32_t[:, ::1] starts
     """
     cdef Py_ssize_t k, n_lines = starts.shape[0]
     cdef uint64_t[::1] g3 = np.empty(3 * ESF_LAYOUT_WORDS, dtype=np.uint64)
-    L_arr = np.arange(65, dtype=np.int64)
-    rs_arr = np.zeros(65, dtype=np.int64)
-    rs_arr[1:] = (2**22) // L_arr[1:]
-    cdef int64_t[::1] rs = rs_arr
-    cdef int64_t[::1] st = (L_arr - 1) * (rs_arr >> 1) + L_arr * L_arr + 2
+    rs_arr, st_arr = _walk_tables()
+    cdef int32_t[::1] rs = rs_arr
+    cdef int32_t[::1] st = st_arr
     cdef int32_t[::1] occ = np.empty(n_lines, dtype=np.int32)
     cdef int32_t[::1] cnt = np.empty(n_lines, dtype=np.int32)
     cdef uint64_t pos, inc
@@ -747,7 +751,8 @@ def esf_line_counts(const int32_t[:, ::1] occupied, const int32_t[:, ::1] starts
         raise ValueError("esf_line_counts: grid must be at most 64")
     esf_fill_layouts(&occupied[0, 0], occupied.shape[0], grid, &g3[0])
     for k in range(n_lines):
-        cnt[k] = esf_line_setup(&starts[k, 0], &ends[k, 0], &rs[0], &st[0], &pos, &inc)
+        cnt[k] = esf_line_setup(starts[k, 0], starts[k, 1], starts[k, 2], ends[k, 0], ends[k, 1],
+                                ends[k, 2], &rs[0], &st[0], &pos, &inc)
         occ[k] = esf_walk(&g3[0], pos, inc, cnt[k])
     return np.asarray(occ), np.asarray(cnt)
 

@@ -55,8 +55,8 @@ typedef struct {
     const int32_t *lut;    /* A3 bin lower bounds over u = sin(angle / 2) */
     double lut_scale;
     int lut_on_cos;        /* table over c (1) or over sin(angle / 2) (0) */
-    const int64_t *rs;     /* rs[L] = floor(2**ESF_FRAC / L), rs[0] = 0 */
-    const int64_t *st;     /* st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2 */
+    const int32_t *rs;     /* rs[L] = floor(2**ESF_FRAC / L), rs[0] = 0 (L <= 64) */
+    const int32_t *st;     /* st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2 */
     const int16_t *ratio_bin; /* [64 * cnt + occ]: bin of occ / cnt, cnt < 64 */
 } esf_const;
 
@@ -114,37 +114,52 @@ static void esf_fill_layouts(const int32_t *cells, int64_t n, int grid, uint64_t
 
 /* Packed start and increment of the line from voxel a towards voxel b,
  * without data-dependent branches or indexed loads but the two tables
- * (rs[L] = floor(S / L), st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2).
- * Returns the number of voxels PCL visits, max(L, 1). L = 1 and L = 0 come
- * out right from the same formulas (one step from the start voxel). */
-static inline int esf_line_setup(const int32_t *a, const int32_t *b, const int64_t *rs,
-                                 const int64_t *st, uint64_t *pos_out, uint64_t *inc_out)
+ * (rs[L] = floor(S / L), st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2), in
+ * 32-bit integers up to the packing (every intermediate is below 2**30), so
+ * that a loop over lines vectorises. Returns the number of voxels PCL
+ * visits, max(L, 1). L = 1 and L = 0 come out right from the same formulas
+ * (one step from the start voxel). */
+static inline int esf_line_setup(int32_t a0, int32_t a1, int32_t a2, int32_t b0, int32_t b1,
+                                 int32_t b2, const int32_t *rs, const int32_t *st,
+                                 uint64_t *pos_out, uint64_t *inc_out)
 {
-    int64_t d0 = b[0] - a[0], d1 = b[1] - a[1], d2 = b[2] - a[2];
-    int64_t n0 = d0 >> 63, n1 = d1 >> 63, n2 = d2 >> 63; /* -1 when negative */
-    int64_t ad0 = (d0 ^ n0) - n0, ad1 = (d1 ^ n1) - n1, ad2 = (d2 ^ n2) - n2;
+    int32_t d0 = b0 - a0, d1 = b1 - a1, d2 = b2 - a2;
+    int32_t n0 = d0 >> 31, n1 = d1 >> 31, n2 = d2 >> 31; /* -1 when negative */
+    int32_t ad0 = (d0 ^ n0) - n0, ad1 = (d1 ^ n1) - n1, ad2 = (d2 ^ n2) - n2;
     /* dominant axis m, the first one on ties (as PCL); layout m's (u, v, w)
      * are (x, y, z), (y, x, z), (z, x, y). Selections by masks (all ones
      * or zero), which the compiler cannot turn into unpredictable jumps. */
-    int64_t m1 = -(int64_t)((ad1 > ad0) & (ad1 >= ad2)), m2 = -(int64_t)((ad2 > ad0) & (ad2 > ad1));
-    int64_t m12 = m1 | m2;
-    int64_t L = ESF_SEL(m2, ad2, ESF_SEL(m1, ad1, ad0));
-    int64_t R = rs[L], start = st[L], flip = ((int64_t)1 << ESF_FRAC) - 2 * start;
+    int32_t m1 = -(int32_t)((ad1 > ad0) & (ad1 >= ad2)), m2 = -(int32_t)((ad2 > ad0) & (ad2 > ad1));
+    int32_t m12 = m1 | m2;
+    int32_t L = ESF_SEL(m2, ad2, ESF_SEL(m1, ad1, ad0));
+    int32_t R = rs[L], start = st[L], flip = ((int32_t)1 << ESF_FRAC) - 2 * start;
     /* each axis as a minor one: S a + start, or S (a + 1) - start when
      * negative; increment d R */
-    int64_t l0 = ((int64_t)a[0] << ESF_FRAC) + start + (n0 & flip);
-    int64_t l1 = ((int64_t)a[1] << ESF_FRAC) + start + (n1 & flip);
-    int64_t l2 = ((int64_t)a[2] << ESF_FRAC) + start + (n2 & flip);
+    int32_t l0 = (a0 << ESF_FRAC) + start + (n0 & flip);
+    int32_t l1 = (a1 << ESF_FRAC) + start + (n1 & flip);
+    int32_t l2 = (a2 << ESF_FRAC) + start + (n2 & flip);
     /* the dominant one exactly: 64 u in the word index, 64 per step */
-    int64_t au = ESF_SEL(m2, (int64_t)a[2], ESF_SEL(m1, (int64_t)a[1], (int64_t)a[0]));
-    int64_t nu = ESF_SEL(m2, n2, ESF_SEL(m1, n1, n0));
-    int64_t word = (((m1 & 1) + (m2 & 2)) * ESF_LAYOUT_WORDS + 64 * au) << ESF_FRAC;
-    int64_t iu = (((int64_t)64 << ESF_FRAC) ^ nu) - nu;
-    int64_t pv = ESF_SEL(m12, l0, l1), iv = ESF_SEL(m12, d0, d1) * R;
-    int64_t pw = ESF_SEL(m2, l1, l2), iw = ESF_SEL(m2, d1, d2) * R;
-    *pos_out = ((uint64_t)(word + pv) << ESF_WLANE) + (uint64_t)pw;
-    *inc_out = ((uint64_t)(iu + iv) << ESF_WLANE) + (uint64_t)iw;
-    return (int)(L + (L == 0));
+    int32_t au = ESF_SEL(m2, a2, ESF_SEL(m1, a1, a0));
+    int32_t nu = ESF_SEL(m2, n2, ESF_SEL(m1, n1, n0));
+    int32_t word = ((m1 & 1) + (m2 & 2)) * ESF_LAYOUT_WORDS + 64 * au;
+    int32_t iu = (((int32_t)64 << ESF_FRAC) ^ nu) - nu;
+    int32_t pv = ESF_SEL(m12, l0, l1), iv = ESF_SEL(m12, d0, d1) * R;
+    int32_t pw = ESF_SEL(m2, l1, l2), iw = ESF_SEL(m2, d1, d2) * R;
+    *pos_out = ((uint64_t)(((int64_t)word << ESF_FRAC) + pv) << ESF_WLANE) + (uint64_t)(int64_t)pw;
+    *inc_out = ((uint64_t)((int64_t)iu + iv) << ESF_WLANE) + (uint64_t)(int64_t)iw;
+    return L + (L == 0);
+}
+
+/* esf_line_setup over n lines given as coordinate arrays. (An AVX2 clone of
+ * this loop, vectorised with gathers for the two tables, was slower here.) */
+static void esf_setup_lines(int n, const int32_t *ax, const int32_t *ay, const int32_t *az,
+                            const int32_t *bx, const int32_t *by, const int32_t *bz,
+                            const int32_t *rs, const int32_t *st, uint64_t *pos, uint64_t *inc,
+                            int *cnt)
+{
+    int q;
+    for (q = 0; q < n; q++)
+        cnt[q] = esf_line_setup(ax[q], ay[q], az[q], bx[q], by[q], bz[q], rs, st, &pos[q], &inc[q]);
 }
 
 /* Occupied voxels among the n steps of a packed line. */
@@ -255,6 +270,8 @@ static int esf_take(const esf_const *k, esf_state *s, const uint32_t *i1, const 
     int sel[ESF_BATCH];
     uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
     int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH];
+    int32_t ax[3 * ESF_BATCH], ay[3 * ESF_BATCH], az[3 * ESF_BATCH];
+    int32_t bx[3 * ESF_BATCH], by[3 * ESF_BATCH], bz[3 * ESF_BATCH];
     const double *pts = s->pts;
     const int n_bins = k->n_bins;
     int j, q, nsel = 0, fail = 0;
@@ -301,13 +318,16 @@ static int esf_take(const esf_const *k, esf_state *s, const uint32_t *i1, const 
     }
     /* line set-up: sides 12, 13, 23 */
     for (q = 0; q < nsel; q++) {
-        j = sel[q];
-        const int32_t *a1 = s->cells + 3 * (int64_t)i1[j], *a2 = s->cells + 3 * (int64_t)i2[j],
-                      *a3 = s->cells + 3 * (int64_t)i3[j];
-        cnt[3 * q] = esf_line_setup(a1, a2, k->rs, k->st, &pos[3 * q], &inc[3 * q]);
-        cnt[3 * q + 1] = esf_line_setup(a1, a3, k->rs, k->st, &pos[3 * q + 1], &inc[3 * q + 1]);
-        cnt[3 * q + 2] = esf_line_setup(a2, a3, k->rs, k->st, &pos[3 * q + 2], &inc[3 * q + 2]);
+        const int32_t *cl = s->cells;
+        int64_t e1 = 3 * (int64_t)i1[sel[q]], e2 = 3 * (int64_t)i2[sel[q]], e3 = 3 * (int64_t)i3[sel[q]];
+        ax[3 * q] = cl[e1]; ay[3 * q] = cl[e1 + 1]; az[3 * q] = cl[e1 + 2];
+        bx[3 * q] = cl[e2]; by[3 * q] = cl[e2 + 1]; bz[3 * q] = cl[e2 + 2];
+        ax[3 * q + 1] = cl[e1]; ay[3 * q + 1] = cl[e1 + 1]; az[3 * q + 1] = cl[e1 + 2];
+        bx[3 * q + 1] = cl[e3]; by[3 * q + 1] = cl[e3 + 1]; bz[3 * q + 1] = cl[e3 + 2];
+        ax[3 * q + 2] = cl[e2]; ay[3 * q + 2] = cl[e2 + 1]; az[3 * q + 2] = cl[e2 + 2];
+        bx[3 * q + 2] = cl[e3]; by[3 * q + 2] = cl[e3 + 1]; bz[3 * q + 2] = cl[e3 + 2];
     }
+    esf_setup_lines(3 * nsel, ax, ay, az, bx, by, bz, k->rs, k->st, pos, inc, cnt);
     for (q = 0; q < 3 * nsel; q++)
         occ[q] = esf_walk(s->g3, pos[q], inc[q], cnt[q]);
     /* histograms, in integers (A3 in 32nds of a voxel), without branches;
