@@ -130,7 +130,7 @@ def main():
     rows, source = bench_descriptor(args.objects, args.repeats, tuple(args.sizes))
     print(f"\nEPPF descriptor, 20,000 pairs, 64^3 grid, {args.objects} objects from {source}, best of {args.repeats}")
     print(f"(1-minute load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after; "
-          f"SIMD kernels {'on' if core._simd_enabled() else 'off'})")
+          f"SIMD kernels {'on' if getattr(core, '_simd_enabled', lambda: False)() else 'off'})")
     print("(wall ms per object; 'CPU ms/obj' is the process CPU time per object summed over threads: the")
     print(" per-core cost, meaningful even when other processes share the cores; normals: PCA, 20 neighbours)")
     print(f"{'points':>7} | {'threads':>7} | {'ms/obj (normals given)':>22} | {'CPU ms/obj':>10} | "

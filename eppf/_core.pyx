@@ -22,6 +22,13 @@ Conventions (see ``DESIGN.md``):
   grids below 1024 (see ``_line_bin``). Both end voxels are occupied.
   bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
 - A bin count of 1 switches a function off (its value is never computed).
+
+Where the CPU has AVX2 (checked at import), batches of 64 pairs go through
+the kernels of ``_walk.h`` instead: f1-f3 four pairs at a time with the same
+IEEE operations in the same order, and the f4 walks of grids up to 64 in
+four lanes, pairs grouped by line length. Their bins are bit-identical to the
+scalar code here, which every other case uses and ``_set_simd(False)``
+forces (tests compare both with the NumPy reference).
 """
 import numpy as np
 

@@ -194,8 +194,8 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
             __m128i L = _mm_max_epi32(_mm_max_epi32(_mm_abs_epi32(dx), _mm_abs_epi32(dy)), _mm_abs_epi32(dz));
             __m128i row = _mm_mullo_epi32(_mm_add_epi32(L, onev), n4v);
             /* 2**14 / L, the same correctly rounded division as recip_packed[L]
-               (L <= 1 lanes are never walked: their values do not matter) */
-            __m256d q = _mm256_div_pd(S, _mm256_cvtepi32_pd(L));
+               (L <= 1 lanes are never walked; max(L, 1) only keeps them finite) */
+            __m256d q = _mm256_div_pd(S, _mm256_cvtepi32_pd(_mm_max_epi32(L, onev)));
             __m128i ix = _mm256_cvtpd_epi32(_mm256_mul_pd(_mm256_cvtepi32_pd(dx), q));  /* = llrint */
             __m128i iy = _mm256_cvtpd_epi32(_mm256_mul_pd(_mm256_cvtepi32_pd(dy), q));
             __m128i iz = _mm256_cvtpd_epi32(_mm256_mul_pd(_mm256_cvtepi32_pd(dz), q));
