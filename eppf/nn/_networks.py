@@ -52,6 +52,16 @@ def check_n_bins(n_bins, *, owner=None):
     Returns
     -------
     n_bins : tuple of 4 ints
+
+    Examples
+    --------
+    >>> from eppf.nn import check_n_bins
+    >>> check_n_bins([15, 3, 4, 3])
+    (15, 3, 4, 3)
+    >>> check_n_bins((20, 4, 5), owner="MyNet")
+    Traceback (most recent call last):
+        ...
+    ValueError: MyNet: n_bins must be a tuple of 4 positive ints, got (20, 4, 5)
     """
     pre = f"{owner}: " if owner else ""
     try:
@@ -103,6 +113,13 @@ def count_parameters(module):
     Returns
     -------
     n : int
+
+    Examples
+    --------
+    >>> import torch
+    >>> from eppf.nn import count_parameters
+    >>> count_parameters(torch.nn.Linear(10, 3))  # 10 * 3 weights + 3 biases
+    33
     """
     return sum(p.numel() for p in module.parameters() if p.requires_grad)
 
