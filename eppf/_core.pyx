@@ -44,8 +44,8 @@ cnp.import_array()
 
 cdef extern from "_walk.h":
     int eppf_walk_has_avx2() noexcept nogil
-    void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts,
-                              const double* nrm, double scale, int n1, int n2, int n3, int n4,
+    void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
+                              const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                               double f1_density, const double* cos2, const double* cos3,
                               int32_t* B) noexcept nogil
     void eppf_f4_batch_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
@@ -131,7 +131,7 @@ cdef inline int64_t _grid_words(int grid) noexcept nogil:
     return <int64_t>grid * grid * _row_words(grid)
 
 
-cdef inline void _fill_grid(const double* pts, int64_t n, int grid, uint64_t* bits,
+cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, uint64_t* bits,
                             int32_t* vox) noexcept nogil:
     """Voxelise ``n`` points on a grid over their bounding cube.
 
@@ -144,21 +144,21 @@ cdef inline void _fill_grid(const double* pts, int64_t n, int grid, uint64_t* bi
     cdef double mxx = mnx, mxy = mny, mxz = mnz
     cdef double side, inv
     for i in range(1, n):
-        if pts[3 * i] < mnx: mnx = pts[3 * i]
-        if pts[3 * i] > mxx: mxx = pts[3 * i]
-        if pts[3 * i + 1] < mny: mny = pts[3 * i + 1]
-        if pts[3 * i + 1] > mxy: mxy = pts[3 * i + 1]
-        if pts[3 * i + 2] < mnz: mnz = pts[3 * i + 2]
-        if pts[3 * i + 2] > mxz: mxz = pts[3 * i + 2]
+        if pts[ps * i] < mnx: mnx = pts[ps * i]
+        if pts[ps * i] > mxx: mxx = pts[ps * i]
+        if pts[ps * i + 1] < mny: mny = pts[ps * i + 1]
+        if pts[ps * i + 1] > mxy: mxy = pts[ps * i + 1]
+        if pts[ps * i + 2] < mnz: mnz = pts[ps * i + 2]
+        if pts[ps * i + 2] > mxz: mxz = pts[ps * i + 2]
     side = mxx - mnx
     if mxy - mny > side: side = mxy - mny
     if mxz - mnz > side: side = mxz - mnz
     inv = grid / side
     memset(bits, 0, _grid_words(grid) * sizeof(uint64_t))
     for i in range(n):
-        vox[3 * i] = _voxel(pts[3 * i], mnx, inv, grid)
-        vox[3 * i + 1] = _voxel(pts[3 * i + 1], mny, inv, grid)
-        vox[3 * i + 2] = _voxel(pts[3 * i + 2], mnz, inv, grid)
+        vox[3 * i] = _voxel(pts[ps * i], mnx, inv, grid)
+        vox[3 * i + 1] = _voxel(pts[ps * i + 1], mny, inv, grid)
+        vox[3 * i + 2] = _voxel(pts[ps * i + 2], mnz, inv, grid)
         idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * _row_words(grid) + (vox[3 * i + 2] >> 6)
         bits[idx] |= (<uint64_t>1) << (vox[3 * i + 2] & 63)
 
@@ -257,12 +257,12 @@ cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* pr
     return b
 
 
-cdef inline int _bin_f123(const double* pts, const double* nrm, int64_t i, int64_t j,
+cdef inline int _bin_f123(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t i, int64_t j,
                           double scale, const Params* prm, int* parts) noexcept nogil:
     """Bins of f1, f2, f3 of the ordered pair (i, j) combined as (b1 * n2 + b2) * n3 + b3."""
-    cdef double dx = pts[3 * j] - pts[3 * i]
-    cdef double dy = pts[3 * j + 1] - pts[3 * i + 1]
-    cdef double dz = pts[3 * j + 2] - pts[3 * i + 2]
+    cdef double dx = pts[ps * j] - pts[ps * i]
+    cdef double dy = pts[ps * j + 1] - pts[ps * i + 1]
+    cdef double dz = pts[ps * j + 2] - pts[ps * i + 2]
     cdef double dist = sqrt(dx * dx + dy * dy + dz * dz)
     cdef double v, m1, m2, inv
     cdef int b1 = 0, b2 = 0, b3 = 0, k
@@ -276,14 +276,14 @@ cdef inline int _bin_f123(const double* pts, const double* nrm, int64_t i, int64
             b1 = prm.n1 - 1
     if prm.n2 > 1:
         inv = 1.0 / dist
-        m1 = (nrm[3 * i] * dx + nrm[3 * i + 1] * dy + nrm[3 * i + 2] * dz) * inv
-        m2 = (nrm[3 * j] * dx + nrm[3 * j + 1] * dy + nrm[3 * j + 2] * dz) * inv
+        m1 = (nrm[ns * i] * dx + nrm[ns * i + 1] * dy + nrm[ns * i + 2] * dz) * inv
+        m2 = (nrm[ns * j] * dx + nrm[ns * j + 1] * dy + nrm[ns * j + 2] * dz) * inv
         if m2 < m1:
             m1 = m2
         for k in range(prm.n2 - 1):
             b2 += m1 <= prm.cos2[k]
     if prm.n3 > 1:
-        v = nrm[3 * i] * nrm[3 * j] + nrm[3 * i + 1] * nrm[3 * j + 1] + nrm[3 * i + 2] * nrm[3 * j + 2]
+        v = nrm[ns * i] * nrm[ns * j] + nrm[ns * i + 1] * nrm[ns * j + 1] + nrm[ns * i + 2] * nrm[ns * j + 2]
         if v < 0.0:
             v = -v
         for k in range(prm.n3 - 1):
@@ -295,7 +295,7 @@ cdef inline int _bin_f123(const double* pts, const double* nrm, int64_t i, int64
     return (b1 * prm.n2 + b2) * prm.n3 + b3
 
 
-cdef inline int _draw_pair(const double* pts, uint32_t n, uint64_t* state,
+cdef inline int _draw_pair(const double* pts, int64_t ps, uint32_t n, uint64_t* state,
                            int64_t* i_out, int64_t* j_out) noexcept nogil:
     """Draw an ordered pair i != j with distinct coordinates; 0 on success."""
     cdef uint32_t i, j
@@ -307,8 +307,8 @@ cdef inline int _draw_pair(const double* pts, uint32_t n, uint64_t* state,
         j = <uint32_t>(((r & LOW32) * <uint64_t>(n - 1)) >> 32)
         if j >= i:
             j += 1
-        if (pts[3 * i] != pts[3 * j] or pts[3 * i + 1] != pts[3 * j + 1]
-                or pts[3 * i + 2] != pts[3 * j + 2]):
+        if (pts[ps * i] != pts[ps * j] or pts[ps * i + 1] != pts[ps * j + 1]
+                or pts[ps * i + 2] != pts[ps * j + 2]):
             i_out[0] = i
             j_out[0] = j
             return 0
@@ -317,7 +317,7 @@ cdef inline int _draw_pair(const double* pts, uint32_t n, uint64_t* state,
             return 1
 
 
-cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double scale,
+cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
                         int32_t* vox, int32_t* counts) noexcept nogil:
     """Histogram counts of one object; returns 1 if pairs could not be drawn.
@@ -334,7 +334,7 @@ cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double 
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
     if prm.n4 > 1:
-        _fill_grid(pts, n, prm.grid, bits, vox)
+        _fill_grid(pts, ps, n, prm.grid, bits, vox)
     base = 0
     while base < n_pairs:
         m = n_pairs - base
@@ -342,16 +342,16 @@ cdef int _object_counts(const double* pts, const double* nrm, int64_t n, double 
             m = BATCH
         base += m
         for t in range(m):
-            if _draw_pair(pts, <uint32_t>n, &state, &i, &j) != 0:
+            if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
                 return 1
             I[t] = <int32_t>i
             J[t] = <int32_t>j
         if prm.simd123:
-            eppf_f123_batch_avx2(<int>m, I, J, pts, nrm, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+            eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
                                  prm.f1_density, prm.cos2, prm.cos3, B)
         else:
             for t in range(m):
-                B[t] = _bin_f123(pts, nrm, I[t], J[t], scale, prm, NULL) * prm.n4
+                B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
             if prm.simd:
@@ -415,7 +415,17 @@ def _tables(int grid, int n4):
     return recip, thr
 
 
-def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
+def _rows_of_doubles(a, what):
+    """``a`` as float64 rows whose first three columns are contiguous (a view when it already is)."""
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] < 3:
+        raise ValueError(f"{what} must have shape (N, 3) or wider")
+    if a.strides[1] != 8 or a.strides[0] < 24 or a.strides[0] % 8:
+        a = np.ascontiguousarray(a[:, :3])
+    return a
+
+
+def eppf_counts(points_in, normals_in,
                 const int64_t[::1] offsets, const double[::1] scales,
                 const uint64_t[::1] seeds, int n_pairs, n_bins, int grid_size,
                 double f1_max, int num_threads):
@@ -423,7 +433,9 @@ def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
 
     Parameters
     ----------
-    points, normals : (N, 3) float64, C-contiguous; normals unit length.
+    points_in, normals_in : (N, 3) float64, normals unit length; wider rows
+        (e.g. the two halves of one (N, 6) array) are read in place as long as
+        their first three columns are contiguous.
     offsets : (n_objects + 1,) int64.
     scales : (n_objects,) float64, multiplies distances for f1.
     seeds : (n_objects,) uint64, one generator seed per object.
@@ -438,6 +450,11 @@ def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
         distinct points to draw pairs.
     """
     _check_bins(n_bins, grid_size)
+    cdef const double[:, :] points = _rows_of_doubles(points_in, "points")
+    cdef const double[:, :] normals = _rows_of_doubles(normals_in, "normals")
+    if normals.shape[0] != points.shape[0] or offsets.shape[0] < 1 or offsets[offsets.shape[0] - 1] > points.shape[0]:
+        raise ValueError("points, normals and offsets do not match")
+    cdef int64_t ps = points.strides[0] // 8, ns = normals.strides[0] // 8
     recip_arr, thr_arr = _tables(grid_size, n_bins[3])
     cdef const int64_t[::1] recip = recip_arr
     cdef const int32_t[:, ::1] thr = thr_arr
@@ -465,7 +482,7 @@ def eppf_counts(const double[:, ::1] points, const double[:, ::1] normals,
         for k in prange(n_obj, num_threads=num_threads, schedule="dynamic", chunksize=1):
             start = offsets[k]
             tid = threadid()
-            status[k] = _object_counts(&points[start, 0], &normals[start, 0],
+            status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
                                        &prm, &grids[tid, 0], &vox[tid, 0], &counts[k, 0])
     return counts_arr, status_arr
@@ -482,7 +499,7 @@ def eppf_pairs(const double[:, ::1] points, uint64_t seed, int n_pairs):
     cdef uint64_t state = seed
     cdef int64_t t, i, j
     for t in range(n_pairs):
-        if _draw_pair(&points[0, 0], <uint32_t>n, &state, &i, &j) != 0:
+        if _draw_pair(&points[0, 0], 3, <uint32_t>n, &state, &i, &j) != 0:
             raise ValueError("too few distinct points to draw pairs")
         out[t, 0] = i
         out[t, 1] = j
@@ -517,9 +534,9 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
     for t in range(n_p):
         if not (0 <= pairs[t, 0] < n and 0 <= pairs[t, 1] < n):
             raise ValueError("pair indices out of range")
-    _fill_grid(&points[0, 0], n, grid_size, &bits[0], &vox[0, 0])
+    _fill_grid(&points[0, 0], 3, n, grid_size, &bits[0], &vox[0, 0])
     for t in range(n_p):
-        _bin_f123(&points[0, 0], &normals[0, 0], pairs[t, 0], pairs[t, 1], scale, &prm, parts)
+        _bin_f123(&points[0, 0], 3, &normals[0, 0], 3, pairs[t, 0], pairs[t, 1], scale, &prm, parts)
         parts[3] = parts[4] = parts[5] = 0
         if prm.n4 > 1:
             parts[3] = _line_bin(&vox[pairs[t, 0], 0], &vox[pairs[t, 1], 0], &prm, &bits[0],

@@ -271,9 +271,15 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
 
     def _points_and_normals(self, clouds, n_threads):
         needs_normals = "angle" in self.functions_ or "normal" in self.functions_
+        packed = _stacked_view(clouds)
+        if packed is not None and (packed[0].shape[1] == 6 or not needs_normals):
+            # Clouds validated in one block: the kernel reads the block's rows in place.
+            stacked, offsets = packed[0], packed[1]
+            points = stacked[:, :3]
+            normals = stacked[:, 3:6] if needs_normals else np.zeros((len(stacked), 3))
+            return points, normals, offsets
         if not needs_normals:
-            # Clouds validated in one block are packed without a per-cloud copy.
-            points, _, offsets = pack_point_clouds(clouds if _stacked_view(clouds) else [c[:, :3] for c in clouds])
+            points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
             return points, np.zeros_like(points), offsets
         missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
         if missing:

@@ -180,11 +180,12 @@ static inline int esf_walk(const uint64_t *g3, uint64_t pos, uint64_t inc, int n
  * one short (no cell holds two edges); one comparison completes it. The
  * argument is c itself when the cells can be that fine (coarse bins), else
  * u = sqrt((1 - c) / 2) = sin(angle / 2). */
-static inline int esf_angle_bin(double c, const esf_const *k)
+static inline int esf_angle_bin(double c, int on_cos, const int32_t *lut, double lut_scale,
+                                const double *edges)
 {
-    double arg = k->lut_on_cos ? c : sqrt((1.0 - c) * 0.5);
-    int lo = k->lut[(int)(arg * k->lut_scale)];
-    lo += k->edges[lo] >= c;
+    double arg = on_cos ? c : sqrt((1.0 - c) * 0.5);
+    int lo = lut[(int)(arg * lut_scale)];
+    lo += edges[lo] >= c;
     return lo;
 }
 
@@ -335,6 +336,9 @@ static int esf_take(const esf_const *k, esf_state *s, const uint32_t *i1, const 
     {
         int64_t *acc = s->acc;
         const int16_t *ratio_bin = k->ratio_bin;
+        const int32_t *lut = k->lut;
+        const double *edges = k->edges, lut_scale = k->lut_scale;
+        const int on_cos = k->lut_on_cos;
         int8_t *cls2 = s->cls2, *cls3 = s->cls3;
         double *d2v = s->d2v, *d3v = s->d3v, maxd2 = s->maxd2, maxd3 = s->maxd3;
         int t = s->t;
@@ -361,9 +365,9 @@ static int esf_take(const esf_const *k, esf_state *s, const uint32_t *i1, const 
             cls = in_sum <= 21 ? ESF_OUT : 2 * (n_sum - in_sum >= 4);
             cls3[t] = (int8_t)cls;
             h = cls * n_bins; /* A3 histograms 0, 1, 2 */
-            acc[h + esf_angle_bin(c1[j], k)] += cnt[3 * q + 2];
-            acc[13 * n_bins + h + esf_angle_bin(c2[j], k)] += cnt[3 * q];
-            acc[16 * n_bins + h + esf_angle_bin(c3[j], k)] += cnt[3 * q + 1];
+            acc[h + esf_angle_bin(c1[j], on_cos, lut, lut_scale, edges)] += cnt[3 * q + 2];
+            acc[13 * n_bins + h + esf_angle_bin(c2[j], on_cos, lut, lut_scale, edges)] += cnt[3 * q];
+            acc[16 * n_bins + h + esf_angle_bin(c3[j], on_cos, lut, lut_scale, edges)] += cnt[3 * q + 1];
             maxd2 = A[j] > maxd2 ? A[j] : maxd2;
             maxd2 = B[j] > maxd2 ? B[j] : maxd2;
             maxd2 = C[j] > maxd2 ? C[j] : maxd2;

@@ -56,15 +56,17 @@ static int eppf_walk_has_avx2(void)
 
 #if EPPF_WALK_SIMD
 
-/* 4 points (x, y, z) at rows r[0..3] of an (n, 3) array, as x, y, z vectors. */
+/* 4 points (x, y, z) at rows r[0..3] of an array with rows of ``stride``
+ * doubles, as x, y, z vectors. */
 __attribute__((target("avx2")))
-static inline void eppf_load3x4(const double *a, const int32_t *r, __m256d *x, __m256d *y, __m256d *z)
+static inline void eppf_load3x4(const double *a, int64_t stride, const int32_t *r, __m256d *x, __m256d *y,
+                                __m256d *z)
 {
     const __m256i keep3 = _mm256_set_epi64x(0, -1, -1, -1);
-    __m256d p0 = _mm256_maskload_pd(a + 3 * (int64_t)r[0], keep3);  /* x0 y0 z0 0 */
-    __m256d p1 = _mm256_maskload_pd(a + 3 * (int64_t)r[1], keep3);
-    __m256d p2 = _mm256_maskload_pd(a + 3 * (int64_t)r[2], keep3);
-    __m256d p3 = _mm256_maskload_pd(a + 3 * (int64_t)r[3], keep3);
+    __m256d p0 = _mm256_maskload_pd(a + stride * r[0], keep3);  /* x0 y0 z0 0 */
+    __m256d p1 = _mm256_maskload_pd(a + stride * r[1], keep3);
+    __m256d p2 = _mm256_maskload_pd(a + stride * r[2], keep3);
+    __m256d p3 = _mm256_maskload_pd(a + stride * r[3], keep3);
     __m256d t0 = _mm256_unpacklo_pd(p0, p1);  /* x0 x1 z0 z1 */
     __m256d t1 = _mm256_unpackhi_pd(p0, p1);  /* y0 y1 0 0 */
     __m256d t2 = _mm256_unpacklo_pd(p2, p3);  /* x2 x3 z2 z3 */
@@ -78,8 +80,8 @@ static inline void eppf_load3x4(const double *a, const int32_t *r, __m256d *x, _
  * exactly as _core.pyx's ``_bin_f123``; cos2 / cos3 hold the n2 - 1 / n3 - 1
  * inner bin edges on the cosine scale. */
 __attribute__((target("avx2")))
-static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const double *pts,
-                                 const double *nrm, double scale, int n1, int n2, int n3, int n4,
+static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                                 const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
 {
     int32_t ri[4], rj[4];
@@ -97,8 +99,8 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
             ri[l] = ii[u];
             rj[l] = jj[u];
         }
-        eppf_load3x4(pts, ri, &pix, &piy, &piz);
-        eppf_load3x4(pts, rj, &pjx, &pjy, &pjz);
+        eppf_load3x4(pts, ps, ri, &pix, &piy, &piz);
+        eppf_load3x4(pts, ps, rj, &pjx, &pjy, &pjz);
         dx = _mm256_sub_pd(pjx, pix);
         dy = _mm256_sub_pd(pjy, piy);
         dz = _mm256_sub_pd(pjz, piz);
@@ -110,8 +112,8 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
         b2 = _mm_setzero_si128();
         b3 = _mm_setzero_si128();
         if (n2 > 1 || n3 > 1) {
-            eppf_load3x4(nrm, ri, &nix, &niy, &niz);
-            eppf_load3x4(nrm, rj, &njx, &njy, &njz);
+            eppf_load3x4(nrm, ns, ri, &nix, &niy, &niz);
+            eppf_load3x4(nrm, ns, rj, &njx, &njy, &njz);
         }
         if (n2 > 1) {
             inv = _mm256_div_pd(one, dist);
@@ -349,11 +351,11 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
 
 #else
 
-static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const double *pts,
-                                 const double *nrm, double scale, int n1, int n2, int n3, int n4,
+static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                                 const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
 {
-    (void)m; (void)ii; (void)jj; (void)pts; (void)nrm; (void)scale; (void)n1; (void)n2; (void)n3;
+    (void)m; (void)ii; (void)jj; (void)pts; (void)ps; (void)nrm; (void)ns; (void)scale; (void)n1; (void)n2; (void)n3;
     (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
 }
 

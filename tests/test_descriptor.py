@@ -562,3 +562,26 @@ def test_degenerate_cloud_reports_object():
     est = EPPFTransformer(n_pairs=50, functions=("distance",), random_state=0)
     with pytest.raises(ValueError, match=re.escape("EPPFTransformer: point cloud 1 has too few distinct points")):
         est.fit_transform(clouds)
+
+
+def test_kernel_reads_wide_rows_in_place_with_the_same_counts():
+    # The (N, 6) block is read through strided views of its two halves: the counts must be
+    # those of the contiguous (N, 3) copies, for every SIMD setting.
+    rng = np.random.default_rng(5)
+    block = rng.normal(size=(300, 6))
+    block[:, 3:] /= np.linalg.norm(block[:, 3:], axis=1, keepdims=True)
+    offsets = np.array([0, 120, 300], dtype=np.int64)
+    args = (offsets, np.ones(2), np.array([3, 4], dtype=np.uint64), 500, (20, 4, 5, 3), 64, np.sqrt(3.0), 1)
+    for simd in (False, True):
+        old = _set_simd(simd)
+        try:
+            wide = eppf_counts(block[:, :3], block[:, 3:], *args)
+            packed = eppf_counts(np.ascontiguousarray(block[:, :3]), np.ascontiguousarray(block[:, 3:]), *args)
+        finally:
+            _set_simd(old)
+        assert_array_equal(wide[0], packed[0])
+        assert_array_equal(wide[1], packed[1])
+    with pytest.raises(ValueError, match="do not match"):
+        eppf_counts(block[:, :3], block[:200, 3:], *args)
+    with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
+        eppf_counts(block[:, :2], block[:, 3:], *args)
