@@ -51,8 +51,14 @@ def test_public_names_have_examples():
     import inspect
 
     missing = []
-    for modname in ("eppf", "eppf.datasets", "eppf.metrics", "eppf.preprocessing",
-                    "eppf.io", "eppf.nn"):
+    modules = ["eppf", "eppf.datasets", "eppf.metrics", "eppf.preprocessing", "eppf.io", "eppf.nn"]
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        modules += ["eppf.plotting", "eppf.experiments"]
+    for modname in modules:
         module = importlib.import_module(modname)
         for attr in module.__all__:
             obj = getattr(module, attr)

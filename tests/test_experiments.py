@@ -257,9 +257,33 @@ def test_cli_errors(argv, msg, tmp_path, capsys):
     assert not os.path.exists(tmp_path / "retrieval.md")
 
 
-def test_folder_data_is_refused(tmp_path):
-    with pytest.raises(ExperimentError, match="is a folder"):
+def test_folder_data_is_read_with_its_split(tmp_path):
+    rng = np.random.default_rng(0)
+    for split, n in (("train", 4), ("test", 2)):
+        for name, scale in (("ball", 1.0), ("rod", (5.0, 0.2, 0.2))):
+            folder = tmp_path / "objs" / split / name
+            folder.mkdir(parents=True)
+            for k in range(n):
+                np.savetxt(folder / f"{k}.xyz", rng.normal(size=(60, 3)) * scale)
+    data = load_data(tmp_path / "objs")
+    assert data.name == "objs" and data.default_scaling == "object"
+    assert list(data.target_names) == ["ball", "rod"]
+    assert data.train.size == 8 and data.test.size == 4
+    assert "folder's split" in data.split_source
+    assert all(c.shape == (60, 3) and c.dtype == np.float64 for c in data.clouds)
+    # runs end to end on it
+    table = run_retrieval(tmp_path / "objs", out=tmp_path / "out", descriptors=["eppf"], draws=1, quick=True,
+                          verbose=False)
+    assert os.path.exists(tmp_path / "out" / "retrieval.md")
+    assert table is not None
+
+
+def test_empty_or_missing_folder_is_one_line_error(tmp_path, capsys):
+    with pytest.raises(ExperimentError, match="no class folders|no object files"):
         load_data(tmp_path)
+    assert main(["retrieval", "--data", str(tmp_path / "nope"), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no such file or folder" in err and len(err.splitlines()) == 1
 
 
 def test_bad_npz_is_one_line_error(tmp_path, capsys):

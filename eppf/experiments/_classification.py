@@ -226,6 +226,17 @@ def run_classification(
     -------
     result : dict
         ``"rows"`` (as in the CSV), ``"paths"``, ``"cache"``.
+
+    Examples
+    --------
+    The 4D network for one epoch and the KL 1-NN on the quick built-in set:
+
+    >>> import tempfile
+    >>> from eppf.experiments import run_classification
+    >>> result = run_classification("builtin", quick=True, models=["4d", "kl"], n_jobs=1, out=tempfile.mkdtemp(),
+    ...                             verbose=False)
+    >>> [(row["model"], row["n_test"]) for row in result["rows"]]
+    [('EPPF 4D', 20), ('EPPF KL 1-NN', 20)]
     """
     log = Logger("classification", verbose)
     models = check_models(models, DEFAULT_MODELS)

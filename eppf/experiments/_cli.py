@@ -99,6 +99,15 @@ def main(argv=None):
     status : int
         0 on success, 2 on a bad argument or input (with a one-line message
         on stderr).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from eppf.experiments import main
+    >>> main(["retrieval", "--quick", "--quiet", "--descriptors", "eppf", "--draws", "1", "--out", tempfile.mkdtemp()])
+    0
+    >>> main(["retrieval", "--data", "no_such_file.npz", "--quiet"])
+    2
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -107,7 +116,7 @@ def main(argv=None):
     except SystemExit as exc:
         return int(exc.code or 0)
     command = f"{PROG} {shlex.join(argv)}"
-    data_name = "builtin" if args.data == "builtin" else os.path.splitext(os.path.basename(args.data))[0]
+    data_name = "builtin" if args.data == "builtin" else os.path.splitext(os.path.basename(os.path.normpath(args.data)))[0]
     out = args.out or os.path.join("results", args.experiment, data_name)
     common = dict(data=args.data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
                   cache_dir=args.cache_dir, verbose=not args.quiet, command=command, scaling=args.scaling)

@@ -28,7 +28,20 @@ _NEUTRAL = ("n_jobs", "verbose", "chunk_size", "batch_size")
 
 
 class ExperimentError(ValueError):
-    """A bad argument or input of an experiment (reported as one line)."""
+    """A bad argument or input of an experiment (reported as one line).
+
+    A subclass of :class:`ValueError`; the command line prints its message
+    as one line and exits with status 2.
+
+    Examples
+    --------
+    >>> from eppf.experiments import ExperimentError, load_data
+    >>> try:
+    ...     load_data("no_such_file.npz")
+    ... except ExperimentError as exc:
+    ...     print(exc)
+    --data: no such file or folder: 'no_such_file.npz'
+    """
 
 
 # ------------------------------------------------------------------ logging
@@ -81,6 +94,15 @@ class Dataset:
         How the split was made.
     default_scaling : str
         EPPF ``scaling`` used when the experiment is given ``scaling="auto"``.
+
+    Examples
+    --------
+    >>> from eppf.experiments import load_data
+    >>> data = load_data("builtin", quick=True)
+    >>> data.default_scaling, data.train.size, data.test.size
+    ('fit', 40, 20)
+    >>> print(data.summary()[1])
+    - objects: 60 (40 train / 20 test; split: make_shapes' stratified split (test_size=0.25))
     """
 
     name: str
@@ -134,21 +156,38 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
     ----------
     spec : str or path-like
         ``"builtin"``: :func:`eppf.datasets.make_shapes` (ten synthetic
-        classes, its own stratified split); otherwise a ``.npz`` file in the
-        flat layout read by :func:`eppf.datasets.load_npz` (its ``split`` is
-        used; a file without one gets a seeded stratified 70/30 split).
+        classes, its own stratified split); a folder with one subfolder per
+        class, read by :func:`eppf.datasets.load_folder` (meshes sampled with
+        ``n_points`` or 2,048 points); otherwise a ``.npz`` file in the flat
+        layout read by :func:`eppf.datasets.load_npz`. The split of the
+        folder or file is used; data without one gets a seeded stratified
+        70/30 split.
     quick : bool, default=False
         Smaller built-in set (6 objects per class, 256 points).
     random_state : int, default=0
         Seed of the built-in set and of a missing split.
     n_per_class, n_points : int, default=None
         Size of the built-in set (defaults: 40 and 1024, or 6 and 256 with
-        ``quick``).
+        ``quick``); ``n_points`` also resamples the objects of a folder.
 
     Returns
     -------
     data : Dataset
         The clouds (xyz only), labels and split.
+
+    Raises
+    ------
+    ExperimentError
+        If the file or folder does not exist or cannot be read.
+
+    Examples
+    --------
+    >>> from eppf.experiments import load_data
+    >>> data = load_data("builtin", quick=True)
+    >>> data.name, len(data.clouds), data.clouds[0].shape
+    ('builtin', 60, (256, 3))
+    >>> data.train.size + data.test.size == len(data.clouds)
+    True
     """
     spec = os.fspath(spec)
     if spec == "builtin":
@@ -168,31 +207,29 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
             split_source="make_shapes' stratified split (test_size=0.25)",
             default_scaling="fit",
         )
-    if os.path.isdir(spec):
-        raise ExperimentError(
-            f"--data {spec!r} is a folder; pass 'builtin' or a .npz file (convert a folder with "
-            "eppf.datasets.load_modelnet and save it in the .npz layout)"
-        )
     if not os.path.exists(spec):
-        raise ExperimentError(f"--data: no such file: {spec!r}")
-    from ..datasets import load_npz
+        raise ExperimentError(f"--data: no such file or folder: {spec!r}")
+    from ..datasets import load_folder, load_npz
 
     try:
-        b = load_npz(spec)
+        if os.path.isdir(spec):
+            b = load_folder(spec, n_points=n_points, normals=False, random_state=random_state)
+        else:
+            b = load_npz(spec)
     except (ValueError, OSError) as exc:
-        raise ExperimentError(str(exc)) from None
+        raise ExperimentError(f"--data {spec!r}: {exc}") from None
     y = np.asarray(b.target, dtype=np.int64)
     if b.split is not None:
         split = np.asarray(b.split).astype(str)
         bad = sorted(set(split) - {"train", "test"})
         if bad:
             raise ExperimentError(f"--data {spec!r}: split holds values other than 'train'/'test': {bad}")
-        split_source = "the file's split"
+        split_source = "the folder's split" if os.path.isdir(spec) else "the file's split"
     else:
         split = _stratified_split(y, 0.3, random_state)
         split_source = f"seeded per-class 70/30 split (random_state={random_state})"
     clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
-    name = os.path.splitext(os.path.basename(spec))[0]
+    name = os.path.splitext(os.path.basename(os.path.normpath(spec)))[0]
     return Dataset(
         name=name,
         source=f"`{os.path.abspath(spec)}`",

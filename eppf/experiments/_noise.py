@@ -112,6 +112,17 @@ def run_noise(
         ``"rows"`` (one per level and model, as in the CSV), ``"drops"``
         (model -> total-accuracy drop from the lowest level to
         ``REPORTED_LEVEL`` when both were run), ``"paths"``, ``"cache"``.
+
+    Examples
+    --------
+    The KL 1-NN alone (the networks take longer) at two noise levels:
+
+    >>> import tempfile
+    >>> from eppf.experiments import run_noise
+    >>> result = run_noise("builtin", quick=True, models=["kl"], levels=[0.0, 0.05], out=tempfile.mkdtemp(),
+    ...                    verbose=False)
+    >>> [(row["sigma"], row["model"]) for row in result["rows"]]
+    [(0.0, 'EPPF KL 1-NN'), (0.05, 'EPPF KL 1-NN')]
     """
     from ..preprocessing import GaussianNoise
 

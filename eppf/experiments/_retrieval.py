@@ -107,6 +107,18 @@ def run_retrieval(
     result : dict
         ``"rows"`` (one dict per descriptor, as in the CSV), ``"scores"``
         (descriptor -> metric -> per-draw array), ``"paths"``, ``"cache"``.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from eppf.experiments import run_retrieval
+    >>> out = tempfile.mkdtemp()
+    >>> result = run_retrieval("builtin", quick=True, descriptors=["eppf"], draws=1, out=out, verbose=False)
+    >>> sorted(os.listdir(out))
+    ['cache', 'retrieval.csv', 'retrieval.md', 'retrieval.png']
+    >>> row = result["rows"][0]
+    >>> row["descriptor"], 0.0 <= row["total_accuracy_mean"] <= 1.0
+    ('EPPF', True)
     """
     log = Logger("retrieval", verbose)
     draws = check_positive_int(draws, "--draws")

@@ -97,6 +97,15 @@ def run_runtime(
     -------
     result : dict
         ``"rows"`` (as in the CSV) and ``"paths"``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from eppf.experiments import run_runtime
+    >>> result = run_runtime("builtin", quick=True, n_objects=5, repeats=1, n_jobs=1, out=tempfile.mkdtemp(),
+    ...                      verbose=False)
+    >>> sorted({row["item"] for row in result["rows"]})  # doctest: +NORMALIZE_WHITESPACE
+    ['EPPF', 'EPPF short', 'ESF', 'OUR-CVFH', 'Wahl', 'normals (PCA, 20 neighbours)']
     """
     from .. import estimate_normals
 
