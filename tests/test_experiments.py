@@ -236,7 +236,7 @@ def test_cli_quick_ablation(tmp_path):
     [
         (["nope"], "invalid choice: 'nope'"),
         ([], "required: NAME"),
-        (["retrieval", "--data", "/no/such/file.npz"], "no such file: '/no/such/file.npz'"),
+        (["retrieval", "--data", "/no/such/file.npz"], "no such file or folder: '/no/such/file.npz'"),
         (["noise", "--levels", "-0.1"], "--levels must lie in [0, 1]"),
         (["noise", "--levels", "0,abc"], "noise levels must be numbers"),
         (["noise", "--levels", "0,0"], "--levels has duplicates"),
