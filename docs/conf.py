@@ -163,7 +163,7 @@ def _write_results_pages(docs_dir):
     data_titles = {"modelnet10_1024": "ModelNet10 (1,024 points per object)",
                    "dales_objects": "DALES objects (aerial LiDAR)", "builtin": "Built-in synthetic shapes"}
     lines = []
-    for data in sorted({d for d, _ in done}, key=lambda d: (d not in data_titles, d)):
+    for data in sorted({d for d, _ in done}, key=lambda d: (list(data_titles).index(d) if d in data_titles else 99, d)):
         title = data_titles.get(data, data)
         lines += [title, "-" * len(title), ""]
         names = [n for d, n in done if d == data]
