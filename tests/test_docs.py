@@ -48,3 +48,23 @@ def test_gallery_example_runs(script, tmp_path):
         capture_output=True, text=True, timeout=300,
     )
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-4000:]
+
+
+def test_every_public_name_is_in_the_api_reference():
+    import importlib
+    import re
+
+    api = (DOCS / "api.rst").read_text()
+    sections = re.split(r"^\.\. currentmodule:: (\S+)$", api, flags=re.M)
+    listed = {}  # module -> names listed under its currentmodule
+    for module, body in zip(sections[1::2], sections[2::2]):
+        listed.setdefault(module, set()).update(re.findall(r"^   (\w+)$", body, flags=re.M))
+    missing = []
+    for modname in ("eppf", "eppf.datasets", "eppf.metrics", "eppf.preprocessing", "eppf.io", "eppf.nn",
+                    "eppf.plotting", "eppf.experiments"):
+        try:
+            module = importlib.import_module(modname)
+        except ImportError:  # matplotlib missing: eppf.plotting and eppf.experiments' plots
+            continue
+        missing += [f"{modname}.{name}" for name in module.__all__ if name not in listed.get(modname, ())]
+    assert not missing, "not in docs/api.rst: " + ", ".join(missing)
