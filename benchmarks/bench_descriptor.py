@@ -13,8 +13,14 @@ The load average is printed with the table: wall-clock speed-ups over threads
 only mean something on an otherwise idle machine, CPU time per object is robust
 to other load.
 
+``--contention`` adds a check of the machine rather than of eppf: the CPU
+time per object of one single-threaded process alone, then of two such
+processes running side by side. They share nothing, so any slow-down of the
+pair is the hardware's (shared core, caches or memory bandwidth) and bounds
+the two-thread speed-up any code can reach on the machine.
+
 Usage: ``python benchmarks/bench_descriptor.py [--objects 200] [--repeats 3] [--quick]
-[--sizes 1024 2048 10000] [--no-retrieval]``
+[--sizes 1024 2048 10000] [--no-retrieval] [--contention]``
 """
 
 import argparse
@@ -108,6 +114,30 @@ def bench_loo(sizes, bins=1200):
     return rows
 
 
+def _contention_child(n_objects, n_points, repeats):
+    """Print the best CPU ms per object of a one-thread transform in this process."""
+    from eppf import EPPFTransformer, estimate_normals
+
+    clouds, _ = _clouds(n_objects, n_points, np.random.default_rng(0))
+    with_normals = [np.hstack([c, estimate_normals(c, 20)]) for c in clouds]
+    est = EPPFTransformer(scaling="object", random_state=0, n_jobs=1).fit(clouds)
+    est.transform(with_normals)
+    _, cpu = _best(lambda: est.transform(with_normals), repeats)
+    print(1e3 * cpu / n_objects)
+
+
+def bench_contention(n_objects, repeats, sizes):
+    """CPU ms per object of one process alone and of each of two side by side."""
+    rows = []
+    for n_points in sizes:
+        cmd = [sys.executable, __file__, "--contention-child", str(n_objects), str(n_points), str(repeats)]
+        alone = float(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
+        procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for _ in range(2)]
+        pair = [float(p.communicate()[0]) for p in procs]
+        rows.append((n_points, alone, pair))
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", type=int, default=200)
@@ -115,10 +145,16 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer objects and no 12,000-descriptor search")
     parser.add_argument("--sizes", nargs="+", type=int, default=[1024, 2048, 10000], help="points per object")
     parser.add_argument("--no-retrieval", action="store_true", help="skip the leave-one-out retrieval timing")
+    parser.add_argument("--contention", action="store_true",
+                        help="also time two independent one-thread processes side by side (a machine check)")
     parser.add_argument("--loo-child", nargs=2, type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--contention-child", nargs=3, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.loo_child:
         _loo_child(*args.loo_child)
+        return
+    if args.contention_child:
+        _contention_child(*args.contention_child)
         return
     if args.quick:
         args.objects, args.repeats = 40, 1
@@ -142,6 +178,13 @@ def main():
             one[n_points] = t_desc
         speed = one[n_points] / t_desc
         print(f"{n_points:>7} | {threads:>7} | {t_desc:>22.3f} | {cpu:>10.3f} | {t_full:>18.3f} | {speed:>7.2f}x")
+    if args.contention:
+        print("\nTwo independent one-thread processes side by side (CPU ms per object; a slow-down is the machine's)")
+        print(f"{'points':>7} | {'alone':>7} | {'side by side':>15} | {'slow-down':>9}")
+        print("-" * 49)
+        for n_points, alone, pair in bench_contention(args.objects, args.repeats, tuple(args.sizes)):
+            both = " / ".join(f"{v:.3f}" for v in pair)
+            print(f"{n_points:>7} | {alone:>7.3f} | {both:>15} | {max(pair) / alone - 1:>8.0%}")
     if args.no_retrieval:
         return
     sizes = (5000,) if args.quick else (5000, 12000)
