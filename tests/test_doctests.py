@@ -50,16 +50,10 @@ def test_public_names_have_examples():
     """Every public class and function in the API reference shows an example."""
     import inspect
 
+    from _public_api import public_modules
+
     missing = []
-    modules = ["eppf", "eppf.datasets", "eppf.metrics", "eppf.preprocessing", "eppf.io", "eppf.nn"]
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        pass
-    else:
-        modules += ["eppf.plotting", "eppf.experiments"]
-    for modname in modules:
-        module = importlib.import_module(modname)
+    for modname, module in public_modules():
         for attr in module.__all__:
             obj = getattr(module, attr)
             if not (inspect.isclass(obj) or inspect.isfunction(obj)):

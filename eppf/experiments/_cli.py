@@ -5,7 +5,7 @@ import os
 import shlex
 import sys
 
-from ._common import DESCRIPTORS, SCALINGS, ExperimentError
+from ._common import DESCRIPTORS, SCALINGS, ExperimentError, data_name
 
 __all__ = ["main"]
 
@@ -116,8 +116,7 @@ def main(argv=None):
     except SystemExit as exc:
         return int(exc.code or 0)
     command = f"{PROG} {shlex.join(argv)}"
-    data_name = "builtin" if args.data == "builtin" else os.path.splitext(os.path.basename(os.path.normpath(args.data)))[0]
-    out = args.out or os.path.join("results", args.experiment, data_name)
+    out = args.out or os.path.join("results", args.experiment, data_name(args.data))
     common = dict(data=args.data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
                   cache_dir=args.cache_dir, verbose=not args.quiet, command=command, scaling=args.scaling)
     from . import run_ablation, run_classification, run_noise, run_retrieval, run_runtime

@@ -149,6 +149,12 @@ def _stratified_split(y, test_size, random_state):
     return split
 
 
+def data_name(spec):
+    """Short name of a data set spec: ``"builtin"`` or the file's or folder's stem (names output folders)."""
+    spec = os.fspath(spec)
+    return spec if spec == "builtin" else os.path.splitext(os.path.basename(os.path.normpath(spec)))[0]
+
+
 def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=None):
     """Load the data set named by ``spec``.
 
@@ -229,9 +235,8 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
         split = _stratified_split(y, 0.3, random_state)
         split_source = f"seeded per-class 70/30 split (random_state={random_state})"
     clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
-    name = os.path.splitext(os.path.basename(os.path.normpath(spec)))[0]
     return Dataset(
-        name=name,
+        name=data_name(spec),
         source=f"`{os.path.abspath(spec)}`",
         clouds=clouds,
         y=y,

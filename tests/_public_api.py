@@ -1,0 +1,17 @@
+"""The public modules whose names the API reference and the docstring checks cover."""
+
+import importlib
+
+PUBLIC_MODULES = ("eppf", "eppf.datasets", "eppf.metrics", "eppf.preprocessing", "eppf.io", "eppf.nn",
+                  "eppf.plotting", "eppf.experiments")
+
+
+def public_modules():
+    """The public modules that import here (eppf.plotting needs matplotlib), as (name, module) pairs."""
+    out = []
+    for name in PUBLIC_MODULES:
+        try:
+            out.append((name, importlib.import_module(name)))
+        except ImportError:
+            continue
+    return out
