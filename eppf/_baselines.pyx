@@ -36,6 +36,7 @@ cdef extern from "_esf_kernel.h" nogil:
         const int32_t* rs
         const int32_t* st
         const int16_t* ratio_bin
+        int simd
     ctypedef struct esf_state:
         const double* pts
         const int32_t* cells
@@ -53,12 +54,36 @@ cdef extern from "_esf_kernel.h" nogil:
     void esf_fill_ratio_bins(int n_bins, int16_t* ratio_bin)
     int esf_take(const esf_const* k, esf_state* s, const uint32_t* i1, const uint32_t* i2,
                  const uint32_t* i3, int n_cand)
-    void esf_finish(const esf_state* s, int n_bins)
+    void esf_finish(const esf_state* s, int n_bins, int simd)
     int esf_line_setup(int32_t a0, int32_t a1, int32_t a2, int32_t b0, int32_t b1, int32_t b2,
                        const int32_t* rs, const int32_t* st, uint64_t* pos_out, uint64_t* inc_out)
     int esf_walk(const uint64_t* g3, uint64_t pos, uint64_t inc, int n)
+    int esf_has_avx2()
+    void esf_walk_lines(const uint64_t* g3, const uint64_t* pos, const uint64_t* inc, const int* cnt,
+                        int* occ, int n)
+    void esf_walk_lines_avx2(const uint64_t* g3, const uint64_t* pos, const uint64_t* inc, const int* cnt,
+                             int* occ, int n)
 
 cnp.import_array()
+
+# ESF's AVX2 kernels where the CPU has them (``esf_take_avx2``: the triplet
+# batch compiled for AVX2, its line walks four at a time in vector lanes);
+# ``_set_simd`` turns them off for tests. The results are identical.
+cdef bint _esf_simd = esf_has_avx2() != 0
+
+
+def _simd_enabled():
+    """Whether ESF runs its AVX2 kernels."""
+    return bool(_esf_simd)
+
+
+def _set_simd(enabled):
+    """Use (True, where the CPU allows) or avoid ESF's AVX2 kernels; returns
+    the previous setting. The descriptors are identical either way."""
+    global _esf_simd
+    old = bool(_esf_simd)
+    _esf_simd = bool(enabled) and esf_has_avx2() != 0
+    return old
 
 cdef enum:
     # ESF histograms, in PCL's order.
@@ -272,7 +297,7 @@ cdef int _esf_object_fast(const double* points, int64_t start, int64_t n,
             i3[j] = rand_below(&state, <uint32_t>n)
         if esf_take(kc, &st, i1, i2, i3, ESF_BATCH):
             return 1
-    esf_finish(&st, kc.n_bins)
+    esf_finish(&st, kc.n_bins, kc.simd)
     return 0
 
 
@@ -482,6 +507,7 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     kc.rs = &rs[0]
     kc.st = &st[0]
     kc.ratio_bin = &ratio_bin[0]
+    kc.simd = _esf_simd
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
         if fast:
@@ -732,28 +758,40 @@ def wahl_batch(const double[:, ::1] points, const double[:, ::1] normals,
 
 
 def esf_line_counts(const int32_t[:, ::1] occupied, const int32_t[:, ::1] starts,
-                    const int32_t[:, ::1] ends, int grid):
+                    const int32_t[:, ::1] ends, int grid, bint batch=False):
     """Occupied and visited voxels of ESF's packed line walk (grids up to 64).
 
     The grid is the 3x3x3 dilation of the voxels ``occupied``; line k runs
-    from voxel ``starts[k]`` towards ``ends[k]``. For the tests: an
-    independent Bresenham loop must give the same counts.
+    from voxel ``starts[k]`` towards ``ends[k]``. ``batch`` walks the lines
+    in batches of at most ``3 * ESF_BATCH`` as ``esf_take`` does (in AVX2
+    lanes when ``_simd_enabled()``). For the tests: an independent Bresenham
+    loop must give the same counts.
     """
-    cdef Py_ssize_t k, n_lines = starts.shape[0]
+    cdef Py_ssize_t k, b, m, n_lines = starts.shape[0]
     cdef uint64_t[::1] g3 = np.empty(3 * ESF_LAYOUT_WORDS, dtype=np.uint64)
     rs_arr, st_arr = _walk_tables()
     cdef int32_t[::1] rs = rs_arr
     cdef int32_t[::1] st = st_arr
     cdef int32_t[::1] occ = np.empty(n_lines, dtype=np.int32)
     cdef int32_t[::1] cnt = np.empty(n_lines, dtype=np.int32)
-    cdef uint64_t pos, inc
+    cdef uint64_t[::1] pos = np.empty(n_lines, dtype=np.uint64)
+    cdef uint64_t[::1] inc = np.empty(n_lines, dtype=np.uint64)
     if grid > 64:
         raise ValueError("esf_line_counts: grid must be at most 64")
     esf_fill_layouts(&occupied[0, 0], occupied.shape[0], grid, &g3[0])
     for k in range(n_lines):
         cnt[k] = esf_line_setup(starts[k, 0], starts[k, 1], starts[k, 2], ends[k, 0], ends[k, 1],
-                                ends[k, 2], &rs[0], &st[0], &pos, &inc)
-        occ[k] = esf_walk(&g3[0], pos, inc, cnt[k])
+                                ends[k, 2], &rs[0], &st[0], &pos[k], &inc[k])
+    if not batch:
+        for k in range(n_lines):
+            occ[k] = esf_walk(&g3[0], pos[k], inc[k], cnt[k])
+    else:
+        for b in range(0, n_lines, 3 * ESF_BATCH):
+            m = min(3 * ESF_BATCH, n_lines - b)
+            if _esf_simd:
+                esf_walk_lines_avx2(&g3[0], &pos[b], &inc[b], <int*>&cnt[b], <int*>&occ[b], <int>m)
+            else:
+                esf_walk_lines(&g3[0], &pos[b], &inc[b], <int*>&cnt[b], <int*>&occ[b], <int>m)
     return np.asarray(occ), np.asarray(cnt)
 
 

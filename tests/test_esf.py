@@ -312,8 +312,40 @@ def test_packed_line_walk_matches_bresenham_for_every_length_and_slope():
                         b[ax] = a[ax] + d
                     starts.append(a)
                     ends.append(b)
-    got_occ, got_cnt = esf_line_counts(occupied, np.array(starts, np.int32), np.array(ends, np.int32), grid)
+    starts, ends = np.array(starts, np.int32), np.array(ends, np.int32)
+    got_occ, got_cnt = esf_line_counts(occupied, starts, ends, grid)
     ref = [_walk(occ, tuple(a), tuple(b)) for a, b in zip(starts, ends)]
     assert_array_equal(got_cnt, [r[2] for r in ref])
     assert_array_equal(got_occ, [r[1] for r in ref])
     assert 0.2 < np.mean(got_occ / got_cnt) < 0.6
+    # The batched walks of esf_take (scalar, and four AVX2 lanes where the
+    # CPU has them), on the lines in a shuffled order so that every batch
+    # mixes lengths, must give the same counts.
+    from eppf._baselines import _set_simd
+
+    perm = rng.permutation(len(starts))
+    for simd in (False, True):
+        old = _set_simd(simd)
+        try:
+            b_occ, b_cnt = esf_line_counts(occupied, starts[perm], ends[perm], grid, batch=True)
+        finally:
+            _set_simd(old)
+        assert_array_equal(b_cnt, got_cnt[perm])
+        assert_array_equal(b_occ, got_occ[perm])
+
+
+@pytest.mark.parametrize("n_points", [5, 1024])
+def test_simd_line_walks_give_identical_descriptors(n_points):
+    # The walk kernels are chosen at run time; the descriptor must not depend on it.
+    from eppf._baselines import _set_simd
+
+    rng = np.random.default_rng(3)
+    clouds = [rng.normal(size=(n_points, 3)) * [1, 2, 0.5] for _ in range(4)]
+    outs = []
+    for simd in (False, True):
+        old = _set_simd(simd)
+        try:
+            outs.append(ESFTransformer(n_triplets=3000, random_state=0, n_jobs=1).fit(clouds).transform(clouds))
+        finally:
+            _set_simd(old)
+    assert_array_equal(outs[1], outs[0])
