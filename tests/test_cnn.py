@@ -99,6 +99,7 @@ def test_4d_network_reshape_follows_c_order():
         ({"dropout": 1.0}, "EPPFNet4D: dropout must be a float in [0, 1), got 1.0"),
         ({"filters": (32, 64)}, "EPPFNet4D: filters must be 3 positive ints, got (32, 64)"),
         ({"n_hidden": 0}, "EPPFNet4D: n_hidden must be a positive int, got 0"),
+        ({"precision": "float16"}, "EPPFNet4D: precision must be 'float32' or 'bfloat16', got 'float16'"),
     ],
 )
 def test_network_errors(kwargs, msg):
@@ -110,6 +111,25 @@ def test_network_rejects_wrong_length():
     msg = "EPPFNet3D: expected input of shape (batch, 540) for n_bins=(15, 3, 4, 3), got (2, 1200)"
     with pytest.raises(ValueError, match=re.escape(msg)):
         EPPFNet3D(n_bins=(15, 3, 4, 3), n_hidden=4)(torch.zeros(2, 1200))
+
+
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_bfloat16_network_matches_float32_up_to_rounding(conv):
+    # Same weights, same input: mixed precision changes only the rounding of
+    # the products (bfloat16 keeps 8 significant bits), so the logits agree
+    # to about 1% of their spread, and the parameters and logits stay float32.
+    torch.manual_seed(0)
+    ref = NETS[conv](n_bins=(15, 3, 4, 3), n_classes=5).eval()
+    torch.manual_seed(0)
+    mixed = NETS[conv](n_bins=(15, 3, 4, 3), n_classes=5, precision="bfloat16").eval()
+    x = torch.randn(16, 540, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        a, b = ref(x), mixed(x)
+    assert b.dtype == torch.float32
+    assert all(p.dtype == torch.float32 for p in mixed.parameters())
+    assert not torch.equal(a, b)  # the bfloat16 path really ran
+    assert (a - b).abs().max() <= 0.05 * (a.max() - a.min())
+    assert (a.argmax(1) == b.argmax(1)).float().mean() >= 0.8
 
 
 def test_descriptor_pool_dataset_draws_every_member():
@@ -131,6 +151,21 @@ def test_learns_separable_toy_set(conv):
     clf.fit(X, y)
     assert clf.score(X_test, y_test) >= 0.9
     assert clf.n_epochs_ == 8 and clf.best_epoch_ == 8
+
+
+def test_bfloat16_classifier_learns_and_is_deterministic():
+    rng = np.random.default_rng(5)
+    X, y = _toy(150, rng)
+    X_test, y_test = _toy(90, rng)
+    make = lambda: EPPF4DClassifier(  # noqa: E731
+        n_bins=N_BINS, max_epochs=8, lr=5e-3, early_stopping=False, precision="bfloat16", random_state=0, **SMALL
+    )
+    clf = make().fit(X, y)
+    assert clf.net_.module_.precision == "bfloat16"
+    assert clf.score(X_test, y_test) >= 0.9
+    proba = clf.predict_proba(X_test)
+    assert proba.dtype == np.float32
+    assert_array_equal(make().fit(X, y).predict_proba(X_test), proba)
 
 
 def test_deterministic_under_random_state():
@@ -368,6 +403,7 @@ def test_pipeline_with_eppf_transformer():
         ({"max_time": 0}, ValueError, "EPPF4DClassifier: max_time must be a float in (0.0, inf), got 0"),
         ({"max_time": "1h"}, ValueError, "EPPF4DClassifier: max_time must be a float in (0.0, inf), got '1h'"),
         ({"input_scaling": "minmax"}, ValueError, "EPPF4DClassifier: input_scaling must be one of 'global', 'bin', 'none', got 'minmax'"),
+        ({"precision": "half"}, ValueError, "EPPF4DClassifier: precision must be 'float32' or 'bfloat16', got 'half'"),
         ({"device": None}, ValueError, "EPPF4DClassifier: device must be a str such as 'cpu' or 'cuda', got None"),
         ({"n_jobs": 0}, ValueError, "EPPF4DClassifier: n_jobs must be None or a non-zero int, got 0"),
         ({"verbose": -1}, ValueError, "EPPF4DClassifier: verbose must be an int >= 0, got -1"),

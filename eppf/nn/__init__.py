@@ -19,7 +19,15 @@ bins               variant       dense-layer input   parameters
 
 from ._conv4d import Conv4d, conv4d, same_padding
 from ._data import DescriptorPoolDataset
-from ._networks import EPPFNet2D, EPPFNet3D, EPPFNet4D, check_n_bins, count_parameters, plane_shape
+from ._networks import (
+    EPPFNet2D,
+    EPPFNet3D,
+    EPPFNet4D,
+    check_n_bins,
+    check_precision,
+    count_parameters,
+    plane_shape,
+)
 
 __all__ = [
     "Conv4d",
@@ -28,6 +36,7 @@ __all__ = [
     "EPPFNet3D",
     "EPPFNet4D",
     "check_n_bins",
+    "check_precision",
     "conv4d",
     "count_parameters",
     "plane_shape",

@@ -26,6 +26,18 @@ How we read Table I
   "(192, 1024)", which no consistent reading of the table reproduces, and the
   authors' public code flattens 30 x 40 x 48 = 57,600 values; we keep the
   table's layers and let the size follow from them.
+
+Precision
+---------
+Every network takes ``precision="float32"`` (default) or ``"bfloat16"``. The
+latter runs the forward pass under :func:`torch.autocast` with bfloat16:
+convolutions and dense layers multiply in bfloat16 (and their backward
+passes follow), while the parameters, their gradients, the optimizer state
+and the returned logits stay float32 ("mixed precision"). On CPUs with
+native bfloat16 arithmetic (AVX512_BF16 or AMX: AMD Zen 4 and later, Intel
+Cooper Lake, Sapphire Rapids and later) it trains markedly faster; on others
+PyTorch emulates it and it is slower. Results differ from float32 by
+bfloat16's rounding (8 bits of mantissa).
 """
 
 import math
@@ -36,7 +48,15 @@ from torch import nn
 
 from ._conv4d import Conv4d, same_padding
 
-__all__ = ["EPPFNet2D", "EPPFNet3D", "EPPFNet4D", "check_n_bins", "count_parameters", "plane_shape"]
+__all__ = [
+    "EPPFNet2D",
+    "EPPFNet3D",
+    "EPPFNet4D",
+    "check_n_bins",
+    "check_precision",
+    "count_parameters",
+    "plane_shape",
+]
 
 
 def check_n_bins(n_bins, *, owner=None):
@@ -103,6 +123,41 @@ def plane_shape(n_features):
     return n // cols, cols
 
 
+_PRECISIONS = ("float32", "bfloat16")
+
+
+def check_precision(precision, *, owner=None):
+    """Validate a network precision: ``"float32"`` or ``"bfloat16"``.
+
+    Parameters
+    ----------
+    precision : str
+        ``"float32"`` computes in single precision; ``"bfloat16"`` runs the
+        forward pass under :func:`torch.autocast` with bfloat16 (mixed
+        precision: parameters, gradients and logits stay float32).
+    owner : str, default=None
+        Name used in error messages.
+
+    Returns
+    -------
+    precision : str
+
+    Examples
+    --------
+    >>> from eppf.nn import check_precision
+    >>> check_precision("bfloat16")
+    'bfloat16'
+    >>> check_precision("fp16", owner="MyNet")
+    Traceback (most recent call last):
+        ...
+    ValueError: MyNet: precision must be 'float32' or 'bfloat16', got 'fp16'
+    """
+    if not isinstance(precision, str) or precision not in _PRECISIONS:
+        pre = f"{owner}: " if owner else ""
+        raise ValueError(f"{pre}precision must be 'float32' or 'bfloat16', got {precision!r}")
+    return precision
+
+
 def count_parameters(module):
     """Number of trainable parameters of a torch module.
 
@@ -156,7 +211,20 @@ def _check_network_args(owner, n_bins, n_classes, dropout, filters, n_hidden):
 
 
 class _EPPFNetBase(nn.Module):
-    """Shared head: ReLU after the convolutions, max-pool, dense, dropout, dense."""
+    """Shared head (max-pool, dense, dropout, dense) and the precision switch.
+
+    Subclasses implement ``_body``: the convolutions (each followed by a
+    ReLU) from a checked (batch, n_features) tensor to the head's input.
+    """
+
+    def forward(self, x):
+        """Logits, float32, for a (batch, prod(n_bins)) tensor of descriptors."""
+        self._check_features(x)
+        if self.precision == "float32":
+            return self._head(self._body(x))
+        with torch.autocast(device_type=x.device.type, dtype=torch.bfloat16):
+            out = self._head(self._body(x))
+        return out.float()
 
     def _build_head(self, n_channels, spatial, pool, n_hidden, dropout, n_classes):
         pool_layer = nn.MaxPool3d if len(pool) == 3 else nn.MaxPool2d
@@ -201,6 +269,9 @@ class EPPFNet4D(_EPPFNetBase):
         Kernel of the 2D convolution.
     n_hidden : int, default=1024
         Units of the first dense layer.
+    precision : {"float32", "bfloat16"}, default="float32"
+        Arithmetic of the forward pass; "bfloat16" is mixed precision under
+        :func:`torch.autocast` (see :func:`check_precision`).
 
     Attributes
     ----------
@@ -237,11 +308,13 @@ class EPPFNet4D(_EPPFNetBase):
         kernel_size=(5, 2, 2, 1),
         kernel_size_2d=(5, 5),
         n_hidden=1024,
+        precision="float32",
     ):
         super().__init__()
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet4D", n_bins, n_classes, dropout, filters, n_hidden
         )
+        self.precision = check_precision(precision, owner="EPPFNet4D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
         self.plane = plane_shape(self.n_features)
@@ -251,9 +324,7 @@ class EPPFNet4D(_EPPFNetBase):
         self.folded = True
         self._build_head(filters[2], self.plane, (2, 2), n_hidden, dropout, n_classes)
 
-    def forward(self, x):
-        """Logits for a (batch, prod(n_bins)) tensor of descriptors."""
-        self._check_features(x)
+    def _body(self, x):
         batch = x.shape[0]
         n1, n2, n3, n4 = self.n_bins
         if self.conv1.kernel_size[3] == 1 and self.conv2.kernel_size[3] == 1 and self.folded:
@@ -271,8 +342,7 @@ class EPPFNet4D(_EPPFNetBase):
         # plane is each channel's 4D response in C order, and the channels-last
         # memory layout is the fast one for the CPU convolution that follows.
         x = x.reshape(batch, *self.plane, x.shape[-1]).permute(0, 3, 1, 2)
-        x = torch.relu(self.conv3(x))
-        return self._head(x)
+        return torch.relu(self.conv3(x))
 
 
 class EPPFNet2D(_EPPFNetBase):
@@ -293,6 +363,8 @@ class EPPFNet2D(_EPPFNetBase):
         Kernel of all three convolutions.
     n_hidden : int, default=1024
         Units of the first dense layer.
+    precision : {"float32", "bfloat16"}, default="float32"
+        Arithmetic of the forward pass (see :class:`EPPFNet4D`).
 
     Attributes
     ----------
@@ -318,12 +390,20 @@ class EPPFNet2D(_EPPFNetBase):
     """
 
     def __init__(
-        self, n_bins=(20, 4, 5, 3), n_classes=10, dropout=0.5, filters=(32, 64, 48), kernel_size=(5, 5), n_hidden=1024
+        self,
+        n_bins=(20, 4, 5, 3),
+        n_classes=10,
+        dropout=0.5,
+        filters=(32, 64, 48),
+        kernel_size=(5, 5),
+        n_hidden=1024,
+        precision="float32",
     ):
         super().__init__()
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet2D", n_bins, n_classes, dropout, filters, n_hidden
         )
+        self.precision = check_precision(precision, owner="EPPFNet2D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
         self.plane = plane_shape(self.n_features)
@@ -333,14 +413,11 @@ class EPPFNet2D(_EPPFNetBase):
         self.conv3 = _SamePadConv(filters[1], filters[2], kernel_size)
         self._build_head(filters[2], self.plane, (2, 2), n_hidden, dropout, n_classes)
 
-    def forward(self, x):
-        """Logits for a (batch, prod(n_bins)) tensor of descriptors."""
-        self._check_features(x)
+    def _body(self, x):
         x = x.reshape(x.shape[0], 1, *self.plane).contiguous(memory_format=torch.channels_last)
         x = torch.relu(self.conv1(x))
         x = torch.relu(self.conv2(x))
-        x = torch.relu(self.conv3(x))
-        return self._head(x)
+        return torch.relu(self.conv3(x))
 
 
 class EPPFNet3D(_EPPFNetBase):
@@ -361,6 +438,8 @@ class EPPFNet3D(_EPPFNetBase):
         Kernel of all three convolutions.
     n_hidden : int, default=1024
         Units of the first dense layer.
+    precision : {"float32", "bfloat16"}, default="float32"
+        Arithmetic of the forward pass (see :class:`EPPFNet4D`).
 
     Attributes
     ----------
@@ -395,11 +474,13 @@ class EPPFNet3D(_EPPFNetBase):
         filters=(32, 64, 48),
         kernel_size=(5, 5, 1),
         n_hidden=1024,
+        precision="float32",
     ):
         super().__init__()
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet3D", n_bins, n_classes, dropout, filters, n_hidden
         )
+        self.precision = check_precision(precision, owner="EPPFNet3D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
         self.volume = (n_bins[0], n_bins[1], n_bins[2] * n_bins[3])
@@ -409,11 +490,8 @@ class EPPFNet3D(_EPPFNetBase):
         self.conv3 = _SamePadConv(filters[1], filters[2], kernel_size)
         self._build_head(filters[2], self.volume, (2, 2, 1), n_hidden, dropout, n_classes)
 
-    def forward(self, x):
-        """Logits for a (batch, prod(n_bins)) tensor of descriptors."""
-        self._check_features(x)
+    def _body(self, x):
         x = x.reshape(x.shape[0], 1, *self.volume)
         x = torch.relu(self.conv1(x))
         x = torch.relu(self.conv2(x))
-        x = torch.relu(self.conv3(x))
-        return self._head(x)
+        return torch.relu(self.conv3(x))
