@@ -36,7 +36,7 @@ cimport numpy as cnp
 from cython.parallel cimport prange, threadid
 from libc.math cimport sqrt, cos, llrint, isfinite, M_PI
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
-from libc.string cimport memset
+from libc.string cimport memcpy, memset
 
 from ._common cimport omp_get_max_threads, EPPF_HAVE_OPENMP, splitmix64, rand_below
 
@@ -547,11 +547,64 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
 
 
 
-def scan_clouds(const double[:, ::1] data, const int64_t[::1] offsets):
-    """One validation pass over packed clouds: finiteness and bounding boxes.
+cdef signed char _scan_object(const double* src, double* dst, int64_t n, int cols, double* lo,
+                              double* hi) noexcept nogil:
+    """Validate one cloud of ``n`` rows of ``cols`` (3 or 6) float64 values.
+
+    Copies ``src`` to ``dst`` first unless they are the same memory, then
+    checks finiteness, takes the bounding box of columns 0-2 into ``lo`` and
+    ``hi`` and, with normals, divides each normal by its length
+    ``sqrt((x * x + y * y) + z * z)`` in place. Returns 0 (valid), 1 (a NaN
+    or infinite value), 2 (all points identical) or 3 (a normal shorter
+    than 1e-12); the normals are divided only when the cloud is valid.
+    """
+    cdef int64_t i, m = n * cols
+    cdef int c
+    cdef double v, d
+    cdef double* row
+    if src != dst:
+        memcpy(dst, src, m * sizeof(double))
+    for i in range(m):
+        if not isfinite(dst[i]):
+            return 1
+    for c in range(3):
+        lo[c] = dst[c]
+        hi[c] = dst[c]
+    for i in range(1, n):
+        row = dst + i * cols
+        for c in range(3):
+            v = row[c]
+            if v < lo[c]:
+                lo[c] = v
+            if v > hi[c]:
+                hi[c] = v
+    if lo[0] == hi[0] and lo[1] == hi[1] and lo[2] == hi[2]:
+        return 2
+    if cols == 6:
+        for i in range(n):
+            row = dst + i * 6
+            if sqrt((row[3] * row[3] + row[4] * row[4]) + row[5] * row[5]) < 1e-12:
+                return 3
+        for i in range(n):
+            row = dst + i * 6
+            d = sqrt((row[3] * row[3] + row[4] * row[4]) + row[5] * row[5])
+            row[3] = row[3] / d
+            row[4] = row[4] / d
+            row[5] = row[5] / d
+    return 0
+
+
+def scan_clouds(double[:, ::1] data, const int64_t[::1] offsets, list sources=None, int num_threads=1):
+    """One validation pass over packed clouds, objects in parallel.
 
     ``data`` is (N, 3) or (N, 6) float64, object ``k`` its rows
-    ``offsets[k]:offsets[k + 1]`` (at least one row each).
+    ``offsets[k]:offsets[k + 1]`` (at least one row each). With ``sources``
+    (one C-contiguous float64 array per object, of its rows), the objects
+    are first copied into ``data``; otherwise ``data`` already holds them.
+    Each object is checked for finiteness and distinct points, its bounding
+    box is taken and, with six columns, its normals are divided by their
+    lengths ``sqrt((x * x + y * y) + z * z)`` in place (see
+    ``_scan_object``).
 
     Returns
     -------
@@ -559,16 +612,11 @@ def scan_clouds(const double[:, ::1] data, const int64_t[::1] offsets):
         Per-axis minimum and maximum of the coordinates (columns 0-2).
     status : (n_objects,) int8
         0 valid, 1 a NaN or infinite value in any column, 2 all points
-        identical.
+        identical, 3 a zero-length normal.
     """
     cdef Py_ssize_t n_obj = offsets.shape[0] - 1
-    cdef Py_ssize_t cols = data.shape[1]
-    cdef Py_ssize_t k, i, a, b, c
-    cdef const double* row
-    cdef double v
-    cdef double mn[3]
-    cdef double mx[3]
-    cdef signed char st
+    cdef int cols = <int>data.shape[1]
+    cdef Py_ssize_t k
     if cols != 3 and cols != 6:
         raise ValueError("data must have 3 or 6 columns")
     lo_arr = np.zeros((n_obj, 3), dtype=np.float64)
@@ -581,56 +629,27 @@ def scan_clouds(const double[:, ::1] data, const int64_t[::1] offsets):
     for k in range(n_obj):
         if offsets[k + 1] <= offsets[k]:
             raise ValueError("every object needs at least one row")
+    src_arr = np.zeros(n_obj, dtype=np.uintp)
+    cdef size_t[::1] src = src_arr
+    cdef cnp.ndarray item
+    if sources is not None:
+        if len(sources) != n_obj:
+            raise ValueError("sources must hold one array per object")
+        for k in range(n_obj):
+            item = sources[k]
+            if (item.dtype != np.float64 or not item.flags.c_contiguous or item.ndim != 2
+                    or item.shape[0] != offsets[k + 1] - offsets[k] or item.shape[1] != cols):
+                raise ValueError("sources must be C-contiguous float64 arrays of the objects' shapes")
+            src[k] = <size_t>cnp.PyArray_DATA(item)
     cdef double[:, ::1] lo = lo_arr
     cdef double[:, ::1] hi = hi_arr
     cdef signed char[::1] status = status_arr
-    with nogil:
-        for k in range(n_obj):
-            a = offsets[k]
-            b = offsets[k + 1]
-            st = 0
-            for i in range(a, b):
-                row = &data[i, 0]
-                for c in range(cols):
-                    if not isfinite(row[c]):
-                        st = 1
-            if st == 0:
-                row = &data[a, 0]
-                for c in range(3):
-                    mn[c] = row[c]
-                    mx[c] = row[c]
-                for i in range(a + 1, b):
-                    row = &data[i, 0]
-                    for c in range(3):
-                        v = row[c]
-                        if v < mn[c]:
-                            mn[c] = v
-                        if v > mx[c]:
-                            mx[c] = v
-                for c in range(3):
-                    lo[k, c] = mn[c]
-                    hi[k, c] = mx[c]
-                if mn[0] == mx[0] and mn[1] == mx[1] and mn[2] == mx[2]:
-                    st = 2
-            status[k] = st
+    cdef double* base = &data[0, 0]
+    for k in prange(n_obj, nogil=True, num_threads=max(1, num_threads), schedule="dynamic", chunksize=4):
+        status[k] = _scan_object(
+            <const double*>src[k] if src[k] != 0 else base + offsets[k] * cols, base + offsets[k] * cols,
+            offsets[k + 1] - offsets[k], cols, &lo[k, 0], &hi[k, 0])
     return lo_arr, hi_arr, status_arr
-
-
-def divide_normals(double[:, ::1] data, const double[::1] norms):
-    """Divide columns 3-5 of each row of ``data`` (N, 6) by ``norms[row]`` in place.
-
-    The same correctly rounded divisions as ``data[:, 3:] / norms[:, None]``.
-    """
-    cdef Py_ssize_t i, n = data.shape[0]
-    cdef double d
-    if data.shape[1] != 6 or norms.shape[0] != n:
-        raise ValueError("data must be (N, 6) and norms (N,)")
-    with nogil:
-        for i in range(n):
-            d = norms[i]
-            data[i, 3] = data[i, 3] / d
-            data[i, 4] = data[i, 4] / d
-            data[i, 5] = data[i, 5] / d
 
 
 def split_columns(const double[:, ::1] data):

@@ -254,8 +254,8 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         """
         check_is_fitted(self, "n_bins_")
         name = type(self).__name__
-        clouds = check_point_clouds(X, owner=name)
         n_threads = check_n_jobs(self.n_jobs, owner=name)
+        clouds = check_point_clouds(X, owner=name, n_threads=n_threads)
         if self.scaling == "fit":
             scales = np.full(len(clouds), self.scale_)
         elif self.scaling == "object":

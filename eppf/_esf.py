@@ -175,7 +175,7 @@ class ESFTransformer(TransformerMixin, BaseEstimator):
         check_is_fitted(self)
         owner = type(self).__name__
         n_triplets, grid_size, n_bins, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3)
+        clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
         seeds = object_seeds(self.random_state, len(clouds))
         return transform_in_chunks(_esf_chunk, self, clouds, (seeds,), n_features=10 * n_bins)
 

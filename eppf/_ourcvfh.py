@@ -448,7 +448,7 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         check_is_fitted(self)
         owner = type(self).__name__
         params, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3)
+        clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
         return transform_in_chunks(_ourcvfh_chunk, self, clouds, n_features=308)
 
     def get_feature_names_out(self, input_features=None):

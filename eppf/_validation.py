@@ -75,7 +75,8 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
         raise ValueError(f"{pre}{what} has all {n} points identical; at least two distinct points are needed")
     if arr.shape[1] == 6:
         normals = arr[:, 3:]
-        norms = np.sqrt(np.einsum("ij,ij->i", normals, normals))
+        # the length exactly as the compiled batch path takes it (_core._scan_object)
+        norms = np.sqrt((normals[:, 0] * normals[:, 0] + normals[:, 1] * normals[:, 1]) + normals[:, 2] * normals[:, 2])
         bad = np.flatnonzero(norms < 1e-12)
         if bad.size:
             raise ValueError(f"{pre}{what} has {bad.size} zero-length normal(s), first at point {bad[0]}")
@@ -83,7 +84,7 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
     return arr
 
 
-def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True):
+def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True, n_threads=1):
     """Validate a collection of point clouds.
 
     Parameters
@@ -97,6 +98,10 @@ def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True):
         Smallest accepted number of points per cloud.
     allow_normals : bool, default=True
         Whether six-column clouds are accepted.
+    n_threads : int, default=1
+        Threads of the compiled validation pass over many clouds (copies,
+        finiteness, bounding boxes, normal lengths); the result does not
+        depend on it.
 
     Returns
     -------
@@ -122,7 +127,7 @@ def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True):
             raise TypeError(f"{pre}X must be a list of point clouds, got {type(X).__name__}") from None
     if len(items) == 0:
         raise ValueError(f"{pre}X is empty: at least one point cloud is needed")
-    fast = _check_stacked(items, min_points, allow_normals)
+    fast = _check_stacked(items, min_points, allow_normals, n_threads)
     if fast is not None:
         return fast
     # Per-cloud path: mixed or unusual input, and every error message.
@@ -176,19 +181,23 @@ def _stacked_view(clouds):
     return clouds._stacked, clouds._offsets, clouds._lo, clouds._hi
 
 
-def _check_stacked(items, min_points, allow_normals):
+def _check_stacked(items, min_points, allow_normals, n_threads=1):
     """Validate plain float/int arrays of one width with a few whole-collection calls.
 
     Returns a :class:`_CloudList` of views into one new float64 array, bit for
     bit what :func:`check_point_cloud` returns for each cloud, or None when
     some item is not such an array or is invalid (the per-cloud path then
-    finds the first problem and words the error).
+    finds the first problem and words the error). C-contiguous float64
+    clouds are copied, checked and normalised by one compiled pass with the
+    objects spread over ``n_threads`` threads; others are first cast and
+    concatenated by NumPy.
     """
-    from ._core import divide_normals, scan_clouds
+    from ._core import scan_clouds
 
     allowed = (3, 6) if allow_normals else (3,)
     cols = None
     sizes = np.empty(len(items), dtype=np.int64)
+    plain = True
     for k, c in enumerate(items):
         if type(c) is not np.ndarray or c.ndim != 2 or c.dtype.kind not in "biuf":
             return None
@@ -198,20 +207,19 @@ def _check_stacked(items, min_points, allow_normals):
         if m != cols or n < max(min_points, 2):
             return None
         sizes[k] = n
+        plain = plain and c.dtype == np.float64 and c.flags.c_contiguous
     if cols not in allowed:
         return None
     offsets = np.zeros(len(items) + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])
-    stacked = np.concatenate(items, axis=0, dtype=np.float64, casting="unsafe")
-    lo, hi, status = scan_clouds(stacked, offsets)
+    stacked = np.empty((int(offsets[-1]), cols), dtype=np.float64)
+    if plain:
+        lo, hi, status = scan_clouds(stacked, offsets, list(items), int(n_threads))
+    else:  # (into a C-ordered block whatever the clouds' own order)
+        np.concatenate(items, axis=0, out=stacked, casting="unsafe")
+        lo, hi, status = scan_clouds(stacked, offsets, None, int(n_threads))
     if status.any():
         return None
-    if cols == 6:
-        normals = stacked[:, 3:]
-        norms = np.sqrt(np.einsum("ij,ij->i", normals, normals))
-        if (norms < 1e-12).any():
-            return None
-        divide_normals(stacked, norms)  # = normals / norms[:, None], without a temporary
     views = [stacked[a:b] for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())]
     return _CloudList(views, stacked, offsets, lo, hi)
 

@@ -206,7 +206,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         check_is_fitted(self)
         owner = type(self).__name__
         n_bins, n_pairs, n_neighbors, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=2)
+        clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
         seeds = object_seeds(self.random_state, len(clouds))
         return transform_in_chunks(_wahl_chunk, self, clouds, (seeds,), n_features=int(np.prod(n_bins)))
 

@@ -435,6 +435,28 @@ def test_block_validation_equals_per_cloud_validation(dtype, cols):
         assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("cols", [3, 6])
+def test_block_validation_is_the_same_on_any_thread_count_and_layout(cols):
+    # C-contiguous float64 clouds are copied and checked by the compiled pass
+    # (objects spread over the threads); other layouts are concatenated by
+    # NumPy first. Both give check_point_cloud's arrays, bit for bit.
+    rng = np.random.default_rng(10 + cols)
+    X = _mixed_magnitude_clouds(rng, np.float64, cols)
+    want = [check_point_cloud(c) for c in X]
+    for layout in ("C", "F"):
+        clouds = [np.asarray(c, order=layout) for c in X]
+        for n_threads in (1, 2, 3):
+            got = check_point_clouds(clouds, n_threads=n_threads)
+            assert _stacked_view(got) is not None
+            for a, b in zip(got, want):
+                assert_array_equal(a, b)
+    # a bad cloud among many is still found and named, whichever thread meets it
+    bad = [c.copy() for c in X]
+    bad[-2][1, 0] = np.nan
+    with pytest.raises(ValueError, match=f"point cloud {len(X) - 2} contains NaN"):
+        check_point_clouds(bad, owner="T", n_threads=2)
+
+
 def test_block_validation_of_3d_array_and_mixed_widths():
     rng = np.random.default_rng(1)
     arr = rng.normal(size=(4, 50, 6))
