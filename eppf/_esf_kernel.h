@@ -31,6 +31,14 @@
  * S (a + 1) - start - k D R, whose floor is a - floor(X / S) because the
  * positive-direction value never equals X. The walk is checked against a
  * plain Bresenham loop for every L, D and sign by the tests.
+ *
+ * Where the CPU has AVX2 and BMI2 (checked at run time; esf_const.simd),
+ * esf_take runs a copy of its body compiled for them (esf_take_avx2: four
+ * doubles per vector for the square roots and divisions) and walks a
+ * batch's lines four at a time (esf_walk_lines_avx2), and the D2/D3 values
+ * are binned by esf_count_scaled_avx2. Only integer steps and plain IEEE
+ * operations are involved (no FMA), so the descriptor is bit-identical
+ * either way; the tests compare both paths.
  */
 #ifndef EPPF_ESF_KERNEL_H
 #define EPPF_ESF_KERNEL_H

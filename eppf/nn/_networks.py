@@ -37,7 +37,7 @@ and the returned logits stay float32 ("mixed precision"). On CPUs with
 native bfloat16 arithmetic (AVX512_BF16 or AMX: AMD Zen 4 and later, Intel
 Cooper Lake, Sapphire Rapids and later) it trains markedly faster; on others
 PyTorch emulates it and it is slower. Results differ from float32 by
-bfloat16's rounding (8 bits of mantissa).
+bfloat16's rounding (8 significant bits).
 """
 
 import math
@@ -220,7 +220,8 @@ class _EPPFNetBase(nn.Module):
     def forward(self, x):
         """Logits, float32, for a (batch, prod(n_bins)) tensor of descriptors."""
         self._check_features(x)
-        if self.precision == "float32":
+        # (getattr: networks pickled before the option existed are float32)
+        if getattr(self, "precision", "float32") == "float32":
             return self._head(self._body(x))
         with torch.autocast(device_type=x.device.type, dtype=torch.bfloat16):
             out = self._head(self._body(x))
