@@ -292,3 +292,21 @@ def test_bad_npz_is_one_line_error(tmp_path, capsys):
     assert main(["retrieval", "--data", str(path), "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "lacks the arrays" in err and len(err.splitlines()) == 1
+
+
+def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path):
+    from eppf.experiments._classification import TrainingSettings
+    from eppf.experiments._cli import build_parser
+
+    common = dict(epochs=None, pointnet_epochs=None, pointnet_points=None, validation_fraction=0.1, patience=None,
+                  scaling="fit", quick=True, n_jobs=1, random_state=0)
+    assert TrainingSettings.resolve(**common).make_model("4d").precision == "float32"
+    assert TrainingSettings.resolve(**common, precision="bfloat16").make_model("2d").precision == "bfloat16"
+    with pytest.raises(ExperimentError, match="--precision must be 'float32' or 'bfloat16', got 'half'"):
+        TrainingSettings.resolve(**common, precision="half")
+    args = build_parser().parse_args(["noise", "--precision", "bfloat16"])
+    assert args.precision == "bfloat16"
+    result = run_classification("builtin", quick=True, models=["4d"], n_jobs=1, out=str(tmp_path), verbose=False,
+                                precision="bfloat16")
+    assert result["rows"][0]["model"] == "EPPF 4D"
+    assert "precision='bfloat16'" in (tmp_path / "classification.md").read_text()

@@ -44,10 +44,11 @@ class TrainingSettings:
     quick: bool
     n_jobs: int
     random_state: int
+    precision: str = "float32"
 
     @classmethod
     def resolve(cls, *, epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, scaling, quick,
-                n_jobs, random_state):
+                n_jobs, random_state, precision="float32"):
         """Fill in the defaults and check the values."""
         epochs = check_positive_int(epochs if epochs is not None else (1 if quick else 30), "--epochs")
         pointnet_epochs = check_positive_int(pointnet_epochs if pointnet_epochs is not None else epochs,
@@ -57,8 +58,10 @@ class TrainingSettings:
         patience = check_positive_int(patience if patience is not None else (1 if quick else 5), "--patience")
         if not (isinstance(validation_fraction, (int, float)) and 0 < validation_fraction < 1):
             raise ExperimentError(f"--validation-fraction must lie in (0, 1), got {validation_fraction!r}")
+        if precision not in ("float32", "bfloat16"):
+            raise ExperimentError(f"--precision must be 'float32' or 'bfloat16', got {precision!r}")
         return cls(epochs, pointnet_epochs, pointnet_points, float(validation_fraction), patience, scaling, quick,
-                   n_jobs, random_state)
+                   n_jobs, random_state, precision)
 
     def make_model(self, key):
         """An unfitted classifier for a model key (None for the KL 1-NN)."""
@@ -69,7 +72,7 @@ class TrainingSettings:
         if key == "pointnet":
             return PointNetClassifier(n_points=self.pointnet_points, max_epochs=self.pointnet_epochs, **common)
         if key in ("2d", "3d", "4d"):
-            return EPPF4DClassifier(conv=key, max_epochs=self.epochs, **common)
+            return EPPF4DClassifier(conv=key, max_epochs=self.epochs, precision=self.precision, **common)
         if key == "kl":
             return KLNearestNeighbors(n_neighbors=1, n_jobs=self.n_jobs)
         raise ExperimentError(f"unknown model {key!r}; choose from {list(MODELS)}")
@@ -165,6 +168,7 @@ def run_classification(
     pointnet_points=None,
     validation_fraction=0.1,
     patience=None,
+    precision="float32",
     train_per_class=None,
     test_per_class=None,
     scaling="auto",
@@ -201,6 +205,8 @@ def run_classification(
         Share of the training objects held out for early stopping.
     patience : int, default=None
         Early-stopping patience (5, or 2 with ``quick``).
+    precision : {"float32", "bfloat16"}, default="float32"
+        Arithmetic of the EPPF networks (see :class:`eppf.EPPF4DClassifier`).
     train_per_class : int, default=None
         Train on at most this many objects per class (seeded), to fit a CPU
         budget; None uses the whole training split.
@@ -243,7 +249,7 @@ def run_classification(
     settings = TrainingSettings.resolve(
         epochs=epochs, pointnet_epochs=pointnet_epochs, pointnet_points=pointnet_points,
         validation_fraction=validation_fraction, patience=patience, scaling=None,
-        quick=quick, n_jobs=n_jobs, random_state=random_state)
+        quick=quick, n_jobs=n_jobs, random_state=random_state, precision=precision)
     if train_per_class is not None:
         train_per_class = check_positive_int(train_per_class, "--train-per-class")
     if test_per_class is not None:

@@ -56,6 +56,7 @@ def run_noise(
     pointnet_points=None,
     validation_fraction=0.1,
     patience=None,
+    precision="float32",
     train_per_class=None,
     test_per_class=None,
     scaling="auto",
@@ -89,7 +90,7 @@ def run_noise(
         ``quick``) when None.
     models : list of str, default=None
         Keys of the classification models; None runs ``4d pointnet kl``.
-    epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, train_per_class, test_per_class
+    epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, precision, train_per_class, test_per_class
         As in :func:`run_classification`.
     scaling : {"auto", "fit", "object", "none"}, default="auto"
         EPPF scaling.
@@ -132,7 +133,7 @@ def run_noise(
     settings = TrainingSettings.resolve(
         epochs=epochs, pointnet_epochs=pointnet_epochs, pointnet_points=pointnet_points,
         validation_fraction=validation_fraction, patience=patience, scaling=None,
-        quick=quick, n_jobs=n_jobs, random_state=random_state)
+        quick=quick, n_jobs=n_jobs, random_state=random_state, precision=precision)
     if train_per_class is not None:
         train_per_class = check_positive_int(train_per_class, "--train-per-class")
     if test_per_class is not None:
