@@ -556,7 +556,9 @@ cdef signed char _scan_object(const double* src, double* dst, int64_t n, int col
     ``hi`` and, with normals, divides each normal by its length
     ``sqrt((x * x + y * y) + z * z)`` in place. Returns 0 (valid), 1 (a NaN
     or infinite value), 2 (all points identical) or 3 (a normal shorter
-    than 1e-12); the normals are divided only when the cloud is valid.
+    than 1e-12). ``dst`` is the caller's own copy, so an invalid cloud may be
+    left partly normalised there (the caller then validates the original
+    cloud by cloud to word the error).
     """
     cdef int64_t i, m = n * cols
     cdef int c
@@ -583,11 +585,9 @@ cdef signed char _scan_object(const double* src, double* dst, int64_t n, int col
     if cols == 6:
         for i in range(n):
             row = dst + i * 6
-            if sqrt((row[3] * row[3] + row[4] * row[4]) + row[5] * row[5]) < 1e-12:
-                return 3
-        for i in range(n):
-            row = dst + i * 6
             d = sqrt((row[3] * row[3] + row[4] * row[4]) + row[5] * row[5])
+            if d < 1e-12:
+                return 3
             row[3] = row[3] / d
             row[4] = row[4] / d
             row[5] = row[5] / d

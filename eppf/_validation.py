@@ -75,8 +75,8 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
         raise ValueError(f"{pre}{what} has all {n} points identical; at least two distinct points are needed")
     if arr.shape[1] == 6:
         normals = arr[:, 3:]
-        # the length exactly as the compiled batch path takes it (_core._scan_object)
-        norms = np.sqrt((normals[:, 0] * normals[:, 0] + normals[:, 1] * normals[:, 1]) + normals[:, 2] * normals[:, 2])
+        x, y, z = normals.T
+        norms = np.sqrt((x * x + y * y) + z * z)  # as the compiled batch path (_core._scan_object)
         bad = np.flatnonzero(norms < 1e-12)
         if bad.size:
             raise ValueError(f"{pre}{what} has {bad.size} zero-length normal(s), first at point {bad[0]}")
