@@ -59,10 +59,8 @@ cdef extern from "_esf_kernel.h" nogil:
                        const int32_t* rs, const int32_t* st, uint64_t* pos_out, uint64_t* inc_out)
     int esf_walk(const uint64_t* g3, uint64_t pos, uint64_t inc, int n)
     int esf_has_avx2()
-    void esf_walk_lines(const uint64_t* g3, const uint64_t* pos, const uint64_t* inc, const int* cnt,
-                        int* occ, int n)
-    void esf_walk_lines_avx2(const uint64_t* g3, const uint64_t* pos, const uint64_t* inc, const int* cnt,
-                             int* occ, int n)
+    void esf_walk_batch(const uint64_t* g3, const uint64_t* pos, const uint64_t* inc, const int* cnt,
+                        int* occ, int n, int simd)
 
 cnp.import_array()
 
@@ -788,10 +786,7 @@ def esf_line_counts(const int32_t[:, ::1] occupied, const int32_t[:, ::1] starts
     else:
         for b in range(0, n_lines, 3 * ESF_BATCH):
             m = min(3 * ESF_BATCH, n_lines - b)
-            if _esf_simd:
-                esf_walk_lines_avx2(&g3[0], &pos[b], &inc[b], <int*>&cnt[b], <int*>&occ[b], <int>m)
-            else:
-                esf_walk_lines(&g3[0], &pos[b], &inc[b], <int*>&cnt[b], <int*>&occ[b], <int>m)
+            esf_walk_batch(&g3[0], &pos[b], &inc[b], <int*>&cnt[b], <int*>&occ[b], <int>m, _esf_simd)
     return np.asarray(occ), np.asarray(cnt)
 
 

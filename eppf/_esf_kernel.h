@@ -275,6 +275,17 @@ static void esf_walk_lines_avx2(const uint64_t *g3, const uint64_t *pos, const u
 }
 #endif
 
+/* The line walks of a batch of n <= 3 * ESF_BATCH lines, in AVX2 lanes when
+ * simd (the counts are the same either way). */
+static void esf_walk_batch(const uint64_t *g3, const uint64_t *pos, const uint64_t *inc, const int *cnt, int *occ,
+                           int n, int simd)
+{
+    if (simd)
+        esf_walk_lines_avx2(g3, pos, inc, cnt, occ, n);
+    else
+        esf_walk_lines(g3, pos, inc, cnt, occ, n);
+}
+
 /* round((n_bins - 1) arccos(c) / (pi / 2)) for c in [0, 1] without arccos:
  * the number of bin edges (cosines, decreasing, padded with -2) not below c.
  * The table gives, per cell of its argument, a lower bound that is at most
@@ -480,10 +491,7 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
         bx[3 * q + 2] = cl[e3]; by[3 * q + 2] = cl[e3 + 1]; bz[3 * q + 2] = cl[e3 + 2];
     }
     esf_setup_lines(3 * nsel, ax, ay, az, bx, by, bz, k->rs, k->st, pos, inc, cnt);
-    if (k->simd)
-        esf_walk_lines_avx2(s->g3, pos, inc, cnt, occ, 3 * nsel);
-    else
-        esf_walk_lines(s->g3, pos, inc, cnt, occ, 3 * nsel);
+    esf_walk_batch(s->g3, pos, inc, cnt, occ, 3 * nsel, k->simd);
     /* histograms, in integers (A3 in 32nds of a voxel), without branches;
      * the state's fields in locals (the int8 stores could alias them) */
     {
