@@ -26,9 +26,11 @@ __all__ = [
     "random_dropout",
     "random_rotation",
     "random_rotation_matrix",
+    "random_scaling",
     "resample",
     "rotate",
     "rotation_matrix",
+    "scale",
 ]
 
 _AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
@@ -504,3 +506,119 @@ def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
         axis = _check_vector(axis, "axis", owner)
     rot = random_rotation_matrix(axis=axis, random_state=random_state)
     return _rotate(arr, rot, center)
+
+
+# --------------------------------------------------------------------------- #
+# scaling
+# --------------------------------------------------------------------------- #
+def _scale(arr, factors, center):
+    out = arr.copy()
+    origin = arr[:, :3].mean(axis=0) if center == "centroid" else np.zeros(3)
+    out[:, :3] = (arr[:, :3] - origin) * factors + origin
+    if arr.shape[1] == 6:
+        # Normals transform with the inverse transpose of diag(factors), then get unit length again.
+        normals = arr[:, 3:] / factors
+        out[:, 3:] = normals / np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]
+    return out
+
+
+def scale(cloud, factors, *, center="centroid"):
+    """Stretch a point cloud along the coordinate axes.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    factors : float or array-like of shape (3,)
+        Positive scale factor per axis (one number scales all three axes
+        alike). Each point ``p`` becomes ``diag(factors) (p - c) + c`` for the
+        centre ``c``; each normal ``n`` becomes ``diag(factors)^-1 n``, scaled
+        back to unit length, so it stays perpendicular to the stretched
+        surface.
+    center : {"centroid", "origin"}, default="centroid"
+        Fixed point of the scaling: the mean of the points, so the object
+        stays where it is, or the coordinate origin.
+
+    Returns
+    -------
+    scaled : ndarray of shape (n_points, 3) or (n_points, 6)
+        The stretched cloud.
+
+    See Also
+    --------
+    random_scaling : Random factors, for augmentation.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import scale
+    >>> cloud = np.array([[0.0, 0.0, 0.0], [2.0, 2.0, 2.0]])
+    >>> scale(cloud, [1.0, 0.5, 2.0])
+    array([[ 0. ,  0.5, -1. ],
+           [ 2. ,  1.5,  3. ]])
+    """
+    owner = "scale"
+    arr = check_point_cloud(cloud, owner=owner)
+    _check_center(center, owner)
+    try:
+        fac = np.asarray(factors, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{owner}: factors must be a number or a vector of length 3, got {type(factors).__name__}") from None
+    if fac.shape not in ((), (3,)):
+        raise ValueError(f"{owner}: factors must be a number or a vector of length 3, got shape {fac.shape}")
+    if not np.isfinite(fac).all() or (fac <= 0).any():
+        raise ValueError(f"{owner}: factors must be finite and > 0, got {fac.tolist()!r}")
+    return _scale(arr, np.broadcast_to(fac, (3,)), center)
+
+
+def _check_scale_range(low, high, owner):
+    low = _check_real(low, "low", owner)
+    high = _check_real(high, "high", owner)
+    if not 0.0 < low <= high:
+        raise ValueError(f"{owner}: need 0 < low <= high, got low={low!r}, high={high!r}")
+    return low, high
+
+
+def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centroid", random_state=None):
+    """Stretch a point cloud by random factors, for augmentation.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by unit normals.
+    low, high : float, default=0.8, 1.25
+        Range of the factors, ``0 < low <= high``. Factors are drawn
+        log-uniformly, so with ``high = 1 / low`` stretching and shrinking by
+        the same ratio are equally likely.
+    anisotropic : bool, default=True
+        Draw one factor per axis (the object's proportions change) or one for
+        all three (only its size changes, which a per-object scaled descriptor
+        does not see).
+    center : {"centroid", "origin"}, default="centroid"
+        Fixed point of the scaling.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the factors.
+
+    Returns
+    -------
+    scaled : ndarray of shape (n_points, 3) or (n_points, 6)
+        The stretched cloud; normals follow as in :func:`scale`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf._perturb import random_scaling
+    >>> cloud = np.random.RandomState(0).uniform(size=(100, 3))
+    >>> sides = np.ptp(random_scaling(cloud, 0.5, 2.0, random_state=0), axis=0) / np.ptp(cloud, axis=0)
+    >>> bool(((sides >= 0.5) & (sides <= 2.0)).all())
+    True
+    """
+    owner = "random_scaling"
+    arr = check_point_cloud(cloud, owner=owner)
+    low, high = _check_scale_range(low, high, owner)
+    if not isinstance(anisotropic, (bool, np.bool_)):
+        raise TypeError(f"{owner}: anisotropic must be True or False, got {type(anisotropic).__name__}")
+    _check_center(center, owner)
+    rng = check_random_state(random_state)
+    log_factors = rng.uniform(np.log(low), np.log(high), size=3 if anisotropic else 1)
+    return _scale(arr, np.broadcast_to(np.exp(log_factors), (3,)), center)

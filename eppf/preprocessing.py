@@ -18,13 +18,14 @@ The work on one cloud is done by the functions of :mod:`eppf._perturb`;
 
 import numbers
 
+import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
 from ._sampling import object_rng, sample_mesh
 from ._validation import check_point_clouds, object_seeds
 
-__all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "Resampler", "sample_mesh"]
+__all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "RandomScaling", "Resampler", "sample_mesh"]
 
 
 class _CloudTransformer(TransformerMixin, BaseEstimator):
@@ -247,6 +248,63 @@ class RandomRotation(_CloudTransformer):
 
     def _apply(self, cloud, rng):
         return _perturb.random_rotation(cloud, axis=self.axis, center=self.center, random_state=rng)
+
+
+class RandomScaling(_CloudTransformer):
+    """Stretch each cloud by random factors along the coordinate axes.
+
+    Augmentation for the descriptor pools of :class:`eppf.EPPF4DClassifier`:
+    an anisotropic stretch changes an object's proportions a little, which
+    the scale-invariant descriptor (``scaling="object"``) does see, so
+    descriptors of stretched copies teach a classifier that a slightly wider
+    chair is still a chair. On ModelNet10 a pool of stretched draws lifted
+    the 4D network's test accuracy by about 2 points over a pool of plain
+    draws (``benchmarks/bench_cnn.py``). Normals follow the surface (see
+    :func:`eppf._perturb.scale`).
+
+    Parameters
+    ----------
+    low, high : float, default=0.8, 1.25
+        Range of the factors, ``0 < low <= high``, drawn log-uniformly per
+        object (and per axis when ``anisotropic``).
+    anisotropic : bool, default=True
+        One factor per axis, or one shared by all three axes.
+    center : {"centroid", "origin"}, default="centroid"
+        Fixed point of the scaling.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the factors.
+
+    See Also
+    --------
+    RandomRotation : Random rotations.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.preprocessing import RandomScaling
+    >>> clouds = [np.random.RandomState(0).uniform(size=(20, 3))]
+    >>> RandomScaling(random_state=0).fit_transform(clouds)[0].shape
+    (20, 3)
+    """
+
+    def __init__(self, low=0.8, high=1.25, *, anisotropic=True, center="centroid", random_state=None):
+        self.low = low
+        self.high = high
+        self.anisotropic = anisotropic
+        self.center = center
+        self.random_state = random_state
+
+    def _check_params(self):
+        owner = type(self).__name__
+        _perturb._check_scale_range(self.low, self.high, owner)
+        if not isinstance(self.anisotropic, (bool, np.bool_)):
+            raise TypeError(f"{owner}: anisotropic must be True or False, got {type(self.anisotropic).__name__}")
+        _perturb._check_center(self.center, owner)
+
+    def _apply(self, cloud, rng):
+        return _perturb.random_scaling(
+            cloud, self.low, self.high, anisotropic=bool(self.anisotropic), center=self.center, random_state=rng
+        )
 
 
 class Resampler(_CloudTransformer):

@@ -16,9 +16,11 @@ from eppf._perturb import (
     random_dropout,
     random_rotation,
     random_rotation_matrix,
+    random_scaling,
     resample,
     rotate,
     rotation_matrix,
+    scale,
 )
 
 
@@ -60,6 +62,8 @@ ALL = [
     lambda c, rs: random_rotation(c, axis="z", random_state=rs),
     lambda c, rs: resample(c, 150, random_state=rs),
     lambda c, rs: resample(c, 350, random_state=rs),
+    lambda c, rs: random_scaling(c, random_state=rs),
+    lambda c, rs: random_scaling(c, 0.5, 2.0, anisotropic=False, random_state=rs),
 ]
 
 
@@ -87,7 +91,7 @@ def test_normals_stay_unit_and_attached(func):
 
 @pytest.mark.parametrize(
     "func",
-    [add_gaussian_noise, occlude, random_dropout, random_rotation, resample],
+    [add_gaussian_noise, occlude, random_dropout, random_rotation, resample, random_scaling, scale],
 )
 @pytest.mark.parametrize(
     "cloud, msg",
@@ -100,7 +104,7 @@ def test_normals_stay_unit_and_attached(func):
     ],
 )
 def test_bad_cloud(func, cloud, msg):
-    args = {resample: (10,), random_rotation: ()}.get(func, (0.1,))
+    args = {resample: (10,), random_rotation: (), random_scaling: (), scale: (2.0,)}.get(func, (0.1,))
     with pytest.raises(ValueError, match=re.escape(f"{func.__name__}: point cloud {msg}")):
         func(cloud, *args)
 
@@ -311,6 +315,58 @@ def test_random_rotation_about_axis_is_uniform_angle():
 
 
 # --------------------------------------------------------------------------- #
+# scaling
+# --------------------------------------------------------------------------- #
+@pytest.mark.parametrize("center", ["centroid", "origin"])
+def test_scale_hand_case_and_normals_stay_perpendicular(center):
+    # a tilted plane x + y + z = 1 with its normal; stretched, the points stay on
+    # a plane whose normal the function must report
+    rng = np.random.RandomState(0)
+    uv = rng.uniform(-1, 1, size=(50, 2))
+    pts = np.column_stack([uv[:, 0], uv[:, 1], 1.0 - uv.sum(axis=1)])
+    nrm = np.tile(np.ones(3) / np.sqrt(3), (50, 1))
+    factors = np.array([2.0, 0.5, 1.5])
+    out = scale(np.hstack([pts, nrm]), factors, center=center)
+    origin = pts.mean(axis=0) if center == "centroid" else np.zeros(3)
+    assert_allclose(out[:, :3], (pts - origin) * factors + origin)
+    assert_allclose(np.linalg.norm(out[:, 3:], axis=1), 1.0)
+    # every difference of two stretched points is perpendicular to the new normal
+    diffs = out[1:, :3] - out[0, :3]
+    assert_allclose(diffs @ out[0, 3:], 0.0, atol=1e-12)
+    expected = (1.0 / factors) / np.linalg.norm(1.0 / factors)
+    assert_allclose(out[:, 3:], np.tile(expected, (50, 1)))
+
+
+def test_scale_single_factor_keeps_normals_and_shape():
+    cloud = _cloud()
+    out = scale(cloud, 3.0)
+    assert_allclose(out[:, 3:], cloud[:, 3:])
+    assert_allclose(pdist(out[:, :3]), 3.0 * pdist(cloud[:, :3]))
+
+
+@pytest.mark.parametrize("anisotropic", [True, False])
+def test_random_scaling_factors_in_range_and_log_uniform(anisotropic):
+    cloud = _cloud(normals=False)
+    ratios = np.array(
+        [np.ptp(random_scaling(cloud, 0.5, 2.0, anisotropic=anisotropic, random_state=s), axis=0) / np.ptp(cloud, axis=0)
+         for s in range(400)]
+    )
+    assert ((ratios >= 0.5 - 1e-12) & (ratios <= 2.0 + 1e-12)).all()
+    if anisotropic:
+        assert np.std(ratios[:, 0] / ratios[:, 1]) > 0.1
+    else:
+        assert_allclose(ratios[:, 0], ratios[:, 1])
+    # log-uniform on [ln 0.5, ln 2]: stretching and shrinking equally likely
+    logs = np.log(ratios[:, 0])
+    assert stats.kstest(logs, stats.uniform(loc=np.log(0.5), scale=np.log(4.0)).cdf).pvalue > 1e-3
+
+
+def test_random_scaling_degenerate_range_is_exact():
+    cloud = _cloud()
+    assert_allclose(random_scaling(cloud, 1.5, 1.5, random_state=0), scale(cloud, 1.5))
+
+
+# --------------------------------------------------------------------------- #
 # parameter errors
 # --------------------------------------------------------------------------- #
 C = _cloud(20)
@@ -358,6 +414,15 @@ C = _cloud(20)
         ),
         (lambda: rotate(C, 2 * np.eye(3)), ValueError, "rotate: rotation must be a proper rotation matrix"),
         (lambda: rotate(C, np.full((3, 3), np.nan)), ValueError, "rotate: rotation contains NaN or infinite values"),
+        (lambda: scale(C, [1.0, 0.0, 1.0]), ValueError, "scale: factors must be finite and > 0, got [1.0, 0.0, 1.0]"),
+        (lambda: scale(C, np.nan), ValueError, "scale: factors must be finite and > 0"),
+        (lambda: scale(C, [1.0, 2.0]), ValueError, "scale: factors must be a number or a vector of length 3, got shape (2,)"),
+        (lambda: scale(C, "big"), TypeError, "scale: factors must be a number or a vector of length 3, got str"),
+        (lambda: scale(C, 2.0, center="mean"), ValueError, "scale: center must be 'centroid' or 'origin', got 'mean'"),
+        (lambda: random_scaling(C, 1.25, 0.8), ValueError, "random_scaling: need 0 < low <= high, got low=1.25, high=0.8"),
+        (lambda: random_scaling(C, 0.0, 1.0), ValueError, "random_scaling: need 0 < low <= high, got low=0.0, high=1.0"),
+        (lambda: random_scaling(C, 0.8, np.inf), ValueError, "random_scaling: high must be finite, got inf"),
+        (lambda: random_scaling(C, anisotropic=1), TypeError, "random_scaling: anisotropic must be True or False, got int"),
     ],
 )
 def test_parameter_errors(call, err, msg):

@@ -10,7 +10,8 @@ from sklearn.base import clone
 from sklearn.pipeline import make_pipeline
 from sklearn.utils import get_tags
 
-from eppf.preprocessing import GaussianNoise, Occlusion, RandomDropout, RandomRotation, Resampler
+from eppf._perturb import scale
+from eppf.preprocessing import GaussianNoise, Occlusion, RandomDropout, RandomRotation, RandomScaling, Resampler
 
 
 def _clouds(n=4, n_points=60, normals=True, seed=0):
@@ -31,6 +32,7 @@ ALL = [
     Occlusion(0.3, random_state=0),
     RandomRotation(random_state=0),
     Resampler(32, random_state=0),
+    RandomScaling(random_state=0),
 ]
 
 
@@ -119,6 +121,15 @@ def test_rotation_is_rigid_and_moves_normals():
         assert_allclose(rot[:, 2], orig[:, 2], atol=1e-12)  # about the vertical axis through the centroid
 
 
+def test_random_scaling_matches_the_function():
+    X = _clouds()
+    out = RandomScaling(0.5, 2.0, random_state=0).transform(X)
+    for cloud, new in zip(X, out):
+        factors = np.ptp(new[:, :3], axis=0) / np.ptp(cloud[:, :3], axis=0)
+        assert ((factors >= 0.5 - 1e-12) & (factors <= 2.0 + 1e-12)).all()
+        assert_allclose(new, scale(cloud, factors), atol=1e-12)
+
+
 def test_resampler_sizes():
     small, large = _clouds(1, n_points=10)[0], _clouds(1, n_points=500)[0]
     out_small, out_large = Resampler(64, random_state=0).transform([small, large])
@@ -147,6 +158,9 @@ def test_pipeline():
         (RandomRotation(axis=[1, 0]), ValueError, "RandomRotation: axis must be a vector of length 3"),
         (RandomRotation(center="middle"), ValueError, "RandomRotation: center must be 'centroid' or 'origin', got 'middle'"),
         (Resampler(1), ValueError, "Resampler: n_points must be >= 2, got 1"),
+        (RandomScaling(2.0, 1.0), ValueError, "RandomScaling: need 0 < low <= high, got low=2.0, high=1.0"),
+        (RandomScaling(anisotropic="yes"), TypeError, "RandomScaling: anisotropic must be True or False, got str"),
+        (RandomScaling(center="middle"), ValueError, "RandomScaling: center must be 'centroid' or 'origin', got 'middle'"),
         (Resampler(3.5), TypeError, "Resampler: n_points must be an int, got float"),
     ],
 )
