@@ -257,9 +257,9 @@ class RandomScaling(_CloudTransformer):
     an anisotropic stretch changes an object's proportions a little, which
     the scale-invariant descriptor (``scaling="object"``) does see, so
     descriptors of stretched copies teach a classifier that a slightly wider
-    chair is still a chair. On ModelNet10 a pool of stretched draws lifted
-    the 4D network's test accuracy by about 2 points over a pool of plain
-    draws (``benchmarks/bench_cnn.py``). Normals follow the surface (see
+    chair is still a chair. On ModelNet10 pools of stretched draws gave the
+    4D network 85.0 to 86.8% test accuracy, pools of plain draws 82.6 to
+    84.6% (``benchmarks/bench_cnn.py``). Normals follow the surface (see
     :func:`eppf._perturb.scale`).
 
     Parameters
