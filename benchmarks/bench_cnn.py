@@ -19,7 +19,10 @@ Five parts, each printed as a table:
 ``descriptors``
     Computes and caches EPPF descriptors of ModelNet10 (``--draws`` draws per
     object with different random pairs, per-object unit-cube scaling because
-    the coordinates are raw CAD units).
+    the coordinates are raw CAD units). ``--stretch LOW HIGH``: draws 1.. of
+    the training objects describe clouds stretched per axis by random
+    factors in [LOW, HIGH], and stretched copies of the test objects are
+    cached as well.
 ``modelnet``
     Trains each variant on the official training split with early stopping on
     a stratified validation fraction of the *training* objects, then reports
@@ -27,7 +30,8 @@ Five parts, each printed as a table:
     set is used for nothing else. ``--augment`` trains on the pool of draws
     (a fresh draw per object every epoch). Test accuracy is reported for one
     draw per test object and with the predicted probabilities averaged over
-    all cached draws (test-time averaging, "TTA").
+    all cached draws (test-time averaging, "TTA"), and, for a ``--stretch``
+    cache, over stretched copies of the test objects ("sTTA").
 
 Run, e.g.::
 
@@ -125,6 +129,48 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
   commands with ``--draws 8``, ``--max-epochs 60 --patience 10``) gives no
   more: 24 epochs (best 14), validation 90.7%, test 83.26% / 82.21% (TTA
   83.15% / 82.13%).
+* Stretched pools (``descriptors --draws 8 --n-neighbors 30 --stretch 0.8
+  1.25 --cache /tmp/mn10_stretch8.npz`` then ``modelnet --cache
+  /tmp/mn10_stretch8.npz --variants 4d --threads 1 --max-epochs 60
+  --patience 10 --lr-schedule plateau --precision bfloat16 --augment``):
+  training draws 1 to 7 describe copies of the clouds stretched per axis by
+  log-uniform factors in [0.8, 1.25] (``eppf.descriptor_pool`` with
+  ``eppf.preprocessing.RandomScaling``); validation and draw 0 stay plain.
+  "sTTA" averages the probabilities over a plain and 7 stretched copies of
+  each test object. That command: 33 epochs (best 23), 31.3 s per epoch on
+  one thread, validation 92.5%, test 85.57% total / 84.84% mean class, TTA
+  86.01% / 85.27%, sTTA 87.00% / 86.27%. The other rows were made
+  the same way with a scratch driver (same transformer and classifier
+  settings; other draw seeds; two threads for the first three rows, one for
+  the rest, two runs side by side), all 4D, bfloat16, Adam 5e-4 halved on
+  plateaus, early stopping with patience 10 on 10% of the training objects:
+
+  =================================  ====  ======  ====  =====  =====  =====  =====
+  pool                               seed  epochs  best  val    one    TTA    sTTA
+  =================================  ====  ======  ====  =====  =====  =====  =====
+  8 plain draws (k = 30)             0     27      17    92.5   82.60  83.59  -
+  8 draws, stretch [0.8, 1.25]       0     33      23    92.0   86.56  86.45  -
+  16 draws, stretch [0.8, 1.25]      0     30      20    91.0   85.02  86.01  -
+  8 draws, stretch [0.8, 1.25]       1     31      21    93.0   85.68  86.12  87.22
+  16 draws, stretch [0.8, 1.25]      2     37      27    90.0   86.78  87.44  87.44
+  8 draws, stretch [0.8, 1.25]       3     36      26    90.2   85.46  85.13  86.45
+  16 draws, stretch [0.8, 1.25]      4     43      33    91.2   85.24  85.79  86.34
+  8 draws, stretch [0.7, 1.43]       0     36      26    91.2   84.36  85.24  -
+  8, stretch, weight decay 1e-4      0     25      15    91.7   82.71  83.70  -
+  8, stretch, sqrt(histogram) input  0     25      15    91.0   84.80  85.35  -
+  =================================  ====  ======  ====  =====  =====  =====  =====
+
+  (test total accuracy in %, one draw / averaged over the plain test draws
+  / over stretched copies.) Averaging the networks of seeds 1 to 3 gives
+  86.89 (one draw), 87.00 (TTA), 87.78% (sTTA); seeds 1 to 4, 87.56% (sTTA).
+  88% is not reached. Why: the same protocol's validation accuracy is 90 to
+  93%, and the split is harder for the descriptor itself: the KL 1-NN from
+  3,083 training objects gets 84.7% of 908 held-out training objects right
+  but 81.2% of the 908 test objects. Most remaining errors (seed 2, sTTA):
+  dresser and night stand confused 27 times, table taken for desk 13 and
+  for bed 7, desk for night stand, bed or table 5 each, bathtub for bed 6,
+  bed for sofa 5: classes told apart mostly by size or use, which a
+  per-object scaled, rotation-invariant histogram does not see.
 """
 
 import argparse
@@ -316,23 +362,40 @@ def epoch(args):
 def descriptors(args):
     import eppf
     from eppf.datasets import load_npz
+    from eppf.preprocessing import RandomScaling
 
     data = load_npz(args.data)
-    draws = []
     t0 = time.perf_counter()
-    for k in range(args.draws):
-        tr = eppf.EPPFTransformer(
-            scaling="object", n_neighbors=args.n_neighbors, random_state=k, n_jobs=args.threads
-        )
-        draws.append(tr.fit_transform(data.data).astype(np.float32))
-        print(f"draw {k}: {time.perf_counter() - t0:.1f} s", flush=True)
+    extra = {}
+    tr = eppf.EPPFTransformer(scaling="object", n_neighbors=args.n_neighbors, n_jobs=args.threads)
+    if args.stretch:
+        # training objects: draw 0 as given, the others stretched; test objects: plain draws only
+        train = data.split == "train"
+        X = np.empty((len(data.data), args.draws, int(np.prod(tr.n_bins))), np.float32)
+        stretch = RandomScaling(*args.stretch)
+        train_clouds = [c for c, keep in zip(data.data, train) if keep]
+        test_clouds = [c for c, keep in zip(data.data, ~train) if keep]
+        X[train] = eppf.descriptor_pool(tr, train_clouds, args.draws, augment=stretch, random_state=args.seed)
+        X[~train] = eppf.descriptor_pool(tr, test_clouds, args.draws, random_state=args.seed + 1)
+        # for test-time averaging over stretched copies: test objects, draw 0 plain, the others stretched
+        extra["X_test_stretched"] = eppf.descriptor_pool(
+            tr, test_clouds, args.draws, augment=stretch, random_state=args.seed + 2
+        ).astype(np.float32)
+        print(f"{args.draws} draws (training draws 1.. stretched by {args.stretch}): {time.perf_counter() - t0:.1f} s")
+    else:
+        draws = []
+        for k in range(args.draws):
+            draws.append(tr.set_params(random_state=k).fit_transform(data.data).astype(np.float32))
+            print(f"draw {k}: {time.perf_counter() - t0:.1f} s", flush=True)
+        X = np.stack(draws, axis=1)
     np.savez(
         args.cache,
-        X=np.stack(draws, axis=1),
+        X=X,
         y=data.target,
         split=data.split,
         names=np.asarray(data.target_names),
         n_neighbors=args.n_neighbors,
+        **extra,
     )
     print(f"{len(data.data)} objects x {args.draws} draws -> {args.cache}")
 
@@ -357,6 +420,7 @@ def modelnet(args):
     print(
         f"{'variant':8s} {'epochs':>6s} {'best':>5s} {'wall (s)':>9s} {'s/epoch':>8s} {'val acc':>8s} "
         f"{'total acc':>10s} {'mean acc':>9s} {'TTA total':>10s} {'TTA mean':>9s}"
+        + (f" {'sTTA total':>10s} {'sTTA mean':>9s}" if "X_test_stretched" in cache else "")
     )
     yt = y[test]
 
@@ -376,16 +440,20 @@ def modelnet(args):
             random_state=args.seed,
             verbose=args.verbose,
             precision=args.precision[0],
+            weight_decay=args.weight_decay,
         )
         t0 = time.perf_counter()
         clf.fit(X_train, y[train])
         wall = time.perf_counter() - t0
         total, mean = scores(clf.predict(X[test, 0]))  # one descriptor draw per test object
         tta_total, tta_mean = scores(clf.predict(X[test]))  # probabilities averaged over all draws
+        stretched = ""
+        if "X_test_stretched" in cache:  # averaged over stretched copies of the test objects
+            stretched = " {:9.2f}% {:8.2f}%".format(*scores(clf.predict(cache["X_test_stretched"])))
         val = clf.net_.history[clf.best_epoch_ - 1, "valid_acc"]
         print(
             f"{conv:8s} {clf.n_epochs_:6d} {clf.best_epoch_:5d} {wall:9.0f} {wall / clf.n_epochs_:8.1f} "
-            f"{val:8.3f} {total:9.2f}% {mean:8.2f}% {tta_total:9.2f}% {tta_mean:8.2f}%",
+            f"{val:8.3f} {total:9.2f}% {mean:8.2f}% {tta_total:9.2f}% {tta_mean:8.2f}%{stretched}",
             flush=True,
         )
 
@@ -413,7 +481,12 @@ def main(argv=None):
         "--precision", nargs="+", default=["float32"], choices=("float32", "bfloat16"),
         help="epoch: every one listed; modelnet: the first",
     )
+    parser.add_argument("--weight-decay", type=float, default=0.0)
     parser.add_argument("--augment", action="store_true")
+    parser.add_argument(
+        "--stretch", nargs=2, type=float, metavar=("LOW", "HIGH"),
+        help="descriptors: stretch the training clouds of draws 1.. by random per-axis factors in [LOW, HIGH]",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--verbose", type=int, default=0)
     parser.add_argument("--no-mkldnn", action="store_true", help="profile: disable oneDNN convolutions")
