@@ -73,6 +73,8 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
                 f"{_OWNER}: {role} must be a scikit-learn style estimator with "
                 f"{' and '.join(methods)} and a random_state parameter, got {type(est).__name__}"
             )
+    if hasattr(X, "__next__"):
+        X = list(X)  # an iterator (a generator) would be used up by the first draw
     rng = check_random_state(random_state)
     seeds = rng.randint(np.iinfo(np.int32).max, size=(int(n_draws), 2))
     draws = []

@@ -45,6 +45,11 @@ def test_augment_leaves_draw_zero_alone_and_is_deterministic():
     assert_array_equal(descriptor_pool(TR, X, 3, augment=RandomScaling(0.5, 2.0), random_state=1), aug)
 
 
+def test_generator_input_is_read_once():
+    X = _clouds(3)
+    assert_array_equal(descriptor_pool(TR, (c for c in X), 2, random_state=0), descriptor_pool(TR, X, 2, random_state=0))
+
+
 def test_pool_feeds_the_classifier():
     rng = np.random.RandomState(0)
     X = [rng.normal(size=(120, 3)) * ([1, 1, 1] if k % 2 else [3, 1, 0.3]) for k in range(12)]
