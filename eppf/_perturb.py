@@ -55,6 +55,12 @@ def _check_non_negative(value, name, owner):
     return value
 
 
+def _check_flag(value, name, owner):
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{owner}: {name} must be True or False, got {type(value).__name__}")
+    return bool(value)
+
+
 def _check_fraction(value, name, owner):
     value = _check_real(value, name, owner)
     if not 0.0 <= value < 1.0:
@@ -616,8 +622,7 @@ def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centr
     owner = "random_scaling"
     arr = check_point_cloud(cloud, owner=owner)
     low, high = _check_scale_range(low, high, owner)
-    if not isinstance(anisotropic, (bool, np.bool_)):
-        raise TypeError(f"{owner}: anisotropic must be True or False, got {type(anisotropic).__name__}")
+    anisotropic = _check_flag(anisotropic, "anisotropic", owner)
     _check_center(center, owner)
     rng = check_random_state(random_state)
     log_factors = rng.uniform(np.log(low), np.log(high), size=3 if anisotropic else 1)

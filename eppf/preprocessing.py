@@ -18,7 +18,6 @@ The work on one cloud is done by the functions of :mod:`eppf._perturb`;
 
 import numbers
 
-import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
@@ -243,8 +242,7 @@ class RandomRotation(_CloudTransformer):
         owner = type(self).__name__
         if self.axis is not None:
             _perturb._check_vector(self.axis, "axis", owner)
-        if self.center not in ("centroid", "origin"):
-            raise ValueError(f"{owner}: center must be 'centroid' or 'origin', got {self.center!r}")
+        _perturb._check_center(self.center, owner)
 
     def _apply(self, cloud, rng):
         return _perturb.random_rotation(cloud, axis=self.axis, center=self.center, random_state=rng)
@@ -297,13 +295,12 @@ class RandomScaling(_CloudTransformer):
     def _check_params(self):
         owner = type(self).__name__
         _perturb._check_scale_range(self.low, self.high, owner)
-        if not isinstance(self.anisotropic, (bool, np.bool_)):
-            raise TypeError(f"{owner}: anisotropic must be True or False, got {type(self.anisotropic).__name__}")
+        _perturb._check_flag(self.anisotropic, "anisotropic", owner)
         _perturb._check_center(self.center, owner)
 
     def _apply(self, cloud, rng):
         return _perturb.random_scaling(
-            cloud, self.low, self.high, anisotropic=bool(self.anisotropic), center=self.center, random_state=rng
+            cloud, self.low, self.high, anisotropic=self.anisotropic, center=self.center, random_state=rng
         )
 
 
