@@ -1,8 +1,14 @@
 """Build the Cython extensions of eppf, with OpenMP when the compiler has it.
 
 All metadata lives in ``pyproject.toml``; this file only declares the compiled
-modules (every ``eppf/_*.pyx``) and probes for OpenMP, falling back to a serial
-build (``prange`` runs as a plain loop) when ``-fopenmp`` does not compile.
+modules and probes for OpenMP, falling back to a serial build (``prange`` runs
+as a plain loop) when ``-fopenmp`` does not compile.
+
+Every kernel is named after its caller and sits beside it: ``eppf/<pkg>/_x_fast.pyx``
+builds the extension ``eppf.<pkg>._x_fast`` used by ``eppf/<pkg>/_x.py``. Each
+extension sees only its own folder's C headers (and depends on the headers it
+includes, so editing one rebuilds just the kernels that use it) plus the shared
+``eppf/utils/_common.pxd``.
 """
 import glob
 import os
@@ -45,19 +51,28 @@ def _openmp_flags():
 omp_compile, omp_link = _openmp_flags()
 base_args = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fno-math-errno"]
 
-extensions = [
-    Extension(
-        "eppf." + os.path.splitext(os.path.basename(path))[0],
-        [path],
-        include_dirs=[np.get_include(), "eppf"],
-        # C headers and the shared .pxd: editing one rebuilds the extensions
-        depends=sorted(glob.glob(os.path.join("eppf", "*.h"))) + [os.path.join("eppf", "_common.pxd")],
+def _included_headers(pyx):
+    """The C headers of the pyx's own folder that it names in ``cdef extern from``."""
+    folder = os.path.dirname(pyx)
+    with open(pyx) as fh:
+        text = fh.read()
+    return [h for h in sorted(glob.glob(os.path.join(folder, "*.h"))) if '"%s"' % os.path.basename(h) in text]
+
+
+def _extension(pyx):
+    name = os.path.splitext(pyx)[0].replace(os.sep, ".")
+    return Extension(
+        name,
+        [pyx],
+        include_dirs=[np.get_include(), os.path.dirname(pyx)],
+        depends=_included_headers(pyx) + [os.path.join("eppf", "utils", "_common.pxd")],
         extra_compile_args=base_args + omp_compile,
         extra_link_args=omp_link,
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
     )
-    for path in sorted(glob.glob(os.path.join("eppf", "_*.pyx")))
-]
+
+
+extensions = [_extension(p) for p in sorted(glob.glob(os.path.join("eppf", "**", "_*.pyx"), recursive=True))]
 
 setup(
     ext_modules=cythonize(

@@ -35,8 +35,8 @@ from sklearn.metrics import pairwise_distances_chunked
 
 import eppf
 from eppf import ESFTransformer, OURCVFHTransformer, WahlTransformer
-from eppf._normals import estimate_normals_batch
-from eppf._validation import pack_point_clouds
+from eppf.preprocessing._normals import estimate_normals_batch
+from eppf.utils._validation import pack_point_clouds
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -172,7 +172,7 @@ def main():
         return
     if args.quick:
         args.objects, args.repeats = 40, 1
-    import eppf._core as core
+    import eppf.descriptors._eppf_fast as core
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"OpenMP {'on' if core.has_openmp() else 'off'}")

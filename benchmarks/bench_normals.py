@@ -6,7 +6,7 @@ k = 10, 20 and 30 neighbours:
 - ``cpu 1t``: CPU time of the one-thread batch run (stable when other
   processes share the machine);
 - ``batch 1t`` / ``batch 2t``: many objects through
-  ``eppf._normals.estimate_normals_batch`` (OpenMP over objects, what
+  ``eppf.preprocessing._normals.estimate_normals_batch`` (OpenMP over objects, what
   ``EPPFTransformer`` calls), wall time divided by the number of objects;
 - ``single 1t``: one call of ``estimate_normals`` per object (Python overhead
   included);
@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
 from eppf import estimate_normals
-from eppf._normals import estimate_normals_batch
+from eppf.preprocessing._normals import estimate_normals_batch
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 MODELNET = os.path.join(HERE, "..", "..", "shared", "data", "modelnet10_1024.npz")

@@ -7,15 +7,22 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 
 __version__ = "0.1.0"
 
-from ._descriptor import FUNCTIONS, EPPFTransformer
-from ._neighbors import KLNearestNeighbors, symmetric_kl_distances
-from ._cnn import EPPF4DClassifier
-from ._pool import descriptor_pool
+from .descriptors import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
+from .descriptors import descriptor_pool
+from .neighbors import KLNearestNeighbors, symmetric_kl_distances
+from .classifiers import EPPF4DClassifier, PointNetClassifier
+from .preprocessing import estimate_normals
 
-from ._esf import ESFTransformer
-from ._ourcvfh import OURCVFHTransformer
-from ._wahl import WahlTransformer
-from ._normals import estimate_normals
-from ._pointnet import PointNetClassifier
-
-__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "PointNetClassifier", "WahlTransformer", "descriptor_pool", "estimate_normals", "symmetric_kl_distances"]
+__all__ = [
+    "EPPF4DClassifier",
+    "EPPFTransformer",
+    "ESFTransformer",
+    "FUNCTIONS",
+    "KLNearestNeighbors",
+    "OURCVFHTransformer",
+    "PointNetClassifier",
+    "WahlTransformer",
+    "descriptor_pool",
+    "estimate_normals",
+    "symmetric_kl_distances",
+]

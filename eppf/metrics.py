@@ -14,7 +14,7 @@ from sklearn.base import clone
 from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import type_of_target
 
-from ._neighbors import (
+from .neighbors._kl import (
     _blas_limits,
     _check_chunk_size,
     _check_floor,
@@ -150,7 +150,7 @@ def leave_one_out_retrieval(
         Class labels.
     floor : "auto" or float, default="auto"
         Bins below ``floor`` are raised to it; ``"auto"`` is half the
-        smallest positive value in ``X`` (see :func:`eppf.symmetric_kl_distances`).
+        smallest positive value in ``X`` (see :func:`eppf.neighbors.symmetric_kl_distances`).
     renormalize : bool, default=False
         Whether floored histograms are divided by their sum.
     chunk_size : int, default=None
@@ -290,7 +290,7 @@ def repeated_retrieval(
     ----------
     transformer : estimator
         An unfitted scikit-learn transformer of point clouds with a
-        ``random_state`` parameter (e.g. :class:`eppf.EPPFTransformer`).
+        ``random_state`` parameter (e.g. :class:`eppf.descriptors.EPPFTransformer`).
         It is cloned for every draw and never modified.
     clouds : list of array-like
         The point clouds, passed unchanged to ``fit_transform``.

@@ -151,7 +151,7 @@ def plot_descriptor(descriptor, n_bins=(20, 4, 5, 3), *, fig=None, log=False, cm
     ----------
     descriptor : array-like of shape (prod(n_bins),) or n_bins
         One flat descriptor in C order over (f1, f2, f3, f4), f4 fastest, as
-        :class:`eppf.EPPFTransformer` writes it, or the 4D histogram itself.
+        :class:`eppf.descriptors.EPPFTransformer` writes it, or the 4D histogram itself.
     n_bins : tuple of 4 ints, default=(20, 4, 5, 3)
         Bins along (f1, f2, f3, f4).
     fig : matplotlib.figure.Figure, default=None
@@ -205,7 +205,7 @@ def _check_fitted_4d(classifier, owner):
     from sklearn.exceptions import NotFittedError
     from sklearn.utils.validation import check_is_fitted
 
-    from ._cnn import EPPF4DClassifier
+    from .classifiers import EPPF4DClassifier
 
     if not isinstance(classifier, EPPF4DClassifier):
         raise TypeError(f"{owner}: classifier must be an eppf.EPPF4DClassifier, got {type(classifier).__name__}")
@@ -311,7 +311,7 @@ def plot_filter_responses(classifier, descriptor, *, layers=(0, 1), n_filters=8,
     """Show how the 4D convolutions of a fitted classifier respond to one descriptor.
 
     For each of the chosen 4D convolution layers of a fitted
-    :class:`eppf.EPPF4DClassifier` (``conv="4d"``), the responses (after the
+    :class:`eppf.classifiers.EPPF4DClassifier` (``conv="4d"``), the responses (after the
     ReLU) of the first ``n_filters`` filters are recorded with forward hooks,
     the input standardised exactly as ``predict`` does. Each response is a 4D
     array over the (f1, f2, f3, f4) bins; a panel shows it reduced over

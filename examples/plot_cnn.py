@@ -3,7 +3,7 @@
 Classifying with the 4D convolutional network
 =====================================================
 
-Train the paper's network (:class:`eppf.EPPF4DClassifier`, two 4D
+Train the paper's network (:class:`eppf.classifiers.EPPF4DClassifier`, two 4D
 convolutions, a 2D convolution and dense layers) on "EPPF short"
 descriptors (15 x 3 x 4 x 3 bins) of the built-in shapes, then look at its
 learning curve, its confusion matrix on the held-out split and how its
@@ -12,7 +12,7 @@ figure.
 
 The network here is much smaller than the paper's (fewer filters, 256
 hidden units, 20 epochs) so that the example runs in seconds on a CPU; the
-defaults of :class:`eppf.EPPF4DClassifier` are the paper's.
+defaults of :class:`eppf.classifiers.EPPF4DClassifier` are the paper's.
 """
 
 import matplotlib.pyplot as plt

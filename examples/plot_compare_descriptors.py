@@ -10,10 +10,10 @@ symmetric Kullback-Leibler divergence. Here we run that protocol on the
 built-in shapes for
 
 * EPPF (20 x 4 x 5 x 3 bins) and "EPPF short" (15 x 3 x 4 x 3 bins),
-  :class:`eppf.EPPFTransformer`;
-* ESF, :class:`eppf.ESFTransformer`;
-* Wahl et al.'s surflet-pair histogram, :class:`eppf.WahlTransformer`;
-* OUR-CVFH, :class:`eppf.OURCVFHTransformer`.
+  :class:`eppf.descriptors.EPPFTransformer`;
+* ESF, :class:`eppf.descriptors.ESFTransformer`;
+* Wahl et al.'s surflet-pair histogram, :class:`eppf.descriptors.WahlTransformer`;
+* OUR-CVFH, :class:`eppf.descriptors.OURCVFHTransformer`.
 
 and report the total accuracy and the time to describe one object. The
 clouds have no normals; the transformers that need them estimate them

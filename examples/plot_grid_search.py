@@ -3,7 +3,7 @@
 Tuning the descriptor with GridSearchCV
 =================================================
 
-:class:`eppf.EPPFTransformer` is an ordinary scikit-learn transformer, so its
+:class:`eppf.descriptors.EPPFTransformer` is an ordinary scikit-learn transformer, so its
 parameters, including the readings of the paper such as the bin counts
 ``n_bins`` and the distance-weighting constant ``c``, can be searched with
 ``GridSearchCV`` like any other hyper-parameter.

@@ -7,7 +7,7 @@ The paper's retrieval protocol: every object is a query against all the
 others, and the label of its nearest neighbour by symmetric
 Kullback-Leibler divergence is the answer. We run it on the built-in shapes
 (with noise and occlusion) and show the confusion matrix, then classify a
-held-out split with :class:`eppf.KLNearestNeighbors` in a pipeline.
+held-out split with :class:`eppf.neighbors.KLNearestNeighbors` in a pipeline.
 """
 
 import matplotlib.pyplot as plt

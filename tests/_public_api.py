@@ -2,8 +2,8 @@
 
 import importlib
 
-PUBLIC_MODULES = ("eppf", "eppf.datasets", "eppf.metrics", "eppf.preprocessing", "eppf.io", "eppf.nn",
-                  "eppf.plotting", "eppf.experiments")
+PUBLIC_MODULES = ("eppf", "eppf.utils", "eppf.io", "eppf.preprocessing", "eppf.descriptors", "eppf.neighbors",
+                  "eppf.classifiers", "eppf.nn", "eppf.datasets", "eppf.metrics", "eppf.plotting", "eppf.experiments")
 
 
 def public_modules():

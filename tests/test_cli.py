@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from eppf.cli import build_parser, main, run_main_job
+from eppf.cli._app import build_parser, main, run_main_job
 
 
 def _write_npz(path, n_per_class=6, with_split=True):
@@ -71,7 +71,7 @@ import joblib  # noqa: E402
 
 import eppf  # noqa: E402
 from eppf import EPPFTransformer, KLNearestNeighbors, symmetric_kl_distances  # noqa: E402
-from eppf.cli import load_model, make_pipeline_from_args  # noqa: E402
+from eppf.cli._app import load_model, make_pipeline_from_args  # noqa: E402
 from eppf.datasets import load_npz  # noqa: E402
 from eppf.io import read_point_cloud, write_point_cloud  # noqa: E402
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores  # noqa: E402

@@ -13,8 +13,8 @@ from sklearn.pipeline import Pipeline
 
 import eppf_reference as ref
 from eppf import FUNCTIONS, EPPFTransformer, KLNearestNeighbors
-from eppf._core import _set_simd, eppf_counts, eppf_pair_features, eppf_pairs
-from eppf._validation import (
+from eppf.descriptors._eppf_fast import _set_simd, eppf_counts, eppf_pair_features, eppf_pairs
+from eppf.utils._validation import (
     _bounding_sides,
     _stacked_view,
     check_point_cloud,

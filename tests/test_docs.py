@@ -60,7 +60,16 @@ def test_every_public_name_is_in_the_api_reference():
     listed = {}  # module -> names listed under its currentmodule
     for module, body in zip(sections[1::2], sections[2::2]):
         listed.setdefault(module, set()).update(re.findall(r"^   (\w+)$", body, flags=re.M))
+    modules = dict(public_modules())
+    documented = {id(getattr(modules[m], n)) for m, names in listed.items() if m in modules for n in names
+                  if hasattr(modules[m], n)}
     missing = []
-    for modname, module in public_modules():
-        missing += [f"{modname}.{name}" for name in module.__all__ if name not in listed.get(modname, ())]
+    for modname, module in modules.items():
+        for name in module.__all__:
+            if name in listed.get(modname, ()):
+                continue
+            # a re-export (``eppf.EPPFTransformer``) is documented where it is defined
+            if modname == "eppf" and id(getattr(module, name)) in documented:
+                continue
+            missing.append(f"{modname}.{name}")
     assert not missing, "not in docs/api.rst: " + ", ".join(missing)

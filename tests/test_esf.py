@@ -11,7 +11,7 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import make_pipeline
 
 from eppf import ESFTransformer, KLNearestNeighbors
-from eppf._validation import object_seeds
+from eppf.utils._validation import object_seeds
 
 MASK = (1 << 64) - 1
 
@@ -292,7 +292,7 @@ def test_packed_line_walk_matches_bresenham_for_every_length_and_slope():
     # The batched kernel walks lines in packed fixed point over three grid
     # layouts; every dominant axis, direction, length 0..63 and minor slope
     # -L..L must visit exactly PCL's voxels (about 40% of them occupied).
-    from eppf._baselines import esf_line_counts
+    from eppf.descriptors._esf_fast import esf_line_counts
 
     rng = np.random.default_rng(0)
     grid = 64
@@ -321,7 +321,7 @@ def test_packed_line_walk_matches_bresenham_for_every_length_and_slope():
     # The batched walks of esf_take (scalar, and four AVX2 lanes where the
     # CPU has them), on the lines in a shuffled order so that every batch
     # mixes lengths, must give the same counts.
-    from eppf._baselines import _set_simd
+    from eppf.descriptors._esf_fast import _set_simd
 
     perm = rng.permutation(len(starts))
     for simd in (False, True):
@@ -337,7 +337,7 @@ def test_packed_line_walk_matches_bresenham_for_every_length_and_slope():
 @pytest.mark.parametrize("n_points", [5, 1024])
 def test_simd_line_walks_give_identical_descriptors(n_points):
     # The walk kernels are chosen at run time; the descriptor must not depend on it.
-    from eppf._baselines import _set_simd
+    from eppf.descriptors._esf_fast import _set_simd
 
     rng = np.random.default_rng(3)
     clouds = [rng.normal(size=(n_points, 3)) * [1, 2, 0.5] for _ in range(4)]

@@ -8,9 +8,9 @@ from numpy.testing import assert_allclose, assert_array_equal
 from scipy.spatial import cKDTree
 
 from eppf import estimate_normals
-from eppf._normals import estimate_normals_batch
-from eppf._normals_cy import smallest_eigvecs
-from eppf._validation import pack_point_clouds
+from eppf.preprocessing._normals import estimate_normals_batch
+from eppf.preprocessing._normals_fast import smallest_eigvecs
+from eppf.utils._validation import pack_point_clouds
 
 
 def reference_normals(points, k):

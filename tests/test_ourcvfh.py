@@ -10,7 +10,7 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import make_pipeline
 
 from eppf import KLNearestNeighbors, OURCVFHTransformer
-from eppf._ourcvfh import _ourcvfh_object, _pair_features
+from eppf.descriptors._ourcvfh import _ourcvfh_object, _pair_features
 
 
 def _plane(n_side=20):

@@ -1,4 +1,4 @@
-"""Tests of the single-cloud perturbations in eppf._perturb."""
+"""Tests of the single-cloud perturbations in eppf.preprocessing._perturb."""
 
 import re
 
@@ -10,7 +10,7 @@ from scipy.optimize import linprog
 from scipy.spatial.distance import pdist
 from scipy.spatial.transform import Rotation
 
-from eppf._perturb import (
+from eppf.preprocessing._perturb import (
     add_gaussian_noise,
     occlude,
     random_dropout,

@@ -9,7 +9,7 @@ pytest.importorskip("skorch")
 
 from sklearn.base import clone  # noqa: E402
 
-from eppf._pointnet import PointNetClassifier, _modules, _normalise_and_sample  # noqa: E402
+from eppf.classifiers._pointnet import PointNetClassifier, _modules, _normalise_and_sample  # noqa: E402
 
 FAST = dict(n_points=32, max_epochs=2, batch_size=8, early_stopping=False, n_jobs=1)
 
@@ -226,7 +226,7 @@ def test_not_fitted():
 
 
 def test_augmentation():
-    from eppf._pointnet import _make_dataset
+    from eppf.classifiers._pointnet import _make_dataset
 
     rng = np.random.default_rng(0)
     pts = rng.uniform(-0.5, 0.5, size=(2, 20, 3)).astype(np.float32)

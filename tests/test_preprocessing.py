@@ -10,7 +10,7 @@ from sklearn.base import clone
 from sklearn.pipeline import make_pipeline
 from sklearn.utils import get_tags
 
-from eppf._perturb import scale
+from eppf.preprocessing._perturb import scale
 from eppf.preprocessing import GaussianNoise, Occlusion, RandomDropout, RandomRotation, RandomScaling, Resampler
 
 

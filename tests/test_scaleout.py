@@ -5,7 +5,7 @@ import pytest
 from joblib import parallel_config
 from numpy.testing import assert_array_equal
 
-import eppf._chunks as chunks_module
+import eppf.utils._chunks as chunks_module
 from eppf import EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
 
 

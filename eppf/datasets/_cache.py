@@ -44,7 +44,7 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
     Parameters
     ----------
     transformer : estimator
-        The transformer to cache, e.g. :class:`eppf.EPPFTransformer`; it is
+        The transformer to cache, e.g. :class:`eppf.descriptors.EPPFTransformer`; it is
         cloned in ``fit``.
     memory : str, path-like or joblib.Memory, default=None
         Where to cache (a folder, or a Memory object); None disables caching.

@@ -7,7 +7,7 @@ import os
 import numpy as np
 from sklearn.utils import Bunch
 
-from .._sampling import object_rng, sample_mesh
+from ..preprocessing._sampling import object_rng, sample_mesh
 from ..io import read_mesh
 from ._loaders import _CLOUD_EXT, _MESH_EXT, _check_choice, _check_dir, _check_n_points, _file_seeds, \
     _from_cloud_file, _load_all

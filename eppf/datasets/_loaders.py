@@ -29,8 +29,8 @@ import numpy as np
 from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
-from .._perturb import resample
-from .._sampling import object_rng, sample_mesh
+from ..preprocessing._perturb import resample
+from ..preprocessing._sampling import object_rng, sample_mesh
 from ..io import read_mesh, read_point_cloud
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]

@@ -13,7 +13,7 @@ import numbers
 import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
-from .._perturb import (
+from ..preprocessing._perturb import (
     _add_noise,
     _check_fraction,
     _check_non_negative,
@@ -356,9 +356,9 @@ def make_shapes(
        tell the classes apart.
     3. It is rotated (points and normals) as ``rotate`` says.
     4. A random viewing direction is drawn and the far side is removed with
-       :func:`eppf._perturb.occlude`, leaving exactly ``n_points`` points.
+       :func:`eppf.preprocessing._perturb.occlude`, leaving exactly ``n_points`` points.
     5. Gaussian noise of standard deviation ``noise`` is added to the
-       coordinates with :func:`eppf._perturb.add_gaussian_noise`.
+       coordinates with :func:`eppf.preprocessing._perturb.add_gaussian_noise`.
 
     Parameters
     ----------

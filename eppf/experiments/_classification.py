@@ -206,7 +206,7 @@ def run_classification(
     patience : int, default=None
         Early-stopping patience (5, or 2 with ``quick``).
     precision : {"float32", "bfloat16"}, default="float32"
-        Arithmetic of the EPPF networks (see :class:`eppf.EPPF4DClassifier`).
+        Arithmetic of the EPPF networks (see :class:`eppf.classifiers.EPPF4DClassifier`).
     train_per_class : int, default=None
         Train on at most this many objects per class (seeded), to fit a CPU
         budget; None uses the whole training split.

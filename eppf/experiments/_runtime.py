@@ -64,7 +64,7 @@ def run_runtime(
 
     ``n_objects`` objects spread evenly over the data set are described at
     their own point counts, on one thread and on ``n_jobs`` threads. Normals
-    are estimated once beforehand (:func:`eppf.estimate_normals`, timed
+    are estimated once beforehand (:func:`eppf.preprocessing.estimate_normals`, timed
     separately, object by object) and given to the descriptors, so the
     descriptor rows exclude normal estimation. Each figure is the best of
     ``repeats`` runs (wall time; the process CPU time of that run, summed

@@ -19,7 +19,7 @@ from libc.math cimport sqrt, atan2, floor, ceil, fabs, M_PI
 from libc.stdint cimport int8_t, int16_t, int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memset
 
-from ._common cimport splitmix64, rand_below
+from ..utils._common cimport splitmix64, rand_below
 
 cdef extern from "_esf_kernel.h" nogil:
     enum:

@@ -6,10 +6,10 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ._chunks import transform_in_chunks
-from ._core import eppf_counts
-from ._validation import _bounding_sides, _stacked_view, check_n_jobs, check_point_clouds, object_seeds
-from ._validation import pack_point_clouds
+from ..utils._chunks import transform_in_chunks
+from ._eppf_fast import eppf_counts
+from ..utils._validation import _bounding_sides, _stacked_view, check_n_jobs, check_point_clouds, object_seeds
+from ..utils._validation import pack_point_clouds
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
 
@@ -57,7 +57,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         fall in the last bin.
     n_neighbors : int, default=20
         Neighbours for PCA normal estimation of clouds given without normals
-        (see :func:`eppf.estimate_normals`). Clouds of shape (n, 6) carry their
+        (see :func:`eppf.preprocessing.estimate_normals`). Clouds of shape (n, 6) carry their
         own normals and are not re-estimated. Chosen by measurement: on noisy
         synthetic shapes (noise 0.03, occlusion 0.4) leave-one-out accuracy
         was 70.3 / 85.8 / 91.5% for 10 / 20 / 30 neighbours, on ModelNet10
@@ -283,7 +283,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
             return points, np.zeros_like(points), offsets
         missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
         if missing:
-            from ._normals import estimate_normals_batch
+            from ..preprocessing._normals import estimate_normals_batch
 
             sub = [clouds[k] for k in missing]
             pts, _, off = pack_point_clouds(sub)

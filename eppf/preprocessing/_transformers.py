@@ -1,20 +1,4 @@
-"""Perturbations and sampling of point clouds, as scikit-learn transformers.
-
-Each transformer maps a list of point clouds (arrays of shape (n_i, 3) or
-(n_i, 6), normals last) to a new list, so it can stand in a
-:class:`~sklearn.pipeline.Pipeline` before a descriptor transformer, or be
-applied once to a data set (``GaussianNoise(0.02).fit_transform(data.data)``).
-``fit`` learns nothing; the transformers work unfitted too.
-
-Randomness: one seed per object is drawn from ``random_state``
-(:func:`eppf._validation.object_seeds`), and object ``k`` is perturbed with its
-own generator. A fixed integer ``random_state`` therefore gives the same
-output on every call and for any split of the data into chunks; a
-``RandomState`` instance gives fresh draws on each call (augmentation).
-
-The work on one cloud is done by the functions of :mod:`eppf._perturb`;
-:func:`sample_mesh` turns meshes (see :func:`eppf.io.read_mesh`) into clouds.
-"""
+"""The perturbation and sampling transformers of :mod:`eppf.preprocessing`."""
 
 import numbers
 
@@ -22,7 +6,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
 from ._sampling import object_rng, sample_mesh
-from ._validation import check_point_clouds, object_seeds
+from ..utils._validation import check_point_clouds, object_seeds
 
 __all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "RandomScaling", "Resampler", "sample_mesh"]
 
@@ -171,7 +155,7 @@ class Occlusion(_CloudTransformer):
 
     The points are ranked by their projection on the viewing direction and
     the ``fraction`` farthest from the sensor are removed (a plane cut); see
-    :func:`eppf._perturb.occlude`.
+    :func:`eppf.preprocessing._perturb.occlude`.
 
     Parameters
     ----------
@@ -251,14 +235,14 @@ class RandomRotation(_CloudTransformer):
 class RandomScaling(_CloudTransformer):
     """Stretch each cloud by random factors along the coordinate axes.
 
-    Augmentation for the descriptor pools of :class:`eppf.EPPF4DClassifier`:
+    Augmentation for the descriptor pools of :class:`eppf.classifiers.EPPF4DClassifier`:
     an anisotropic stretch changes an object's proportions a little, which
     the scale-invariant descriptor (``scaling="object"``) does see, so
     descriptors of stretched copies teach a classifier that a slightly wider
     chair is still a chair. On ModelNet10 pools of stretched draws gave the
     4D network 85.0 to 86.8% test accuracy, pools of plain draws 82.6 to
     84.6% (``benchmarks/bench_cnn.py``). Normals follow the surface (see
-    :func:`eppf._perturb.scale`).
+    :func:`eppf.preprocessing._perturb.scale`).
 
     Parameters
     ----------

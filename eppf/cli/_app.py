@@ -89,7 +89,7 @@ def _load(args):
     from sklearn.model_selection import train_test_split
 
     if args.data is None:
-        from .datasets import make_shapes
+        from ..datasets import make_shapes
 
         bunch = make_shapes(random_state=args.random_state)
         name = "built-in synthetic shapes"
@@ -121,8 +121,8 @@ def run_main_job(args, out=None):
     report : dict
         The measured metrics and timings.
     """
-    from . import EPPFTransformer, KLNearestNeighbors
-    from .metrics import leave_one_out_retrieval, retrieval_scores
+    from .. import EPPFTransformer, KLNearestNeighbors
+    from ..metrics import leave_one_out_retrieval, retrieval_scores
 
     out = out or sys.stdout
     name, clouds, y, class_names, split = _load(args)
@@ -328,10 +328,10 @@ def _find_files(inputs):
 
 def _read_clouds(inputs, progress):
     """Read files/folders or one .npz data set: (clouds, ids, labels or None, class_names or None)."""
-    from .io import read_point_cloud
+    from ..io import read_point_cloud
 
     if len(inputs) == 1 and str(inputs[0]).lower().endswith(".npz") and Path(inputs[0]).is_file():
-        from .datasets import load_npz
+        from ..datasets import load_npz
 
         try:
             with np.load(inputs[0], allow_pickle=False) as f:
@@ -357,7 +357,7 @@ def _read_clouds(inputs, progress):
 
 
 def _make_transformer(name, params):
-    from . import EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
+    from .. import EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
 
     cls = {"eppf": EPPFTransformer, "esf": ESFTransformer, "wahl": WahlTransformer,
            "ourcvfh": OURCVFHTransformer}[name]
@@ -447,7 +447,7 @@ def run_retrieve(args, out=None):
     rows : list of tuple
         ``(query, rank, match_id, match_label, distance)`` for every query and rank.
     """
-    from . import symmetric_kl_distances
+    from .. import symmetric_kl_distances
 
     out = out or sys.stdout
     db = _load_descriptors(args.database, "database")
@@ -511,7 +511,7 @@ def _emit(rows, header, output, out):
 
 def _load_labelled(path):
     """A labelled data set from a .npz file or a folder of class subfolders."""
-    from .datasets import load_folder, load_npz
+    from ..datasets import load_folder, load_npz
 
     if Path(path).is_dir():
         return load_folder(path)
@@ -521,7 +521,7 @@ def _load_labelled(path):
 def _load_data(args):
     """(name, clouds, y, class_names, split or None, ids) of --data or --built-in."""
     if args.built_in:
-        from .datasets import make_shapes
+        from ..datasets import make_shapes
 
         bunch = make_shapes(random_state=args.random_state)
         name = "built-in synthetic shapes"
@@ -550,7 +550,7 @@ def make_pipeline_from_args(args):
     """
     from sklearn.pipeline import Pipeline
 
-    from . import EPPF4DClassifier, EPPFTransformer, KLNearestNeighbors
+    from .. import EPPF4DClassifier, EPPFTransformer, KLNearestNeighbors
 
     eppf = EPPFTransformer(n_bins=tuple(args.n_bins), n_pairs=args.n_pairs, scaling=args.scaling or "fit",
                            random_state=args.random_state, n_jobs=args.n_jobs,
@@ -586,7 +586,7 @@ def run_train(args, out=None):
     """
     import joblib
 
-    from . import __version__
+    from .. import __version__
 
     out = out or sys.stdout
     if not 0 < args.test_size < 1:
@@ -640,7 +640,7 @@ def load_model(path):
     """
     import joblib
 
-    from . import __version__
+    from .. import __version__
 
     path = str(path)
     if not Path(path).is_file():
@@ -665,7 +665,7 @@ def _set_runtime(model, n_jobs, progress):
     if "descriptor__verbose" in names:
         updates["descriptor__verbose"] = 1 if progress else 0
     if n_jobs is not None:
-        from . import EPPF4DClassifier
+        from .. import EPPF4DClassifier
 
         for key in names:
             if key.endswith("__n_jobs"):
@@ -730,8 +730,8 @@ def run_evaluate(args, out=None):
         ``"retrieval"`` and/or ``"model"``: the scores of
         :func:`eppf.metrics.retrieval_scores` (fractions).
     """
-    from . import EPPFTransformer
-    from .metrics import leave_one_out_retrieval, retrieval_scores
+    from .. import EPPFTransformer
+    from ..metrics import leave_one_out_retrieval, retrieval_scores
 
     out = out or sys.stdout
     if args.no_retrieval and args.model is None:
@@ -777,8 +777,8 @@ def run_bench(args, out=None):
     rows : list of tuple
         ``(n_pairs, n_jobs, ms_per_object)`` per timed setting.
     """
-    from . import EPPFTransformer
-    from .datasets import make_shapes
+    from .. import EPPFTransformer
+    from ..datasets import make_shapes
 
     out = out or sys.stdout
     clouds, _ = make_shapes(args.n_per_class, n_points=args.n_points, random_state=args.random_state,

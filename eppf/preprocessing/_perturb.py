@@ -2,7 +2,7 @@
 
 Every function takes one cloud, an array of shape (n_points, 3) or
 (n_points, 6) whose last three columns are normals, validates it with
-:func:`eppf._validation.check_point_cloud` and returns a new float64 array with
+:func:`eppf.utils._validation.check_point_cloud` and returns a new float64 array with
 the same number of columns; the input is never modified. Normals follow the
 points: they are rotated with them and dropped with them. Randomness comes
 from ``random_state`` (anything :func:`sklearn.utils.check_random_state`
@@ -18,7 +18,7 @@ import numbers
 import numpy as np
 from sklearn.utils import check_random_state
 
-from ._validation import check_point_cloud
+from ..utils._validation import check_point_cloud
 
 __all__ = [
     "add_gaussian_noise",
@@ -140,7 +140,7 @@ def add_gaussian_noise(cloud, sigma, *, relative_to="unit_cube", random_state=No
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import add_gaussian_noise
+    >>> from eppf.preprocessing._perturb import add_gaussian_noise
     >>> cloud = np.random.RandomState(0).uniform(size=(100, 3))
     >>> noisy = add_gaussian_noise(cloud, 0.01, random_state=0)
     >>> noisy.shape
@@ -212,7 +212,7 @@ def occlude(cloud, fraction, *, direction=None, random_state=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import occlude
+    >>> from eppf.preprocessing._perturb import occlude
     >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
     >>> occlude(cloud, 0.3, direction="z").shape
     (70, 3)
@@ -265,7 +265,7 @@ def random_dropout(cloud, fraction, *, random_state=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import random_dropout
+    >>> from eppf.preprocessing._perturb import random_dropout
     >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
     >>> random_dropout(cloud, 0.25, random_state=0).shape
     (75, 3)
@@ -309,7 +309,7 @@ def resample(cloud, n_points, *, random_state=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import resample
+    >>> from eppf.preprocessing._perturb import resample
     >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
     >>> resample(cloud, 64, random_state=0).shape
     (64, 3)
@@ -359,7 +359,7 @@ def rotation_matrix(axis, angle):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import rotation_matrix
+    >>> from eppf.preprocessing._perturb import rotation_matrix
     >>> np.round(rotation_matrix("z", np.pi / 2) @ [1.0, 0.0, 0.0], 12)
     array([0., 1., 0.])
     """
@@ -498,7 +498,7 @@ def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import random_rotation
+    >>> from eppf.preprocessing._perturb import random_rotation
     >>> cloud = np.random.RandomState(0).normal(size=(10, 3))
     >>> rotated = random_rotation(cloud, random_state=0)
     >>> bool(np.allclose(np.linalg.norm(rotated[0] - rotated[1]),
@@ -557,7 +557,7 @@ def scale(cloud, factors, *, center="centroid"):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import scale
+    >>> from eppf.preprocessing._perturb import scale
     >>> cloud = np.array([[0.0, 0.0, 0.0], [2.0, 2.0, 2.0]])
     >>> scale(cloud, [1.0, 0.5, 2.0])
     array([[ 0. ,  0.5, -1. ],
@@ -613,7 +613,7 @@ def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centr
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf._perturb import random_scaling
+    >>> from eppf.preprocessing._perturb import random_scaling
     >>> cloud = np.random.RandomState(0).uniform(size=(100, 3))
     >>> sides = np.ptp(random_scaling(cloud, 0.5, 2.0, random_state=0), axis=0) / np.ptp(cloud, axis=0)
     >>> bool(((sides >= 0.5) & (sides <= 2.0)).all())

@@ -10,10 +10,10 @@ from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted
 
-from ._cnn import _check_float as _cnn_check_float
-from ._cnn import _check_int as _cnn_check_int
-from ._cnn import _silent, _torch_threads, _validation_split
-from ._validation import check_point_clouds, object_seeds
+from ._eppf_cnn import _check_float as _cnn_check_float
+from ._eppf_cnn import _check_int as _cnn_check_int
+from ._eppf_cnn import _silent, _torch_threads, _validation_split
+from ..utils._validation import check_point_clouds, object_seeds
 
 __all__ = ["PointNetClassifier"]
 
@@ -396,7 +396,7 @@ class PointNetClassifier(ClassifierMixin, BaseEstimator):
     def _n_threads(self):
         if self.n_jobs is None:
             return None
-        from ._validation import check_n_jobs
+        from ..utils._validation import check_n_jobs
 
         return check_n_jobs(self.n_jobs, owner=_OWNER)
 

@@ -6,9 +6,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ._baselines import esf_batch
-from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
+from ._esf_fast import esf_batch
+from ..utils._chunks import transform_in_chunks
+from ..utils._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["ESFTransformer"]
 

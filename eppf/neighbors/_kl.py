@@ -66,7 +66,7 @@ def _blas_limits(n_jobs, owner):
         return nullcontext()
     from threadpoolctl import threadpool_limits
 
-    from ._validation import check_n_jobs
+    from ..utils._validation import check_n_jobs
 
     return threadpool_limits(limits=check_n_jobs(n_jobs, owner=owner), user_api="blas")
 
@@ -489,7 +489,7 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         renormalize = _check_renormalize(self.renormalize, name)
         chunk_size = _check_chunk_size(self.chunk_size, name)
         if self.n_jobs is not None:
-            from ._validation import check_n_jobs
+            from ..utils._validation import check_n_jobs
 
             check_n_jobs(self.n_jobs, owner=name)
         return floor, renormalize, chunk_size

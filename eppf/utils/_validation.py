@@ -76,7 +76,7 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
     if arr.shape[1] == 6:
         normals = arr[:, 3:]
         x, y, z = normals.T
-        norms = np.sqrt((x * x + y * y) + z * z)  # as the compiled batch path (_core._scan_object)
+        norms = np.sqrt((x * x + y * y) + z * z)  # as the compiled batch path (_scan_fast._scan_object)
         bad = np.flatnonzero(norms < 1e-12)
         if bad.size:
             raise ValueError(f"{pre}{what} has {bad.size} zero-length normal(s), first at point {bad[0]}")
@@ -192,7 +192,7 @@ def _check_stacked(items, min_points, allow_normals, n_threads=1):
     objects spread over ``n_threads`` threads; others are first cast and
     concatenated by NumPy.
     """
-    from ._core import scan_clouds
+    from ._scan_fast import scan_clouds
 
     allowed = (3, 6) if allow_normals else (3,)
     cols = None
@@ -250,7 +250,7 @@ def pack_point_clouds(clouds):
     """
     packed = _stacked_view(clouds)
     if packed is not None:
-        from ._core import split_columns
+        from ._scan_fast import split_columns
 
         stacked, offsets = packed[0], packed[1].copy()
         if stacked.shape[1] == 6:
@@ -276,7 +276,7 @@ def check_n_jobs(n_jobs, *, owner=None):
     """
     import os
 
-    from ._core import openmp_max_threads
+    from ._scan_fast import openmp_max_threads
 
     pre = _prefix(owner)
     if n_jobs is None:

@@ -1,7 +1,7 @@
 """Surface normals of point clouds by PCA over k nearest neighbours.
 
 The Python layer validates input and resolves parameters; the work is done by
-the compiled kernel in :mod:`eppf._normals_cy` (exact kNN on a uniform grid,
+the compiled kernel in ``eppf.preprocessing._normals_fast`` (exact kNN on a uniform grid,
 Jacobi 3x3 eigensolver, OpenMP over objects or over the points of one object).
 """
 
@@ -9,8 +9,8 @@ import numbers
 
 import numpy as np
 
-from ._normals_cy import normals_packed, normals_single, scratch_sizes
-from ._validation import check_n_jobs, check_point_cloud
+from ._normals_fast import normals_packed, normals_single, scratch_sizes
+from ..utils._validation import check_n_jobs, check_point_cloud
 
 __all__ = ["estimate_normals", "estimate_normals_batch"]
 
@@ -177,7 +177,7 @@ default="centroid"
 def estimate_normals_batch(points, offsets, n_neighbors=10, orientation="centroid", n_jobs=None, *, owner=None):
     """Estimate normals of many packed point clouds at once.
 
-    The packed layout is that of :func:`eppf._validation.pack_point_clouds`:
+    The packed layout is that of :func:`eppf.utils._validation.pack_point_clouds`:
     object ``i`` is ``points[offsets[i]:offsets[i + 1]]``. Objects are spread
     over OpenMP threads; each object's normals are exactly those
     :func:`estimate_normals` returns for it alone, for any thread count.

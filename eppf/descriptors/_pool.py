@@ -19,12 +19,12 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
     describe perturbed copies of the clouds (a clone of ``augment``, e.g.
     :class:`eppf.preprocessing.RandomScaling`, with its own seed per draw),
     while draw 0 always describes the clouds as given: it is the draw
-    :class:`eppf.EPPF4DClassifier` validates on.
+    :class:`eppf.classifiers.EPPF4DClassifier` validates on.
 
     Parameters
     ----------
     transformer : estimator
-        A descriptor transformer such as :class:`eppf.EPPFTransformer`, with
+        A descriptor transformer such as :class:`eppf.descriptors.EPPFTransformer`, with
         a ``random_state`` parameter. Each draw fits a clone on ``X`` as
         given (so ``scaling="fit"`` learns its scale from the unperturbed
         clouds) and transforms the draw's clouds.
@@ -44,7 +44,7 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
     -------
     pool : ndarray of shape (n_objects, n_draws, n_features)
         ``pool[:, r]`` is draw ``r``; pass the pool to
-        :meth:`eppf.EPPF4DClassifier.fit` (a fresh draw per object every
+        :meth:`eppf.classifiers.EPPF4DClassifier.fit` (a fresh draw per object every
         epoch) or to ``predict_proba`` (probabilities averaged over draws).
 
     Examples

@@ -11,8 +11,8 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ._esf import _check_int
-from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_clouds
+from ..utils._chunks import transform_in_chunks
+from ..utils._validation import check_n_jobs, check_point_clouds
 from ._wahl import _points_and_normals
 
 __all__ = ["OURCVFHTransformer"]
@@ -282,7 +282,7 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         and for the curvature.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         Sign of estimated normals: away from the object's centroid, towards
-        the origin, or unoriented (as in :class:`eppf.EPPFTransformer`).
+        the origin, or unoriented (as in :class:`eppf.descriptors.EPPFTransformer`).
     n_jobs : int, default=None
         Threads over objects (joblib); None means 1. Output does not depend
         on it.

@@ -56,7 +56,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
     n_bins : tuple of 4 ints, default=(20, 4, 5, 3)
         Histogram bins along (f1, f2, f3, f4). Descriptors must have
         ``prod(n_bins)`` columns in C order over (f1, f2, f3, f4), f4 fastest,
-        as :class:`eppf.EPPFTransformer` writes them; use (15, 3, 4, 3) for
+        as :class:`eppf.descriptors.EPPFTransformer` writes them; use (15, 3, 4, 3) for
         "EPPF short".
     conv : {"4d", "3d", "2d"}, default="4d"
         Network variant: :class:`eppf.nn.EPPFNet4D`,
@@ -161,7 +161,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
     Descriptor pools (augmentation beyond the paper): ``X`` may be a 3D
     array of shape (n_objects, n_draws, n_features), ``n_draws`` descriptors
     of every object computed with different random pairs, as
-    :func:`eppf.descriptor_pool` makes them. In ``fit`` every epoch draws
+    :func:`eppf.descriptors.descriptor_pool` makes them. In ``fit`` every epoch draws
     one of them per object afresh; validation uses the first draw. In
     ``predict_proba`` the class probabilities are averaged over the draws
     (test-time averaging). Pools whose training draws describe slightly
@@ -241,7 +241,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
 
     # ------------------------------------------------------------------ checks
     def _check_params(self):
-        from .nn import check_n_bins, check_precision
+        from ..nn import check_n_bins, check_precision
 
         n_bins = check_n_bins(self.n_bins, owner=_OWNER)
         if self.conv not in _CONVS:
@@ -313,7 +313,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
     def _n_threads(self):
         if self.n_jobs is None:
             return None
-        from ._validation import check_n_jobs
+        from ..utils._validation import check_n_jobs
 
         return check_n_jobs(self.n_jobs, owner=_OWNER)
 
@@ -342,7 +342,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         from skorch.callbacks import EarlyStopping
         from skorch.helper import predefined_split
 
-        from .nn import DescriptorPoolDataset, EPPFNet2D, EPPFNet3D, EPPFNet4D
+        from ..nn import DescriptorPoolDataset, EPPFNet2D, EPPFNet3D, EPPFNet4D
 
         n_bins = self._check_params()
         n_features = math.prod(n_bins)

@@ -11,7 +11,7 @@ __all__ = ["object_rng", "sample_mesh"]
 def object_rng(seed):
     """A NumPy RandomState from one 64-bit object seed.
 
-    The seeds come from :func:`eppf._validation.object_seeds` (or a loader's
+    The seeds come from :func:`eppf.utils._validation.object_seeds` (or a loader's
     per-file seeds); each object gets its own generator so its draws do not
     depend on the other objects. The legacy ``RandomState`` interface runs
     on a PCG64 bit generator, which is seeded from all 64 bits and is twenty

@@ -6,10 +6,10 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ._baselines import wahl_batch
+from ._esf_fast import wahl_batch
 from ._esf import _check_int
-from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
+from ..utils._chunks import transform_in_chunks
+from ..utils._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["WahlTransformer"]
 
@@ -21,7 +21,7 @@ def _points_and_normals(clouds, n_neighbors, orientation, n_threads, owner):
 
     Returns ``points`` (N, 3), ``normals`` (N, 3) and ``offsets``.
     """
-    from ._normals import estimate_normals_batch
+    from ..preprocessing._normals import estimate_normals_batch
 
     points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
     normals = np.empty_like(points)
@@ -74,12 +74,12 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         of Wahl et al.), or the more parallel one (PCL's PFH rule).
     n_neighbors : int, default=10
         Neighbourhood size for PCA normals of clouds given without normals
-        (see :func:`eppf.estimate_normals`); clouds with six columns use
+        (see :func:`eppf.preprocessing.estimate_normals`); clouds with six columns use
         their own normals.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         Sign of estimated normals: away from the object's centroid, towards
         the origin (a sensor there), or unoriented (as in
-        :class:`eppf.EPPFTransformer`).
+        :class:`eppf.descriptors.EPPFTransformer`).
     random_state : int, RandomState instance or None, default=None
         Draws one seed per object; each object's pairs come from a private
         generator seeded with it, so the output does not depend on ``n_jobs``.

@@ -1,0 +1,29 @@
+"""Global descriptors of point clouds, as scikit-learn transformers.
+
+Every transformer takes a list of point clouds (arrays of shape (n_i, 3), or
+(n_i, 6) with normals) and returns one row per object. Each descriptor lives in
+its own module with its compiled kernel beside it (``_esf.py`` over
+``_esf_fast.pyx``):
+
+- :class:`EPPFTransformer`: the paper's extended point-pair feature histogram;
+- :class:`ESFTransformer`: Ensemble of Shape Functions (Wohlkinger & Vincze 2011);
+- :class:`WahlTransformer`: surflet-pair relation histograms (Wahl et al. 2003);
+- :class:`OURCVFHTransformer`: oriented, unique and repeatable clustered VFH
+  (Aldoma et al. 2012);
+- :func:`descriptor_pool`: several seeded draws of one descriptor per object.
+"""
+
+from ._eppf import FUNCTIONS, EPPFTransformer
+from ._esf import ESFTransformer
+from ._ourcvfh import OURCVFHTransformer
+from ._pool import descriptor_pool
+from ._wahl import WahlTransformer
+
+__all__ = [
+    "EPPFTransformer",
+    "ESFTransformer",
+    "FUNCTIONS",
+    "OURCVFHTransformer",
+    "WahlTransformer",
+    "descriptor_pool",
+]
