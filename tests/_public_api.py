@@ -3,7 +3,8 @@
 import importlib
 
 PUBLIC_MODULES = ("eppf", "eppf.utils", "eppf.io", "eppf.preprocessing", "eppf.descriptors", "eppf.neighbors",
-                  "eppf.classifiers", "eppf.nn", "eppf.datasets", "eppf.metrics", "eppf.plotting", "eppf.experiments")
+                  "eppf.classifiers", "eppf.nn", "eppf.datasets", "eppf.metrics", "eppf.plotting", "eppf.experiments",
+                  "eppf.registry")
 
 
 def public_modules():

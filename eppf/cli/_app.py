@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from ..registry import DESCRIPTORS as REGISTRY
 
 __all__ = ["build_parser", "load_model", "main", "make_pipeline_from_args", "run_main_job"]
 
@@ -181,7 +182,7 @@ def run_main_job(args, out=None):
 #: Extensions read as point clouds when a folder is given.
 CLOUD_EXTENSIONS = (".ply", ".pcd", ".xyz", ".txt", ".csv", ".pts", ".npy", ".off", ".obj")
 
-DESCRIPTORS = ("eppf", "esf", "wahl", "ourcvfh")
+DESCRIPTORS = tuple(REGISTRY)
 
 _MODEL_FORMAT = "eppf-model"
 
@@ -357,15 +358,8 @@ def _read_clouds(inputs, progress):
 
 
 def _make_transformer(name, params):
-    from .. import EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
-
-    cls = {"eppf": EPPFTransformer, "esf": ESFTransformer, "wahl": WahlTransformer,
-           "ourcvfh": OURCVFHTransformer}[name]
-    est = cls()
-    accepted = est.get_params()
-    if "n_pairs" in params and "n_triplets" in accepted:
-        params = dict(params, n_triplets=params["n_pairs"])
-    return est.set_params(**{k: v for k, v in params.items() if k in accepted})
+    params = dict(params)
+    return REGISTRY[name].make(n_samples=params.pop("n_pairs", None), **params)
 
 
 def _descriptor_params(args, progress):

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.utils import check_random_state
 
+from ..registry import DESCRIPTORS as REGISTRY
+
 __all__ = [
     "Dataset",
     "DescriptorCache",
@@ -509,9 +511,9 @@ def _draw(plot, path, log):
 
 # -------------------------------------------------------------- descriptors
 #: Descriptor keys and their names in the tables (the paper's Table II order).
-DESCRIPTORS = {"ourcvfh": "OUR-CVFH", "esf": "ESF", "wahl": "Wahl", "eppf_short": "EPPF short", "eppf": "EPPF"}
+DESCRIPTORS = {name: spec.title for name, spec in REGISTRY.items()}
 #: Descriptors without random sampling (one draw suffices).
-DETERMINISTIC = ("ourcvfh",)
+DETERMINISTIC = tuple(name for name, spec in REGISTRY.items() if spec.deterministic)
 SCALINGS = ("auto", "fit", "object", "none")
 
 
@@ -534,21 +536,12 @@ def n_samples_setting(quick):
 
 
 def make_descriptor(name, *, scaling, random_state, n_jobs, quick, functions=None):
-    """An unfitted descriptor transformer by key (see :data:`DESCRIPTORS`)."""
-    from .. import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
-
-    n = n_samples_setting(quick)
-    if name in ("eppf", "eppf_short"):
-        kw = {"n_bins": (15, 3, 4, 3)} if name == "eppf_short" else {}
-        return EPPFTransformer(n_pairs=n, scaling=scaling, functions=functions or FUNCTIONS,
-                               random_state=random_state, n_jobs=n_jobs, **kw)
-    if name == "esf":
-        return ESFTransformer(n_triplets=n, random_state=random_state, n_jobs=n_jobs)
-    if name == "wahl":
-        return WahlTransformer(n_pairs=n, random_state=random_state, n_jobs=n_jobs)
-    if name == "ourcvfh":
-        return OURCVFHTransformer(n_jobs=n_jobs)
-    raise ExperimentError(f"unknown descriptor {name!r}; choose from {list(DESCRIPTORS)}")
+    """An unfitted descriptor transformer by registry key (see :data:`eppf.registry.DESCRIPTORS`)."""
+    if name not in REGISTRY:
+        raise ExperimentError(f"unknown descriptor {name!r}; choose from {list(DESCRIPTORS)}")
+    extra = {"functions": functions} if functions is not None else {}
+    return REGISTRY[name].make(n_samples=n_samples_setting(quick), scaling=scaling, random_state=random_state,
+                               n_jobs=n_jobs, **extra)
 
 
 def params_text(est):

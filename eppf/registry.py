@@ -1,0 +1,182 @@
+"""The one registry of eppf's descriptors and classifiers.
+
+Every place that offers a choice of descriptor or classifier by name (the
+``eppf`` command's ``--descriptor`` and ``--classifier``, the experiments'
+``--descriptors`` and ``--models``, the benchmarks and the tests) reads these
+two tables, so a descriptor added here is available everywhere at once.
+
+Each descriptor entry says which class builds it, the name of its sampling
+parameter (pairs or triplets per object, or None for deterministic
+descriptors), its natural metric for retrieval (``"kl"``, symmetric
+Kullback-Leibler divergence, or ``"l1"``) and whether it follows the data
+set's scaling setting.
+
+Examples
+--------
+>>> from eppf.registry import DESCRIPTORS, make_descriptor
+>>> sorted(DESCRIPTORS)[:3]
+['eppf', 'eppf_short', 'esf']
+>>> make_descriptor("esf", n_samples=5000, random_state=0)
+ESFTransformer(n_triplets=5000, random_state=0)
+"""
+
+from dataclasses import dataclass, field
+
+__all__ = ["CLASSIFIERS", "DESCRIPTORS", "ClassifierSpec", "DescriptorSpec", "make_descriptor"]
+
+
+@dataclass(frozen=True)
+class DescriptorSpec:
+    """How to build one descriptor transformer by name.
+
+    Parameters
+    ----------
+    name : str
+        The key used on the command line and in the experiments.
+    title : str
+        Its name in tables and plots.
+    cls : str
+        Import path ``"module:Class"`` of the transformer (imported on use,
+        so that listing the registry imports no kernel).
+    sampling : str or None
+        Name of the parameter that sets the random samples per object
+        (``"n_pairs"``, ``"n_triplets"``), or None for deterministic
+        descriptors.
+    metric : {"kl", "l1"}
+        The natural metric for retrieval with this descriptor.
+    data_scaling : bool
+        Whether it takes the data set's ``scaling`` setting (EPPF's
+        ``"fit"``/``"object"``/``"none"``); others keep their own default.
+    fixed : dict
+        Parameters that define the entry (EPPF short's bins).
+    """
+
+    name: str
+    title: str
+    cls: str
+    sampling: str = None
+    metric: str = "kl"
+    data_scaling: bool = False
+    fixed: dict = field(default_factory=dict)
+
+    @property
+    def deterministic(self):
+        """True when one draw of the descriptor is all there is."""
+        return self.sampling is None
+
+    def estimator_class(self):
+        """The transformer class (imported now)."""
+        import importlib
+
+        module, name = self.cls.split(":")
+        return getattr(importlib.import_module(module), name)
+
+    def make(self, *, n_samples=None, scaling=None, random_state=None, n_jobs=None, **params):
+        """An unfitted transformer with the given settings.
+
+        ``n_samples`` goes to the sampling parameter (ignored for
+        deterministic descriptors), ``scaling`` only where ``data_scaling``;
+        other keyword arguments are passed through when the class has them.
+        """
+        cls = self.estimator_class()
+        accepted = cls().get_params(deep=False)
+        kw = dict(self.fixed)
+        if n_samples is not None and self.sampling is not None:
+            kw[self.sampling] = n_samples
+        if scaling is not None and self.data_scaling:
+            kw["scaling"] = scaling
+        if "random_state" in accepted and not self.deterministic:
+            kw["random_state"] = random_state
+        kw["n_jobs"] = n_jobs
+        kw.update({k: v for k, v in params.items() if k in accepted and k not in self.fixed})
+        return cls(**{k: v for k, v in kw.items() if k in accepted})
+
+
+@dataclass(frozen=True)
+class ClassifierSpec:
+    """How to build one classifier by name.
+
+    Parameters
+    ----------
+    name : str
+        The key used on the command line and in the experiments.
+    title : str
+        Its name in tables and plots.
+    cls : str
+        Import path ``"module:Class"``.
+    input : {"descriptors", "points"}
+        What it is trained on: descriptor rows or raw point clouds.
+    fixed : dict
+        Parameters that define the entry (the network variant).
+    """
+
+    name: str
+    title: str
+    cls: str
+    input: str = "descriptors"
+    fixed: dict = field(default_factory=dict)
+
+    def estimator_class(self):
+        """The classifier class (imported now)."""
+        import importlib
+
+        module, name = self.cls.split(":")
+        return getattr(importlib.import_module(module), name)
+
+
+_D = "eppf.descriptors"
+
+#: Descriptor name -> :class:`DescriptorSpec`, in the paper's table order.
+DESCRIPTORS = {
+    spec.name: spec
+    for spec in (
+        DescriptorSpec("ourcvfh", "OUR-CVFH", f"{_D}:OURCVFHTransformer", None, "l1"),
+        DescriptorSpec("esf", "ESF", f"{_D}:ESFTransformer", "n_triplets", "kl"),
+        DescriptorSpec("wahl", "Wahl", f"{_D}:WahlTransformer", "n_pairs", "kl"),
+        DescriptorSpec("eppf_short", "EPPF short", f"{_D}:EPPFTransformer", "n_pairs", "kl", True,
+                       {"n_bins": (15, 3, 4, 3)}),
+        DescriptorSpec("eppf", "EPPF", f"{_D}:EPPFTransformer", "n_pairs", "kl", True),
+    )
+}
+
+_C = "eppf.classifiers"
+
+#: Classifier name -> :class:`ClassifierSpec`.
+CLASSIFIERS = {
+    spec.name: spec
+    for spec in (
+        ClassifierSpec("pointnet", "PointNet", f"{_C}:PointNetClassifier", "points"),
+        ClassifierSpec("2d", "EPPF 2D", f"{_C}:EPPF4DClassifier", fixed={"conv": "2d"}),
+        ClassifierSpec("3d", "EPPF 3D", f"{_C}:EPPF4DClassifier", fixed={"conv": "3d"}),
+        ClassifierSpec("4d", "EPPF 4D", f"{_C}:EPPF4DClassifier", fixed={"conv": "4d"}),
+        ClassifierSpec("kl", "EPPF KL 1-NN", "eppf.neighbors:KLNearestNeighbors"),
+    )
+}
+
+
+def make_descriptor(name, **settings):
+    """An unfitted descriptor transformer by registry name.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`DESCRIPTORS`.
+    **settings
+        ``n_samples``, ``scaling``, ``random_state``, ``n_jobs`` and any
+        parameter of the class (see :meth:`DescriptorSpec.make`).
+
+    Returns
+    -------
+    transformer : estimator
+        The unfitted transformer.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is not registered.
+    """
+    try:
+        spec = DESCRIPTORS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown descriptor {name!r}; choose from {sorted(DESCRIPTORS)}") from None
+    return spec.make(**settings)
