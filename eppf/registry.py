@@ -49,6 +49,13 @@ class DescriptorSpec:
         ``"fit"``/``"object"``/``"none"``); others keep their own default.
     fixed : dict
         Parameters that define the entry (EPPF short's bins).
+
+    Examples
+    --------
+    >>> from eppf.registry import DESCRIPTORS
+    >>> spec = DESCRIPTORS["esf"]
+    >>> spec.sampling, spec.metric, spec.deterministic
+    ('n_triplets', 'kl', False)
     """
 
     name: str
@@ -108,6 +115,12 @@ class ClassifierSpec:
         What it is trained on: descriptor rows or raw point clouds.
     fixed : dict
         Parameters that define the entry (the network variant).
+
+    Examples
+    --------
+    >>> from eppf.registry import CLASSIFIERS
+    >>> CLASSIFIERS["4d"].fixed, CLASSIFIERS["pointnet"].input
+    ({'conv': '4d'}, 'points')
     """
 
     name: str
@@ -174,6 +187,12 @@ def make_descriptor(name, **settings):
     ------
     ValueError
         If ``name`` is not registered.
+
+    Examples
+    --------
+    >>> from eppf.registry import make_descriptor
+    >>> make_descriptor("eppf_short", n_samples=1000, random_state=0).n_bins
+    (15, 3, 4, 3)
     """
     try:
         spec = DESCRIPTORS[name]

@@ -3,13 +3,12 @@
 import numbers
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils._chunks import transform_in_chunks
+from ..utils import check_n_jobs, object_seeds, pack_point_clouds
+from ..utils._validation import _bounding_sides, _stacked_view
+from ._base import PointCloudDescriptor
 from ._eppf_fast import eppf_counts
-from ..utils._validation import _bounding_sides, _stacked_view, check_n_jobs, check_point_clouds, object_seeds
-from ..utils._validation import pack_point_clouds
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
 
@@ -20,7 +19,7 @@ _SCALINGS = ("fit", "object", "none")
 _F1_MAX = float(np.sqrt(3.0))
 
 
-class EPPFTransformer(TransformerMixin, BaseEstimator):
+class EPPFTransformer(PointCloudDescriptor):
     """Enhanced Point Pair Functions (EPPF) descriptor of point clouds.
 
     For every object, ``n_pairs`` ordered point pairs are drawn at random and
@@ -211,6 +210,24 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         return tuple(int(b) for b in n_bins), functions
 
     # ---------------------------------------------------------------- sklearn
+    _progress_label = "EPPF"
+
+    def _check_params(self):
+        n_bins, functions = self._validate_params()
+        return n_bins, functions, check_n_jobs(self.n_jobs, owner=type(self).__name__)
+
+    def _learn(self, clouds, params):
+        n_bins, functions, _ = params
+        self.n_bins_ = n_bins
+        self.functions_ = functions
+        self.histogram_shape_ = tuple(b for b, f in zip(n_bins, FUNCTIONS) if f in functions)
+        self.scale_ = None
+        if self.scaling == "fit":
+            self.scale_ = float(1.0 / _bounding_sides(clouds).max())
+
+    def _n_features(self, params):
+        return int(np.prod(self.histogram_shape_))
+
     def fit(self, X, y=None):
         """Validate the parameters and, with ``scaling="fit"``, learn the scale.
 
@@ -226,16 +243,7 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         self : EPPFTransformer
             The fitted transformer.
         """
-        n_bins, functions = self._validate_params()
-        clouds = check_point_clouds(X, owner=type(self).__name__)
-        self.n_bins_ = n_bins
-        self.functions_ = functions
-        self.histogram_shape_ = tuple(b for b, f in zip(n_bins, FUNCTIONS) if f in functions)
-        self.n_features_out_ = int(np.prod(self.histogram_shape_))
-        self.scale_ = None
-        if self.scaling == "fit":
-            self.scale_ = float(1.0 / _bounding_sides(clouds).max())
-        return self
+        return super().fit(X, y)
 
     def transform(self, X):
         """Compute the EPPF descriptor of every point cloud.
@@ -253,9 +261,9 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
             Descriptors, each row non-negative and summing to 1.
         """
         check_is_fitted(self, "n_bins_")
-        name = type(self).__name__
-        n_threads = check_n_jobs(self.n_jobs, owner=name)
-        clouds = check_point_clouds(X, owner=name, n_threads=n_threads)
+        return super().transform(X)
+
+    def _per_object(self, clouds, params):
         if self.scaling == "fit":
             scales = np.full(len(clouds), self.scale_)
         elif self.scaling == "object":
@@ -263,13 +271,23 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         else:
             scales = np.ones(len(clouds))
         # Seeds are drawn once for the whole input, so chunking never changes a result.
-        seeds = object_seeds(self.random_state, len(clouds))
-        return transform_in_chunks(
-            _describe, self, clouds, (scales, seeds, np.full(len(clouds), n_threads)),
-            n_features=self.n_features_out_, verbose=self.verbose, desc="EPPF",
-        )
+        return scales, object_seeds(self.random_state, len(clouds))
 
-    def _points_and_normals(self, clouds, n_threads):
+    def _describe(self, clouds, params, scales, seeds, *, first_index):
+        """Descriptors of one chunk of validated clouds with given scales and seeds."""
+        n_threads = params[2]
+        points, normals, offsets = self._kernel_input(clouds, n_threads)
+        kernel_bins = tuple(b if f in self.functions_ else 1 for b, f in zip(self.n_bins_, FUNCTIONS))
+        counts, status = eppf_counts(
+            points, normals, offsets, scales, seeds, int(self.n_pairs), kernel_bins,
+            int(self.grid_size), _F1_MAX, n_threads,
+        )
+        self._raise_for_status(status, first_index, {
+            1: f"has too few distinct points to draw {self.n_pairs} pairs (almost all of its points coincide)"})
+        return _weight_and_normalise(counts, kernel_bins, self.c, "distance" in self.functions_)
+
+    def _kernel_input(self, clouds, n_threads):
+        """Points, normals (estimated where missing and needed) and offsets for the kernel."""
         needs_normals = "angle" in self.functions_ or "normal" in self.functions_
         packed = _stacked_view(clouds)
         if packed is not None and (packed[0].shape[1] == 6 or not needs_normals):
@@ -295,27 +313,15 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
                 clouds[k] = np.hstack([clouds[k], est[off[j]:off[j + 1]]])
         return pack_point_clouds(clouds)
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the descriptor bins, e.g. ``eppf_d03_a1_n2_o0``.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored; point clouds have no feature names.
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            One name per bin, in the order of the descriptor.
-        """
-        check_is_fitted(self, "n_bins_")
+    def _feature_names(self):
+        """Names of the descriptor bins, e.g. ``eppf_d03_a1_n2_o0``."""
         used = [f for f in FUNCTIONS if f in self.functions_]
         widths = [len(str(b - 1)) for b in self.histogram_shape_]
         names = []
         for idx in np.ndindex(*self.histogram_shape_):
             parts = [f"{_SHORT[f]}{i:0{w}d}" for f, i, w in zip(used, idx, widths)]
             names.append("eppf_" + "_".join(parts))
-        return np.asarray(names, dtype=object)
+        return names
 
     def to_histogram(self, X):
         """View descriptors as histograms of shape ``histogram_shape_``.
@@ -338,33 +344,6 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
                 f"(histogram {self.histogram_shape_}), got shape {X.shape}"
             )
         return X.reshape(X.shape[:-1] + self.histogram_shape_)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        tags.requires_fit = True
-        tags.non_deterministic = self.random_state is None
-        return tags
-
-
-def _describe(est, clouds, scales, seeds, n_threads, first_index):
-    n_threads = int(n_threads[0])
-    """Descriptors of one chunk of validated clouds with given scales and seeds (a joblib task)."""
-    points, normals, offsets = est._points_and_normals(clouds, n_threads)
-    kernel_bins = tuple(b if f in est.functions_ else 1 for b, f in zip(est.n_bins_, FUNCTIONS))
-    counts, status = eppf_counts(
-        points, normals, offsets, scales, seeds, int(est.n_pairs), kernel_bins,
-        int(est.grid_size), _F1_MAX, n_threads,
-    )
-    bad = np.flatnonzero(status)
-    if bad.size:
-        raise ValueError(
-            f"{type(est).__name__}: point cloud {first_index + bad[0]} has too few distinct points to draw "
-            f"{est.n_pairs} pairs (almost all of its points coincide)"
-        )
-    return _weight_and_normalise(counts, kernel_bins, est.c, "distance" in est.functions_)
-
 
 def _check_int(value, what, lo, hi, owner):
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):

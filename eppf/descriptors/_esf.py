@@ -1,14 +1,11 @@
 """Ensemble of Shape Functions (ESF), Wohlkinger & Vincze (2011), as in PCL 1.13."""
 
-import numbers
-
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils.validation import check_is_fitted
 
+from ..utils import check_int as _check_int
+from ..utils import check_n_jobs, pack_point_clouds
+from ._base import PointCloudDescriptor
 from ._esf_fast import esf_batch
-from ..utils._chunks import transform_in_chunks
-from ..utils._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["ESFTransformer"]
 
@@ -20,16 +17,7 @@ _HISTOGRAMS = ("a3_in", "a3_out", "a3_mix", "d3_in", "d3_out", "d3_mix", "d2_in"
 _AREA_EPS = 0.001
 
 
-def _check_int(value, name, owner, low, high=None):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{owner}: {name} must be an int, got {type(value).__name__}")
-    if value < low or (high is not None and value > high):
-        bound = f">= {low}" if high is None else f"in [{low}, {high}]"
-        raise ValueError(f"{owner}: {name} must be {bound}, got {value}")
-    return int(value)
-
-
-class ESFTransformer(TransformerMixin, BaseEstimator):
+class ESFTransformer(PointCloudDescriptor):
     """Ensemble of Shape Functions (ESF) global descriptor of point clouds.
 
     Samples point triplets and histograms three shape functions, the angle
@@ -139,84 +127,23 @@ class ESFTransformer(TransformerMixin, BaseEstimator):
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
         return n_triplets, grid_size, n_bins, n_threads
 
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; ESF learns nothing from data.
+    _min_points = 3
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points each (normals are ignored).
-        y : None
-            Ignored.
+    def _n_features(self, params):
+        return 10 * params[2]
 
-        Returns
-        -------
-        self : ESFTransformer
-            The fitted transformer.
-        """
-        _, _, n_bins, _ = self._check_params()
-        check_point_clouds(X, owner=type(self).__name__, min_points=3)
-        self.n_features_out_ = 10 * n_bins
-        return self
-
-    def transform(self, X):
-        """Compute one ESF histogram per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points each, not all collinear.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, 10 * n_bins)
-            Histograms, each summing to one.
-        """
-        check_is_fitted(self)
-        owner = type(self).__name__
-        n_triplets, grid_size, n_bins, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
-        seeds = object_seeds(self.random_state, len(clouds))
-        return transform_in_chunks(_esf_chunk, self, clouds, (seeds,), n_features=10 * n_bins)
-
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns, e.g. ``esf_a3_in_0``.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            ``esf_<histogram>_<bin>`` in the output's order.
-        """
-        check_is_fitted(self)
+    def _feature_names(self):
         n_bins = self.n_features_out_ // 10
-        return np.asarray([f"esf_{h}_{i}" for h in _HISTOGRAMS for i in range(n_bins)], dtype=object)
+        return [f"esf_{h}_{i}" for h in _HISTOGRAMS for i in range(n_bins)]
 
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        tags.non_deterministic = self.random_state is None
-        return tags
-
-
-def _esf_chunk(est, clouds, seeds, first_index):
-    """ESF rows of one chunk of validated clouds (a joblib task)."""
-    owner = type(est).__name__
-    n_triplets, grid_size, n_bins, n_threads = est._check_params()
-    points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
-    out = np.zeros((len(clouds), 10 * n_bins), dtype=np.float64)
-    status = np.zeros(len(clouds), dtype=np.int8)
-    n_threads = max(1, min(n_threads, len(clouds)))
-    esf_batch(points, offsets, seeds, n_triplets, grid_size, n_bins, _AREA_EPS, out, status, n_threads)
-    bad = np.flatnonzero(status)
-    if bad.size:
-        raise ValueError(
-            f"{owner}: point cloud {first_index + bad[0]} has no triangles of non-zero area "
-            "(all points collinear or nearly so); ESF needs a surface"
-        )
-    return out
+    def _describe(self, clouds, params, seeds, *, first_index):
+        """ESF rows of one chunk of validated clouds."""
+        n_triplets, grid_size, n_bins, n_threads = params
+        points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
+        out = np.zeros((len(clouds), 10 * n_bins), dtype=np.float64)
+        status = np.zeros(len(clouds), dtype=np.int8)
+        n_threads = max(1, min(n_threads, len(clouds)))
+        esf_batch(points, offsets, seeds, n_triplets, grid_size, n_bins, _AREA_EPS, out, status, n_threads)
+        self._raise_for_status(status, first_index, {
+            1: "has no triangles of non-zero area (all points collinear or nearly so); ESF needs a surface"})
+        return out

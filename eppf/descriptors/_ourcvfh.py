@@ -7,13 +7,10 @@ from joblib import Parallel, delayed
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils.validation import check_is_fitted
 
-from ._esf import _check_int
-from ..utils._chunks import transform_in_chunks
-from ..utils._validation import check_n_jobs, check_point_clouds
-from ._wahl import _points_and_normals
+from ..utils import check_int as _check_int
+from ..utils import check_n_jobs
+from ._base import PointCloudDescriptor
 
 __all__ = ["OURCVFHTransformer"]
 
@@ -229,7 +226,7 @@ def _ourcvfh_object(points, normals, *, n_neighbors=10, curvature_threshold=0.03
     return sigs, owners, clusters
 
 
-class OURCVFHTransformer(TransformerMixin, BaseEstimator):
+class OURCVFHTransformer(PointCloudDescriptor):
     """Oriented, Unique and Repeatable Clustered Viewpoint Feature Histogram.
 
     OUR-CVFH (Aldoma et al. 2012) after PCL 1.13's ``OURCVFHEstimation``:
@@ -388,30 +385,25 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         n_threads = 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=owner)
         return params, n_threads
 
-    def fit(self, X, y=None):
-        """Check the parameters and clouds; learn the scale for ``scaling="fit"``.
+    _min_points = 3
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points, with normals in columns 3-5
-            when available.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : OURCVFHTransformer
-            The fitted transformer.
-        """
-        self._check_params()
-        clouds = check_point_clouds(X, owner=type(self).__name__, min_points=3)
+    def _learn(self, clouds, params):
         self.scale_ = 1.0
         if self.scaling == "fit":
             side = max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
             self.scale_ = 1.0 / side
-        self.n_features_out_ = N_FEATURES
-        return self
+
+    def _n_features(self, params):
+        return N_FEATURES
+
+    def _per_object(self, clouds, params):
+        return ()
+
+    def _feature_names(self):
+        names = [f"ourcvfh_{f}_{i}" for f in ("f1", "f2", "f3") for i in range(N_ANGLE_BINS)]
+        names += [f"ourcvfh_octant{k}_shell{j}" for k in range(N_OCTANTS) for j in range(N_SHELLS)]
+        names += [f"ourcvfh_view_{i}" for i in range(N_VIEW_BINS - VIEW_KEPT, N_VIEW_BINS)]
+        return names
 
     def _one(self, pts, nrm, params):
         pts = pts - pts.mean(axis=0)
@@ -431,65 +423,17 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
             row = row / row.sum()
         return row
 
-    def transform(self, X):
-        """Compute one OUR-CVFH row per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points; normals are estimated for
-            clouds with three columns.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, 308)
-            One row per cloud (summing to one when ``normalize``).
-        """
-        check_is_fitted(self)
-        owner = type(self).__name__
-        params, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
-        return transform_in_chunks(_ourcvfh_chunk, self, clouds, n_features=308)
-
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            ``ourcvfh_f1_<i>``, ``_f2_``, ``_f3_``, ``ourcvfh_octant<k>_shell<j>``,
-            ``ourcvfh_view_<i>`` (i = 59..127), in the output's order.
-        """
-        check_is_fitted(self)
-        names = [f"ourcvfh_{f}_{i}" for f in ("f1", "f2", "f3") for i in range(N_ANGLE_BINS)]
-        names += [f"ourcvfh_octant{k}_shell{j}" for k in range(N_OCTANTS) for j in range(N_SHELLS)]
-        names += [f"ourcvfh_view_{i}" for i in range(N_VIEW_BINS - VIEW_KEPT, N_VIEW_BINS)]
-        return np.asarray(names, dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        return tags
-
-
-def _ourcvfh_chunk(est, clouds, first_index):
-    """OUR-CVFH rows of one chunk of validated clouds (a joblib task)."""
-    owner = type(est).__name__
-    params, n_threads = est._check_params()
-    points, normals, offsets = _points_and_normals(
-        clouds, params["n_neighbors"], est.normal_orientation, n_threads, owner
-    )
-    spans = [(offsets[k], offsets[k + 1]) for k in range(len(clouds))]
-    if n_threads == 1:
-        rows = [est._one(points[a:b], normals[a:b], params) for a, b in spans]
-    else:
-        rows = Parallel(n_jobs=n_threads, prefer="threads")(
-            delayed(est._one)(points[a:b], normals[a:b], params) for a, b in spans
+    def _describe(self, clouds, params, *, first_index):
+        """OUR-CVFH rows of one chunk of validated clouds."""
+        params, n_threads = params
+        points, normals, offsets = self._points_and_normals(
+            clouds, params["n_neighbors"], self.normal_orientation, n_threads
         )
-    return np.vstack(rows)
+        spans = [(offsets[k], offsets[k + 1]) for k in range(len(clouds))]
+        if n_threads == 1:
+            rows = [self._one(points[a:b], normals[a:b], params) for a, b in spans]
+        else:
+            rows = Parallel(n_jobs=n_threads, prefer="threads")(
+                delayed(self._one)(points[a:b], normals[a:b], params) for a, b in spans
+            )
+        return np.vstack(rows)

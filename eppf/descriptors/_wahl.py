@@ -3,38 +3,15 @@
 import numbers
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils.validation import check_is_fitted
 
 from ._esf_fast import wahl_batch
-from ._esf import _check_int
-from ..utils._chunks import transform_in_chunks
-from ..utils._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
+from ..utils import check_int as _check_int
+from ..utils import check_n_jobs, pack_point_clouds
+from ._base import PointCloudDescriptor
 
 __all__ = ["WahlTransformer"]
 
 _NAMES = ("alpha", "beta", "gamma", "delta")
-
-
-def _points_and_normals(clouds, n_neighbors, orientation, n_threads, owner):
-    """Pack validated clouds; estimate normals for those given without.
-
-    Returns ``points`` (N, 3), ``normals`` (N, 3) and ``offsets``.
-    """
-    from ..preprocessing._normals import estimate_normals_batch
-
-    points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
-    normals = np.empty_like(points)
-    missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
-    for k, c in enumerate(clouds):
-        if c.shape[1] == 6:
-            normals[offsets[k] : offsets[k + 1]] = c[:, 3:]
-    if missing:
-        sub_pts, _, sub_off = pack_point_clouds([clouds[k][:, :3] for k in missing])
-        est = estimate_normals_batch(sub_pts, sub_off, n_neighbors, orientation, n_threads, owner=owner)
-        for j, k in enumerate(missing):
-            normals[offsets[k] : offsets[k + 1]] = est[sub_off[j] : sub_off[j + 1]]
-    return points, normals, offsets
 
 
 def _check_n_bins(n_bins, owner):
@@ -52,7 +29,7 @@ def _check_n_bins(n_bins, owner):
     return out
 
 
-class WahlTransformer(TransformerMixin, BaseEstimator):
+class WahlTransformer(PointCloudDescriptor):
     """Surflet-pair-relation histogram of Wahl et al. (2003).
 
     Draws random pairs of oriented points (surflets) and histograms their
@@ -167,90 +144,28 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
         return n_bins, n_pairs, n_neighbors, n_threads
 
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; nothing is learnt from data.
+    def _learn(self, clouds, params):
+        self.n_bins_ = params[0]
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 2 points, with normals in columns 3-5
-            when available.
-        y : None
-            Ignored.
+    def _n_features(self, params):
+        return int(np.prod(params[0]))
 
-        Returns
-        -------
-        self : WahlTransformer
-            The fitted transformer.
-        """
-        n_bins, _, _, _ = self._check_params()
-        check_point_clouds(X, owner=type(self).__name__, min_points=2)
-        self.n_bins_ = n_bins
-        self.n_features_out_ = int(np.prod(n_bins))
-        return self
-
-    def transform(self, X):
-        """Compute one surflet-pair-relation histogram per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 2 points; normals are estimated for
-            clouds with three columns.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, prod(n_bins))
-            Histograms, each summing to one.
-        """
-        check_is_fitted(self)
-        owner = type(self).__name__
-        n_bins, n_pairs, n_neighbors, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
-        seeds = object_seeds(self.random_state, len(clouds))
-        return transform_in_chunks(_wahl_chunk, self, clouds, (seeds,), n_features=int(np.prod(n_bins)))
-
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns, e.g. ``wahl_a0_b1_g2_d3``.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            One name per bin, in the output's (C) order.
-        """
-        check_is_fitted(self)
+    def _feature_names(self):
         idx = np.indices(self.n_bins_).reshape(4, -1).T
-        return np.asarray([f"wahl_a{a}_b{b}_g{g}_d{d}" for a, b, g, d in idx], dtype=object)
+        return [f"wahl_a{a}_b{b}_g{g}_d{d}" for a, b, g, d in idx]
 
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        tags.non_deterministic = self.random_state is None
-        return tags
-
-
-def _wahl_chunk(est, clouds, seeds, first_index):
-    """Wahl histograms of one chunk of validated clouds (a joblib task)."""
-    owner = type(est).__name__
-    n_bins, n_pairs, n_neighbors, n_threads = est._check_params()
-    points, normals, offsets = _points_and_normals(clouds, n_neighbors, est.normal_orientation, n_threads, owner)
-    out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)
-    status = np.zeros(len(clouds), dtype=np.int8)
-    n_threads = max(1, min(n_threads, len(clouds)))
-    wahl_batch(
-        points, normals, offsets, seeds, n_pairs, np.asarray(n_bins, dtype=np.int32),
-        est.source == "parallel", out, status, n_threads,
-    )
-    bad = np.flatnonzero(status)
-    if bad.size:
-        raise ValueError(
-            f"{owner}: point cloud {first_index + bad[0]} has too few usable surflet pairs (coincident points, "
-            "or every normal parallel to the lines between points)"
+    def _describe(self, clouds, params, seeds, *, first_index):
+        """Wahl histograms of one chunk of validated clouds."""
+        n_bins, n_pairs, n_neighbors, n_threads = params
+        points, normals, offsets = self._points_and_normals(clouds, n_neighbors, self.normal_orientation, n_threads)
+        out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)
+        status = np.zeros(len(clouds), dtype=np.int8)
+        n_threads = max(1, min(n_threads, len(clouds)))
+        wahl_batch(
+            points, normals, offsets, seeds, n_pairs, np.asarray(n_bins, dtype=np.int32),
+            self.source == "parallel", out, status, n_threads,
         )
-    return out
+        self._raise_for_status(status, first_index, {
+            1: "has too few usable surflet pairs (coincident points, or every normal parallel to the lines "
+               "between points)"})
+        return out

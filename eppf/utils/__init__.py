@@ -9,9 +9,10 @@ meaning everywhere.
 """
 
 from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_cloud, check_point_clouds, object_seeds, pack_point_clouds
+from ._validation import check_int, check_n_jobs, check_point_cloud, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = [
+    "check_int",
     "check_n_jobs",
     "check_point_cloud",
     "check_point_clouds",

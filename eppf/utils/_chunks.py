@@ -47,6 +47,15 @@ def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose
     Returns
     -------
     X : ndarray of shape (len(clouds), n_features)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import transform_in_chunks
+    >>> def sizes(est, clouds, first_index):
+    ...     return np.array([[len(c)] for c in clouds], dtype=float)
+    >>> transform_in_chunks(sizes, None, [np.zeros((n, 3)) for n in (2, 5)], n_features=1).ravel()
+    array([2., 5.])
     """
     n = len(clouds)
     bounds = list(range(0, n, CHUNK)) + [n]

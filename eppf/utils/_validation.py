@@ -11,7 +11,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["check_n_jobs", "check_point_cloud", "check_point_clouds", "object_seeds", "pack_point_clouds"]
+__all__ = ["check_int", "check_n_jobs", "check_point_cloud", "check_point_clouds", "object_seeds", "pack_point_clouds"]
 
 
 def _prefix(owner):
@@ -47,6 +47,14 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
         If the shape is wrong, a value is NaN or infinite, there are fewer than
         ``min_points`` points or fewer than two distinct ones, or a normal has
         zero length.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import check_point_cloud
+    >>> check_point_cloud([[0, 0, 0, 0, 0, 2], [1, 0, 0, 0, 0, 3]])[:, 3:]
+    array([[0., 0., 1.],
+           [0., 0., 1.]])
     """
     pre = _prefix(owner)
     what = "point cloud" if index is None else f"point cloud {index}"
@@ -107,6 +115,14 @@ def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True, n_thr
     -------
     clouds : list of ndarray
         Validated float64 clouds (see :func:`check_point_cloud`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import check_point_clouds
+    >>> clouds = check_point_clouds([np.eye(3), np.ones((4, 3)) * np.arange(4)[:, None]], owner="Mine")
+    >>> [c.shape for c in clouds]
+    [(3, 3), (4, 3)]
     """
     pre = _prefix(owner)
     if X is None or isinstance(X, (str, bytes, dict, numbers.Number)):
@@ -247,6 +263,14 @@ def pack_point_clouds(clouds):
         None when the clouds carry no normals.
     offsets : ndarray of shape (n_objects + 1,), int64
         Object ``k`` is ``points[offsets[k]:offsets[k + 1]]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import pack_point_clouds
+    >>> points, normals, offsets = pack_point_clouds([np.eye(3), np.ones((2, 3))])
+    >>> points.shape, normals, offsets
+    ((5, 3), None, array([0, 3, 5]))
     """
     packed = _stacked_view(clouds)
     if packed is not None:
@@ -273,6 +297,12 @@ def check_n_jobs(n_jobs, *, owner=None):
     ``None`` means the OpenMP default, which honours ``OMP_NUM_THREADS`` and
     ``threadpoolctl`` limits (so estimators nested in joblib workers do not
     oversubscribe); ``-1`` means all cores, ``-2`` all but one, and so on.
+
+    Examples
+    --------
+    >>> from eppf.utils import check_n_jobs
+    >>> check_n_jobs(2)
+    2
     """
     import os
 
@@ -297,8 +327,49 @@ def object_seeds(random_state, n_objects):
     Kernels give each object a private generator seeded from its entry, so a
     descriptor depends only on ``random_state`` and the object's position,
     never on the number of threads or on chunking.
+
+    Examples
+    --------
+    >>> from eppf.utils import object_seeds
+    >>> (object_seeds(0, 3) == object_seeds(0, 3)).all()
+    np.True_
     """
     from sklearn.utils import check_random_state
 
     rng = check_random_state(random_state)
     return rng.randint(0, np.iinfo(np.int64).max, size=n_objects, dtype=np.int64).astype(np.uint64)
+
+
+def check_int(value, name, owner, low, high=None):
+    """Check an integer parameter: ``int(value)``, or a TypeError/ValueError naming ``owner`` and ``name``.
+
+    Parameters
+    ----------
+    value : object
+        The parameter's value; bools are refused.
+    name : str
+        The parameter's name, for the message.
+    owner : str
+        The estimator's name, for the message.
+    low : int
+        Smallest accepted value.
+    high : int, default=None
+        Largest accepted value (no bound when None).
+
+    Returns
+    -------
+    value : int
+        The value as a Python int.
+
+    Examples
+    --------
+    >>> from eppf.utils import check_int
+    >>> check_int(5, "n_pairs", "MyDescriptor", 1)
+    5
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{owner}: {name} must be an int, got {type(value).__name__}")
+    if value < low or (high is not None and value > high):
+        bound = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ValueError(f"{owner}: {name} must be {bound}, got {value}")
+    return int(value)
