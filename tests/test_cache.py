@@ -1,4 +1,4 @@
-"""Tests of CachedTransformer (descriptor caching with joblib.Memory)."""
+"""Tests of CachedTransformer (descriptor outputs cached as .npz files; fit always runs)."""
 
 import re
 import warnings
@@ -55,7 +55,7 @@ def test_cache_hits_and_matches_direct(tmp_path):
     assert CALLS == {"fit": 1, "transform": 2}  # fit_transform inside fit, then transform
     again = CachedTransformer(_Histogram(n_jobs=4), memory=str(tmp_path)).fit(X)  # n_jobs only changes speed
     assert_array_equal(again.transform(Z), expected)
-    assert CALLS == {"fit": 1, "transform": 2}
+    assert CALLS == {"fit": 2, "transform": 2}  # the cheap fit runs again; both outputs come from the cache
     assert again.transformer_.scale_ == direct.scale_
 
 
@@ -89,7 +89,15 @@ def test_joblib_memory_object_and_pipeline(tmp_path):
     a = pipe.fit_transform(X)
     b = clone(pipe).fit_transform(X)
     assert_array_equal(a, b)
-    assert CALLS["fit"] == 1
+    assert CALLS == {"fit": 2, "transform": 1}
+    assert any(f.suffix == ".npz" for f in tmp_path.iterdir())
+
+
+def test_cache_files_hold_no_pickle(tmp_path):
+    CachedTransformer(_Histogram(), memory=tmp_path).fit_transform(_clouds(0))
+    (path,) = [f for f in tmp_path.iterdir() if f.suffix == ".npz"]
+    with np.load(path, allow_pickle=False) as f:
+        assert list(f) == ["X"] and f["X"].dtype == np.float64
 
 
 def test_random_state_none_warns(tmp_path):

@@ -1,33 +1,15 @@
-"""Caching of descriptors on disk with :class:`joblib.Memory`."""
+"""Caching of descriptor outputs on disk, for pipelines and grid searches."""
 
 import os
 import warnings
 
 from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.utils import get_tags
-from sklearn.utils.validation import check_is_fitted, check_memory
+from sklearn.utils.validation import check_is_fitted
+
+from ..utils._cache import DescriptorCache, data_digest, estimator_key
 
 __all__ = ["CachedTransformer"]
-
-# parameters that change how fast a transformer runs, never what it returns
-_NEUTRAL_PARAMS = ("n_jobs", "verbose", "chunk_size", "batch_size")
-
-
-def _key(transformer):
-    """What the output depends on: class, parameters and fitted state."""
-    cls = f"{type(transformer).__module__}.{type(transformer).__qualname__}"
-    params = {k: v for k, v in transformer.get_params(deep=True).items() if k.rsplit("__", 1)[-1] not in _NEUTRAL_PARAMS}
-    state = {k: v for k, v in vars(transformer).items() if k.endswith("_") and not k.startswith("_")}
-    return cls, params, state
-
-
-def _fit_transform(cls, params, X, y, transformer):
-    est = clone(transformer)
-    return est, est.fit_transform(X, y) if y is not None else est.fit_transform(X)
-
-
-def _transform(cls, params, state, X, transformer):
-    return transformer.transform(X)
 
 
 class CachedTransformer(TransformerMixin, BaseEstimator):
@@ -47,7 +29,8 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
         The transformer to cache, e.g. :class:`eppf.descriptors.EPPFTransformer`; it is
         cloned in ``fit``.
     memory : str, path-like or joblib.Memory, default=None
-        Where to cache (a folder, or a Memory object); None disables caching.
+        Where to cache: a folder (or a Memory object, whose location is
+        used); None disables caching.
 
     Attributes
     ----------
@@ -76,26 +59,30 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
         self.transformer = transformer
         self.memory = memory
 
-    def _memory(self):
+    def _cache(self):
         owner = type(self).__name__
         if not hasattr(self.transformer, "fit") or not hasattr(self.transformer, "transform"):
             raise TypeError(f"{owner}: transformer must have fit and transform methods, got {type(self.transformer).__name__}")
         memory = self.memory
+        if memory is not None and hasattr(memory, "location") and hasattr(memory, "cache"):
+            memory = memory.location
         if isinstance(memory, os.PathLike):
             memory = os.fspath(memory)
-        try:
-            memory = check_memory(memory)
-        except ValueError as exc:
-            raise ValueError(f"{owner}: memory must be None, a folder or a joblib.Memory ({exc})") from None
+        if memory is not None and not isinstance(memory, str):
+            raise ValueError(f"{owner}: memory must be None, a folder or a joblib.Memory, got {type(memory).__name__}")
         params = self.transformer.get_params(deep=True)
-        if memory.location is not None and "random_state" in params and params["random_state"] is None:
+        if memory is not None and "random_state" in params and params["random_state"] is None:
             warnings.warn(
                 f"{owner}: the wrapped {type(self.transformer).__name__} has random_state=None; the cache "
                 "returns the first draw on every call. Set an integer random_state.",
                 UserWarning,
                 stacklevel=3,
             )
-        return memory
+        return DescriptorCache(memory)
+
+    def _cached_transform(self, cache, est, X):
+        key = [estimator_key(est, fitted=True), data_digest(X)]
+        return cache.get(type(est).__name__, key, lambda: {"X": est.transform(X)}, ["X"], type(est).__name__)["X"]
 
     def fit(self, X, y=None):
         """Fit a clone of the transformer (cached).
@@ -130,11 +117,14 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
         X_new : ndarray
             The wrapped transformer's output.
         """
-        memory = self._memory()
-        cls, params, _ = _key(self.transformer)
-        func = memory.cache(_fit_transform, ignore=["transformer"])
-        self.transformer_, Xt = func(cls, params, X, y, self.transformer)
-        return Xt
+        cache = self._cache()
+        est = clone(self.transformer)
+        if y is None:
+            est.fit(X)
+        else:
+            est.fit(X, y)
+        self.transformer_ = est
+        return self._cached_transform(cache, est, X)
 
     def transform(self, X):
         """Transform with the fitted transformer (cached).
@@ -150,10 +140,7 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
             The wrapped transformer's output.
         """
         check_is_fitted(self, "transformer_")
-        memory = self._memory()
-        cls, params, state = _key(self.transformer_)
-        func = memory.cache(_transform, ignore=["transformer"])
-        return func(cls, params, state, X, self.transformer_)
+        return self._cached_transform(self._cache(), self.transformer_, X)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

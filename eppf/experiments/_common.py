@@ -13,6 +13,7 @@ import numpy as np
 from sklearn.utils import check_random_state
 
 from ..registry import DESCRIPTORS as REGISTRY
+from ..utils._cache import NEUTRAL_PARAMS, DescriptorCache
 
 __all__ = [
     "Dataset",
@@ -26,7 +27,6 @@ __all__ = [
 ]
 
 #: Parameters that change speed or chattiness, never the descriptor.
-_NEUTRAL = ("n_jobs", "verbose", "chunk_size", "batch_size")
 
 
 class ExperimentError(ValueError):
@@ -271,98 +271,6 @@ def draw_seeds(random_state, n):
 
 
 # -------------------------------------------------------------------- cache
-def clouds_hash(clouds):
-    """A digest of a list of clouds (shapes and values)."""
-    h = hashlib.blake2b(digest_size=16)
-    h.update(str(len(clouds)).encode())
-    for c in clouds:
-        c = np.ascontiguousarray(c, dtype=np.float64)
-        h.update(str(c.shape).encode())
-        h.update(c.data)
-    return h.hexdigest()
-
-
-def _params_key(est):
-    params = est.get_params(deep=False)
-    items = sorted((k, repr(v)) for k, v in params.items() if k not in _NEUTRAL)
-    return f"{type(est).__module__}.{type(est).__qualname__}{items}"
-
-
-class DescriptorCache:
-    """Descriptors on disk, keyed by transformer parameters and input clouds.
-
-    Parameters
-    ----------
-    folder : str or None
-        Where ``.npz`` files go; None disables caching.
-    log : callable, default=None
-        Receives one line per hit or computation.
-
-    Attributes
-    ----------
-    n_computed : int
-        Descriptor sets computed (cache misses) so far.
-    n_loaded : int
-        Descriptor sets read from the cache so far.
-    """
-
-    def __init__(self, folder, log=None):
-        self.folder = folder
-        self.log = log or (lambda msg: None)
-        self.n_computed = 0
-        self.n_loaded = 0
-        self.seconds = 0.0
-        if folder is not None:
-            os.makedirs(folder, exist_ok=True)
-
-    def describe(self, est, fit_clouds, sets, label):
-        """Fit ``est`` on ``fit_clouds`` and transform every set of clouds.
-
-        Parameters
-        ----------
-        est : transformer
-            Unfitted descriptor transformer (its ``random_state`` fixed).
-        fit_clouds : list of ndarray
-            Clouds passed to ``fit``.
-        sets : dict of str to list of ndarray
-            Clouds to transform, by name.
-        label : str
-            Name in progress lines and in the cache file name.
-
-        Returns
-        -------
-        descriptors : dict of str to ndarray
-            One descriptor matrix per set.
-        """
-        key_parts = [_params_key(est), clouds_hash(fit_clouds)]
-        key_parts += [f"{k}:{clouds_hash(v)}" for k, v in sorted(sets.items())]
-        key = hashlib.blake2b("|".join(key_parts).encode(), digest_size=12).hexdigest()
-        # the file name depends on what was computed only, so experiments share files
-        path = None if self.folder is None else os.path.join(self.folder, f"{type(est).__name__}-{key}.npz")
-        if path is not None and os.path.exists(path):
-            try:
-                with np.load(path, allow_pickle=False) as f:
-                    out = {k: f[k] for k in sets}
-                self.n_loaded += 1
-                self.log(f"{label}: descriptors from cache {os.path.basename(path)}")
-                return out
-            except (OSError, KeyError, ValueError):
-                self.log(f"{label}: unreadable cache file {path}, recomputing")
-        t = time.perf_counter()
-        est.fit(fit_clouds)
-        out = {k: np.asarray(est.transform(v)) for k, v in sets.items()}
-        dt = time.perf_counter() - t
-        self.seconds += dt
-        self.n_computed += 1
-        n = sum(len(v) for v in sets.values())
-        self.log(f"{label}: computed {n} descriptors in {dt:.1f} s")
-        if path is not None:
-            tmp = f"{path}.{os.getpid()}.tmp.npz"
-            np.savez(tmp, **out)
-            os.replace(tmp, path)
-        return out
-
-
 # ------------------------------------------------------------------ machine
 def machine_info():
     """CPU model, core count and library versions, as Markdown lines."""
@@ -546,7 +454,7 @@ def make_descriptor(name, *, scaling, random_state, n_jobs, quick, functions=Non
 
 def params_text(est):
     """The parameters of an estimator that matter, for the protocol."""
-    p = {k: v for k, v in est.get_params(deep=False).items() if k not in _NEUTRAL + ("random_state", "device")}
+    p = {k: v for k, v in est.get_params(deep=False).items() if k not in NEUTRAL_PARAMS + ("random_state", "device")}
     return f"{type(est).__name__}(" + ", ".join(f"{k}={v!r}" for k, v in p.items()) + ")"
 
 
