@@ -281,8 +281,9 @@ class OURCVFHTransformer(PointCloudDescriptor):
         Sign of estimated normals: away from the object's centroid, towards
         the origin, or unoriented (as in :class:`eppf.descriptors.EPPFTransformer`).
     n_jobs : int, default=None
-        Threads over objects (joblib); None means 1. Output does not depend
-        on it.
+        Threads over objects, with joblib's meaning for integers (``-1``:
+        all cores); None is the OpenMP default, as for every eppf estimator
+        (see :func:`eppf.utils.check_n_jobs`). Output does not depend on it.
 
     Attributes
     ----------
@@ -382,7 +383,7 @@ class OURCVFHTransformer(PointCloudDescriptor):
             )
         if not isinstance(self.normalize, (bool, np.bool_)):
             raise TypeError(f"{owner}: normalize must be a bool, got {type(self.normalize).__name__}")
-        n_threads = 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=owner)
+        n_threads = check_n_jobs(self.n_jobs, owner=owner)
         return params, n_threads
 
     _min_points = 3

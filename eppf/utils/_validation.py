@@ -292,11 +292,35 @@ def pack_point_clouds(clouds):
 
 
 def check_n_jobs(n_jobs, *, owner=None):
-    """Resolve ``n_jobs`` (joblib's meaning) to a positive thread count.
+    """Resolve ``n_jobs`` to a positive thread count: the one meaning of ``n_jobs`` in eppf.
 
-    ``None`` means the OpenMP default, which honours ``OMP_NUM_THREADS`` and
-    ``threadpoolctl`` limits (so estimators nested in joblib workers do not
-    oversubscribe); ``-1`` means all cores, ``-2`` all but one, and so on.
+    Integers have joblib's meaning: a positive number of threads, ``-1`` all
+    cores, ``-2`` all but one, and so on. ``None`` means "do not override
+    the environment": the OpenMP default, which honours ``OMP_NUM_THREADS``
+    and threadpoolctl limits, so estimators nested in joblib workers (which
+    set those limits) do not oversubscribe. Every eppf estimator and
+    function with an ``n_jobs`` parameter resolves it here (or, for torch
+    and BLAS, leaves the library's own default, which follows the same
+    variables); no result ever depends on it.
+
+    Parameters
+    ----------
+    n_jobs : int or None
+        The parameter's value.
+    owner : str, default=None
+        Name of the estimator, for error messages.
+
+    Returns
+    -------
+    n_threads : int
+        At least 1.
+
+    Raises
+    ------
+    TypeError
+        If ``n_jobs`` is neither an int nor None.
+    ValueError
+        If ``n_jobs`` is 0.
 
     Examples
     --------
