@@ -17,5 +17,6 @@ from ._ourcvfh import OURCVFHTransformer
 from ._wahl import WahlTransformer
 from ._normals import estimate_normals
 from ._pointnet import PointNetClassifier
+from ._persist import load_model, save_model
 
-__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "PointNetClassifier", "WahlTransformer", "descriptor_pool", "estimate_normals", "symmetric_kl_distances"]
+__all__ = ["EPPF4DClassifier", "EPPFTransformer", "ESFTransformer", "FUNCTIONS", "KLNearestNeighbors", "OURCVFHTransformer", "PointNetClassifier", "WahlTransformer", "descriptor_pool", "estimate_normals", "load_model", "save_model", "symmetric_kl_distances"]
