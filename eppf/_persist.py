@@ -583,13 +583,20 @@ def load_model(path, *, trust=False):
                 raise ValueError(f"{path}: {_MANIFEST} is larger than {_MAX_MANIFEST_BYTES >> 20} MiB")
             try:
                 manifest = json.loads(zf.read(_MANIFEST).decode("utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise ValueError(f"{path}: {_MANIFEST} is not valid JSON ({exc})") from None
+            except (ValueError, RecursionError) as exc:  # bad UTF-8 or JSON, absurd nesting or numbers
+                raise ValueError(f"{path}: {_MANIFEST} is not valid JSON ({type(exc).__name__}: {exc})") from None
             _check_manifest(manifest, path)
             arrays = _read_arrays(zf, path)
     except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, KeyError) as exc:
         raise ValueError(f"cannot load model {path}: corrupt or truncated model file ({type(exc).__name__}: {exc})") from None
-    return _Decoder(arrays, path).decode(manifest["root"], "model")
+    try:
+        return _Decoder(arrays, path).decode(manifest["root"], "model")
+    except RecursionError:
+        raise ValueError(f"{path}: the model tree in {_MANIFEST} is nested too deeply") from None
+    except (ValueError, TypeError) as exc:  # raised while rebuilding, e.g. by an estimator's own checks
+        if path in str(exc):
+            raise
+        raise ValueError(f"{path}: cannot rebuild the model: {exc}") from None
 
 
 def _check_manifest(manifest, path):

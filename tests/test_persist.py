@@ -378,3 +378,26 @@ def test_every_model_option_documents_safety_and_trust():
             assert "safe" in actions["model"].help and "--trust" in actions["model"].help
             assert "trust" in actions and "run any code" in actions["trust"].help
     assert with_model == 2
+
+
+def test_hostile_values_in_the_tree_give_value_errors_naming_the_file(model_file):
+    with zipfile.ZipFile(model_file) as zf:
+        manifest = json.loads(zf.read("manifest.json"))
+    ref = manifest["root"]["params"]["steps"][1]["items"][1]["attributes"]["_fit_data"]["H"]
+    # training histograms that are not positive
+    _rewrite(model_file, manifest=lambda m: dict(m, root={"__type__": "kl_prepared", "H": ref}),
+             arrays=lambda blob: _npz(**{ref: -np.ones((2, 3))}))
+    with pytest.raises(ValueError, match=re.escape(str(model_file)) + ".*positive finite"):
+        load_model(model_file)
+    # values an estimator's own code rejects while rebuilding
+    _rewrite(model_file, manifest=lambda m: dict(m, root={"__type__": "kl_prepared", "H": ref}),
+             arrays=lambda blob: _npz(**{ref: np.full((2, 3), 1e308)}))
+    with pytest.raises(ValueError, match=re.escape(str(model_file)) + ".*too large"):
+        load_model(model_file)
+    deep = "[" * 100_000 + "]" * 100_000
+    with zipfile.ZipFile(model_file, "w") as zf:
+        zf.writestr("manifest.json", '{"format": "eppf-model", "format_version": 1, "eppf_version": "0.1.0", '
+                    f'"root": {deep}}}')
+        zf.writestr("arrays.npz", _npz())
+    with pytest.raises(ValueError, match=re.escape(str(model_file))):
+        load_model(model_file)
