@@ -53,3 +53,23 @@ def test_chunks_are_bounded_in_objects_and_points():
     for (lo, hi), _ in zip(chunks[:-1], chunks[1:]):
         assert hi - lo == CHUNK or sum(sizes[lo:hi + 1]) > CHUNK_POINTS
     assert _chunk_bounds([], CHUNK, CHUNK_POINTS) == []
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_point_bound_grows_with_the_threads(monkeypatch, n_jobs):
+    import numpy as np
+
+    import eppf._chunks as chunks_module
+    from eppf import EPPFTransformer
+
+    seen = []
+    real = chunks_module._chunk_bounds
+
+    def spy(clouds, chunk, chunk_points):
+        seen.append(chunk_points)
+        return real(clouds, chunk, chunk_points)
+
+    monkeypatch.setattr(chunks_module, "_chunk_bounds", spy)
+    clouds = [np.random.default_rng(k).normal(size=(50, 3)) for k in range(3)]
+    EPPFTransformer(n_pairs=100, random_state=0, n_jobs=n_jobs).fit_transform(clouds)
+    assert seen == [CHUNK_POINTS * n_jobs]
