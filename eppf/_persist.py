@@ -243,7 +243,7 @@ def save_model(model, path):
                 "numpy_version": np.__version__, "root": root}
     text = json.dumps(manifest, allow_nan=False, indent=1)
     with atomic_write(path, "wb") as fh:
-        with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
             zf.writestr(_MANIFEST, text)
             with zf.open(_ARRAYS, "w", force_zip64=True) as member:
                 np.savez(member, **encoder.arrays)
