@@ -13,6 +13,8 @@ from .neighbors import KLNearestNeighbors, symmetric_kl_distances
 from .classifiers import EPPF4DClassifier, PointNetClassifier
 from .preprocessing import estimate_normals
 
+from ._persist import load_model, save_model
+
 __all__ = [
     "EPPF4DClassifier",
     "EPPFTransformer",
@@ -24,5 +26,7 @@ __all__ = [
     "WahlTransformer",
     "descriptor_pool",
     "estimate_normals",
+    "load_model",
+    "save_model",
     "symmetric_kl_distances",
 ]

@@ -206,7 +206,7 @@ def test_train_save_load_predict_gives_in_memory_predictions(tmp_path, capsys, c
             "--classifier", classifier, "--max-epochs", "1", "--n-jobs", "1", "--random-state", "4", "--no-progress"]
     status, out, _ = _run(argv, capsys)
     assert status == 0 and "trained" in out
-    saved = joblib.load(tmp_path / "m.joblib")
+    saved = eppf.load_model(tmp_path / "m.joblib")
     assert saved["eppf_version"] == eppf.__version__
     assert saved["params"]["n_pairs"] == 1000 and saved["params"]["classifier"] == classifier
     assert saved["classes"] == ["blob", "stick"]
@@ -269,9 +269,9 @@ def test_predict_warns_when_saved_by_another_version(tmp_path, capsys):
     _write_npz(tmp_path / "tiny.npz")
     assert main(["train", "--data", str(tmp_path / "tiny.npz"), "-o", str(tmp_path / "m.joblib"), "--n-pairs",
                  N_PAIRS, "--no-progress"]) == 0
-    saved = joblib.load(tmp_path / "m.joblib")
+    saved = eppf.load_model(tmp_path / "m.joblib")
     saved["eppf_version"] = "0.0.0-old"
-    joblib.dump(saved, tmp_path / "old.joblib")
+    eppf.save_model(saved, tmp_path / "old.joblib")
     cloud = tmp_path / "c.xyz"
     write_point_cloud(cloud, np.random.default_rng(0).normal(size=(60, 3)))
     status, out, err = _run(["predict", cloud, "--model", tmp_path / "old.joblib", "--no-progress"], capsys)
@@ -294,7 +294,7 @@ def test_evaluate_retrieval_and_model_match_direct_computation(tmp_path, capsys)
     X = EPPFTransformer(n_pairs=1000, random_state=2).fit_transform(bunch.data)
     loo = retrieval_scores(bunch.target, leave_one_out_retrieval(X, bunch.target))
     test = bunch.split == "test"
-    model = joblib.load(tmp_path / "m.joblib")["model"]
+    model = eppf.load_model(tmp_path / "m.joblib")["model"]
     split_scores = retrieval_scores(bunch.target[test], model.predict([c for c, t in zip(bunch.data, test) if t]))
     for key in ["total_accuracy", "macro_f1"]:
         assert got[("leave-one-out retrieval", key)] == pytest.approx(100 * loo[key], abs=1e-4)
@@ -350,7 +350,7 @@ def test_train_on_a_folder_of_class_subfolders(tmp_path, capsys):
     status, out, _ = _run(["train", "--data", tmp_path / "objects", "-o", tmp_path / "m.joblib", "--n-pairs",
                            N_PAIRS, "--no-progress"], capsys)
     assert status == 0 and "on 8 objects" in out
-    saved = joblib.load(tmp_path / "m.joblib")
+    saved = eppf.load_model(tmp_path / "m.joblib")
     assert saved["classes"] == ["blob", "stick"]
     status, _, _ = _run(["predict", tmp_path / "objects" / "test", "--model", tmp_path / "m.joblib",
                          "-o", tmp_path / "p.csv", "--no-progress"], capsys)

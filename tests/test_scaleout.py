@@ -65,3 +65,13 @@ def test_error_in_a_later_chunk_names_the_global_index(monkeypatch):
     monkeypatch.setattr(chunks_module, "CHUNK", 3)
     with pytest.raises(ValueError, match=re.escape("ESFTransformer: point cloud 6 has no triangles")):
         ESFTransformer(n_triplets=100, random_state=0).fit_transform(clouds)
+
+
+@pytest.mark.parametrize("name", sorted(DESCRIPTORS))
+def test_point_bounded_chunks_give_the_same_descriptors(monkeypatch, name):
+    clouds = _clouds()
+    est = DESCRIPTORS[name]().fit(clouds)
+    whole = est.transform(clouds)
+    monkeypatch.setattr(chunks_module, "CHUNK_POINTS", 150)  # one to three clouds per chunk
+    assert len(chunks_module._chunk_bounds(clouds, chunks_module.CHUNK, 150)) > len(clouds) // 3
+    assert_array_equal(est.transform(clouds), whole)

@@ -7,10 +7,12 @@ and a train/test classification, printed as a table.
 
 Subcommands: ``describe`` (descriptors of files, folders or a ``.npz`` data
 set to ``.npy``/``.npz``), ``retrieve`` (top-k database neighbours by
-symmetric KL divergence), ``train`` (fit and save a pipeline with joblib),
+symmetric KL divergence), ``train`` (fit and save a pipeline as a safe model file),
 ``predict`` (classify files with a saved model), ``evaluate`` (leave-one-out
 retrieval and a saved model's test metrics) and ``bench`` (descriptor speed).
-Bad input ends with a one-line ``eppf: error: ...`` message and exit code 1.
+Bad input ends with a one-line ``eppf: error: ...`` message and exit code 1;
+Ctrl-C ends with ``eppf: interrupted`` and exit code 130. Every output file is
+written to a temporary file first and renamed into place when complete.
 """
 
 import argparse
@@ -21,7 +23,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from ..registry import DESCRIPTORS as REGISTRY
+from ..utils._atomic import atomic_write
 
 __all__ = ["build_parser", "load_model", "main", "make_pipeline_from_args", "run_main_job"]
 
@@ -186,6 +190,11 @@ DESCRIPTORS = tuple(REGISTRY)
 
 _MODEL_FORMAT = "eppf-model"
 
+_MODEL_HELP = ("a model saved by 'eppf train' (safe to load from anyone: the model format cannot run code; "
+               "pickled eppf 0.1 models need --trust)")
+_TRUST_HELP = ("load a pickled (eppf 0.1, joblib) model file; pickles can run any code while loading, so use "
+               "this only for files you made yourself")
+
 
 class _Progress:
     """A tqdm bar, or a plain iterator when progress is off or tqdm is missing."""
@@ -257,8 +266,9 @@ def build_subcommands(sub):
 
     p = sub.add_parser("train", help="fit a descriptor + classifier pipeline on a data set and save it",
                        description="Fit a Pipeline (EPPF descriptor + 1-NN by symmetric KL, or the 4D CNN) on "
-                                   "the training objects of a data set and save it with joblib, together with "
-                                   "its parameters and the eppf version.")
+                                   "the training objects of a data set and save it as a model file (a zip of "
+                                   "JSON and arrays that loading cannot turn into code), together with its "
+                                   "parameters and the eppf version.")
     _add_data_source(p)
     p.add_argument("-o", "--output", required=True, metavar="MODEL.joblib", help="where to save the model")
     p.add_argument("--classifier", choices=["knn", "cnn"], default="knn",
@@ -275,10 +285,11 @@ def build_subcommands(sub):
     _add_common(p)
 
     p = sub.add_parser("predict", help="classify point cloud files with a saved model",
-                       description="Load a model saved by 'eppf train' and classify point cloud files. Models "
-                                   "are joblib (pickle) files: load only models you trust.")
+                       description="Load a model saved by 'eppf train' and classify point cloud files. Model "
+                                   "files are safe to load; old pickled models need --trust.")
     p.add_argument("inputs", nargs="+", help="point cloud files or folders (searched recursively)")
-    p.add_argument("--model", required=True, metavar="MODEL.joblib", help="a model saved by 'eppf train'")
+    p.add_argument("--model", required=True, metavar="MODEL.joblib", help=_MODEL_HELP)
+    p.add_argument("--trust", action="store_true", help=_TRUST_HELP)
     p.add_argument("-o", "--output", help="write a CSV file instead of printing a table")
     p.add_argument("--n-jobs", type=_n_jobs, default=None, help="threads (default: the model's)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
@@ -288,7 +299,8 @@ def build_subcommands(sub):
                                    "descriptors of a data set, and with --model, the saved model's metrics on "
                                    "the data set's test split (every object when there is no split).")
     _add_data_source(p)
-    p.add_argument("--model", metavar="MODEL.joblib", help="also evaluate this saved model")
+    p.add_argument("--model", metavar="MODEL.joblib", help="also evaluate this saved model; " + _MODEL_HELP)
+    p.add_argument("--trust", action="store_true", help=_TRUST_HELP)
     p.add_argument("--no-retrieval", action="store_true", help="skip the leave-one-out retrieval")
     p.add_argument("-o", "--output", help="also write the metrics to a CSV file")
     _add_common(p)
@@ -396,7 +408,8 @@ def run_describe(args, out=None):
     X = est.fit_transform(clouds)
     seconds = time.perf_counter() - t0
     if output.lower().endswith(".npy"):
-        np.save(output, X)
+        with atomic_write(output) as fh:
+            np.save(fh, X)
     else:
         params = {k: v for k, v in est.get_params().items() if k not in ("verbose", "n_jobs")}
         arrays = dict(descriptors=X, ids=ids, descriptor=np.array(args.descriptor),
@@ -404,7 +417,8 @@ def run_describe(args, out=None):
                       scale=np.array(np.nan if getattr(est, "scale_", None) is None else est.scale_))
         if labels is not None:
             arrays.update(labels=labels, class_names=class_names)
-        np.savez(output, **arrays)
+        with atomic_write(output) as fh:
+            np.savez(fh, **arrays)
     print(f"eppf: {len(X)} {args.descriptor} descriptors of {X.shape[1]} bins -> {output} "
           f"({1e3 * seconds / len(X):.2f} ms per object)", file=out)
     return X
@@ -488,7 +502,7 @@ def run_retrieve(args, out=None):
 
 def _emit(rows, header, output, out):
     if output:
-        with open(output, "w", newline="") as fh:
+        with atomic_write(output, "w", newline="") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             for row in rows:
@@ -559,12 +573,13 @@ def make_pipeline_from_args(args):
 
 
 def run_train(args, out=None):
-    """Run ``eppf train``: fit a pipeline on a data set and save it with joblib.
+    """Run ``eppf train``: fit a pipeline on a data set and save it as a model file.
 
     The saved object is a dict with ``"format"`` (``"eppf-model"``),
     ``"model"`` (the fitted Pipeline), ``"eppf_version"``, ``"params"`` (the
     command's arguments), ``"classes"`` (class names indexed by the model's
-    labels) and ``"data"`` (the training data's name).
+    labels) and ``"data"`` (the training data's name), written with
+    :func:`eppf.save_model`.
 
     Parameters
     ----------
@@ -578,9 +593,7 @@ def run_train(args, out=None):
     saved : dict
         What was written to ``args.output``.
     """
-    import joblib
-
-    from .. import __version__
+    from .. import __version__, save_model
 
     out = out or sys.stdout
     if not 0 < args.test_size < 1:
@@ -605,19 +618,22 @@ def run_train(args, out=None):
     params = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items() if k != "func"}
     saved = {"format": _MODEL_FORMAT, "model": model, "eppf_version": __version__, "params": params,
              "classes": [str(c) for c in class_names], "data": str(name)}
-    joblib.dump(saved, args.output)
+    save_model(saved, args.output)
     print(f"eppf: trained {args.classifier} on {int(train.sum())} objects of {name} ({len(class_names)} classes) "
           f"in {seconds:.1f} s -> {args.output}", file=out)
     return saved
 
 
-def load_model(path):
+def load_model(path, trust=False):
     """Load a model saved by ``eppf train``.
 
     Parameters
     ----------
     path : str or path-like
-        The ``.joblib`` file.
+        The model file.
+    trust : bool, default=False
+        Also load a pickled model of eppf 0.1; see :func:`eppf.load_model`
+        (a pickle can run any code, so only for files you made yourself).
 
     Returns
     -------
@@ -629,24 +645,24 @@ def load_model(path):
     FileNotFoundError
         If the file does not exist.
     ValueError
-        If the file cannot be read or is not an eppf model. A warning is
-        printed on standard error if it was saved by another eppf version.
+        If the file cannot be read, is a pickle and ``trust`` is False, or is
+        not an eppf model. A warning is printed on standard error if it was
+        saved by another eppf version.
     """
-    import joblib
+    import warnings
 
     from .. import __version__
+    from .._persist import load_model as _load_model_file
 
     path = str(path)
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"no such model file: {path}")
-    try:
-        saved = joblib.load(path)
-    except Exception as exc:  # corrupt or foreign files raise all sorts of errors
-        raise ValueError(f"cannot load model {path}: not a readable joblib file "
-                         f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else 'no details'})") from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        saved = _load_model_file(path, trust=trust)
+    for w in caught:
+        print(f"eppf: warning: {w.message}", file=sys.stderr)
     if not (isinstance(saved, dict) and saved.get("format") == _MODEL_FORMAT and hasattr(saved.get("model"), "predict")):
         raise ValueError(f"{path} is not an eppf model (write one with 'eppf train')")
-    if saved.get("eppf_version") != __version__:
+    if saved.get("eppf_version") != __version__ and not caught:
         print(f"eppf: warning: {path} was saved by eppf {saved.get('eppf_version')}, this is eppf {__version__}",
               file=sys.stderr)
     return saved
@@ -693,7 +709,7 @@ def run_predict(args, out=None):
         The model's predicted labels.
     """
     out = out or sys.stdout
-    saved = load_model(args.model)
+    saved = load_model(args.model, trust=args.trust)
     model = saved["model"]
     _set_runtime(model, args.n_jobs, not args.no_progress)
     clouds, ids, _, _ = _read_clouds(args.inputs, not args.no_progress)
@@ -730,7 +746,7 @@ def run_evaluate(args, out=None):
     out = out or sys.stdout
     if args.no_retrieval and args.model is None:
         raise ValueError("nothing to evaluate: --no-retrieval without --model")
-    saved = load_model(args.model) if args.model is not None else None
+    saved = load_model(args.model, trust=args.trust) if args.model is not None else None
     name, clouds, y, class_names, split, _ = _load_data(args)
     print(f"eppf: {name}: {len(clouds)} objects, {len(class_names)} classes", file=out)
     report, rows = {}, []
@@ -808,8 +824,17 @@ def main(argv=None):
     Returns
     -------
     status : int
-        0 on success, 1 on bad input (with a one-line message on stderr).
+        0 on success, 1 on bad input (with a one-line message on stderr),
+        130 when interrupted with Ctrl-C (with ``eppf: interrupted``).
     """
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("eppf: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv):
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["experiment"]:
         # The experiments have their own parser (and their own --help).

@@ -1,21 +1,33 @@
 """Download helpers in the style of scikit-learn's ``fetch_*`` functions.
 
 Files go to a data home folder (``$EPPF_DATA`` or ``~/eppf_data``). A download
-is written to ``<name>.part``, resumed from where it stopped with an HTTP
-``Range`` request, checked against its SHA-256, and only then moved to its
-final name with an atomic rename, so a file under its final name is always
-complete. Archives are extracted into a temporary folder that is renamed when
-extraction has finished.
+is written to ``<name>.part`` and only moved to its final name, with an atomic
+rename, once it is complete and its SHA-256 checked, so a file under its
+final name is always whole.
+
+An interrupted download is resumed only when that cannot mix two files: the
+server's validator of the first response (a strong ``ETag``, else
+``Last-Modified``) is kept beside the part in ``<name>.part.json`` and sent as
+``If-Range``, and the rest is appended only if the server answers ``206`` with
+a ``Content-Range`` starting at the part's size and the same validator. Any
+other answer, or a part without a matching record, starts again from zero.
+
+Only ``http``, ``https`` and ``file`` URLs are fetched (redirects too).
+Archives are extracted into a temporary folder that is renamed when
+extraction has finished; members that would land outside it (absolute paths,
+``..``, links pointing out) and device files are refused.
 """
 
 import hashlib
 import http.client
+import json
 import os
 import shutil
 import socket
 import tarfile
 import tempfile
 import urllib.error
+import urllib.parse
 import urllib.request
 import warnings
 import zipfile
@@ -27,6 +39,14 @@ MODELNET_URLS = {
     40: "http://modelnet.cs.princeton.edu/ModelNet40.zip",
 }
 
+#: SHA-256 digests of files eppf knows, by URL: :func:`fetch_file` checks a
+#: download against them when no ``sha256`` is given. Princeton publishes none
+#: for the ModelNet archives, so they are not listed; such downloads warn (see
+#: :func:`fetch_file`). Add an entry only from a digest published by the
+#: data's authors or computed from a copy known to be good.
+KNOWN_SHA256 = {}
+
+_SCHEMES = ("http", "https", "file")
 _CHUNK = 1 << 16
 
 
@@ -95,17 +115,85 @@ def _check_sha256(sha256, owner):
     return text
 
 
-def _download(url, part, owner, timeout):
-    """Fetch ``url`` into ``part``, resuming an existing partial file."""
-    have = os.path.getsize(part) if os.path.exists(part) else 0
-    request = urllib.request.Request(url, headers={"User-Agent": "eppf"})
-    if have:
-        request.add_header("Range", f"bytes={have}-")
+def _check_url(url, owner):
+    if not isinstance(url, str):
+        raise TypeError(f"{owner}: url must be a str, got {type(url).__name__}")
+    scheme = urllib.parse.urlsplit(url).scheme.lower()
+    if scheme not in _SCHEMES:
+        raise ValueError(f"{owner}: only http, https and file URLs can be fetched, got {scheme or 'no'} scheme "
+                         f"in {url!r}")
+    return scheme
+
+
+class _RedirectHandler(urllib.request.HTTPRedirectHandler):
+    """Follow redirects to http and https only (urllib would also follow ftp)."""
+
+    def redirect_request(self, req, fp, code, msg, headers, newurl):
+        scheme = urllib.parse.urlsplit(newurl).scheme.lower()
+        if scheme not in ("http", "https"):
+            raise urllib.error.HTTPError(req.full_url, code, f"redirect to a {scheme or 'relative'} URL "
+                                         f"refused: {newurl}", headers, fp)
+        return super().redirect_request(req, fp, code, msg, headers, newurl)
+
+
+_OPENER = urllib.request.build_opener(_RedirectHandler)
+
+
+def _validator(headers):
+    """The response's validator usable in ``If-Range``: a strong ETag, else Last-Modified."""
+    etag = headers.get("ETag")
+    if etag and not etag.startswith("W/"):
+        return etag
+    return headers.get("Last-Modified") or None
+
+
+def _content_range(value):
+    """``(start, total or None)`` of a ``Content-Range: bytes start-end/total`` header, or None."""
+    if not value or not value.startswith("bytes "):
+        return None
+    span, _, total = value[6:].partition("/")
+    first, _, last = span.partition("-")
+    if not (first.strip().isdigit() and last.strip().isdigit()):
+        return None
+    return int(first), (int(total) if total.strip().isdigit() else None)
+
+
+def _read_record(record, url):
+    """The validator stored for ``url`` beside a partial download, or None."""
     try:
-        response = urllib.request.urlopen(request, timeout=timeout)
+        with open(record) as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or data.get("url") != url or not isinstance(data.get("validator"), str):
+        return None
+    return data["validator"]
+
+
+def _write_record(record, url, validator):
+    tmp = record + ".tmp"
+    with open(tmp, "w") as fh:
+        json.dump({"url": url, "validator": validator}, fh)
+    os.replace(tmp, record)
+
+
+def _discard(*paths):
+    for path in paths:
+        try:
+            os.remove(path)
+        except FileNotFoundError:
+            pass
+
+
+def _open(url, headers, owner, part, timeout):
+    """The response for ``url``, or None for ``416 Range Not Satisfiable``."""
+    request = urllib.request.Request(url, headers={"User-Agent": "eppf", **headers})
+    try:
+        return _OPENER.open(request, timeout=timeout)
     except urllib.error.HTTPError as exc:
-        if exc.code == 416 and have:  # nothing left to fetch: the partial file is whole
-            return
+        if exc.code == 416 and "Range" in headers:
+            exc.close()
+            return None
         raise OSError(f"{owner}: could not download {url}: HTTP {exc.code} {exc.reason}") from None
     except (urllib.error.URLError, socket.timeout, ConnectionError, http.client.HTTPException) as exc:
         reason = getattr(exc, "reason", exc)
@@ -113,15 +201,59 @@ def _download(url, part, owner, timeout):
             f"{owner}: could not download {url} ({reason}). Check the network connection (are you offline?), "
             f"or download the file by hand and place it at {part[:-5]!r}"
         ) from None
+
+
+def _download(url, part, owner, timeout):
+    """Fetch ``url`` into ``part``, resuming it only when the server proves it is the same file."""
+    record = part + ".json"
+    scheme = urllib.parse.urlsplit(url).scheme.lower()
+    have = os.path.getsize(part) if os.path.exists(part) else 0
+    validator = _read_record(record, url) if have and scheme != "file" else None
+    if have and validator is None:  # no proof of what the part holds: start again
+        _discard(part, record)
+        have = 0
+    for _ in range(2):
+        headers = {"Range": f"bytes={have}-", "If-Range": validator} if have else {}
+        response = _open(url, headers, owner, part, timeout)
+        if response is None:  # the server cannot serve the rest of this part
+            _discard(part, record)
+            have = 0
+            continue
+        status = getattr(response, "status", None) or 200
+        span = _content_range(response.headers.get("Content-Range")) if status == 206 else None
+        if status == 206 and (span is None or span[0] != have
+                              or (have and _validator(response.headers) != validator)):
+            # a range that does not continue this part (or a 206 nobody asked for): ask for the whole file
+            response.close()
+            _discard(part, record)
+            if not have:
+                raise OSError(f"{owner}: could not download {url}: the server sent a partial answer "
+                              f"(Content-Range {response.headers.get('Content-Range')!r}) to a full request")
+            have = 0
+            continue
+        if status not in (200, 206):
+            response.close()
+            raise OSError(f"{owner}: could not download {url}: unexpected HTTP status {status}")
+        break
+    else:
+        raise OSError(f"{owner}: could not download {url}: the server's answers to a restarted download "
+                      "were not usable")
     with response:
-        status = getattr(response, "status", 200)
-        mode = "ab" if (have and status == 206) else "wb"
-        start = have if mode == "ab" else 0
-        length = response.headers.get("Content-Length")
-        expected = start + int(length) if length is not None and length.isdigit() else None
-        got = start
+        resume = status == 206 and have > 0
+        if not resume:
+            have = 0
+            _discard(record)
+            new_validator = _validator(response.headers) if scheme != "file" else None
+            if new_validator is not None:
+                _write_record(record, url, new_validator)
+        if status == 206 and span[1] is not None:
+            expected = span[1]
+        else:
+            length = response.headers.get("Content-Length")
+            expected = have + int(length) if length is not None and length.isdigit() else None
+        got = have
         try:
-            with open(part, mode) as fh:
+            with open(part, "ab" if resume else "wb") as fh:
                 while True:
                     block = response.read(_CHUNK)
                     if not block:
@@ -151,7 +283,9 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
     sha256 : str, default=None
         Expected SHA-256 of the file, 64 hexadecimal digits. When given, a
         file whose digest differs is deleted and reported. When None, the
-        digest of the first download is recorded beside the file in
+        digest listed for ``url`` in ``KNOWN_SHA256`` is used; for a URL
+        without one, the first download cannot be verified: it is accepted
+        with a ``UserWarning``, its digest is recorded beside the file in
         ``<filename>.sha256`` and later calls check the file against it.
     data_home : str or path-like, default=None
         Folder to download into; see :func:`get_data_home`.
@@ -171,9 +305,27 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
     ------
     OSError
         If the download fails or stops early (offline, HTTP error, truncated
-        transfer); a truncated transfer is kept and resumed by the next call.
+        transfer); a truncated transfer is kept and resumed by the next call
+        when the server supports it (see Notes).
     ValueError
-        If the downloaded file does not match ``sha256`` (it is deleted).
+        If the URL's scheme is not ``http``, ``https`` or ``file``, or the
+        downloaded file does not match ``sha256`` (it is deleted).
+
+    Warns
+    -----
+    UserWarning
+        When a file is downloaded without a known digest (trust on first
+        use), and when a cached file no longer matches its digest.
+
+    Notes
+    -----
+    A partial download resumes only if the server identified the file with
+    a strong ``ETag`` or a ``Last-Modified`` date (kept in
+    ``<filename>.part.json``) and answers the ``Range`` + ``If-Range``
+    request with ``206 Partial Content`` whose ``Content-Range`` starts at
+    the part's size and whose validator is unchanged. Otherwise the download
+    starts again from the first byte, so a stale part can never be joined
+    to a different file.
 
     Examples
     --------
@@ -187,7 +339,10 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
     'hello'
     """
     owner = "fetch_file"
+    _check_url(url, owner)
     sha256 = _check_sha256(sha256, owner)
+    if sha256 is None and url in KNOWN_SHA256:
+        sha256 = _check_sha256(KNOWN_SHA256[url], owner)
     if filename is None:
         filename = os.path.basename(url.split("?", 1)[0].rstrip("/")) or "download"
     if os.sep in filename or (os.altsep and os.altsep in filename) or filename in (".", ".."):
@@ -210,13 +365,18 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
     _download(url, part, owner, timeout)
     digest = _sha256(part)
     if sha256 is not None and digest != sha256:
-        os.remove(part)
+        _discard(part, part + ".json")
         raise ValueError(
             f"{owner}: checksum mismatch for {url}: expected sha256 {sha256}, got {digest}; "
             "the corrupted download was deleted"
         )
     os.replace(part, target)
+    _discard(part + ".json")
     if sha256 is None:
+        warnings.warn(
+            f"{owner}: no SHA-256 is known for {url}; the download could not be verified, so its digest is "
+            f"recorded in {record!r} and only later copies are checked against it. Pass sha256= to verify it",
+            UserWarning, stacklevel=2)
         tmp = record + ".tmp"
         with open(tmp, "w") as fh:
             fh.write(digest + "\n")
@@ -241,7 +401,7 @@ def _extract(archive, folder, owner):
                 zf.extractall(tmp)
         elif tarfile.is_tarfile(archive):
             with tarfile.open(archive) as tf:
-                tf.extractall(tmp, filter="data")
+                _extract_tar(tf, tmp, archive, owner)
         else:
             raise ValueError(f"{owner}: {archive!r} is neither a zip nor a tar archive")
         os.replace(tmp, folder)
@@ -249,6 +409,51 @@ def _extract(archive, folder, owner):
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return folder
+
+
+#: Whether this Python's tarfile has extraction filters (3.10.12+, 3.11.4+, 3.12+).
+_HAS_TAR_FILTER = hasattr(tarfile, "data_filter")
+
+
+def _extract_tar(tf, folder, archive, owner):
+    """Extract a tar archive with the "data" filter, or equivalent checks on older Pythons."""
+    if _HAS_TAR_FILTER:
+        try:
+            tf.extractall(folder, filter="data")
+        except tarfile.FilterError as exc:
+            raise ValueError(f"{owner}: {archive!r} holds an unsafe member: {exc}") from None
+        return
+    root = os.path.realpath(folder)
+
+    def inside(path):
+        path = os.path.realpath(path)
+        return path == root or path.startswith(root + os.sep)
+
+    members = []
+    for member in tf.getmembers():
+        name = member.name
+        if os.path.isabs(name) or name.startswith(("/", "\\")) or ".." in name.replace("\\", "/").split("/"):
+            raise ValueError(f"{owner}: {archive!r} holds a path outside the archive: {name!r}")
+        if not inside(os.path.join(folder, name)):
+            raise ValueError(f"{owner}: {archive!r} holds a path outside the archive: {name!r}")
+        if member.isdev() or not (member.isfile() or member.isdir() or member.issym() or member.islnk()):
+            raise ValueError(f"{owner}: {archive!r} holds a device or special file: {name!r}")
+        if member.issym() or member.islnk():
+            target = member.linkname
+            base = os.path.dirname(os.path.join(folder, name)) if member.issym() else folder
+            # no ".." in targets: with it, a link through another link can climb out
+            if os.path.isabs(target) or ".." in target.replace("\\", "/").split("/") \
+                    or not inside(os.path.join(base, target)):
+                raise ValueError(f"{owner}: {archive!r} holds a link pointing outside the archive: "
+                                 f"{name!r} -> {target!r}")
+        member.mode = (member.mode & 0o755) | (0o600 if member.isfile() else 0o700)  # no setuid, owner rw
+        member.uid = member.gid = 0
+        member.uname = member.gname = ""
+        members.append(member)
+    # the checks above replace the filter; on a Python that has filters (only
+    # in tests) say so, which also keeps 3.12+ from warning about the default
+    trusted = {"filter": "fully_trusted"} if hasattr(tarfile, "fully_trusted_filter") else {}
+    tf.extractall(folder, members=members, numeric_owner=True, **trusted)
 
 
 def fetch_modelnet(version=40, *, data_home=None, url=None, sha256=None, download_if_missing=True, **load_kwargs):
@@ -264,8 +469,8 @@ def fetch_modelnet(version=40, *, data_home=None, url=None, sha256=None, downloa
         Mirror to download from; default: the official archive.
     sha256 : str, default=None
         Expected SHA-256 of the archive. Princeton publishes none, so by
-        default the digest of the first download is recorded and checked on
-        later calls (see :func:`fetch_file`).
+        default the first download is accepted with a ``UserWarning`` and its
+        digest recorded and checked on later calls (see :func:`fetch_file`).
     download_if_missing : bool, default=True
         If False and the data is absent, raise instead of downloading.
     **load_kwargs

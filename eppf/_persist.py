@@ -1,0 +1,653 @@
+"""Model files that loading cannot turn into running code.
+
+A model file is a zip container with two members:
+
+``manifest.json``
+    The format name and version, the eppf version that wrote the file and
+    the saved object as a tree: estimators by class name (from a fixed
+    allow-list) with their ``get_params()`` values and fitted attributes,
+    numbers, strings, lists, tuples and string-keyed dicts as JSON, and
+    arrays by reference.
+``arrays.npz``
+    The arrays, written and read by NumPy with ``allow_pickle=False``.
+
+Loading builds estimators only from the allow-list, by calling the class
+with the recorded parameters and setting the recorded attributes; nothing in
+the file names a function or module to import. The torch networks of
+:class:`~eppf.EPPF4DClassifier` and :class:`~eppf.PointNetClassifier` are
+stored as their ``state_dict`` tensors and rebuilt for prediction.
+
+Models written by eppf 0.1 are pickles (joblib files); :func:`load_model`
+opens them only with ``trust=True``.
+"""
+
+import json
+import math
+import numbers
+import os
+import shutil
+import tempfile
+import warnings
+import zipfile
+import zlib
+
+import numpy as np
+
+from .utils._atomic import atomic_write
+
+__all__ = ["load_model", "save_model"]
+
+FORMAT = "eppf-model"
+FORMAT_VERSION = 1
+
+_MANIFEST = "manifest.json"
+_ARRAYS = "arrays.npz"
+_MAX_MANIFEST_BYTES = 64 << 20
+
+#: Classes a model file may hold: the name written to the file -> (module, attribute).
+_ALLOWED = {
+    "eppf.EPPFTransformer": ("eppf.descriptors", "EPPFTransformer"),
+    "eppf.ESFTransformer": ("eppf.descriptors", "ESFTransformer"),
+    "eppf.WahlTransformer": ("eppf.descriptors", "WahlTransformer"),
+    "eppf.OURCVFHTransformer": ("eppf.descriptors", "OURCVFHTransformer"),
+    "eppf.KLNearestNeighbors": ("eppf.neighbors", "KLNearestNeighbors"),
+    "eppf.EPPF4DClassifier": ("eppf.classifiers", "EPPF4DClassifier"),
+    "eppf.PointNetClassifier": ("eppf.classifiers", "PointNetClassifier"),
+    "eppf.preprocessing.GaussianNoise": ("eppf.preprocessing", "GaussianNoise"),
+    "eppf.preprocessing.RandomDropout": ("eppf.preprocessing", "RandomDropout"),
+    "eppf.preprocessing.Occlusion": ("eppf.preprocessing", "Occlusion"),
+    "eppf.preprocessing.RandomRotation": ("eppf.preprocessing", "RandomRotation"),
+    "eppf.preprocessing.RandomScaling": ("eppf.preprocessing", "RandomScaling"),
+    "eppf.preprocessing.Resampler": ("eppf.preprocessing", "Resampler"),
+    "sklearn.pipeline.Pipeline": ("sklearn.pipeline", "Pipeline"),
+    "sklearn.preprocessing.Normalizer": ("sklearn.preprocessing", "Normalizer"),
+    "sklearn.preprocessing.StandardScaler": ("sklearn.preprocessing", "StandardScaler"),
+    "sklearn.preprocessing.MinMaxScaler": ("sklearn.preprocessing", "MinMaxScaler"),
+    "sklearn.preprocessing.MaxAbsScaler": ("sklearn.preprocessing", "MaxAbsScaler"),
+    "sklearn.decomposition.PCA": ("sklearn.decomposition", "PCA"),
+    "sklearn.linear_model.LogisticRegression": ("sklearn.linear_model", "LogisticRegression"),
+}
+
+# Estimators whose ``net_`` is a skorch network, rebuilt from its state_dict.
+_NET_OWNERS = ("eppf.EPPF4DClassifier", "eppf.PointNetClassifier")
+
+_TORCH_DTYPES = ("float32", "float64", "float16", "bfloat16", "int64", "int32", "int16", "int8", "uint8", "bool")
+
+
+def _import_class(name):
+    import importlib
+
+    module, attr = _ALLOWED[name]
+    return getattr(importlib.import_module(module), attr)
+
+
+def _class_name(obj):
+    """The allow-list name of ``obj``'s exact class, or None."""
+    cls = type(obj)
+    for name, (module, attr) in _ALLOWED.items():
+        if cls.__name__ == attr and (cls.__module__ == module or cls.__module__.startswith(module + ".")):
+            if _import_class(name) is cls:
+                return name
+    return None
+
+
+# ------------------------------------------------------------------- encoding
+class _Encoder:
+    def __init__(self):
+        self.arrays = {}
+
+    def array(self, arr):
+        key = f"a{len(self.arrays)}"
+        self.arrays[key] = arr
+        return key
+
+    def encode(self, value, where):
+        if value is None or isinstance(value, (bool, str)):
+            return value
+        if isinstance(value, numbers.Integral) and type(value) is int:
+            return value
+        if type(value) is float:
+            return value if math.isfinite(value) else {"__type__": "float", "value": repr(value)}
+        if isinstance(value, np.ndarray):
+            return self._ndarray(value, where)
+        if isinstance(value, np.generic):
+            if value.dtype.hasobject:
+                raise TypeError(f"save_model: cannot save {where}: numpy object scalars are not supported")
+            return {"__type__": "npscalar", "ref": self.array(np.asarray(value))}
+        if isinstance(value, list):
+            return [self.encode(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if isinstance(value, tuple) and type(value) is tuple:
+            return {"__type__": "tuple", "items": [self.encode(v, f"{where}[{i}]") for i, v in enumerate(value)]}
+        if type(value) is dict:
+            for k in value:
+                if not isinstance(k, str):
+                    raise TypeError(f"save_model: cannot save {where}: dict keys must be str, got {type(k).__name__}")
+            return {"__type__": "dict", "items": {k: self.encode(v, f"{where}[{k!r}]") for k, v in value.items()}}
+        if isinstance(value, np.random.RandomState):
+            kind, keys, pos, has_gauss, cached = value.get_state()
+            return {"__type__": "random_state", "keys": self.array(np.asarray(keys)), "pos": int(pos),
+                    "has_gauss": int(has_gauss), "cached_gaussian": self.encode(float(cached), where)}
+        prepared = _prepared_type()
+        if isinstance(value, prepared):
+            return {"__type__": "kl_prepared", "H": self.array(np.asarray(value.H))}
+        name = _class_name(value)
+        if name is not None:
+            return self._estimator(value, name, where)
+        raise TypeError(
+            f"save_model: cannot save {where}: objects of type {type(value).__module__}.{type(value).__qualname__} "
+            f"are not supported by the safe model format (allowed: numbers, strings, lists, tuples, dicts, "
+            f"arrays and the estimators {', '.join(sorted(_ALLOWED))})"
+        )
+
+    def _ndarray(self, arr, where):
+        if arr.dtype.hasobject:
+            items = arr.ravel().tolist()
+            if not all(isinstance(v, str) for v in items):
+                raise TypeError(f"save_model: cannot save {where}: object arrays must hold only strings")
+            return {"__type__": "objarray", "shape": list(arr.shape), "items": items}
+        return {"__type__": "ndarray", "ref": self.array(arr)}
+
+    def _estimator(self, est, name, where):
+        params = est.get_params(deep=False)
+        attrs = {}
+        for key, value in vars(est).items():
+            if key in params:
+                continue
+            if key == "net_" and name in _NET_OWNERS:
+                attrs[key] = self._net(value, f"{where}.{key}")
+            else:
+                attrs[key] = self.encode(value, f"{where}.{key}")
+        return {"__type__": "estimator", "class": name,
+                "params": {k: self.encode(v, f"{where}.{k}") for k, v in params.items()},
+                "attributes": attrs}
+
+    def _net(self, net, where):
+        tensors = []
+        for key, tensor in net.module_.state_dict().items():
+            t = tensor.detach().cpu()
+            dtype = str(t.dtype).replace("torch.", "")
+            if dtype not in _TORCH_DTYPES:
+                raise TypeError(f"save_model: cannot save {where}: tensor {key} has dtype {dtype}")
+            values = t.float().numpy() if dtype == "bfloat16" else t.numpy()
+            tensors.append({"name": key, "dtype": dtype, "ref": self.array(np.array(values))})
+        history = [dict(epoch) for epoch in net.history]
+        try:
+            history = self.encode(history, f"{where}.history")
+        except TypeError:  # a callback logged something that is not plain data
+            history = None
+        return {"__type__": "skorch_net", "state_dict": tensors, "history": history}
+
+
+def _prepared_type():
+    from .neighbors._kl import _Prepared
+
+    return _Prepared
+
+
+def save_model(model, path):
+    """Save a model in eppf's safe model-file format.
+
+    Parameters
+    ----------
+    model : estimator, or dict / list / tuple of estimators and plain values
+        A fitted (or unfitted) estimator of eppf or one of the scikit-learn
+        classes on the allow-list (``Pipeline``, ``Normalizer``,
+        ``StandardScaler``, ``MinMaxScaler``, ``MaxAbsScaler``, ``PCA``,
+        ``LogisticRegression``), or a string-keyed dict holding such
+        estimators next to numbers, strings, lists and arrays (``eppf train``
+        saves a dict with the pipeline, its class names and settings).
+    path : str or path-like
+        The file to write; the name is used as given (``eppf train`` uses
+        ``.joblib`` or whatever ``-o`` says).
+
+    Raises
+    ------
+    TypeError
+        If ``model`` holds an object the format cannot represent (a function,
+        an estimator not on the allow-list...); nothing is written then.
+
+    See Also
+    --------
+    load_model : Read the file back.
+
+    Notes
+    -----
+    The file is a zip container holding ``manifest.json`` (the format
+    version, the eppf version, class names, parameters and fitted attributes)
+    and ``arrays.npz`` (every array, stored without pickle). It is written
+    to a temporary file that replaces ``path`` only when complete, so a full
+    disk or an interrupt never leaves a truncated model behind.
+
+    The torch networks of :class:`~eppf.EPPF4DClassifier` and
+    :class:`~eppf.PointNetClassifier` are saved as their weights (the
+    module's ``state_dict``) and training history; the optimizer state and
+    the training callbacks are not, which prediction does not need
+    (``fit`` builds a new network anyway).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import numpy as np
+    >>> from eppf import KLNearestNeighbors, load_model, save_model
+    >>> clf = KLNearestNeighbors().fit([[0.9, 0.1], [0.2, 0.8]], ["a", "b"])
+    >>> path = os.path.join(tempfile.mkdtemp(), "model.eppf")
+    >>> save_model(clf, path)
+    >>> load_model(path).predict([[0.8, 0.2]])
+    array(['a'], dtype='<U1')
+    """
+    from . import __version__
+
+    encoder = _Encoder()
+    root = encoder.encode(model, "model")
+    manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "eppf_version": __version__,
+                "numpy_version": np.__version__, "root": root}
+    text = json.dumps(manifest, allow_nan=False, indent=1)
+    with atomic_write(path, "wb") as fh:
+        with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
+            zf.writestr(_MANIFEST, text)
+            with zf.open(_ARRAYS, "w", force_zip64=True) as member:
+                np.savez(member, **encoder.arrays)
+
+
+# ------------------------------------------------------------------- decoding
+class _Decoder:
+    def __init__(self, arrays, path):
+        self.arrays, self.path = arrays, path
+
+    def fail(self, where, problem):
+        return ValueError(f"{self.path}: {where}: {problem}")
+
+    def array(self, ref, where):
+        if not isinstance(ref, str) or ref not in self.arrays:
+            raise self.fail(where, f"refers to an array {ref!r} that is not in {_ARRAYS}")
+        return self.arrays[ref]
+
+    def decode(self, node, where):
+        if node is None or isinstance(node, (bool, str, int, float)):
+            return node
+        if isinstance(node, list):
+            return [self.decode(v, f"{where}[{i}]") for i, v in enumerate(node)]
+        if not isinstance(node, dict):
+            raise self.fail(where, f"unexpected JSON value of type {type(node).__name__}")
+        kind = node.get("__type__")
+        if kind == "float":
+            text = node.get("value")
+            if text not in ("nan", "inf", "-inf"):
+                raise self.fail(where, f"bad float {text!r}")
+            return float(text)
+        if kind == "tuple":
+            return tuple(self.decode(v, f"{where}[{i}]") for i, v in enumerate(self._list(node, "items", where)))
+        if kind == "dict":
+            items = node.get("items")
+            if not isinstance(items, dict):
+                raise self.fail(where, "a dict without items")
+            return {k: self.decode(v, f"{where}[{k!r}]") for k, v in items.items()}
+        if kind == "ndarray":
+            return self.array(node.get("ref"), where)
+        if kind == "npscalar":
+            arr = self.array(node.get("ref"), where)
+            if arr.ndim != 0:
+                raise self.fail(where, f"a numpy scalar stored with shape {arr.shape}")
+            return arr[()]
+        if kind == "objarray":
+            shape = self._list(node, "shape", where)
+            items = self._list(node, "items", where)
+            if not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in shape) \
+                    or math.prod(shape) != len(items) or not all(isinstance(v, str) for v in items):
+                raise self.fail(where, "an object array whose shape and strings disagree")
+            out = np.empty(len(items), dtype=object)
+            out[:] = items
+            return out.reshape(shape)
+        if kind == "random_state":
+            keys = self.array(node.get("keys"), where)
+            pos, has_gauss = node.get("pos"), node.get("has_gauss")
+            cached = self.decode(node.get("cached_gaussian"), where)
+            if keys.shape != (624,) or keys.dtype != np.uint32 or not isinstance(pos, int) \
+                    or not isinstance(has_gauss, int) or not isinstance(cached, float):
+                raise self.fail(where, "a malformed random state")
+            rs = np.random.RandomState()
+            rs.set_state(("MT19937", keys, pos, has_gauss, cached))
+            return rs
+        if kind == "kl_prepared":
+            return self._prepared(self.array(node.get("H"), where), where)
+        if kind == "estimator":
+            return self._estimator(node, where)
+        raise self.fail(where, f"unknown node type {kind!r}")
+
+    def _list(self, node, key, where):
+        value = node.get(key)
+        if not isinstance(value, list):
+            raise self.fail(where, f"missing list {key!r}")
+        return value
+
+    def _prepared(self, H, where):
+        from .neighbors._kl import _prepare
+
+        if H.ndim != 2 or H.dtype != np.float64 or not np.all(np.isfinite(H)) or (H.size and H.min() <= 0):
+            raise self.fail(where, "the stored training histograms must be a 2D array of positive finite float64")
+        # H is already floored (and renormalised): a floor of 0 keeps it as it is
+        # and recomputes the logarithms and row terms exactly as fit did.
+        return _prepare(H, 0.0, False, "load_model")
+
+    def _estimator(self, node, where):
+        name = node.get("class")
+        if not isinstance(name, str) or name not in _ALLOWED:
+            raise ValueError(
+                f"{self.path}: {where}: class {name!r} is not on the allow-list of classes a model file may "
+                f"hold ({', '.join(sorted(_ALLOWED))}); refusing to load it"
+            )
+        cls = _import_class(name)
+        params = node.get("params")
+        attrs = node.get("attributes")
+        if not isinstance(params, dict) or not isinstance(attrs, dict):
+            raise self.fail(where, f"{name} without params or attributes")
+        params = {k: self.decode(v, f"{where}.{k}") for k, v in params.items()}
+        try:
+            est = cls(**params)
+        except TypeError as exc:
+            raise self.fail(where, f"{name} does not accept the stored parameters ({exc})") from None
+        net = None
+        state = {}
+        for key, value in attrs.items():
+            if not isinstance(key, str) or not key.isidentifier() or key.startswith("__") or key in params:
+                raise self.fail(where, f"{name} has a bad attribute name {key!r}")
+            if key == "net_" and name in _NET_OWNERS:
+                net = value
+            else:
+                state[key] = self.decode(value, f"{where}.{key}")
+        vars(est).update(state)
+        if net is not None:
+            est.net_ = self._net(est, name, net, f"{where}.net_")
+        return est
+
+    def _net(self, est, name, node, where):
+        import torch
+
+        if not isinstance(node, dict) or node.get("__type__") != "skorch_net":
+            raise self.fail(where, "a network without its weights")
+        tensors = {}
+        for i, entry in enumerate(self._list(node, "state_dict", where)):
+            if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) \
+                    or entry.get("dtype") not in _TORCH_DTYPES:
+                raise self.fail(where, f"malformed tensor entry {i}")
+            arr = np.ascontiguousarray(self.array(entry.get("ref"), where))
+            tensors[entry["name"]] = torch.from_numpy(arr).to(getattr(torch, entry["dtype"]))
+        history = self.decode(node.get("history"), f"{where}.history")
+        try:
+            with torch.random.fork_rng(devices=[]):  # initialising draws random weights
+                net = (_build_cnn_net if name == "eppf.EPPF4DClassifier" else _build_pointnet_net)(est)
+                net.module_.load_state_dict(tensors, strict=True)
+        except (RuntimeError, ValueError, TypeError, AttributeError, KeyError) as exc:
+            raise self.fail(where, f"cannot rebuild the network of {name}: {str(exc).splitlines()[0]}") from None
+        if isinstance(history, list):
+            from skorch.history import History
+
+            net.history_ = History(history)
+        return net
+
+
+def _build_cnn_net(est):
+    """The skorch network of a fitted EPPF4DClassifier, as its ``fit`` builds it, untrained."""
+    import torch
+    from skorch import NeuralNetClassifier
+
+    from .nn import EPPFNet2D, EPPFNet3D, EPPFNet4D
+
+    n_bins = est._check_params()
+    module = {"4d": EPPFNet4D, "3d": EPPFNet3D, "2d": EPPFNet2D}[est.conv]
+    n_classes = len(est.classes_)
+    net = NeuralNetClassifier(
+        module,
+        module__n_bins=n_bins,
+        module__n_classes=n_classes,
+        module__dropout=float(est.dropout),
+        module__n_hidden=int(est.n_hidden),
+        module__filters=tuple(int(f) for f in est.filters),
+        module__precision=est.precision,
+        criterion=torch.nn.CrossEntropyLoss,
+        optimizer=torch.optim.Adam,
+        optimizer__weight_decay=float(est.weight_decay),
+        lr=float(est.lr),
+        max_epochs=int(est.max_epochs),
+        batch_size=int(est.batch_size),
+        train_split=None,
+        classes=np.arange(n_classes),
+        device=est.device,
+        verbose=int(est.verbose),
+    )
+    return net.initialize()
+
+
+def _build_pointnet_net(est):
+    """The skorch network of a fitted PointNetClassifier, as its ``fit`` builds it, untrained."""
+    import torch
+    from skorch import NeuralNetClassifier
+
+    from .classifiers._pointnet import _modules, _softmax
+
+    est._check_params()
+    _, PointNet, PointNetLoss, _ = _modules()
+    n_classes = len(est.classes_)
+    net = NeuralNetClassifier(
+        PointNet,
+        module__n_classes=n_classes,
+        module__dropout=float(est.dropout),
+        criterion=PointNetLoss,
+        criterion__reg_weight=float(est.reg_weight),
+        optimizer=torch.optim.Adam,
+        lr=float(est.lr),
+        max_epochs=int(est.max_epochs),
+        batch_size=int(est.batch_size),
+        train_split=None,
+        classes=np.arange(n_classes),
+        predict_nonlinearity=_softmax,
+        device=est.device,
+        verbose=int(est.verbose),
+    )
+    return net.initialize()
+
+
+def _version_tuple(text):
+    try:
+        from packaging.version import Version
+
+        return Version(text)
+    except Exception:  # packaging missing or an odd version string
+        parts = []
+        for piece in str(text).split("."):
+            digits = "".join(c for c in piece if c.isdigit())
+            parts.append(int(digits) if digits else 0)
+        return tuple(parts)
+
+
+def _read_arrays(zf, path):
+    """The arrays of ``arrays.npz`` in an open model container, read without pickle."""
+    if _ARRAYS not in zf.namelist():
+        raise ValueError(f"{path}: the model file has no {_ARRAYS}")
+    spool = tempfile.SpooledTemporaryFile(max_size=64 << 20)
+    with spool:
+        with zf.open(_ARRAYS) as member:
+            shutil.copyfileobj(member, spool, 1 << 20)
+        spool.seek(0)
+        try:
+            inner = zipfile.ZipFile(spool)
+        except zipfile.BadZipFile:
+            raise ValueError(f"{path}: {_ARRAYS} inside the model file is not a readable .npz") from None
+        arrays = {}
+        with inner:
+            for info in inner.infolist():
+                if not info.filename.endswith(".npy"):
+                    raise ValueError(f"{path}: unexpected member {info.filename!r} in {_ARRAYS}")
+                key = info.filename[:-4]
+                with inner.open(info) as fp:
+                    _check_npy_header(fp, info, path)
+                with inner.open(info) as fp:
+                    arrays[key] = np.lib.format.read_array(fp, allow_pickle=False)
+    return arrays
+
+
+def _check_npy_header(fp, info, path):
+    """Refuse an array whose header promises other data than the member holds."""
+    fmt = np.lib.format
+    version = fmt.read_magic(fp)
+    if version == (1, 0):
+        shape, _, dtype = fmt.read_array_header_1_0(fp)
+    elif version in ((2, 0), (3, 0)):
+        shape, _, dtype = fmt.read_array_header_2_0(fp)
+    else:
+        raise ValueError(f"{path}: array {info.filename} has an unknown .npy version {version}")
+    if dtype.hasobject:
+        raise ValueError(f"{path}: array {info.filename} holds Python objects (pickle), which model files may not")
+    need = math.prod(int(s) for s in shape) * dtype.itemsize
+    if fp.tell() + need != info.file_size:
+        raise ValueError(f"{path}: array {info.filename} declares shape {shape} of {dtype} "
+                         f"({need} bytes) but holds {info.file_size - fp.tell()} bytes")
+
+
+def _looks_like_pickle(path):
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    # pickle protocol 2+ opens with 0x80; joblib's compressed files with zlib/gzip/xz/lz4 magics.
+    return head[:1] == b"\x80" or head[:2] in (b"\x78\x01", b"\x78\x9c", b"\x78\xda", b"\x1f\x8b") \
+        or head[:4] in (b"\xfd7zX", b"\x04\x22\x4d\x18")
+
+
+def load_model(path, *, trust=False):
+    """Load a model written by :func:`save_model` or ``eppf train``.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The model file.
+    trust : bool, default=False
+        Also accept a pickled model (a joblib file written by eppf 0.1).
+        Unpickling can run any code the file contains, and a file made to
+        do so still yields a working model, so the harm would go unnoticed:
+        pass ``True`` only for files you made yourself. Files in the safe
+        format load the same way either way.
+
+    Returns
+    -------
+    model : object
+        What was saved: an estimator, or the dict ``eppf train`` saves
+        (``"model"``, ``"classes"``, ``"params"``, ``"eppf_version"``...).
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such file.
+    ValueError
+        If the file is not a model file in the safe format (and ``trust`` is
+        False), is truncated or corrupt, was written in a newer format
+        version, names a class that is not on the allow-list, or holds
+        arrays of Python objects. The message names the file.
+
+    Warns
+    -----
+    UserWarning
+        If the file was written by a newer eppf than the one running.
+
+    See Also
+    --------
+    save_model : Write a model file.
+
+    Notes
+    -----
+    Loading reads ``manifest.json`` as JSON and ``arrays.npz`` with
+    ``allow_pickle=False``, checks every array's header against its stored
+    size, and creates only estimators of the allow-listed eppf and
+    scikit-learn classes, from their recorded parameters and fitted
+    attributes. No name in the file is imported or called, so a model file
+    from anyone can be opened; it can at worst predict badly.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from eppf import KLNearestNeighbors, load_model, save_model
+    >>> path = os.path.join(tempfile.mkdtemp(), "model.eppf")
+    >>> save_model(KLNearestNeighbors(n_neighbors=3), path)
+    >>> load_model(path)
+    KLNearestNeighbors(n_neighbors=3)
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"no such model file: {path}")
+    if not zipfile.is_zipfile(path):
+        return _load_untrusted_or_refuse(path, trust)
+    try:
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+            if _MANIFEST not in names:
+                raise ValueError(f"{path} is a zip file but not an eppf model file (it has no {_MANIFEST})")
+            if zf.getinfo(_MANIFEST).file_size > _MAX_MANIFEST_BYTES:
+                raise ValueError(f"{path}: {_MANIFEST} is larger than {_MAX_MANIFEST_BYTES >> 20} MiB")
+            try:
+                manifest = json.loads(zf.read(_MANIFEST).decode("utf-8"))
+            except (ValueError, RecursionError) as exc:  # bad UTF-8 or JSON, absurd nesting or numbers
+                raise ValueError(f"{path}: {_MANIFEST} is not valid JSON ({type(exc).__name__}: {exc})") from None
+            _check_manifest(manifest, path)
+            arrays = _read_arrays(zf, path)
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, KeyError) as exc:
+        raise ValueError(f"cannot load model {path}: corrupt or truncated model file ({type(exc).__name__}: {exc})") from None
+    try:
+        return _Decoder(arrays, path).decode(manifest["root"], "model")
+    except RecursionError:
+        raise ValueError(f"{path}: the model tree in {_MANIFEST} is nested too deeply") from None
+    except (ValueError, TypeError) as exc:  # raised while rebuilding, e.g. by an estimator's own checks
+        if path in str(exc):
+            raise
+        raise ValueError(f"{path}: cannot rebuild the model: {exc}") from None
+
+
+def _check_manifest(manifest, path):
+    from . import __version__
+
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        raise ValueError(f"{path}: {_MANIFEST} does not describe an eppf model (format {FORMAT!r} expected)")
+    version = manifest.get("format_version")
+    if not isinstance(version, int) or isinstance(version, bool) or version < 1:
+        raise ValueError(f"{path}: bad format version {version!r}")
+    if version > FORMAT_VERSION:
+        raise ValueError(f"{path} was written in model format version {version} by eppf "
+                         f"{manifest.get('eppf_version')}; this eppf {__version__} reads up to version "
+                         f"{FORMAT_VERSION}: upgrade eppf to load it")
+    written_by = manifest.get("eppf_version")
+    if not isinstance(written_by, str):
+        raise ValueError(f"{path}: {_MANIFEST} does not record the eppf version that wrote it")
+    if _newer(written_by, __version__):
+        warnings.warn(f"{path} was saved by eppf {written_by}, which is newer than this eppf {__version__}; "
+                      "it may not load or predict as it did there", UserWarning, stacklevel=3)
+    if "root" not in manifest:
+        raise ValueError(f"{path}: {_MANIFEST} holds no model")
+
+
+def _newer(a, b):
+    try:
+        return _version_tuple(a) > _version_tuple(b)
+    except TypeError:
+        return False
+
+
+def _load_untrusted_or_refuse(path, trust):
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head[:4] == b"PK\x03\x04":
+        raise ValueError(f"cannot load model {path}: corrupt or truncated model file (its zip container is incomplete)")
+    if not trust:
+        if not _looks_like_pickle(path):
+            raise ValueError(f"cannot load model {path}: not an eppf model file (neither the safe zip format "
+                             "nor a pickle)")
+        raise ValueError(
+            f"{path} is not an eppf model in the safe format but a pickle (an eppf 0.1 joblib model?). "
+            "Loading a pickle can run any code it contains, so it is refused by default; if you made this "
+            "file yourself, load it with load_model(path, trust=True) or '--trust' on the command line, "
+            "then save it again with save_model to get a safe file"
+        )
+    import joblib
+
+    try:
+        return joblib.load(path)
+    except Exception as exc:  # a corrupt or foreign file raises all sorts of errors
+        first = str(exc).splitlines()[0] if str(exc) else "no details"
+        raise ValueError(f"cannot load model {path}: not a readable joblib file ({type(exc).__name__}: {first})") from None
+

@@ -1,0 +1,75 @@
+"""Ctrl-C: ``eppf`` stops promptly with one line and exit status 130."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from eppf.utils._chunks import CHUNK, CHUNK_POINTS, _chunk_bounds
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a child process is POSIX")
+def test_sigint_exits_130_with_one_line():
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONUNBUFFERED="1")
+    # many descriptor draws: the job is still computing when the signal comes
+    proc = subprocess.Popen([sys.executable, "-m", "eppf", "--no-progress", "--repeats", "500", "--n-jobs", "1"],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = proc.stdout.readline()  # printed once the data are loaded, before any descriptor
+        assert "built-in synthetic shapes" in first
+        time.sleep(0.5)
+        assert proc.poll() is None
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+        latency = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 130
+    assert err.strip().splitlines() == ["eppf: interrupted"]
+    assert "Traceback" not in out
+    assert latency < 5.0  # the kernels hand control back between chunks
+
+
+def test_chunks_are_bounded_in_objects_and_points():
+    sizes = [10, 70_000, 5, 5, 30_000, 30_000, 10_000] + [3] * 600
+    clouds = [range(s) for s in sizes]
+    chunks = _chunk_bounds(clouds, CHUNK, CHUNK_POINTS)
+    assert chunks[0][0] == 0 and chunks[-1][1] == len(clouds)
+    assert all(a[1] == b[0] for a, b in zip(chunks[:-1], chunks[1:]))  # contiguous, in order
+    for lo, hi in chunks:
+        assert 1 <= hi - lo <= CHUNK
+        assert hi - lo == 1 or sum(sizes[lo:hi]) <= CHUNK_POINTS
+    assert (1, 2) in chunks  # a cloud above the bound is a chunk of its own
+    # greedy: no chunk could take the next cloud without breaking a bound
+    for (lo, hi), _ in zip(chunks[:-1], chunks[1:]):
+        assert hi - lo == CHUNK or sum(sizes[lo:hi + 1]) > CHUNK_POINTS
+    assert _chunk_bounds([], CHUNK, CHUNK_POINTS) == []
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_point_bound_grows_with_the_threads(monkeypatch, n_jobs):
+    import numpy as np
+
+    import eppf.utils._chunks as chunks_module
+    from eppf import EPPFTransformer
+
+    seen = []
+    real = chunks_module._chunk_bounds
+
+    def spy(clouds, chunk, chunk_points):
+        seen.append(chunk_points)
+        return real(clouds, chunk, chunk_points)
+
+    monkeypatch.setattr(chunks_module, "_chunk_bounds", spy)
+    clouds = [np.random.default_rng(k).normal(size=(50, 3)) for k in range(3)]
+    EPPFTransformer(n_pairs=100, random_state=0, n_jobs=n_jobs).fit_transform(clouds)
+    assert seen == [CHUNK_POINTS * n_jobs]

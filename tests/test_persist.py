@@ -1,0 +1,403 @@
+"""Safe model files: round trips, refusal of pickles and foreign classes, corrupt files."""
+
+import io
+import json
+import os
+import pickle
+import re
+import warnings
+import zipfile
+
+import joblib
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from sklearn.decomposition import PCA
+from sklearn.linear_model import LogisticRegression
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import FunctionTransformer, Normalizer, StandardScaler
+
+import eppf
+from eppf import (
+    EPPF4DClassifier,
+    EPPFTransformer,
+    ESFTransformer,
+    KLNearestNeighbors,
+    OURCVFHTransformer,
+    PointNetClassifier,
+    WahlTransformer,
+    load_model,
+    save_model,
+)
+from eppf.datasets import make_shapes
+
+
+@pytest.fixture(scope="module")
+def shapes():
+    X, y = make_shapes(2, n_points=160, random_state=0, return_X_y=True)
+    return X, y
+
+
+def _round_trip(obj, tmp_path, name="model.joblib"):
+    path = tmp_path / name
+    save_model(obj, path)
+    assert zipfile.is_zipfile(path)
+    return load_model(path)
+
+
+def _descriptors(n=12, bins=24, seed=0):
+    rng = np.random.default_rng(seed)
+    X = rng.random((n, bins)) * (rng.random((n, bins)) > 0.4)
+    X[:, 0] += 1e-3
+    return X / X.sum(axis=1, keepdims=True), np.array(["chair", "table", "lamp"])[np.arange(n) % 3]
+
+
+# ---------------------------------------------------------------- round trips
+@pytest.mark.parametrize("params", [{}, {"n_neighbors": 3, "weights": "distance", "renormalize": True},
+                                    {"floor": 1e-4, "chunk_size": 2}])
+def test_kl_nearest_neighbors_round_trip_is_exact(tmp_path, params):
+    X, y = _descriptors()
+    Q, _ = _descriptors(seed=1)
+    clf = KLNearestNeighbors(**params).fit(X, y)
+    back = _round_trip(clf, tmp_path)
+    assert type(back) is KLNearestNeighbors and back.get_params() == clf.get_params()
+    assert back.floor_ == clf.floor_ and back.n_samples_fit_ == clf.n_samples_fit_
+    assert_array_equal(back.classes_, clf.classes_)
+    for a, b in zip(back._fit_data, clf._fit_data):  # the rebuilt private state, bit for bit
+        assert_array_equal(a, b)
+    assert_array_equal(back.predict(Q), clf.predict(Q))
+    assert_array_equal(back.predict_proba(Q), clf.predict_proba(Q))
+    for a, b in zip(back.kneighbors(Q), clf.kneighbors(Q)):
+        assert_array_equal(a, b)
+    assert_array_equal(back.kneighbors(return_distance=False), clf.kneighbors(return_distance=False))
+
+
+@pytest.mark.parametrize("make", [
+    lambda: EPPFTransformer(n_bins=(6, 2, 3, 2), n_pairs=400, random_state=3),
+    lambda: ESFTransformer(n_triplets=400, n_bins=8, random_state=3),
+    lambda: WahlTransformer(n_bins=3, n_pairs=400, random_state=3),
+    lambda: OURCVFHTransformer(),
+], ids=["eppf", "esf", "wahl", "ourcvfh"])
+def test_descriptor_pipelines_round_trip(tmp_path, shapes, make):
+    X, y = shapes
+    steps = [("descriptor", make())]
+    if isinstance(steps[0][1], OURCVFHTransformer):
+        steps.append(("l1", Normalizer(norm="l1")))
+    model = Pipeline(steps + [("classifier", KLNearestNeighbors())]).fit(X[::2], y[::2])
+    back = _round_trip(model, tmp_path)
+    assert [n for n, _ in back.steps] == [n for n, _ in model.steps]
+    assert back.get_params(deep=True).keys() == model.get_params(deep=True).keys()
+    assert_array_equal(back[:-1].transform(X[1::2]), model[:-1].transform(X[1::2]))
+    assert_array_equal(back.predict(X[1::2]), model.predict(X[1::2]))
+
+
+def test_unfitted_estimator_and_random_state_instance_round_trip(tmp_path, shapes):
+    est = EPPFTransformer(n_pairs=300, random_state=np.random.RandomState(5))
+    back = _round_trip(est, tmp_path)
+    assert isinstance(back.random_state, np.random.RandomState)
+    # same generator state: both draw the same descriptors
+    X, _ = shapes
+    assert_array_equal(back.fit_transform(X[:3]), est.fit_transform(X[:3]))
+
+
+def test_allow_listed_sklearn_estimators_round_trip(tmp_path):
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(40, 6))
+    y = (X[:, 0] + X[:, 1] > 0).astype(int)
+    model = Pipeline([("scale", StandardScaler()), ("pca", PCA(3, random_state=0)),
+                      ("lr", LogisticRegression())]).fit(X, y)
+    back = _round_trip(model, tmp_path)
+    assert_array_equal(back.predict_proba(X), model.predict_proba(X))
+
+
+def test_cli_style_dict_round_trips_with_plain_values(tmp_path):
+    X, y = _descriptors()
+    saved = {"format": "eppf-model", "model": KLNearestNeighbors().fit(X, y), "eppf_version": eppf.__version__,
+             "params": {"n_bins": [20, 4, 5, 3], "scaling": None, "test_size": 0.25, "all": False,
+                        "nested": {"t": (1, 2.5), "nan": float("nan"), "i64": np.int64(7)}},
+             "classes": ["chair", "lamp", "table"], "data": "x.npz", "names": np.array(["a", "b"], dtype=object)}
+    back = _round_trip(saved, tmp_path)
+    assert list(back) == list(saved)
+    assert back["params"]["nested"]["t"] == (1, 2.5) and np.isnan(back["params"]["nested"]["nan"])
+    assert back["params"]["nested"]["i64"] == 7 and back["params"]["nested"]["i64"].dtype == np.int64
+    assert {k: v for k, v in back["params"].items() if k != "nested"} == \
+        {k: v for k, v in saved["params"].items() if k != "nested"}
+    assert back["names"].dtype == object and back["names"].tolist() == ["a", "b"]
+    assert_array_equal(back["model"].predict(X), saved["model"].predict(X))
+
+
+def test_eppf4d_classifier_round_trip_predicts_identically(tmp_path):
+    import torch
+
+    X, y = _descriptors(n=12, bins=6 * 2 * 2 * 2)
+    clf = EPPF4DClassifier(n_bins=(6, 2, 2, 2), max_epochs=2, n_hidden=8, filters=(2, 2, 2), batch_size=4,
+                           early_stopping=False, random_state=0).fit(X, y)
+    before = torch.random.get_rng_state()
+    back = _round_trip(clf, tmp_path)
+    assert torch.equal(torch.random.get_rng_state(), before)  # rebuilding does not touch the caller's stream
+    assert_array_equal(back.predict_proba(X), clf.predict_proba(X))
+    assert_array_equal(back.predict(X), clf.predict(X))
+    assert back.n_epochs_ == clf.n_epochs_ == len(back.net_.history)
+    assert_array_equal(back.input_mean_, clf.input_mean_)
+
+
+def test_pointnet_classifier_round_trip_predicts_identically(tmp_path, shapes):
+    X, y = shapes
+    clf = PointNetClassifier(n_points=32, max_epochs=1, batch_size=8, early_stopping=False, random_state=0)
+    clf.fit(X[:8], y[:8])
+    back = _round_trip(clf, tmp_path)
+    assert_array_equal(back.predict_proba(X[8:]), clf.predict_proba(X[8:]))
+
+
+def test_objects_outside_the_format_are_refused_and_nothing_is_written(tmp_path):
+    model = Pipeline([("f", FunctionTransformer(np.sqrt)), ("knn", KLNearestNeighbors())])
+    with pytest.raises(TypeError, match="FunctionTransformer"):
+        save_model(model, tmp_path / "m.eppf")
+    with pytest.raises(TypeError, match=r"model\['x'\]: objects of type builtins.function"):
+        save_model({"x": lambda v: v}, tmp_path / "m.eppf")
+    assert os.listdir(tmp_path) == []
+
+
+# ----------------------------------------------------------------- pickles
+class _WritesMarker:
+    """Unpickling this calls ``open(marker, "w")``: code run by loading."""
+
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def test_pickle_with_code_payload_is_refused_without_trust(tmp_path):
+    marker = tmp_path / "payload-ran"
+    X, y = _descriptors()
+    path = tmp_path / "evil.joblib"
+    # a real model plus the payload: it would load and predict normally
+    joblib.dump({"format": "eppf-model", "model": KLNearestNeighbors().fit(X, y), "x": _WritesMarker(str(marker))},
+                path)
+    with pytest.raises(ValueError, match=re.escape(str(path))) as info:
+        load_model(path)
+    assert "trust=True" in str(info.value) and "--trust" in str(info.value)
+    assert "run any code" in str(info.value)
+    assert not marker.exists()
+    # the same through the command line: one-line error, status 1, payload not run
+    from eppf.cli import main
+
+    cloud = tmp_path / "c.xyz"
+    np.savetxt(cloud, np.random.default_rng(0).normal(size=(40, 3)))
+    assert main(["predict", str(cloud), "--model", str(path), "--no-progress"]) == 1
+    assert not marker.exists()
+    # plain pickle.dump files are refused the same way
+    with open(tmp_path / "evil.pkl", "wb") as fh:
+        pickle.dump(_WritesMarker(str(marker)), fh)
+    with pytest.raises(ValueError, match="trust=True"):
+        load_model(tmp_path / "evil.pkl")
+    assert not marker.exists()
+
+
+def test_trust_loads_an_old_pickled_model(tmp_path):
+    X, y = _descriptors()
+    clf = KLNearestNeighbors().fit(X, y)
+    marker = tmp_path / "harmless"
+    path = tmp_path / "old.joblib"
+    joblib.dump({"format": "eppf-model", "model": clf, "touch": _WritesMarker(str(marker))}, path)
+    old = load_model(path, trust=True)
+    assert marker.exists()  # trust=True does run what the pickle holds: why it is not the default
+    assert_array_equal(old["model"].predict(X), clf.predict(X))
+    # converting it: save again, and the new file loads without trust
+    del old["touch"]
+    back = _round_trip(old, tmp_path, "new.eppf")
+    assert_array_equal(back["model"].predict(X), clf.predict(X))
+
+
+# ---------------------------------------------------------- hostile files
+def _rewrite(path, manifest=None, arrays=None):
+    """Rewrite a model file with a changed manifest and/or arrays."""
+    with zipfile.ZipFile(path) as zf:
+        text = zf.read("manifest.json")
+        blob = zf.read("arrays.npz")
+    if manifest is not None:
+        text = json.dumps(manifest(json.loads(text)))
+    if arrays is not None:
+        blob = arrays(blob)
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("manifest.json", text)
+        zf.writestr("arrays.npz", blob)
+
+
+@pytest.fixture
+def model_file(tmp_path):
+    X, y = _descriptors()
+    path = tmp_path / "m.eppf"
+    save_model(Pipeline([("l1", Normalizer(norm="l1")), ("knn", KLNearestNeighbors().fit(X, y))]), path)
+    return path
+
+
+def test_class_not_on_the_allow_list_is_refused(model_file):
+    def swap(m):
+        m["root"]["params"]["steps"][0]["items"][1]["class"] = "os.system"
+        return m
+
+    _rewrite(model_file, manifest=swap)
+    with pytest.raises(ValueError, match=re.escape(str(model_file)) + ".*'os.system' is not on the allow-list"):
+        load_model(model_file)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda m: dict(m, format_version=99), "format version 99"),
+    (lambda m: dict(m, format="other"), "does not describe an eppf model"),
+    (lambda m: {k: v for k, v in m.items() if k != "eppf_version"}, "does not record the eppf version"),
+    (lambda m: dict(m, root={"__type__": "function", "name": "os.system"}), "unknown node type 'function'"),
+    (lambda m: dict(m, root={"__type__": "ndarray", "ref": "a999"}), "not in arrays.npz"),
+])
+def test_bad_manifest_gives_value_error_naming_the_file(model_file, change, message):
+    _rewrite(model_file, manifest=change)
+    with pytest.raises(ValueError, match=re.escape(str(model_file))) as info:
+        load_model(model_file)
+    assert message in str(info.value)
+
+
+def test_newer_eppf_version_warns(model_file):
+    _rewrite(model_file, manifest=lambda m: dict(m, eppf_version="99.0"))
+    with pytest.warns(UserWarning, match="saved by eppf 99.0, which is newer"):
+        load_model(model_file)
+    _rewrite(model_file, manifest=lambda m: dict(m, eppf_version="0.0.1"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_model(model_file)  # older: no warning
+
+
+def _npz(**arrays):
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue()
+
+
+def test_arrays_of_python_objects_are_refused(model_file, tmp_path):
+    marker = tmp_path / "payload-ran"
+    evil = np.empty(1, dtype=object)
+    evil[0] = _WritesMarker(str(marker))
+    _rewrite(model_file, manifest=lambda m: dict(m, root={"__type__": "ndarray", "ref": "a0"}),
+             arrays=lambda blob: _npz(a0=evil))
+    with pytest.raises(ValueError, match="holds Python objects"):
+        load_model(model_file)
+    assert not marker.exists()
+
+
+def test_array_header_promising_more_data_than_stored_is_refused(model_file):
+    def lie(blob):
+        good = _npz(a0=np.zeros(4))
+        with zipfile.ZipFile(io.BytesIO(good)) as zf:
+            data = zf.read("a0.npy")
+        data = data.replace(b"(4,)", b"(9,)")
+        out = io.BytesIO()
+        with zipfile.ZipFile(out, "w") as zf:
+            zf.writestr("a0.npy", data)
+        return out.getvalue()
+
+    _rewrite(model_file, manifest=lambda m: dict(m, root={"__type__": "ndarray", "ref": "a0"}), arrays=lie)
+    with pytest.raises(ValueError, match=r"declares shape \(9,\)"):
+        load_model(model_file)
+
+
+@pytest.mark.parametrize("cut", [30, 200, -100, -10])
+def test_truncated_model_file_gives_value_error_naming_it(model_file, cut):
+    data = model_file.read_bytes()
+    model_file.write_bytes(data[:cut])
+    with pytest.raises(ValueError, match=re.escape(f"cannot load model {model_file}")):
+        load_model(model_file)
+
+
+def test_corrupted_bytes_inside_the_container_are_detected(model_file):
+    data = bytearray(model_file.read_bytes())
+    with zipfile.ZipFile(model_file) as zf:
+        info = zf.getinfo("arrays.npz")
+    mid = info.header_offset + 30 + len(info.filename) + info.compress_size // 2
+    data[mid] ^= 0xFF
+    model_file.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=re.escape(str(model_file))):
+        load_model(model_file)
+
+
+def test_other_files_give_clear_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such model file"):
+        load_model(tmp_path / "missing.eppf")
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(b"\x00\x01garbage" * 10)
+    with pytest.raises(ValueError, match="not an eppf model file"):
+        load_model(junk)
+    with pytest.raises(ValueError, match="cannot load model"):
+        load_model(junk, trust=True)
+    other_zip = tmp_path / "other.zip"
+    with zipfile.ZipFile(other_zip, "w") as zf:
+        zf.writestr("readme.txt", "hi")
+    with pytest.raises(ValueError, match="no manifest.json"):
+        load_model(other_zip)
+
+
+# ------------------------------------------------------------- command line
+def test_cli_train_writes_a_safe_file_that_predict_and_evaluate_read(tmp_path, capsys):
+    from eppf.cli import main
+
+    model = tmp_path / "m.joblib"
+    assert main(["train", "--built-in", "-o", str(model), "--n-pairs", "300", "--n-jobs", "1", "--no-progress"]) == 0
+    assert zipfile.is_zipfile(model)
+    saved = load_model(model)
+    assert saved["format"] == "eppf-model" and len(saved["classes"]) == 10
+    assert saved["params"]["n_pairs"] == 300 and saved["params"]["classifier"] == "knn"
+    X, _ = make_shapes(1, random_state=9, return_X_y=True)
+    folder = tmp_path / "clouds"
+    folder.mkdir()
+    for i, cloud in enumerate(X[:2]):
+        np.savetxt(folder / f"{i}.xyz", cloud)
+    capsys.readouterr()
+    assert main(["predict", str(folder), "--model", str(model), "--no-progress"]) == 0
+    out, err = capsys.readouterr()
+    assert err == "" and out.count(str(folder)) == 2
+    # an old pickled model: refused with a hint, accepted with --trust
+    old = tmp_path / "old.joblib"
+    joblib.dump(saved, old)
+    assert main(["predict", str(folder), "--model", str(old), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "--trust" in err and len(err.strip().splitlines()) == 1
+    assert main(["predict", str(folder), "--model", str(old), "--trust", "--no-progress"]) == 0
+    assert capsys.readouterr().out == out
+
+
+def test_every_model_option_documents_safety_and_trust():
+    from eppf.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    with_model = 0
+    for name, p in sub.choices.items():
+        actions = {a.dest: a for a in p._actions}
+        if "model" in actions:
+            with_model += 1
+            assert "safe" in actions["model"].help and "--trust" in actions["model"].help
+            assert "trust" in actions and "run any code" in actions["trust"].help
+    assert with_model == 2
+
+
+def test_hostile_values_in_the_tree_give_value_errors_naming_the_file(model_file):
+    with zipfile.ZipFile(model_file) as zf:
+        manifest = json.loads(zf.read("manifest.json"))
+    ref = manifest["root"]["params"]["steps"][1]["items"][1]["attributes"]["_fit_data"]["H"]
+    # training histograms that are not positive
+    _rewrite(model_file, manifest=lambda m: dict(m, root={"__type__": "kl_prepared", "H": ref}),
+             arrays=lambda blob: _npz(**{ref: -np.ones((2, 3))}))
+    with pytest.raises(ValueError, match=re.escape(str(model_file)) + ".*positive finite"):
+        load_model(model_file)
+    # values an estimator's own code rejects while rebuilding
+    _rewrite(model_file, manifest=lambda m: dict(m, root={"__type__": "kl_prepared", "H": ref}),
+             arrays=lambda blob: _npz(**{ref: np.full((2, 3), 1e308)}))
+    with pytest.raises(ValueError, match=re.escape(str(model_file)) + ".*too large"):
+        load_model(model_file)
+    deep = "[" * 100_000 + "]" * 100_000
+    with zipfile.ZipFile(model_file, "w") as zf:
+        zf.writestr("manifest.json", '{"format": "eppf-model", "format_version": 1, "eppf_version": "0.1.0", '
+                    f'"root": {deep}}}')
+        zf.writestr("arrays.npz", _npz())
+    with pytest.raises(ValueError, match=re.escape(str(model_file))):
+        load_model(model_file)
