@@ -281,8 +281,10 @@ class _SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             callbacks=self._callbacks(valid_ds is not None),
             classes=np.arange(n_classes),
             device=self.device,
-            # skorch's own table stays off: EpochLog prints one line per epoch.
-            verbose=0,
+            # skorch's own table is off (EpochLog prints one line per epoch);
+            # its verbose still lets EarlyStopping say why it stopped.
+            callbacks__print_log=None,
+            verbose=int(self.verbose),
         )
         params.update(self._net_params(n_classes, train_idx.shape[0]))
         self.net_ = NeuralNetClassifier(**params)
