@@ -67,11 +67,12 @@ class PointNet(nn.Module):
     dropout : float, default=0.3
         Dropout probability before the last dense layer.
 
-    Returns
-    -------
+    Notes
+    -----
     The forward pass returns ``(logits, feature_transform)``: the logits of
     shape (batch, n_classes) and the 64 x 64 feature transform of shape
-    (batch, 64, 64) that the orthogonality regulariser needs.
+    (batch, 64, 64) that the orthogonality regulariser needs (see
+    :class:`PointNetLoss`).
 
     References
     ----------
