@@ -9,7 +9,9 @@ pytest.importorskip("skorch")
 
 from sklearn.base import clone  # noqa: E402
 
-from eppf.classifiers._pointnet import PointNetClassifier, _modules, _normalise_and_sample  # noqa: E402
+from eppf.classifiers._pointnet import PointNetClassifier, _normalise_and_sample  # noqa: E402
+from eppf.nn import PointNet, PointNetLoss, TNet  # noqa: E402
+from eppf.nn import orthogonality_penalty as penalty  # noqa: E402
 
 FAST = dict(n_points=32, max_epochs=2, batch_size=8, early_stopping=False, n_jobs=1)
 
@@ -35,7 +37,6 @@ def _toy(n_per_class=12, seed=0, labels=("ball", "stick")):
 
 
 def test_module_output_shapes():
-    TNet, PointNet, _, _ = _modules()
     torch.manual_seed(0)
     net = PointNet(n_classes=5).eval()
     logits, feat = net(torch.randn(4, 20, 3))
@@ -46,7 +47,6 @@ def test_module_output_shapes():
 
 @pytest.mark.parametrize("k", [3, 64])
 def test_tnet_identity_at_init(k):
-    TNet = _modules()[0]
     torch.manual_seed(0)
     out = TNet(k).train()(torch.randn(3, k, 16))
     expected = torch.eye(k).expand(3, k, k)
@@ -54,7 +54,6 @@ def test_tnet_identity_at_init(k):
 
 
 def test_orthogonality_penalty():
-    penalty = _modules()[3]
     q, _ = torch.linalg.qr(torch.randn(2, 64, 64, dtype=torch.float64))
     assert penalty(q).item() == pytest.approx(0.0, abs=1e-20 + 1e-10)
     a = 2 * torch.eye(4, dtype=torch.float64).unsqueeze(0)
@@ -66,7 +65,6 @@ def test_orthogonality_penalty():
 
 
 def test_loss_adds_regulariser():
-    _, _, PointNetLoss, penalty = _modules()
     logits = torch.randn(4, 3)
     y = torch.tensor([0, 1, 2, 0])
     feat = torch.randn(4, 6, 6)
@@ -76,7 +74,6 @@ def test_loss_adds_regulariser():
 
 
 def test_module_permutation_invariance():
-    PointNet = _modules()[1]
     torch.manual_seed(0)
     net = PointNet(n_classes=3).eval()
     x = torch.randn(2, 30, 3)

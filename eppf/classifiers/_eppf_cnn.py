@@ -2,45 +2,17 @@
 
 import math
 import numbers
-import time
 
 import numpy as np
-from sklearn.base import BaseEstimator, ClassifierMixin
-from sklearn.utils import check_random_state
-from sklearn.utils.multiclass import check_classification_targets
-from sklearn.utils.validation import check_is_fitted
+
+from ..utils._param_validation import Interval, Satisfies, StrOptions
+from ._base import _COMMON_CONSTRAINTS, _SkorchClassifierBase, _positive_int_tuple
+from ._base import _silent, _torch_threads, _validation_split  # noqa: F401  (names older code and pickles use)
 
 __all__ = ["EPPF4DClassifier"]
 
-_OWNER = "EPPF4DClassifier"
-_CONVS = ("2d", "3d", "4d")
-_INPUT_SCALINGS = ("global", "bin", "none")
-_LR_SCHEDULES = ("constant", "plateau")
 
-
-def _check_int(name, value, low, *, allow_none=False, owner=_OWNER):
-    if value is None and allow_none:
-        return None
-    if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < low:
-        raise ValueError(f"{owner}: {name} must be an int >= {low}, got {value!r}")
-    return int(value)
-
-
-def _check_float(name, value, low, high, *, low_open=True, high_open=True, owner=_OWNER):
-    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-    if ok:
-        ok = (value > low if low_open else value >= low) and (value < high if high_open else value <= high)
-    if not ok:
-        lo, hi = ("(" if low_open else "["), (")" if high_open else "]")
-        raise ValueError(f"{owner}: {name} must be a float in {lo}{low}, {high}{hi}, got {value!r}")
-    return float(value)
-
-
-def _silent(*args, **kwargs):
-    """Sink for skorch's early-stopping message when not verbose."""
-
-
-class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
+class EPPF4DClassifier(_SkorchClassifierBase):
     """The paper's convolutional classifier on EPPF descriptors.
 
     Trains the 4D network of Bobkov et al. (two 4D convolutions, a 2D
@@ -49,7 +21,8 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
     The network is a :mod:`skorch` ``NeuralNetClassifier`` built in ``fit``
     (wrapped, not subclassed); this class adds label encoding, input
     standardisation, a validation split taken from the training data for
-    early stopping, seeding and thread control.
+    early stopping, a time budget, seeding and thread control (the parts
+    shared with :class:`PointNetClassifier` live in one base class).
 
     Parameters
     ----------
@@ -128,8 +101,8 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         results on CPU are reproducible (the global torch RNG is left as it
         was).
     verbose : int, default=0
-        1 or more prints skorch's per-epoch table (losses, validation
-        accuracy, duration).
+        1 or more prints one line per epoch (epoch, training loss,
+        validation loss and accuracy, seconds) and why training stopped.
 
     Attributes
     ----------
@@ -239,88 +212,116 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         self.random_state = random_state
         self.verbose = verbose
 
-    # ------------------------------------------------------------------ checks
-    def _check_params(self):
-        from ..nn import check_n_bins, check_precision
 
-        n_bins = check_n_bins(self.n_bins, owner=_OWNER)
-        if self.conv not in _CONVS:
-            raise ValueError(f"{_OWNER}: conv must be one of '4d', '3d', '2d', got {self.conv!r}")
-        _check_int("max_epochs", self.max_epochs, 1)
-        _check_float("lr", self.lr, 0.0, math.inf)
-        if self.lr_schedule not in _LR_SCHEDULES:
-            raise ValueError(f"{_OWNER}: lr_schedule must be 'constant' or 'plateau', got {self.lr_schedule!r}")
-        _check_int("batch_size", self.batch_size, 1)
-        _check_float("dropout", self.dropout, 0.0, 1.0, low_open=False)
-        _check_float("weight_decay", self.weight_decay, 0.0, math.inf, low_open=False)
-        _check_int("n_hidden", self.n_hidden, 1)
-        try:
-            filters = tuple(self.filters)
-        except TypeError:
-            filters = ()
-        if len(filters) != 3 or not all(
-            isinstance(f, numbers.Integral) and not isinstance(f, bool) and f >= 1 for f in filters
-        ):
-            raise ValueError(f"{_OWNER}: filters must be a tuple of 3 positive ints, got {self.filters!r}")
-        if not isinstance(self.early_stopping, (bool, np.bool_)):
-            raise ValueError(f"{_OWNER}: early_stopping must be True or False, got {self.early_stopping!r}")
-        _check_float("validation_fraction", self.validation_fraction, 0.0, 1.0)
-        _check_int("n_iter_no_change", self.n_iter_no_change, 1)
-        if self.max_time is not None:
-            _check_float("max_time", self.max_time, 0.0, math.inf)
-        if self.input_scaling not in _INPUT_SCALINGS:
-            raise ValueError(
-                f"{_OWNER}: input_scaling must be one of 'global', 'bin', 'none', got {self.input_scaling!r}"
-            )
-        check_precision(self.precision, owner=_OWNER)
-        if not isinstance(self.device, str):
-            raise ValueError(f"{_OWNER}: device must be a str such as 'cpu' or 'cuda', got {self.device!r}")
-        if self.n_jobs is not None:
-            if not isinstance(self.n_jobs, numbers.Integral) or isinstance(self.n_jobs, bool) or self.n_jobs == 0:
-                raise ValueError(f"{_OWNER}: n_jobs must be None or a non-zero int, got {self.n_jobs!r}")
-        _check_int("verbose", self.verbose, 0)
-        return n_bins
+    _parameter_constraints = {
+        **_COMMON_CONSTRAINTS,
+        "n_bins": [Satisfies(_positive_int_tuple(4), "a tuple of 4 positive ints")],
+        "conv": [StrOptions(["4d", "3d", "2d"])],
+        "weight_decay": [Interval(numbers.Real, 0, None, closed="left")],
+        "n_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
+        "filters": [Satisfies(_positive_int_tuple(3), "a tuple of 3 positive ints")],
+        "input_scaling": [StrOptions(["global", "bin", "none"])],
+        "precision": [StrOptions(["float32", "bfloat16"])],
+    }
+    _seed_names = ("torch", "split", "draws")
+
+    # ------------------------------------------------------------------ hooks
+    def _check_params(self):
+        super()._check_params()
+        self._n_bins = tuple(int(b) for b in self.n_bins)
 
     def _validate_X(self, X, n_features):
         """Return X as float32 of shape (n_objects, n_draws, n_features)."""
+        owner = self._owner
         if X is None or isinstance(X, (str, bytes, dict)):
-            raise TypeError(f"{_OWNER}: X must be an array of descriptors, got {type(X).__name__}")
+            raise TypeError(f"{owner}: X must be an array of descriptors, got {type(X).__name__}")
         try:
             arr = np.asarray(X)
         except Exception as exc:
-            raise ValueError(f"{_OWNER}: X could not be converted to an array: {exc}") from None
+            raise ValueError(f"{owner}: X could not be converted to an array: {exc}") from None
         if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
-            raise TypeError(f"{_OWNER}: X must hold numbers, got dtype {arr.dtype}")
+            raise TypeError(f"{owner}: X must hold numbers, got dtype {arr.dtype}")
         if arr.ndim == 2:
             arr = arr[:, None, :]
         elif arr.ndim != 3:
             raise ValueError(
-                f"{_OWNER}: X must have shape (n_objects, n_features) or (n_objects, n_draws, n_features), "
+                f"{owner}: X must have shape (n_objects, n_features) or (n_objects, n_draws, n_features), "
                 f"got shape {arr.shape}"
             )
         if arr.shape[0] == 0 or arr.shape[1] == 0:
-            raise ValueError(f"{_OWNER}: X is empty (shape {arr.shape})")
+            raise ValueError(f"{owner}: X is empty (shape {arr.shape})")
         if arr.shape[2] != n_features:
             raise ValueError(
-                f"{_OWNER}: descriptors have {arr.shape[2]} values but n_bins={tuple(self.n_bins)} needs "
+                f"{owner}: descriptors have {arr.shape[2]} values but n_bins={tuple(self.n_bins)} needs "
                 f"{n_features}; pass the n_bins the descriptors were computed with"
             )
         arr = arr.astype(np.float32)
         if not np.isfinite(arr).all():
-            raise ValueError(f"{_OWNER}: X contains NaN or infinite values")
+            raise ValueError(f"{owner}: X contains NaN or infinite values")
         return arr
 
-    def _n_threads(self):
-        if self.n_jobs is None:
-            return None
-        from ..utils._validation import check_n_jobs
-
-        return check_n_jobs(self.n_jobs, owner=_OWNER)
+    def _fit_inputs(self, X, seeds):
+        n_features = math.prod(self._n_bins)
+        X = self._validate_X(X, n_features)
+        self.n_features_in_ = n_features
+        self.n_draws_fit_ = X.shape[1]
+        return X
 
     def _standardise(self, X):
         return (X - self.input_mean_) / self.input_scale_
 
-    # --------------------------------------------------------------------- fit
+    def _make_datasets(self, X, y_enc, train_idx, valid_idx, seeds):
+        from ..nn import DescriptorPoolDataset
+
+        n_features = self.n_features_in_
+        if self.input_scaling == "global":
+            values = X[train_idx].astype(np.float64)
+            self.input_mean_ = np.array([values.mean()], dtype=np.float32)
+            self.input_scale_ = np.array([values.std()], dtype=np.float32)
+        elif self.input_scaling == "bin":
+            values = X[train_idx].reshape(-1, n_features).astype(np.float64)
+            self.input_mean_ = values.mean(axis=0).astype(np.float32)
+            self.input_scale_ = values.std(axis=0).astype(np.float32)
+        else:
+            self.input_mean_ = np.zeros(1, dtype=np.float32)
+            self.input_scale_ = np.ones(1, dtype=np.float32)
+        self.input_scale_[~(self.input_scale_ > 0)] = 1.0
+        Xs = self._standardise(X)
+        train_ds = DescriptorPoolDataset(Xs[train_idx], y_enc[train_idx], seeds["draws"])
+        valid_ds = None
+        if valid_idx is not None:
+            # Validation always sees the first draw of every object.
+            valid_ds = DescriptorPoolDataset(Xs[valid_idx][:, :1], y_enc[valid_idx], 0)
+        return train_ds, valid_ds
+
+    def _net_params(self, n_classes, n_train):
+        import torch
+
+        from ..nn import EPPFNet2D, EPPFNet3D, EPPFNet4D
+
+        return dict(
+            module={"4d": EPPFNet4D, "3d": EPPFNet3D, "2d": EPPFNet2D}[self.conv],
+            module__n_bins=self._n_bins,
+            module__n_classes=n_classes,
+            module__dropout=float(self.dropout),
+            module__n_hidden=int(self.n_hidden),
+            module__filters=tuple(int(f) for f in self.filters),
+            module__precision=self.precision,
+            criterion=torch.nn.CrossEntropyLoss,
+            optimizer=torch.optim.Adam,
+            optimizer__weight_decay=float(self.weight_decay),
+            # One fused kernel instead of a dozen passes over the 15 M
+            # parameters: the same Adam update, 8x faster on CPU.
+            optimizer__fused=torch.device(self.device).type in ("cpu", "cuda"),
+        )
+
+    def _predict_proba(self, X):
+        X = self._validate_X(X, self.n_features_in_)
+        n, k, f = X.shape
+        proba = self._infer(self._standardise(X.reshape(n * k, f)))
+        return proba.reshape(n, k, -1).mean(axis=1)
+
+    # ------------------------------------------------------------ public API
     def fit(self, X, y):
         """Train the network on descriptors.
 
@@ -337,130 +338,8 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         self : EPPF4DClassifier
             Fitted estimator.
         """
-        import torch
-        from skorch import NeuralNetClassifier
-        from skorch.callbacks import EarlyStopping
-        from skorch.helper import predefined_split
+        return super().fit(X, y)
 
-        from ..nn import DescriptorPoolDataset, EPPFNet2D, EPPFNet3D, EPPFNet4D
-
-        n_bins = self._check_params()
-        n_features = math.prod(n_bins)
-        X = self._validate_X(X, n_features)
-        y = np.asarray(y)
-        if y.ndim != 1:
-            raise ValueError(f"{_OWNER}: y must be 1D, got shape {y.shape}")
-        if y.shape[0] != X.shape[0]:
-            raise ValueError(f"{_OWNER}: X has {X.shape[0]} objects but y has {y.shape[0]} labels")
-        check_classification_targets(y)
-        classes, y_enc = np.unique(y, return_inverse=True)
-        if classes.shape[0] < 2:
-            raise ValueError(f"{_OWNER}: y has a single class {classes[0].tolist()!r}; at least 2 are needed")
-        self.classes_ = classes
-        y_enc = y_enc.astype(np.int64)
-        self.n_features_in_ = n_features
-        self.n_draws_fit_ = X.shape[1]
-
-        rng = check_random_state(self.random_state)
-        seed_torch, seed_split, seed_draws = (int(s) for s in rng.randint(0, 2**31 - 1, size=3))
-
-        train_idx = np.arange(X.shape[0])
-        valid_idx = None
-        if self.early_stopping:
-            train_idx, valid_idx = _validation_split(
-                y_enc, len(self.classes_), self.validation_fraction, seed_split, _OWNER
-            )
-
-        if self.input_scaling == "global":
-            values = X[train_idx].astype(np.float64)
-            self.input_mean_ = np.array([values.mean()], dtype=np.float32)
-            self.input_scale_ = np.array([values.std()], dtype=np.float32)
-        elif self.input_scaling == "bin":
-            values = X[train_idx].reshape(-1, n_features).astype(np.float64)
-            self.input_mean_ = values.mean(axis=0).astype(np.float32)
-            self.input_scale_ = values.std(axis=0).astype(np.float32)
-        else:
-            self.input_mean_ = np.zeros(1, dtype=np.float32)
-            self.input_scale_ = np.ones(1, dtype=np.float32)
-        self.input_scale_[~(self.input_scale_ > 0)] = 1.0
-        Xs = self._standardise(X)
-
-        train_ds = DescriptorPoolDataset(Xs[train_idx], y_enc[train_idx], seed_draws)
-        callbacks = []
-        train_split = None
-        if valid_idx is not None:
-            valid_ds = DescriptorPoolDataset(Xs[valid_idx][:, :1], y_enc[valid_idx], 0)
-            train_split = predefined_split(valid_ds)
-            callbacks.append(
-                (
-                    "early_stopping",
-                    EarlyStopping(
-                        monitor="valid_loss",
-                        patience=self.n_iter_no_change,
-                        load_best=True,
-                        sink=print if self.verbose else _silent,
-                    ),
-                )
-            )
-
-        if self.lr_schedule == "plateau":
-            from skorch.callbacks import LRScheduler
-
-            callbacks.append(
-                (
-                    "lr_scheduler",
-                    LRScheduler(
-                        policy=torch.optim.lr_scheduler.ReduceLROnPlateau,
-                        monitor="valid_loss" if valid_idx is not None else "train_loss",
-                        mode="min",
-                        factor=0.5,
-                        patience=max(1, self.n_iter_no_change // 3),
-                    ),
-                )
-            )
-        if self.max_time is not None:
-            callbacks.append(("time_budget", _TimeBudget(float(self.max_time), print if self.verbose else _silent)))
-
-        module = {"4d": EPPFNet4D, "3d": EPPFNet3D, "2d": EPPFNet2D}[self.conv]
-        self.net_ = NeuralNetClassifier(
-            module,
-            module__n_bins=n_bins,
-            module__n_classes=len(self.classes_),
-            module__dropout=float(self.dropout),
-            module__n_hidden=int(self.n_hidden),
-            module__filters=tuple(int(f) for f in self.filters),
-            module__precision=self.precision,
-            criterion=torch.nn.CrossEntropyLoss,
-            optimizer=torch.optim.Adam,
-            optimizer__weight_decay=float(self.weight_decay),
-            # One fused kernel instead of a dozen passes over the 15 M
-            # parameters: the same Adam update, 8x faster on CPU.
-            optimizer__fused=torch.device(self.device).type in ("cpu", "cuda"),
-            lr=float(self.lr),
-            max_epochs=int(self.max_epochs),
-            batch_size=int(self.batch_size),
-            iterator_train__shuffle=True,
-            train_split=train_split,
-            callbacks=callbacks,
-            classes=np.arange(len(self.classes_)),
-            device=self.device,
-            verbose=int(self.verbose),
-        )
-        with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed_torch)
-            self.net_.fit(train_ds, y=None)
-        # The validation set lives in train_split; drop it so it is not pickled.
-        self.net_.train_split = None
-        history = self.net_.history
-        self.n_epochs_ = len(history)
-        if valid_idx is not None:
-            losses = history[:, "valid_loss"]
-            self.best_epoch_ = int(np.argmin(losses)) + 1
-        else:
-            self.best_epoch_ = self.n_epochs_
-        return self
-
-    # ----------------------------------------------------------------- predict
     def predict_proba(self, X):
         """Class probabilities, averaged over descriptor draws for a 3D ``X``.
 
@@ -474,17 +353,7 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         proba : ndarray of shape (n_objects, n_classes)
             Columns follow ``classes_``.
         """
-        import torch
-
-        check_is_fitted(self, "net_")
-        X = self._validate_X(X, self.n_features_in_)
-        n, k, f = X.shape
-        flat = self._standardise(X.reshape(n * k, f))
-        # fork_rng: torch's data loader draws a seed from the global generator
-        # even at inference; leave the caller's random stream untouched.
-        with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
-            proba = self.net_.predict_proba(flat)
-        return proba.reshape(n, k, -1).mean(axis=1)
+        return super().predict_proba(X)
 
     def predict(self, X):
         """Predicted class labels.
@@ -499,98 +368,19 @@ class EPPF4DClassifier(ClassifierMixin, BaseEstimator):
         y : ndarray of shape (n_objects,)
             Labels from ``classes_``.
         """
-        proba = self.predict_proba(X)
-        return self.classes_[np.argmax(proba, axis=1)]
+        return super().predict(X)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.three_d_array = True
-        tags.non_deterministic = self.device != "cpu"
         return tags
 
 
-class _TimeBudget:
-    """skorch callback that ends training after the epoch that passes a deadline.
+def __getattr__(name):
+    # Models pickled before the callbacks moved name eppf.classifiers._eppf_cnn._TimeBudget;
+    # resolve it lazily so that importing this module needs no skorch.
+    if name == "_TimeBudget":
+        from ._callbacks import TimeBudget
 
-    Raising ``KeyboardInterrupt`` is how skorch's own ``EarlyStopping`` stops
-    a fit; skorch still runs ``on_train_end``, so the best weights are loaded.
-    """
-
-    def __init__(self, seconds, sink):
-        self.seconds = seconds
-        self.sink = sink
-
-    def initialize(self):
-        return self
-
-    def get_params(self, deep=True):
-        return {"seconds": self.seconds, "sink": self.sink}
-
-    def set_params(self, **params):
-        for key, value in params.items():
-            setattr(self, key, value)
-        return self
-
-    def on_train_begin(self, net, **kwargs):
-        self.start_ = time.monotonic()
-
-    def on_epoch_end(self, net, **kwargs):
-        if time.monotonic() - self.start_ > self.seconds:
-            self.sink(f"Stopping: time budget of {self.seconds:g} s used after {len(net.history)} epochs.")
-            raise KeyboardInterrupt
-
-    def on_train_end(self, net, **kwargs):
-        pass
-
-    def on_batch_begin(self, net, **kwargs):
-        pass
-
-    def on_batch_end(self, net, **kwargs):
-        pass
-
-    def on_epoch_begin(self, net, **kwargs):
-        pass
-
-    def on_grad_computed(self, net, named_parameters, **kwargs):
-        pass
-
-
-class _torch_threads:
-    """Set torch's intra-op thread count for a block; None changes nothing."""
-
-    def __init__(self, n):
-        self.n = n
-
-    def __enter__(self):
-        import torch
-
-        self.previous = torch.get_num_threads()
-        if self.n is not None:
-            torch.set_num_threads(self.n)
-
-    def __exit__(self, *exc):
-        import torch
-
-        if self.n is not None:
-            torch.set_num_threads(self.previous)
-        return False
-
-
-def _validation_split(y_enc, n_classes, fraction, seed, owner):
-    """Indices of a seeded hold-out of the training objects for early stopping.
-
-    Stratified by class when every class can appear on both sides; shared by
-    the descriptor CNN and PointNet so both hold out data the same way.
-    """
-    from sklearn.model_selection import train_test_split
-
-    n = y_enc.shape[0]
-    n_valid = int(math.ceil(fraction * n))
-    if n_valid < 1 or n - n_valid < 1:
-        raise ValueError(
-            f"{owner}: validation_fraction={fraction} of {n} objects leaves no "
-            "validation or no training objects; use more data or early_stopping=False"
-        )
-    counts = np.bincount(y_enc, minlength=n_classes)
-    stratify = y_enc if (counts.min() >= 2 and n_valid >= n_classes and n - n_valid >= n_classes) else None
-    return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)
+        return TimeBudget
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

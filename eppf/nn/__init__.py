@@ -1,4 +1,4 @@
-"""Neural-network building blocks: a 4D convolution and the paper's networks.
+"""Neural-network building blocks: a 4D convolution, the paper's networks, PointNet.
 
 Importing this subpackage imports torch (``import eppf`` does not).
 
@@ -18,7 +18,7 @@ bins               variant       dense-layer input   parameters
 """
 
 from ._conv4d import Conv4d, conv4d, same_padding
-from ._data import DescriptorPoolDataset
+from ._data import AugmentedPointClouds, DescriptorPoolDataset
 from ._networks import (
     EPPFNet2D,
     EPPFNet3D,
@@ -28,17 +28,23 @@ from ._networks import (
     count_parameters,
     plane_shape,
 )
+from ._pointnet import PointNet, PointNetLoss, TNet, orthogonality_penalty
 
 __all__ = [
+    "AugmentedPointClouds",
     "Conv4d",
     "DescriptorPoolDataset",
     "EPPFNet2D",
     "EPPFNet3D",
     "EPPFNet4D",
+    "PointNet",
+    "PointNetLoss",
+    "TNet",
     "check_n_bins",
     "check_precision",
     "conv4d",
     "count_parameters",
+    "orthogonality_penalty",
     "plane_shape",
     "same_padding",
 ]

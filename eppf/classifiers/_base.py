@@ -1,0 +1,340 @@
+"""The scaffolding shared by eppf's skorch classifiers, written once.
+
+:class:`_SkorchClassifierBase` holds what :class:`EPPF4DClassifier` and
+:class:`PointNetClassifier` have in common: parameter validation (through
+``_parameter_constraints``), label encoding and ``classes_``, the seeded and
+stratified validation split, early stopping, the learning-rate schedule and
+the time budget as skorch callbacks, the per-epoch log, torch thread control
+(restored after ``fit`` and ``predict``), the fitted-state attributes and the
+mapping of probabilities back to labels. Subclasses fill in the hooks:
+
+``_seed_names``
+    Names of the seeds drawn from ``random_state``, in drawing order (the
+    first two must be ``"torch"`` and ``"split"``).
+``_fit_inputs(X, seeds)``
+    Validate and convert the training ``X``; return an array whose first
+    axis is the objects.
+``_make_datasets(X, y_enc, train_idx, valid_idx, seeds)``
+    The training dataset and the validation one (None without early
+    stopping).
+``_net_params(n_classes, n_train)``
+    The ``skorch.NeuralNetClassifier`` arguments that differ: module,
+    criterion, optimizer and iterator options.
+``_predict_proba(X)``
+    Class probabilities of a fitted estimator, through :meth:`_infer`.
+
+The base never subclasses skorch: the network is a ``NeuralNetClassifier``
+built in ``fit`` and stored as ``net_``. Nothing here imports torch or skorch
+at module level, so ``import eppf`` does not pay for them.
+"""
+
+import math
+import numbers
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.utils import check_random_state
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import check_is_fitted
+
+from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
+from ..utils._validation import check_n_jobs
+
+__all__ = []
+
+
+def _silent(*args, **kwargs):
+    """Sink for the callbacks' messages when not verbose."""
+
+
+def _print_line(text):
+    """Sink for the callbacks' messages when verbose (not ``print`` itself:
+    skorch mutes a ``print`` sink when the net's own ``verbose`` is 0)."""
+    print(text, flush=True)
+
+
+def _nonzero_int(value):
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value != 0
+
+
+def _positive_int_tuple(length):
+    """Predicate: an iterable of ``length`` ints >= 1 (bool excluded)."""
+
+    def check(value):
+        values = tuple(value)
+        return len(values) == length and all(
+            isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_)) and v >= 1 for v in values
+        )
+
+    return check
+
+
+#: Constraints of the parameters every subclass has.
+_COMMON_CONSTRAINTS = {
+    "max_epochs": [Interval(numbers.Integral, 1, None, closed="left")],
+    "lr": [Interval(numbers.Real, 0, None, closed="neither")],
+    "lr_schedule": [StrOptions(["constant", "plateau"])],
+    "batch_size": [Interval(numbers.Integral, 1, None, closed="left")],
+    "dropout": [Interval(numbers.Real, 0, 1, closed="left")],
+    "early_stopping": [Options(bool)],
+    "validation_fraction": [Interval(numbers.Real, 0, 1, closed="neither")],
+    "n_iter_no_change": [Interval(numbers.Integral, 1, None, closed="left")],
+    "max_time": [None, Interval(numbers.Real, 0, None, closed="neither")],
+    "device": [Options(str, description="a str such as 'cpu' or 'cuda'")],
+    "n_jobs": [None, Satisfies(_nonzero_int, "a non-zero int")],
+    "random_state": [
+        None,
+        Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
+        Options(np.random.RandomState, description="a numpy RandomState"),
+    ],
+    "verbose": [Interval(numbers.Integral, 0, None, closed="left")],
+}
+
+
+class _torch_threads:
+    """Set torch's intra-op thread count for a block; None changes nothing.
+
+    The previous count is restored on exit, also when the block raises.
+    """
+
+    def __init__(self, n):
+        self.n = n
+
+    def __enter__(self):
+        import torch
+
+        self.previous = torch.get_num_threads()
+        if self.n is not None:
+            torch.set_num_threads(self.n)
+        return self
+
+    def __exit__(self, *exc):
+        import torch
+
+        if self.n is not None:
+            torch.set_num_threads(self.previous)
+        return False
+
+
+def _validation_split(y_enc, n_classes, fraction, seed, owner):
+    """Indices of a seeded hold-out of the training objects for early stopping.
+
+    Stratified by class when every class can appear on both sides.
+    """
+    from sklearn.model_selection import train_test_split
+
+    n = y_enc.shape[0]
+    n_valid = int(math.ceil(fraction * n))
+    if n_valid < 1 or n - n_valid < 1:
+        raise ValueError(
+            f"{owner}: validation_fraction={fraction} of {n} objects leaves no "
+            "validation or no training objects; use more data or early_stopping=False"
+        )
+    counts = np.bincount(y_enc, minlength=n_classes)
+    stratify = y_enc if (counts.min() >= 2 and n_valid >= n_classes and n - n_valid >= n_classes) else None
+    return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)
+
+
+class _SkorchClassifierBase(ClassifierMixin, BaseEstimator):
+    """Base of the skorch-backed classifiers (see the module docstring for the hooks).
+
+    Subclasses define ``__init__`` with their parameters (which must include
+    every key of ``_COMMON_CONSTRAINTS``), ``_parameter_constraints`` and the
+    hooks.
+    """
+
+    _parameter_constraints = dict(_COMMON_CONSTRAINTS)
+    _seed_names = ("torch", "split")
+
+    # ------------------------------------------------------------------ hooks
+    def _check_params(self):
+        """Validate the parameters; subclasses may return derived values."""
+        validate_params(self)
+
+    def _fit_inputs(self, X, seeds):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _make_datasets(self, X, y_enc, train_idx, valid_idx, seeds):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _net_params(self, n_classes, n_train):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _predict_proba(self, X):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # ---------------------------------------------------------------- helpers
+    @property
+    def _owner(self):
+        return type(self).__name__
+
+    def _n_threads(self):
+        """Torch threads for fit and predict, or None to leave torch alone."""
+        if self.n_jobs is None:
+            return None
+        return check_n_jobs(self.n_jobs, owner=self._owner)
+
+    def _sink(self):
+        return _print_line if self.verbose else _silent
+
+    def _encode_labels(self, y, n_objects):
+        """Check y against the objects; set ``classes_``; return int64 codes."""
+        owner = self._owner
+        y = np.asarray(y)
+        if y.ndim != 1:
+            raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")
+        if y.shape[0] != n_objects:
+            raise ValueError(f"{owner}: X has {n_objects} objects but y has {y.shape[0]} labels")
+        check_classification_targets(y)
+        classes, y_enc = np.unique(y, return_inverse=True)
+        if classes.shape[0] < 2:
+            raise ValueError(f"{owner}: y has a single class {classes[0].tolist()!r}; at least 2 are needed")
+        self.classes_ = classes
+        return y_enc.astype(np.int64)
+
+    def _callbacks(self, validating):
+        """Named skorch callbacks: epoch log, early stopping, LR schedule, time budget."""
+        import torch
+        from skorch.callbacks import EarlyStopping, LRScheduler
+
+        from ._callbacks import EpochLog, TimeBudget
+
+        sink = self._sink()
+        callbacks = []
+        if self.verbose:
+            # First, so that it logs the epoch in which another callback stops training.
+            callbacks.append(("epoch_log", EpochLog(sink, int(self.max_epochs))))
+        if validating:
+            callbacks.append(
+                (
+                    "early_stopping",
+                    EarlyStopping(monitor="valid_loss", patience=self.n_iter_no_change, load_best=True, sink=sink),
+                )
+            )
+        if self.lr_schedule == "plateau":
+            callbacks.append(
+                (
+                    "lr_scheduler",
+                    LRScheduler(
+                        policy=torch.optim.lr_scheduler.ReduceLROnPlateau,
+                        monitor="valid_loss" if validating else "train_loss",
+                        mode="min",
+                        factor=0.5,
+                        patience=max(1, self.n_iter_no_change // 3),
+                    ),
+                )
+            )
+        if self.max_time is not None:
+            callbacks.append(("time_budget", TimeBudget(float(self.max_time), sink)))
+        return callbacks
+
+    def _infer(self, X):
+        """``net_.predict_proba`` under the thread setting, leaving torch's global RNG alone."""
+        import torch
+
+        # fork_rng: torch's data loader draws a seed from the global generator
+        # even at inference; leave the caller's random stream untouched.
+        with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
+            return self.net_.predict_proba(X)
+
+    # -------------------------------------------------------------------- fit
+    def fit(self, X, y):
+        """Train the network.
+
+        Parameters
+        ----------
+        X : array-like or list
+            Training objects, as the subclass documents.
+        y : array-like of shape (n_objects,)
+            Class labels, any sortable type.
+
+        Returns
+        -------
+        self : object
+            Fitted estimator.
+        """
+        import torch
+        from skorch import NeuralNetClassifier
+        from skorch.helper import predefined_split
+
+        self._check_params()
+        rng = check_random_state(self.random_state)
+        seeds = dict(zip(self._seed_names, (int(s) for s in rng.randint(0, 2**31 - 1, size=len(self._seed_names)))))
+        X = self._fit_inputs(X, seeds)
+        y_enc = self._encode_labels(y, X.shape[0])
+        n_classes = len(self.classes_)
+
+        train_idx = np.arange(X.shape[0])
+        valid_idx = None
+        if self.early_stopping:
+            train_idx, valid_idx = _validation_split(
+                y_enc, n_classes, self.validation_fraction, seeds["split"], self._owner
+            )
+        train_ds, valid_ds = self._make_datasets(X, y_enc, train_idx, valid_idx, seeds)
+
+        params = dict(
+            lr=float(self.lr),
+            max_epochs=int(self.max_epochs),
+            batch_size=int(self.batch_size),
+            iterator_train__shuffle=True,
+            train_split=None if valid_ds is None else predefined_split(valid_ds),
+            callbacks=self._callbacks(valid_ds is not None),
+            classes=np.arange(n_classes),
+            device=self.device,
+            # skorch's own table is off (EpochLog prints one line per epoch);
+            # its verbose still lets EarlyStopping say why it stopped.
+            callbacks__print_log=None,
+            verbose=int(self.verbose),
+        )
+        params.update(self._net_params(n_classes, train_idx.shape[0]))
+        self.net_ = NeuralNetClassifier(**params)
+        with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seeds["torch"])
+            self.net_.fit(train_ds, y=None)
+        # The validation set lives in train_split; drop it so it is not pickled.
+        self.net_.train_split = None
+        history = self.net_.history
+        self.n_epochs_ = len(history)
+        if valid_ds is not None:
+            self.best_epoch_ = int(np.argmin(history[:, "valid_loss"])) + 1
+        else:
+            self.best_epoch_ = self.n_epochs_
+        return self
+
+    # ---------------------------------------------------------------- predict
+    def predict_proba(self, X):
+        """Class probabilities.
+
+        Parameters
+        ----------
+        X : array-like or list
+            Objects, as in ``fit``.
+
+        Returns
+        -------
+        proba : ndarray of shape (n_objects, n_classes)
+            Columns follow ``classes_``.
+        """
+        check_is_fitted(self, "net_")
+        return self._predict_proba(X)
+
+    def predict(self, X):
+        """Predicted class labels.
+
+        Parameters
+        ----------
+        X : array-like or list
+            Objects, as in ``fit``.
+
+        Returns
+        -------
+        y : ndarray of shape (n_objects,)
+            Labels from ``classes_``.
+        """
+        proba = self.predict_proba(X)
+        return self.classes_[np.argmax(proba, axis=1)]
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.non_deterministic = self.device != "cpu"
+        return tags

@@ -1,0 +1,295 @@
+"""The shared skorch scaffolding (eppf/classifiers/_base.py), through both classifiers."""
+
+import math
+import pickle
+import re
+
+import numpy as np
+import pytest
+import torch
+from sklearn.exceptions import NotFittedError
+from skorch import NeuralNetClassifier
+from skorch.callbacks import Callback
+
+from eppf import EPPF4DClassifier, PointNetClassifier
+from eppf.classifiers._base import _SkorchClassifierBase, _torch_threads, _validation_split
+from eppf.classifiers._callbacks import EpochLog, TimeBudget
+
+N_BINS = (4, 2, 3, 2)
+EPPF_FAST = dict(n_bins=N_BINS, filters=(4, 8, 4), n_hidden=16, batch_size=16, n_jobs=1)
+PN_FAST = dict(n_points=24, batch_size=8, n_jobs=1)
+
+
+def _descriptors(n, labels, seed=0):
+    """Rows whose mass sits in a class-specific block (easily separable)."""
+    rng = np.random.default_rng(seed)
+    n_features = math.prod(N_BINS)
+    codes = rng.integers(0, len(labels), n)
+    X = rng.random((n, n_features)) * 0.3
+    block = n_features // len(labels)
+    for c in range(len(labels)):
+        X[codes == c, c * block : (c + 1) * block] += 1.0
+    X /= X.sum(axis=1, keepdims=True)
+    return X, np.asarray(labels, dtype=object)[codes].astype(type(labels[0]))
+
+
+def _clouds(n, labels, seed=0):
+    rng = np.random.default_rng(seed)
+    X, y = [], []
+    for i in range(n):
+        c = i % len(labels)
+        X.append(rng.normal(size=(30, 3)) * [1.0, 1.0, 1.0 + 4.0 * c])
+        y.append(labels[c])
+    return X, np.asarray(y)
+
+
+def _make(kind, **params):
+    if kind == "eppf":
+        X, y = _descriptors(30, ["cat", "dog"])
+        return EPPF4DClassifier(**{**EPPF_FAST, **params}), X, y
+    X, y = _clouds(12, ["ball", "stick"])
+    return PointNetClassifier(**{**PN_FAST, **params}), X, y
+
+
+KINDS = ["eppf", "pointnet"]
+
+
+def test_both_classifiers_share_the_base():
+    for cls in (EPPF4DClassifier, PointNetClassifier):
+        assert issubclass(cls, _SkorchClassifierBase)
+        assert not issubclass(cls, NeuralNetClassifier)  # wrapped, not subclassed
+
+
+# ---------------------------------------------------------------- time budget
+def test_time_budget_is_a_skorch_callback_that_stops_after_the_deadline(monkeypatch):
+    import eppf.classifiers._callbacks as cb
+
+    clock = [100.0]
+    monkeypatch.setattr(cb.time, "monotonic", lambda: clock[0])
+    said = []
+    budget = TimeBudget(5.0, said.append).initialize()
+    assert isinstance(budget, Callback)
+    assert budget.get_params() == {"seconds": 5.0, "sink": said.append}
+
+    class Net:
+        history = [{}, {}, {}]
+
+    budget.on_train_begin(Net())
+    clock[0] = 105.0  # exactly at the budget: keep going
+    budget.on_epoch_end(Net())
+    assert said == []
+    clock[0] = 105.5
+    with pytest.raises(KeyboardInterrupt):
+        budget.on_epoch_end(Net())
+    assert said == ["Stopping: time budget of 5 s used after 3 epochs."]
+
+
+@pytest.mark.parametrize("kind, early_stopping", [("eppf", False), ("eppf", True), ("pointnet", True)])
+def test_time_budget_ends_fit_after_first_epoch(kind, early_stopping, capsys):
+    clf, X, y = _make(kind, max_epochs=6, max_time=1e-9, early_stopping=early_stopping, random_state=0)
+    clf.fit(X, y)
+    assert clf.n_epochs_ == 1 and clf.best_epoch_ == 1
+    assert capsys.readouterr().out == ""  # quiet by default
+    names = [name for name, _ in clf.net_.callbacks]
+    assert "time_budget" in names and ("early_stopping" in names) == early_stopping
+    if kind == "eppf":
+        # Without a budget, the same fit runs every epoch.
+        clf.set_params(max_time=None, early_stopping=False, max_epochs=3).fit(X, y)
+        assert clf.n_epochs_ == 3
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_time_budget_message_when_verbose(kind, capsys):
+    clf, X, y = _make(kind, max_epochs=4, max_time=1e-9, early_stopping=False, random_state=0, verbose=1)
+    clf.fit(X, y)
+    out = capsys.readouterr().out
+    assert "Stopping: time budget of 1e-09 s used after 1 epochs." in out
+
+
+# -------------------------------------------------------------- epoch logging
+@pytest.mark.parametrize("kind", KINDS)
+def test_verbose_prints_one_line_per_epoch(kind, capsys):
+    clf, X, y = _make(kind, max_epochs=2, early_stopping=True, validation_fraction=0.3, n_iter_no_change=5,
+                      random_state=0, verbose=1)
+    clf.fit(X, y)
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("epoch ")]
+    assert len(lines) == clf.n_epochs_ == 2
+    pattern = re.compile(r"^epoch ([12])/2  train_loss \d+\.\d{4}  valid_loss \d+\.\d{4}  valid_acc \d\.\d{4}  "
+                         r"\d+\.\d\d s$")
+    for k, line in enumerate(lines, start=1):
+        m = pattern.match(line)
+        assert m and int(m.group(1)) == k, line
+        row = clf.net_.history[k - 1]
+        assert f"train_loss {row['train_loss']:.4f}" in line and f"valid_acc {row['valid_acc']:.4f}" in line
+    if kind == "eppf":
+        clf.set_params(verbose=0).fit(X, y)
+        assert capsys.readouterr().out == ""
+
+
+def test_epoch_log_without_validation():
+    said = []
+
+    class Net:
+        history = [{"epoch": 7, "train_loss": 0.25, "dur": 1.5}]
+
+    EpochLog(said.append, 100).on_epoch_end(Net())
+    assert said == ["epoch   7/100  train_loss 0.2500  1.50 s"]
+
+
+def test_early_stopping_message_when_verbose(capsys):
+    # lr=0 cannot improve the validation loss: patience 1 stops after epoch 2.
+    clf, X, y = _make("eppf", max_epochs=10, lr=1e-12, n_iter_no_change=1, random_state=0, verbose=1)
+    clf.fit(X, y)
+    out = capsys.readouterr().out
+    assert clf.n_epochs_ < 10
+    assert "Stopping since valid_loss has not improved" in out
+    assert len([ln for ln in out.splitlines() if ln.startswith("epoch ")]) == clf.n_epochs_
+
+
+# ------------------------------------------------------------ torch threads
+@pytest.fixture
+def two_threads():
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_threads_set_during_fit_and_predict_and_restored(kind, two_threads, monkeypatch):
+    seen = {}
+    fit, predict_proba = NeuralNetClassifier.fit, NeuralNetClassifier.predict_proba
+
+    def spy_fit(net, *args, **kwargs):
+        seen["fit"] = torch.get_num_threads()
+        return fit(net, *args, **kwargs)
+
+    def spy_predict(net, *args, **kwargs):
+        seen["predict"] = torch.get_num_threads()
+        return predict_proba(net, *args, **kwargs)
+
+    monkeypatch.setattr(NeuralNetClassifier, "fit", spy_fit)
+    monkeypatch.setattr(NeuralNetClassifier, "predict_proba", spy_predict)
+    clf, X, y = _make(kind, max_epochs=1, early_stopping=False, random_state=0, n_jobs=1)
+    clf.fit(X, y)
+    assert seen["fit"] == 1 and torch.get_num_threads() == 2
+    clf.predict(X)
+    assert seen["predict"] == 1 and torch.get_num_threads() == 2
+    if kind == "eppf":
+        # n_jobs=None leaves torch's setting alone
+        clf.set_params(n_jobs=None).predict(X)
+        assert seen["predict"] == 2
+
+
+def test_threads_restored_when_fit_raises(two_threads, monkeypatch):
+    def boom(net, *args, **kwargs):
+        assert torch.get_num_threads() == 1
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(NeuralNetClassifier, "fit", boom)
+    clf, X, y = _make("pointnet", max_epochs=1, early_stopping=False, n_jobs=1)
+    with pytest.raises(RuntimeError, match="boom"):
+        clf.fit(X, y)
+    assert torch.get_num_threads() == 2
+    with _torch_threads(None):
+        assert torch.get_num_threads() == 2
+
+
+# ---------------------------------------------------------------- labels
+@pytest.mark.parametrize("labels", [["zebra", "ant", "mole"], [30, -7, 4]])
+def test_labels_map_back(labels):
+    X, y = _descriptors(60, labels, seed=3)
+    clf = EPPF4DClassifier(**{**EPPF_FAST, "lr": 1e-2}, max_epochs=12, early_stopping=False, random_state=0).fit(X, y)
+    assert list(clf.classes_) == sorted(labels)
+    pred = clf.predict(X)
+    assert pred.dtype == y.dtype and set(pred) <= set(labels)
+    # columns of predict_proba follow classes_: a permuted mapping would score near 1/3
+    assert np.mean(pred == y) >= 0.9
+    np.testing.assert_array_equal(pred, clf.classes_[np.argmax(clf.predict_proba(X), axis=1)])
+
+
+def test_pointnet_order_preserving_relabelling_changes_nothing_but_the_names():
+    X, y = _clouds(12, ["b", "a"])
+    kw = dict(PN_FAST, max_epochs=1, early_stopping=False, random_state=0)
+    a = PointNetClassifier(**kw).fit(X, y)
+    b = PointNetClassifier(**kw).fit(X, np.where(y == "a", "alpha", "beta"))
+    assert list(a.classes_) == ["a", "b"] and list(b.classes_) == ["alpha", "beta"]
+    np.testing.assert_array_equal(a.predict_proba(X), b.predict_proba(X))
+    np.testing.assert_array_equal(np.where(a.predict(X) == "a", "alpha", "beta"), b.predict(X))
+
+
+# ---------------------------------------------------------------- not fitted
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("method", ["predict", "predict_proba"])
+def test_not_fitted(kind, method):
+    clf, X, _ = _make(kind)
+    with pytest.raises(NotFittedError, match=type(clf).__name__):
+        getattr(clf, method)(X)
+
+
+# -------------------------------------------------------- validation split
+def test_validation_split_is_stratified_seeded_and_disjoint():
+    y = np.repeat([0, 1, 2], [20, 10, 30])
+    tr, va = _validation_split(y, 3, 0.2, seed=5, owner="X")
+    assert len(va) == 12 and len(tr) == 48
+    assert np.intersect1d(tr, va).size == 0 and np.union1d(tr, va).size == 60
+    np.testing.assert_array_equal(np.bincount(y[va], minlength=3), [4, 2, 6])  # class shares kept
+    tr2, va2 = _validation_split(y, 3, 0.2, seed=5, owner="X")
+    np.testing.assert_array_equal(va, va2)
+    assert not np.array_equal(np.sort(va), np.sort(_validation_split(y, 3, 0.2, seed=6, owner="X")[1]))
+
+
+def test_validation_split_falls_back_to_unstratified_for_singleton_classes():
+    y = np.array([0, 0, 0, 0, 0, 1])
+    tr, va = _validation_split(y, 2, 0.34, seed=0, owner="X")
+    assert len(va) == 3 and len(tr) == 3
+
+
+# ---------------------------------------------------------------- parameters
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize(
+    "params, err, msg",
+    [
+        ({"random_state": -1}, ValueError,
+         "random_state must be None or an int in [0, 4294967295] or a numpy RandomState, got -1"),
+        ({"random_state": "0"}, TypeError,
+         "random_state must be None or an int in [0, 4294967295] or a numpy RandomState, got '0'"),
+        ({"lr_schedule": "step"}, ValueError, "lr_schedule must be 'constant' or 'plateau', got 'step'"),
+        ({"max_time": float("inf")}, ValueError, "max_time must be None or a float in (0.0, inf), got inf"),
+        ({"n_jobs": 1.0}, TypeError, "n_jobs must be None or a non-zero int, got 1.0"),
+        ({"verbose": True}, ValueError, "verbose must be an int >= 0, got True"),
+    ],
+)
+def test_common_parameters_are_checked_in_fit(kind, params, err, msg):
+    clf, X, y = _make(kind, **params)
+    with pytest.raises(err, match=re.escape(f"{type(clf).__name__}: {msg}")):
+        clf.fit(X, y)
+
+
+def test_accepts_a_randomstate_and_pickles():
+    clf, X, y = _make("eppf", max_epochs=1, early_stopping=False, random_state=np.random.RandomState(0))
+    clf.fit(X, y)
+    again = pickle.loads(pickle.dumps(clf))
+    np.testing.assert_array_equal(again.predict_proba(X), clf.predict_proba(X))
+
+
+def test_names_of_models_pickled_before_the_move_still_resolve():
+    import io
+
+    import eppf.nn
+
+    find = pickle.Unpickler(io.BytesIO(b"")).find_class
+    for name in ("TNet", "PointNet", "PointNetLoss", "orthogonality_penalty"):
+        assert find("eppf.classifiers._pointnet", name) is getattr(eppf.nn, name)
+    assert find("eppf.classifiers._eppf_cnn", "_TimeBudget") is TimeBudget
+    assert callable(find("eppf.classifiers._eppf_cnn", "_silent"))
+    with pytest.raises(AttributeError):
+        find("eppf.classifiers._pointnet", "NoSuchThing")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_tags(kind):
+    clf, _, _ = _make(kind)
+    assert clf.__sklearn_tags__().estimator_type == "classifier"
+    assert not clf.__sklearn_tags__().non_deterministic
+    assert clf.set_params(device="cuda").__sklearn_tags__().non_deterministic
