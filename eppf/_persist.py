@@ -375,7 +375,7 @@ class _Decoder:
         history = self.decode(node.get("history"), f"{where}.history")
         try:
             with torch.random.fork_rng(devices=[]):  # initialising draws random weights
-                net = (_build_cnn_net if name == "eppf.EPPF4DClassifier" else _build_pointnet_net)(est)
+                net = est._untrained_net(len(est.classes_))
                 net.module_.load_state_dict(tensors, strict=True)
         except (RuntimeError, ValueError, TypeError, AttributeError, KeyError) as exc:
             raise self.fail(where, f"cannot rebuild the network of {name}: {str(exc).splitlines()[0]}") from None
@@ -384,67 +384,6 @@ class _Decoder:
 
             net.history_ = History(history)
         return net
-
-
-def _build_cnn_net(est):
-    """The skorch network of a fitted EPPF4DClassifier, as its ``fit`` builds it, untrained."""
-    import torch
-    from skorch import NeuralNetClassifier
-
-    from .nn import EPPFNet2D, EPPFNet3D, EPPFNet4D
-
-    n_bins = est._check_params()
-    module = {"4d": EPPFNet4D, "3d": EPPFNet3D, "2d": EPPFNet2D}[est.conv]
-    n_classes = len(est.classes_)
-    net = NeuralNetClassifier(
-        module,
-        module__n_bins=n_bins,
-        module__n_classes=n_classes,
-        module__dropout=float(est.dropout),
-        module__n_hidden=int(est.n_hidden),
-        module__filters=tuple(int(f) for f in est.filters),
-        module__precision=est.precision,
-        criterion=torch.nn.CrossEntropyLoss,
-        optimizer=torch.optim.Adam,
-        optimizer__weight_decay=float(est.weight_decay),
-        lr=float(est.lr),
-        max_epochs=int(est.max_epochs),
-        batch_size=int(est.batch_size),
-        train_split=None,
-        classes=np.arange(n_classes),
-        device=est.device,
-        verbose=int(est.verbose),
-    )
-    return net.initialize()
-
-
-def _build_pointnet_net(est):
-    """The skorch network of a fitted PointNetClassifier, as its ``fit`` builds it, untrained."""
-    import torch
-    from skorch import NeuralNetClassifier
-
-    from .classifiers._pointnet import _modules, _softmax
-
-    est._check_params()
-    _, PointNet, PointNetLoss, _ = _modules()
-    n_classes = len(est.classes_)
-    net = NeuralNetClassifier(
-        PointNet,
-        module__n_classes=n_classes,
-        module__dropout=float(est.dropout),
-        criterion=PointNetLoss,
-        criterion__reg_weight=float(est.reg_weight),
-        optimizer=torch.optim.Adam,
-        lr=float(est.lr),
-        max_epochs=int(est.max_epochs),
-        batch_size=int(est.batch_size),
-        train_split=None,
-        classes=np.arange(n_classes),
-        predict_nonlinearity=_softmax,
-        device=est.device,
-        verbose=int(est.verbose),
-    )
-    return net.initialize()
 
 
 def _version_tuple(text):

@@ -301,6 +301,24 @@ class _SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             self.best_epoch_ = self.n_epochs_
         return self
 
+    def _untrained_net(self, n_classes):
+        """The skorch network ``fit`` builds for ``n_classes``, initialised but untrained and without
+        training callbacks or validation data: what a saved model's weights are loaded into."""
+        from skorch import NeuralNetClassifier
+
+        self._check_params()
+        params = dict(
+            lr=float(self.lr),
+            max_epochs=int(self.max_epochs),
+            batch_size=int(self.batch_size),
+            train_split=None,
+            classes=np.arange(n_classes),
+            device=self.device,
+            verbose=int(self.verbose),
+        )
+        params.update(self._net_params(n_classes, 0))
+        return NeuralNetClassifier(**params).initialize()
+
     # ---------------------------------------------------------------- predict
     def predict_proba(self, X):
         """Class probabilities.
