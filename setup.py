@@ -1,7 +1,7 @@
 """Build the Cython extensions of eppf, with OpenMP when the compiler has it.
 
 All metadata lives in ``pyproject.toml``; this file only declares the compiled
-modules (every ``eppf/_*.pyx``) and probes for OpenMP, falling back to a serial
+modules (every ``eppf/_*.pyx`` and ``eppf/**/_*.pyx``) and probes for OpenMP, falling back to a serial
 build (``prange`` runs as a plain loop) when ``-fopenmp`` does not compile.
 """
 import glob
@@ -45,19 +45,36 @@ def _openmp_flags():
 omp_compile, omp_link = _openmp_flags()
 base_args = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fno-math-errno"]
 
-extensions = [
-    Extension(
-        "eppf." + os.path.splitext(os.path.basename(path))[0],
+
+def _extension(path):
+    """The extension built from ``path`` (``eppf/_x.pyx`` or ``eppf/<package>/_x.pyx``)."""
+    name = os.path.splitext(path)[0].replace(os.sep, ".")
+    folder = os.path.dirname(path)
+    if folder == "eppf":
+        # the kernels: NumPy headers, the shared C headers and _common.pxd
+        include = [np.get_include(), "eppf"]
+        depends = sorted(glob.glob(os.path.join("eppf", "*.h"))) + [os.path.join("eppf", "_common.pxd")]
+    else:
+        # subpackage parsers: their own folder, NumPy only if they cimport it
+        with open(path) as fh:
+            uses_numpy = "cimport numpy" in fh.read()
+        include = [folder] + ([np.get_include()] if uses_numpy else [])
+        depends = sorted(glob.glob(os.path.join(folder, "*.pxd")) + glob.glob(os.path.join(folder, "*.h")))
+    return Extension(
+        name,
         [path],
-        include_dirs=[np.get_include(), "eppf"],
-        # C headers and the shared .pxd: editing one rebuilds the extensions
-        depends=sorted(glob.glob(os.path.join("eppf", "*.h"))) + [os.path.join("eppf", "_common.pxd")],
+        include_dirs=include,
+        depends=depends,
         extra_compile_args=base_args + omp_compile,
         extra_link_args=omp_link,
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
     )
-    for path in sorted(glob.glob(os.path.join("eppf", "_*.pyx")))
-]
+
+
+# every eppf/_*.pyx and eppf/<package>/**/_*.pyx
+# (with recursive=True, "**" also matches no folder at all)
+sources = sorted(glob.glob(os.path.join("eppf", "**", "_*.pyx"), recursive=True))
+extensions = [_extension(path) for path in sources]
 
 setup(
     ext_modules=cythonize(
