@@ -29,7 +29,7 @@ def _read_array(fh, size, path, owner, what):
             shape, fortran, dtype = fmt.read_array_header_2_0(fh)
         else:
             raise ValueError(f"unsupported .npy version {version}")
-    except (ValueError, OSError, EOFError, SyntaxError, TypeError) as exc:
+    except Exception as exc:  # noqa: BLE001 - ValueError, SyntaxError, tokenize.TokenError, EOFError, ...
         raise FileFormatError(f"{owner}: {path!r}{what}: not a readable .npy array ({exc})") from None
     if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
         raise FileFormatError(f"{owner}: {path!r}{what}: holds a {dtype} array; expected plain numbers (pickled objects are refused)")

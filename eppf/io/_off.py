@@ -54,8 +54,8 @@ def _read_off_compiled(data):
     if parsed is None:
         return None
     verts, faces, end = parsed
-    if data[end:].strip() or (n_f and (faces.min() < 0 or faces.max() >= n_v)):
-        return None
+    if data[end:].strip() or (n_f and (faces.min() < 0 or faces.max() >= n_v)) or not np.isfinite(verts).all():
+        return None  # the line-by-line reader names the line
     return Mesh(verts, faces)
 
 
@@ -97,7 +97,7 @@ def _read_off_fast(text):
     if set(map(len, map(str.split, vlines))) != {3}:
         return None
     verts = np.fromstring(" ".join(vlines), sep=" ")  # C parser; sizes checked below
-    if verts.size != 3 * n_v:
+    if verts.size != 3 * n_v or not np.isfinite(verts).all():
         return None
     if n_f == 0:
         return Mesh(verts.reshape(n_v, 3), np.empty((0, 3), dtype=np.int64))

@@ -76,9 +76,9 @@ def lzf_decompress(src, expected, path, owner, base):
         )
     if _lzf_compiled is None:
         return _lzf_python(src, expected, path, owner, base)
-    out, status, ip = _lzf_compiled(src, expected)
+    out, status, ip, op = _lzf_compiled(src, expected)
     if status == 4:
-        raise FileFormatError(f"{owner}: {path!r}: compressed data gives fewer bytes than the {expected} the header says")
+        raise FileFormatError(f"{owner}: {path!r}: compressed data gives {op} bytes, header says {expected}")
     if status:
         raise FileFormatError(f"{owner}: {path!r} byte {base + ip}: corrupt compressed data ({_LZF_ERRORS[status]})")
     return out

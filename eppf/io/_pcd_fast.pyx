@@ -26,11 +26,11 @@ cdef enum:
 def lzf_decompress(const unsigned char[::1] src, Py_ssize_t expected):
     """Decompress ``src`` into ``expected`` bytes.
 
-    Returns ``(out, status, position)``: the output (a bytearray of
+    Returns ``(out, status, position, written)``: the output (a bytearray of
     ``expected`` bytes), a status code (0: success, 1: a literal run
     overflows, 2: a truncated back reference, 3: a reference before the start
     or past the end of the output, 4: the output is shorter than expected) and
-    the input offset where decoding stopped.
+    the input offset where decoding stopped and the bytes written so far.
     """
     if expected < 0:
         raise ValueError("expected must be >= 0")
@@ -78,4 +78,4 @@ def lzf_decompress(const unsigned char[::1] src, Py_ssize_t expected):
                         op += 1
         if status == OK and op != expected:
             status = SHORT_OUTPUT
-    return out, status, ip
+    return out, status, ip, op
