@@ -240,8 +240,14 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         if shape.faces.shape[0] == 0:
             raise FileFormatError(f"{owner}: {path!r} has no faces, so it cannot be sampled; pass mesh='vertices'")
         count = n_points if n_points is not None or resolution is not None else MESH_POINTS
-        return _guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
-                      resolution=resolution, return_normals=normals is not False, random_state=rng)
+        with np.errstate(over="ignore", invalid="ignore"):
+            out = _guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
+                         resolution=resolution, return_normals=normals is not False, random_state=rng)
+        if not np.isfinite(out).all():
+            raise FileFormatError(
+                f"{owner}: {path!r}: the mesh's coordinates are too large to sample (its areas overflow float64)"
+            )
+        return out
     out = _finish_cloud(cloud, path, normals, owner, remove_nan)
     if n_points is not None:
         out = _guard(owner, path, fmt, resample, out, n_points, random_state=rng)

@@ -61,8 +61,8 @@ def _member(zf, name, path, owner):
         return _read_array(fh, info.file_size, path, owner, f" member {name!r}")
 
 
-def _read_npz(path, owner):
-    with zipfile.ZipFile(path) as zf:
+def _read_npz(fh, path, owner):
+    with zipfile.ZipFile(fh) as zf:
         names = zf.namelist()
         keys = {n[:-4] if n.endswith(".npy") else n: n for n in names}
         files = list(keys)
@@ -111,12 +111,15 @@ def read_npz(path, owner, want_normals="auto"):
     size = check_file(path, owner)
     if size == 0:
         raise FileFormatError(f"{owner}: {path!r} is empty")
-    try:
-        arr = _read_npz(path, owner)
-    except (FileFormatError, OSError):
-        raise
-    except Exception as exc:  # zipfile.BadZipFile, zlib.error, NotImplementedError, EOFError, ...
-        raise FileFormatError(f"{owner}: {path!r} is not a readable .npz archive ({type(exc).__name__}: {exc})") from None
+    with open(path, "rb") as fh:  # an OSError here names the file
+        try:
+            arr = _read_npz(fh, path, owner)
+        except FileFormatError:
+            raise
+        except Exception as exc:  # BadZipFile, zlib.error, NotImplementedError, EOFError, OSError from seeks, ...
+            raise FileFormatError(
+                f"{owner}: {path!r} is not a readable .npz archive ({type(exc).__name__}: {exc})"
+            ) from None
     return _to_cloud(arr, path, owner)
 
 

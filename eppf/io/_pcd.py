@@ -255,7 +255,8 @@ def read_pcd(path, data, owner, want_normals="auto"):
             off += sub.itemsize * n_points
 
     def first(name):
-        return np.asarray(cols[name], dtype=np.float64).reshape(n_points, -1)[:, 0]
+        with np.errstate(invalid="ignore"):  # float16-free, but NaN payloads in int fields are fine
+            return np.asarray(cols[name], dtype=np.float64).reshape(n_points, -1)[:, 0]
 
     xyz = np.column_stack([first(f) for f in "xyz"])
     nrm = None

@@ -268,9 +268,10 @@ def _is_number(token):
 def _column(values, code):
     """Values of one scalar property as float64, rounded through its declared type."""
     arr = np.asarray(values)
-    if code in ("f4",) and arr.dtype != np.float32:
-        arr = arr.astype(np.float32)
-    return np.asarray(arr, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):  # out-of-range values become inf, as in C
+        if code in ("f4",) and arr.dtype != np.float32:
+            arr = arr.astype(np.float32)
+        return np.asarray(arr, dtype=np.float64)
 
 
 def read_ply(path, data, owner, want_faces=True):

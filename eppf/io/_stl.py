@@ -43,7 +43,8 @@ def read_stl(path, data, owner):
             if n == 0:
                 raise FileFormatError(f"{owner}: {path!r}: binary STL with no triangles")
             rec = np.frombuffer(data, dtype=_RECORD, count=n, offset=84)
-            corners = rec["vertices"].reshape(-1, 3).astype(np.float64)
+            with np.errstate(invalid="ignore"):
+                corners = rec["vertices"].reshape(-1, 3).astype(np.float64)
             bad = np.flatnonzero(~np.isfinite(corners).all(axis=1))
             if bad.size:
                 k = int(bad[0]) // 3
