@@ -59,12 +59,13 @@ def read_bytes(path, owner):
     return data
 
 
-def text_lines(data, path, owner):
+def text_lines(data, path, owner, split=True):
+    """The lines of a UTF-8 text file (or, with ``split=False``, its text)."""
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise FileFormatError(f"{owner}: {path!r} is not a text file (undecodable byte at offset {exc.start})") from None
-    return text.splitlines()
+    return text.splitlines() if split else text
 
 
 def content(lines, comment="#"):

@@ -255,7 +255,7 @@ def read_pcd(path, data, owner, want_normals="auto"):
             off += sub.itemsize * n_points
 
     def first(name):
-        with np.errstate(invalid="ignore"):  # float16-free, but NaN payloads in int fields are fine
+        with np.errstate(invalid="ignore"):  # NaN to float64 is exact; its cast warning is noise
             return np.asarray(cols[name], dtype=np.float64).reshape(n_points, -1)[:, 0]
 
     xyz = np.column_stack([first(f) for f in "xyz"])

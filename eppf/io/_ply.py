@@ -18,8 +18,13 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud, fan
+from ._common import Cloud
 from ._errors import FileFormatError
+
+try:  # compiled token parser for ASCII bodies; NumPy's string conversion otherwise
+    from ._xyz_fast import parse_tokens as _parse_tokens
+except ImportError:  # pragma: no cover - an uncompiled checkout
+    _parse_tokens = None
 
 _TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
           "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
@@ -168,19 +173,30 @@ def _read_binary(data, pos, elements, endian, path, owner, keep):
     return out
 
 
-def _read_ascii(data, pos, elements, path, owner, keep):
+def _ascii_values(data, pos, path, owner):
+    """Every number of an ASCII body as float64 (one float per token, no list of strings when compiled)."""
+    if _parse_tokens is not None:
+        values, bad = _parse_tokens(data, pos)
+        if values is not None:
+            return values
+        token = (data[bad:bad + 40].split() or [data[bad:bad + 1]])[0].decode("ascii", "replace")
+        line = data.count(b"\n", 0, bad) + 1
+        raise FileFormatError(f"{owner}: {path!r} line {line}: malformed number {token!r} in PLY data")
     try:
         body = data[pos:].decode("ascii")
     except UnicodeDecodeError as exc:
         raise FileFormatError(f"{owner}: {path!r} byte {pos + exc.start}: non-ASCII byte in ASCII PLY data") from None
     tokens = body.split()
     try:
-        values = np.array(tokens, dtype=np.float64)
+        return np.array(tokens, dtype=np.float64)
     except ValueError:
         k = next(k for k, t in enumerate(tokens) if not _is_number(t))
         line = data[:pos].count(b"\n") + body[:body.find(tokens[k])].count("\n") + 1
         raise FileFormatError(f"{owner}: {path!r} line {line}: malformed number {tokens[k][:40]!r} in PLY data") from None
-    del tokens
+
+
+def _read_ascii(data, pos, elements, path, owner, keep):
+    values = _ascii_values(data, pos, path, owner)
     out, t = {}, 0
     for name, count, props, line in elements:
         left = values.size - t

@@ -32,8 +32,14 @@ _RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr
 
 
 def _merge(corners):
-    verts, inverse = np.unique(corners, axis=0, return_inverse=True)
-    return Mesh(np.ascontiguousarray(verts, dtype=np.float64), inverse.reshape(-1, 3).astype(np.int64))
+    """One vertex per distinct corner position (sorted), and the triangles' indices into them."""
+    order = np.lexsort((corners[:, 2], corners[:, 1], corners[:, 0]))
+    ordered = corners[order]
+    first = np.ones(len(ordered), dtype=bool)
+    first[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    inverse = np.empty(len(corners), dtype=np.int64)
+    inverse[order] = np.cumsum(first) - 1
+    return Mesh(np.ascontiguousarray(ordered[first]), inverse.reshape(-1, 3))
 
 
 def read_stl(path, data, owner):

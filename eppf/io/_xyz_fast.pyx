@@ -106,3 +106,53 @@ def parse_float_table(bytes data, Py_ssize_t start):
     if not ok:
         return None
     return out[:row_count * n_cols].reshape(row_count, n_cols)
+
+
+cdef inline bint _is_space(char c) noexcept nogil:
+    return c == b' ' or c == b'\t' or c == b'\r' or c == b'\n' or c == b'\v' or c == b'\f'
+
+
+def parse_tokens(bytes data, Py_ssize_t start):
+    """Parse every whitespace-separated number of ``data[start:]`` (ASCII PLY bodies).
+
+    Returns ``(values, -1)`` with a float64 array of all the numbers, or
+    ``(None, offset)`` with the offset of the first token that is not a
+    decimal number (hexadecimal ones are refused, as Python's ``float``
+    refuses them). Allocates one float64 per token, counted first.
+    """
+    cdef const char* s = data
+    cdef Py_ssize_t n = len(data)
+    cdef Py_ssize_t i = start, count = 0, k = 0, tok, bad = -1
+    cdef char* end
+    with nogil:
+        while i < n:
+            while i < n and _is_space(s[i]):
+                i += 1
+            if i < n:
+                count += 1
+                while i < n and not _is_space(s[i]):
+                    i += 1
+    out = np.empty(count, dtype=np.float64)
+    cdef double[::1] o = out
+    i = start
+    with nogil:
+        while i < n and k < count:
+            while i < n and _is_space(s[i]):
+                i += 1
+            if i >= n:
+                break
+            tok = i
+            while i < n and not _is_space(s[i]):
+                if s[i] == b'x' or s[i] == b'X' or s[i] == 0:
+                    bad = tok
+                i += 1
+            if bad >= 0:
+                break
+            o[k] = strtod(s + tok, &end)
+            if end != s + i:  # strtod stopped inside the token
+                bad = tok
+                break
+            k += 1
+    if bad >= 0:
+        return None, bad
+    return out, -1

@@ -193,3 +193,26 @@ def test_ply_cloud_with_nan_vertices_drops_them(tmp_path):
     path = tmp_path / "n.ply"
     path.write_bytes(_header("ascii", 3, None) + b"0 0 0\nnan 1 0\n1 1 1\n")
     assert_array_equal(read_point_cloud(path), [[0, 0, 0], [1, 1, 1]])
+
+
+def test_ascii_compiled_token_parser_matches_numpy(tmp_path, monkeypatch):
+    from eppf.io import _ply
+
+    if _ply._parse_tokens is None:
+        pytest.skip("eppf.io._xyz_fast is not compiled")
+    data, v, polys = _random_mixed_mesh(np.random.RandomState(4), "ascii")
+    good = tmp_path / "g.ply"
+    good.write_bytes(data.replace(b"\n", b" \r\n", 5))
+    bad = tmp_path / "b.ply"
+    bad.write_bytes(data.replace(b"\n1 2\n", b"\n1 0x2\n"))
+    compiled = read_mesh(good)
+    with pytest.raises(FileFormatError) as c_err:
+        read_mesh(bad)
+    monkeypatch.setattr(_ply, "_parse_tokens", None)
+    reference = read_mesh(good)
+    assert_array_equal(compiled.vertices, reference.vertices)
+    assert_array_equal(compiled.faces, reference.faces)
+    with pytest.raises(FileFormatError) as n_err:
+        read_mesh(bad)
+    assert str(c_err.value) == str(n_err.value)
+    assert "malformed number '0x2' in PLY data" in str(c_err.value)
