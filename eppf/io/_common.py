@@ -43,6 +43,8 @@ def check_file(path, owner):
         raise FileNotFoundError(errno.ENOENT, f"{owner}: no such file", path) from None
     if stat.S_ISDIR(st.st_mode):
         raise IsADirectoryError(errno.EISDIR, f"{owner}: a folder, not a file", path)
+    if not stat.S_ISREG(st.st_mode):  # a FIFO or a device (/dev/zero) would block or never end
+        raise OSError(errno.EINVAL, f"{owner}: not a regular file", path)
     return st.st_size
 
 

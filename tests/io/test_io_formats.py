@@ -86,6 +86,11 @@ def test_missing_file_and_folder(tmp_path):
         with pytest.raises(FileNotFoundError, match="read_point_cloud: no such file") as info:
             read_point_cloud(tmp_path / name)
         assert info.value.filename == str(tmp_path / name) and name in str(info.value)
+    if os.path.exists("/dev/zero"):  # an endless file must not be read
+        os.symlink("/dev/zero", tmp_path / "zero.pcd")
+        with pytest.raises(OSError, match="not a regular file") as info:
+            read_point_cloud(tmp_path / "zero.pcd")
+        assert "zero.pcd" in str(info.value)
     folder = tmp_path / "cloud.ply"
     folder.mkdir()
     for reader in (read_point_cloud, read_mesh):
@@ -124,13 +129,17 @@ def test_argument_errors(tmp_path, monkeypatch, func, args, kwargs, exc, msg):
         func(*args, **kwargs)
 
 
-def test_core_import_needs_no_optional_dependency():
+def test_core_import_needs_no_optional_dependency(tmp_path):
     import subprocess
     import sys
 
+    # a base install reads and writes every format, PLY included, without plyfile
     code = (
-        "import sys; import eppf, eppf.io, eppf.datasets, eppf.preprocessing; "
-        "bad = [m for m in ('plyfile', 'h5py', 'trimesh') if m in sys.modules]; "
+        "import sys; sys.modules['plyfile'] = None; import eppf, eppf.io, eppf.datasets, eppf.preprocessing; "
+        "import numpy as np; "
+        f"eppf.io.write_mesh({str(tmp_path / 'm.ply')!r}, np.eye(3), [[0, 1, 2]]); "
+        f"assert eppf.io.read_point_cloud({str(tmp_path / 'm.ply')!r}, n_points=10).shape == (10, 6); "
+        "bad = [m for m in ('h5py', 'trimesh') if m in sys.modules]; "
         "assert not bad, bad"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

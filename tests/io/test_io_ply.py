@@ -124,19 +124,14 @@ def test_ply_written_files_read_by_plyfile(tmp_path, binary, normals):
     assert_array_equal(read_mesh(tmp_path / "q.ply").faces, [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
 
 
-def test_ply_reads_without_plyfile(tmp_path):
-    import subprocess
+def test_ply_reads_without_plyfile(tmp_path, monkeypatch):
     import sys
 
-    path = tmp_path / "c.ply"
-    write_point_cloud(path, _cloud(n=5))
-    code = (
-        "import sys; sys.modules['plyfile'] = None; "
-        "from eppf.io import read_point_cloud, write_mesh; import numpy as np; "
-        f"assert read_point_cloud({str(path)!r}).shape == (5, 6); "
-        f"write_mesh({str(tmp_path / 'm.ply')!r}, np.eye(3), [[0, 1, 2]])"
-    )
-    subprocess.run([sys.executable, "-c", code], check=True)
+    monkeypatch.setitem(sys.modules, "plyfile", None)  # makes `import plyfile` fail
+    write_point_cloud(tmp_path / "c.ply", _cloud(n=5))
+    assert read_point_cloud(tmp_path / "c.ply").shape == (5, 6)
+    write_mesh(tmp_path / "m.ply", np.eye(3), [[0, 1, 2]], binary=False)
+    assert_array_equal(read_mesh(tmp_path / "m.ply").faces, [[0, 1, 2]])
 
 
 # --------------------------------------------------------------------------- hostile headers and data
@@ -216,3 +211,15 @@ def test_ascii_compiled_token_parser_matches_numpy(tmp_path, monkeypatch):
         read_mesh(bad)
     assert str(c_err.value) == str(n_err.value)
     assert "malformed number '0x2' in PLY data" in str(c_err.value)
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_ply_polygon_longer_than_a_uchar_count(tmp_path, binary):
+    # a 300-gon: its length does not fit the usual 'list uchar int', so the writer uses an int count
+    angle = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    v = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(300)])
+    path = tmp_path / "g.ply"
+    write_mesh(path, v, np.arange(300)[None, :], binary=binary)
+    assert b"property list int int vertex_indices" in path.read_bytes()[:400]
+    mesh = read_mesh(path)
+    assert_array_equal(mesh.faces, [[0, k, k + 1] for k in range(1, 299)])
