@@ -28,3 +28,56 @@ def test_fuzz_files_short():
     for name in ("ascii.pcd", "binary.pcd", "compressed.pcd", "cloud_binary.ply", "mesh_ascii.ply", "mesh.off",
                  "mesh.obj", "ascii.stl", "binary.stl", "cloud.xyz", "count.pts", "cloud.npy", "cloud.npz"):
         assert any(line.startswith(name + " ") for line in lines), name
+
+
+def _harness():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fuzz_files", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the harness forks a child per file")
+def test_fuzz_harness_classifies_failures(tmp_path, monkeypatch):
+    """The child's outcome classes, with stand-in readers (the fork inherits the monkeypatch)."""
+    import resource
+    import signal
+    import time
+
+    import numpy as np
+
+    import eppf.io
+    from eppf.io import FileFormatError
+
+    fuzz = _harness()
+    monkeypatch.setattr(fuzz, "ADDRESS_SPACE", resource.RLIM_INFINITY)  # pytest's own process may be large
+    path = str(tmp_path / "f.xyz")
+    with open(path, "w") as fh:
+        fh.write("1 2 3\n")
+
+    def reader(behaviour):
+        def read(p, **kwargs):
+            if behaviour == "documented":
+                raise FileFormatError(f"read_point_cloud: {p!r}: bad")
+            if behaviour == "anonymous":
+                raise FileFormatError("bad content")
+            if behaviour == "foreign":
+                raise KeyError("x")
+            if behaviour == "hang":
+                time.sleep(30)
+            if behaviour == "signal":
+                os.kill(os.getpid(), signal.SIGSEGV)
+            if behaviour == "memory":
+                np.ones(330 * 2 ** 20 // 8)  # 330 MB touched
+            return np.zeros((1, 3))
+        return read
+
+    expected = {"ok": ("ok", ""), "documented": ("documented", "FileFormatError"),
+                "anonymous": ("FAIL", "does not name the file"), "foreign": ("FAIL", "KeyError"),
+                "hang": ("FAIL", "hang"), "signal": ("FAIL", "SIGSEGV"), "memory": ("FAIL", "peak RSS grew")}
+    for behaviour, (cls, why) in expected.items():
+        monkeypatch.setattr(eppf.io, "read_point_cloud", reader(behaviour))
+        result = fuzz.read_in_child(path, timeout=0.5 if behaviour == "hang" else 30.0)
+        assert result["cls"] == cls and why in result["why"], (behaviour, result)
