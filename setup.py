@@ -61,10 +61,12 @@ def _included_headers(pyx):
 
 def _extension(pyx):
     name = os.path.splitext(pyx)[0].replace(os.sep, ".")
+    with open(pyx) as fh:
+        uses_numpy = "cimport numpy" in fh.read()
     return Extension(
         name,
         [pyx],
-        include_dirs=[np.get_include(), os.path.dirname(pyx)],
+        include_dirs=([np.get_include()] if uses_numpy else []) + [os.path.dirname(pyx)],
         depends=_included_headers(pyx) + [os.path.join("eppf", "utils", "_common.pxd")],
         extra_compile_args=base_args + omp_compile,
         extra_link_args=omp_link,

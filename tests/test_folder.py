@@ -108,3 +108,30 @@ def test_empty_or_missing_folder(tmp_path):
         load_folder(tmp_path)
     with pytest.raises((ValueError, FileNotFoundError), match="load_folder"):
         load_folder(tmp_path / "absent")
+
+
+def test_every_supported_format_in_any_case_is_loaded_like_read_point_cloud(tmp_path):
+    """load_folder reads each file with read_point_cloud and the file's own seed, for every format."""
+    from eppf.datasets._loaders import _file_seeds
+    from eppf.io import supported_extensions
+
+    rng = np.random.RandomState(1)
+    v = rng.normal(size=(8, 3))
+    f = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4], [4, 5, 6], [5, 6, 7]])
+    cloud = np.hstack([rng.normal(size=(40, 3)), np.tile([0.0, 0.0, 1.0], (40, 1))])
+    os.makedirs(tmp_path / "a")
+    for k, ext in enumerate(supported_extensions()):
+        name = tmp_path / "a" / f"o{k}{ext.upper() if k % 2 else ext}"
+        if ext in (".off", ".obj", ".stl"):
+            write_mesh(name, v, f)
+        elif ext == ".xyzrgb":
+            np.savetxt(name, np.hstack([cloud[:, :3], np.full((40, 3), 128.0)]))
+        else:
+            write_point_cloud(name, cloud)
+    for n_points in (None, 64):
+        data = load_folder(tmp_path, n_points=n_points, random_state=5)
+        assert len(data.data) == len(supported_extensions())
+        seeds = _file_seeds(5, str(tmp_path), list(data.filenames))
+        for got, name, seed in zip(data.data, data.filenames, seeds):
+            assert_array_equal(got, read_point_cloud(name, n_points=n_points, random_state=seed))
+            assert got.shape[0] == (n_points or (2048 if name.lower().endswith((".off", ".obj", ".stl")) else 40))

@@ -7,39 +7,27 @@ import os
 import numpy as np
 from sklearn.utils import Bunch
 
-from ..preprocessing._sampling import object_rng, sample_mesh
-from ..io import read_mesh
-from ._loaders import _CLOUD_EXT, _MESH_EXT, _check_choice, _check_dir, _check_n_points, _file_seeds, \
-    _from_cloud_file, _load_all
+from ..io import read_point_cloud, supported_extensions
+from ._loaders import _check_choice, _check_dir, _check_n_points, _file_seeds, _load_all
 
 __all__ = ["load_folder"]
 
-_EXTENSIONS = _MESH_EXT + _CLOUD_EXT + (".ply",)
 _SPLITS = ("train", "test")
-MESH_POINTS = 2048
 
 
 def _object_files(folder):
     """Object files under ``folder``, searched recursively, in sorted order."""
-    found = []
+    found, extensions = [], supported_extensions()
     for dirpath, dirnames, filenames in os.walk(folder):
         dirnames.sort()
         found += [os.path.join(dirpath, f) for f in sorted(filenames)
-                  if os.path.splitext(f)[1].lower() in _EXTENSIONS and not f.startswith(".")]
+                  if os.path.splitext(f)[1].lower() in extensions and not f.startswith(".")]
     return sorted(found)
 
 
 def _read_object(filename, n_points, normals, seed):
-    """One object: meshes sampled (``n_points`` or 2,048 points), point files read."""
-    ext = os.path.splitext(filename)[1].lower()
-    if ext in _MESH_EXT or ext == ".ply":
-        mesh = read_mesh(filename)
-        if mesh.faces.shape[0]:
-            return sample_mesh(mesh.vertices, mesh.faces, n_points=n_points or MESH_POINTS,
-                               return_normals=normals is not False, random_state=object_rng(seed))
-        if ext != ".ply":
-            raise ValueError(f"{filename!r} has no faces")
-    return _from_cloud_file(filename, n_points, normals, seed)
+    """One object: meshes sampled (``n_points`` or 2,048 points), point files read (and resampled)."""
+    return read_point_cloud(filename, normals=normals, n_points=n_points, random_state=seed)
 
 
 def _subfolders(folder):
@@ -58,8 +46,10 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     - ``train/<class>/<object file>`` and ``test/<class>/<object file>``;
     - ``<class>/train/<object file>`` and ``<class>/test/<object file>``.
 
-    Point files (PLY without faces, PCD, XYZ, TXT, CSV, PTS, NPY, NPZ) are read
-    as they are; meshes (OFF, OBJ, PLY with faces) are sampled
+    Every file :func:`eppf.io.read_point_cloud` reads is loaded with it
+    (extensions in any case, see :func:`eppf.io.supported_extensions`):
+    point files (PLY without faces, PCD, XYZ, TXT, CSV, PTS, XYZN, XYZRGB,
+    NPY, NPZ) as they are, meshes (OFF, OBJ, STL, PLY with faces) sampled
     area-uniformly. Hidden files and other extensions are ignored.
 
     Parameters
@@ -145,7 +135,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     found = sorted({e[1] for e in entries})
     if not found:
         raise ValueError(f"{owner}: {root!r} holds no class folders with object files "
-                         f"({', '.join(_EXTENSIONS)}); expected <class>/<file>, train|test/<class>/<file> "
+                         f"({', '.join(supported_extensions())}); expected <class>/<file>, train|test/<class>/<file> "
                          "or <class>/train|test/<file>")
     if classes is None:
         names = found

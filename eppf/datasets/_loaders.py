@@ -29,9 +29,7 @@ import numpy as np
 from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
-from ..preprocessing._perturb import resample
-from ..preprocessing._sampling import object_rng, sample_mesh
-from ..io import read_mesh, read_point_cloud
+from ..io import read_point_cloud, supported_extensions
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
 
@@ -43,10 +41,6 @@ SCANNET_CLASSES = (
     "shelf", "stove", "table", "tv",
 )
 S3DIS_CLASSES = ("beam", "board", "bookcase", "chair", "column", "door", "sofa", "stairs", "table", "window")
-
-_MESH_EXT = (".off", ".obj")
-_CLOUD_EXT = (".pcd", ".xyz", ".txt", ".csv", ".pts", ".npy", ".npz")
-
 
 # --------------------------------------------------------------------------- shared checks
 
@@ -156,35 +150,24 @@ def _finish(owner, clouds, labels, names, splits, ids, filenames, skipped, retur
 
 
 def _from_mesh(filename, n_points, resolution, normals, seed):
-    mesh = read_mesh(filename)
-    return sample_mesh(mesh.vertices, mesh.faces, n_points=n_points, resolution=resolution,
-                       return_normals=normals is not False, random_state=object_rng(seed))
+    return read_point_cloud(filename, normals=normals, n_points=n_points, resolution=resolution, random_state=seed)
 
 
 def _from_cloud_file(filename, n_points, normals, seed, first=False):
-    cloud = read_point_cloud(filename, normals=normals)
-    if n_points is not None:
-        if first:
+    if first:  # pre-sampled files: their first n_points points
+        cloud = read_point_cloud(filename, normals=normals)
+        if n_points is not None:
             if cloud.shape[0] < n_points:
                 raise ValueError(f"{filename!r} has {cloud.shape[0]} points, fewer than n_points={n_points}")
             cloud = cloud[:n_points]
-        else:
-            cloud = resample(cloud, n_points, random_state=object_rng(seed))
-    return cloud
+        return cloud
+    return read_point_cloud(filename, normals=normals, n_points=n_points, random_state=seed)
 
 
 def _from_any(filename, n_points, resolution, normals, seed):
-    ext = os.path.splitext(filename)[1].lower()
-    if ext == ".ply":
-        mesh = read_mesh(filename)
-        if mesh.faces.shape[0]:
-            return sample_mesh(mesh.vertices, mesh.faces, n_points=n_points,
-                               resolution=None if n_points is not None else resolution,
-                               return_normals=normals is not False, random_state=object_rng(seed))
-        return _from_cloud_file(filename, n_points, normals, seed)
-    if ext in _MESH_EXT:
-        return _from_mesh(filename, n_points, None if n_points is not None else resolution, normals, seed)
-    return _from_cloud_file(filename, n_points, normals, seed)
+    """Any supported file: meshes sampled (n_points, or resolution without it), point files resampled."""
+    return read_point_cloud(filename, normals=normals, n_points=n_points,
+                            resolution=None if n_points is not None else resolution, random_state=seed)
 
 
 # --------------------------------------------------------------------------- ModelNet
@@ -536,7 +519,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
         raise ValueError(f"{owner}: classes must be a non-empty sequence of class names, got {classes!r}")
     names = [str(c).lower() for c in classes]
     index = {n: k for k, n in enumerate(names)}
-    exts = _MESH_EXT + _CLOUD_EXT + (".ply",)
+    exts = supported_extensions()
 
     def objects_in(folder):
         return sorted(f for f in glob.glob(os.path.join(folder, "*")) if os.path.splitext(f)[1].lower() in exts)

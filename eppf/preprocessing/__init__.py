@@ -19,7 +19,7 @@ themselves when a cloud has none).
 """
 
 from ._normals import estimate_normals
-from ._sampling import sample_mesh
+from ..utils._sampling import sample_mesh
 from ._transformers import GaussianNoise, Occlusion, RandomDropout, RandomRotation, RandomScaling, Resampler
 
 __all__ = [

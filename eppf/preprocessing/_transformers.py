@@ -5,7 +5,7 @@ import numbers
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
-from ._sampling import object_rng, sample_mesh
+from ..utils._sampling import object_rng, sample_mesh
 from ..utils._validation import check_point_clouds, object_seeds
 
 __all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "RandomScaling", "Resampler", "sample_mesh"]

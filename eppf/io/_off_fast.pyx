@@ -4,8 +4,8 @@
 Only the common form is handled here: each vertex line holds exactly three
 numbers and each face line is ``3 i j k``; blank lines are skipped. Anything
 else (comments, colours, polygons, bad numbers, a short file) makes the
-parser return None, and :mod:`eppf.io` falls back to its line-by-line reader,
-which reads the file or names the line at fault.
+parser return None, and :mod:`eppf.io._off` falls back to its line-by-line
+reader, which reads the file or names the line at fault.
 """
 
 import numpy as np
@@ -100,78 +100,3 @@ def parse_off_body(bytes data, Py_ssize_t start, Py_ssize_t n_vertices, Py_ssize
     if not ok:
         return None
     return vertices, faces, i
-
-
-cdef inline bint _is_sep(char c) noexcept nogil:
-    return c == b' ' or c == b'\t' or c == b',' or c == b';'
-
-
-def parse_float_table(bytes data, Py_ssize_t start):
-    """Parse rows of numbers (separated by spaces, tabs, commas or semicolons) from ``data[start:]``.
-
-    Every non-blank row must hold as many numbers as the first. Returns a
-    float64 array of shape (n_rows, n_columns), or None when a row differs
-    or holds anything but numbers (the caller then reports the line).
-    """
-    cdef const char* s = data
-    cdef Py_ssize_t n = len(data)
-    cdef Py_ssize_t i = start, k = 0, n_cols = -1, row_count = 0, cols, cap
-    cdef char* end
-    cdef bint ok = True
-    cap = data.count(b"\n", start) + 1
-    # the first row fixes the column count
-    i = _skip_blank(s, i, n)
-    if i >= n:
-        return None
-    cols = 0
-    cdef Py_ssize_t j = i
-    while j < n and s[j] != b'\n':
-        while j < n and (_is_sep(s[j]) or s[j] == b'\r'):
-            j += 1
-        if j >= n or s[j] == b'\n':
-            break
-        strtod(s + j, &end)
-        if end == s + j:
-            return None
-        j = end - s
-        cols += 1
-    if cols == 0:
-        return None
-    n_cols = cols
-    out = np.empty(cap * n_cols, dtype=np.float64)
-    cdef double[::1] o = out
-    with nogil:
-        while True:
-            i = _skip_blank(s, i, n)
-            if i >= n:
-                break
-            cols = 0
-            while True:
-                while i < n and _is_sep(s[i]):
-                    i += 1
-                if i >= n or s[i] == b'\n' or s[i] == b'\r':
-                    break
-                if cols == n_cols or not _number_start(s[i]):
-                    ok = False
-                    break
-                o[k] = strtod(s + i, &end)
-                if end == s + i:
-                    ok = False
-                    break
-                i = end - s
-                k += 1
-                cols += 1
-                if i < n and not (_is_sep(s[i]) or s[i] == b'\n' or s[i] == b'\r'):
-                    ok = False
-                    break
-            if not ok or cols != n_cols:
-                ok = False
-                break
-            row_count += 1
-            i = _end_of_line(s, i, n)
-            if i < 0:
-                ok = False
-                break
-    if not ok:
-        return None
-    return out[:row_count * n_cols].reshape(row_count, n_cols)

@@ -1,11 +1,17 @@
-"""Area-weighted sampling of triangle meshes into point clouds."""
+"""Sampling primitives: per-object generators, area-weighted mesh sampling, resampling to a point count.
+
+They sit under every layer because files (``eppf.io``), loaders and the
+preprocessing transformers all sample the same way.
+"""
 
 import numbers
 
 import numpy as np
 from sklearn.utils import check_random_state
 
-__all__ = ["object_rng", "sample_mesh"]
+from ._validation import check_point_cloud
+
+__all__ = ["object_rng", "resample", "sample_mesh"]
 
 
 def object_rng(seed):
@@ -177,3 +183,53 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
         if not return_normals:
             cloud = np.ascontiguousarray(cloud[:, :3])
     return cloud
+
+
+def resample(cloud, n_points, *, random_state=None):
+    """Draw a fixed number of points from a cloud.
+
+    Parameters
+    ----------
+    cloud : array-like of shape (n, 3) or (n, 6)
+        Coordinates, optionally followed by unit normals.
+    n_points : int
+        Number of points to return, >= 2. When ``n_points <= n`` the points
+        are drawn without replacement. When ``n_points > n`` every point is
+        kept once and the ``n_points - n`` extra points are drawn with
+        replacement, so no information is lost.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the draw.
+
+    Returns
+    -------
+    sampled : ndarray of shape (n_points, 3) or (n_points, 6)
+        The drawn points with their normals, in random order.
+
+    See Also
+    --------
+    random_dropout : Remove a share of the points.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils._sampling import resample
+    >>> cloud = np.random.RandomState(0).normal(size=(100, 3))
+    >>> resample(cloud, 64, random_state=0).shape
+    (64, 3)
+    >>> resample(cloud, 256, random_state=0).shape
+    (256, 3)
+    """
+    owner = "resample"
+    arr = check_point_cloud(cloud, owner=owner)
+    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
+        raise TypeError(f"{owner}: n_points must be an int, got {type(n_points).__name__}")
+    if n_points < 2:
+        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
+    rng = check_random_state(random_state)
+    n = arr.shape[0]
+    if n_points <= n:
+        index = rng.choice(n, size=int(n_points), replace=False)
+    else:
+        extra = rng.randint(0, n, size=int(n_points) - n)
+        index = rng.permutation(np.concatenate([np.arange(n), extra]))
+    return arr[index]

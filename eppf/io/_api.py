@@ -1,0 +1,398 @@
+"""The public readers and writers: one way from any supported file to a cloud."""
+
+import numbers
+import os
+
+import numpy as np
+from sklearn.utils import check_random_state
+
+from ..utils._sampling import resample
+from ..utils._sampling import object_rng, sample_mesh
+from . import _ply
+from ._common import Cloud, Mesh, read_bytes
+from ._errors import FileFormatError
+from ._formats import lookup
+
+__all__ = ["MESH_POINTS", "read_mesh", "read_point_cloud", "write_mesh", "write_point_cloud"]
+
+# points drawn from a mesh when neither n_points nor resolution is given (as load_folder does)
+MESH_POINTS = 2048
+
+
+# --------------------------------------------------------------------------- argument checks
+
+
+def _check_normals_arg(normals, owner):
+    if normals not in ("auto", True, False):
+        raise ValueError(f"{owner}: normals must be 'auto', True or False, got {normals!r}")
+
+
+def _check_n_points(n_points, owner):
+    if n_points is None:
+        return None
+    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
+        raise TypeError(f"{owner}: n_points must be an int or None, got {type(n_points).__name__}")
+    if n_points < 2:
+        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
+    return int(n_points)
+
+
+def _check_resolution(resolution, owner):
+    if resolution is None:
+        return None
+    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
+        raise TypeError(f"{owner}: resolution must be a number or None, got {type(resolution).__name__}")
+    if not (resolution > 0 and np.isfinite(resolution)):
+        raise ValueError(f"{owner}: resolution must be positive and finite, got {resolution}")
+    return float(resolution)
+
+
+def _rng(random_state, owner):
+    """An int seeds a PCG64 generator from all its 64 bits (as the folder loaders' per-file seeds do)."""
+    if isinstance(random_state, numbers.Integral) and not isinstance(random_state, bool):
+        if not 0 <= random_state < 2 ** 64:
+            raise ValueError(f"{owner}: an int random_state must lie in 0..2**64-1, got {random_state}")
+        return object_rng(int(random_state))
+    if random_state is None or isinstance(random_state, np.random.RandomState):
+        return check_random_state(random_state)
+    raise TypeError(f"{owner}: random_state must be None, an int or a RandomState, got {type(random_state).__name__}")
+
+
+def _check_cloud_arg(cloud, owner):
+    arr = np.asarray(cloud)
+    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+        raise TypeError(f"{owner}: cloud must be a numeric array, got dtype {arr.dtype}")
+    if arr.ndim != 2 or arr.shape[1] not in (3, 6):
+        raise ValueError(f"{owner}: cloud must have shape (n_points, 3) or (n_points, 6), got {arr.shape}")
+    if arr.shape[0] == 0:
+        raise ValueError(f"{owner}: cloud has no points")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{owner}: cloud contains NaN or infinite values")
+    return arr.astype(np.float64)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _finish_cloud(cloud, path, normals, owner, remove_nan):
+    """Combine coordinates and optional normals; drop non-finite points."""
+    xyz, nrm = cloud
+    if normals is True and nrm is None:
+        raise FileFormatError(f"{owner}: {path!r} has no normals, but normals=True")
+    if normals is False:
+        nrm = None
+    out = xyz if nrm is None else np.hstack([xyz, nrm])
+    out = np.ascontiguousarray(out, dtype=np.float64)
+    if remove_nan:
+        keep = np.isfinite(out).all(axis=1)
+        if not keep.all():
+            out = out[keep]
+    if out.shape[0] == 0:
+        raise FileFormatError(f"{owner}: {path!r} holds no points")
+    return out
+
+
+def _check_vertices(mesh, path, owner):
+    bad = np.flatnonzero(~np.isfinite(mesh.vertices).all(axis=1))
+    if bad.size:
+        k = int(bad[0])
+        raise FileFormatError(
+            f"{owner}: {path!r}: vertex {k} (counting from 0) is not finite: {mesh.vertices[k].tolist()}"
+        )
+    return mesh
+
+
+def _guard(owner, path, fmt, func, *args, **kwargs):
+    """Run a reader; every failure that is not already a FileFormatError or OSError becomes one."""
+    try:
+        return func(*args, **kwargs)
+    except (FileFormatError, OSError):
+        raise
+    except MemoryError:
+        raise FileFormatError(f"{owner}: {path!r}: reading this {fmt.name} file needs more memory than is free") from None
+    except RecursionError:
+        raise FileFormatError(f"{owner}: {path!r}: malformed {fmt.name} file (nested too deeply)") from None
+    except Exception as exc:  # noqa: BLE001 - translated into the one documented type
+        raise FileFormatError(f"{owner}: {path!r}: malformed {fmt.name} file ({type(exc).__name__}: {exc})") from None
+
+
+def _read_any(path, fmt, owner, normals, want_faces):
+    """(Cloud or None, Mesh or None) from any format."""
+    if fmt.raw:
+        return fmt.reader(path, owner, normals), None
+    data = read_bytes(path, owner)
+    if fmt.name == "ply":
+        cloud, faces = _ply.read_ply(path, data, owner, want_faces=want_faces)
+        if faces is None:
+            return cloud, None
+        return cloud, Mesh(np.ascontiguousarray(cloud.xyz), faces)
+    if fmt.kind == "cloud":
+        return fmt.reader(path, data, owner, normals), None
+    return None, fmt.reader(path, data, owner)
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh="sample", n_points=None,
+                     resolution=None, random_state=0):
+    """Read a point cloud from any supported file, sampling meshes.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file. Its extension (any case) chooses the format unless
+        ``format`` is given; :func:`supported_extensions` lists them all.
+        Point files: ``.pcd``, ``.ply``, ``.xyz``/``.txt``/``.csv``,
+        ``.pts``, ``.xyzn``, ``.xyzrgb``, ``.npy``, ``.npz``. Mesh files:
+        ``.off``, ``.obj``, ``.stl`` and ``.ply`` with faces.
+    format : str, default=None
+        Override the format given by the extension (a name from
+        :func:`format_of`, e.g. ``"pcd"``).
+    normals : {"auto", True, False}, default="auto"
+        Whether to return normals. ``"auto"`` returns them when the file has
+        them: PCD fields ``normal_x normal_y normal_z``, PLY properties
+        ``nx ny nz``, the columns of an ``.xyzn`` file, columns 4 to 6 of an
+        ``.xyz``/``.txt``/``.csv``/``.pts`` file when every row there has
+        unit length (so that ``x y z r g b`` files are not mistaken), columns
+        4 to 6 of an array, and the face normals of points sampled from a
+        mesh. True requires them; False drops them.
+    remove_nan : bool, default=True
+        Drop points with a NaN or infinite value (PCL marks invalid points of
+        organised clouds with NaN).
+    mesh : {"sample", "vertices"}, default="sample"
+        What a mesh file (OFF, OBJ, STL, PLY with faces) gives: points drawn
+        uniformly over its surface (area-weighted, with
+        :func:`eppf.preprocessing.sample_mesh`), or its vertices.
+    n_points : int, default=None
+        Points per cloud. Meshes are sampled with this many points (2,048
+        when neither ``n_points`` nor ``resolution`` is given); point files
+        are resampled to it (:func:`eppf.preprocessing.resample`: without
+        replacement when they have more points, every point plus random
+        repeats when fewer). None keeps point files as they are.
+    resolution : float, default=None
+        Instead of ``n_points``, sample meshes on a voxel grid of this cell
+        size (see :func:`eppf.preprocessing.sample_mesh`); point files are
+        kept as they are.
+    random_state : int, RandomState instance or None, default=0
+        Seed of the sampling. An int seeds a PCG64 generator from all its 64
+        bits, so ``random_state=seed`` gives the same cloud as
+        :func:`eppf.datasets.load_folder` when ``seed`` is that file's seed.
+
+    Returns
+    -------
+    cloud : ndarray of shape (n_points, 3) or (n_points, 6), dtype float64
+        Coordinates, followed by the normals when returned.
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError, PermissionError
+        If the file cannot be opened; the message names it.
+    FileFormatError
+        A :class:`ValueError`: the file is empty, truncated or malformed, a
+        header count does not fit the file, or a mesh cannot be sampled (no
+        faces, non-finite vertices, zero area); the message names the file
+        and the line (text) or byte (binary) where reading failed.
+    ValueError
+        If the extension is unknown or an argument is invalid.
+
+    See Also
+    --------
+    write_point_cloud : The inverse.
+    read_mesh : Read a mesh's vertices and triangles.
+    supported_extensions : What can be read.
+
+    Notes
+    -----
+    The same file with the same ``n_points``, ``resolution``, ``normals`` and
+    ``random_state`` always gives the same cloud, so a model trained on
+    sampled meshes can be applied to new meshes sampled the same way.
+
+    Examples
+    --------
+    >>> import numpy as np, os, tempfile
+    >>> from eppf.io import read_point_cloud, write_mesh, write_point_cloud
+    >>> folder = tempfile.mkdtemp()
+    >>> write_point_cloud(os.path.join(folder, "cloud.xyz"), np.eye(3))
+    >>> read_point_cloud(os.path.join(folder, "cloud.xyz")).shape
+    (3, 3)
+    >>> square = np.array([[0., 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    >>> write_mesh(os.path.join(folder, "square.STL"), square, [[0, 1, 2], [0, 2, 3]])
+    >>> read_point_cloud(os.path.join(folder, "square.STL"), n_points=500).shape
+    (500, 6)
+    """
+    owner = "read_point_cloud"
+    _check_normals_arg(normals, owner)
+    if mesh not in ("sample", "vertices"):
+        raise ValueError(f"{owner}: mesh must be 'sample' or 'vertices', got {mesh!r}")
+    n_points = _check_n_points(n_points, owner)
+    resolution = _check_resolution(resolution, owner)
+    if n_points is not None and resolution is not None:
+        raise ValueError(f"{owner}: give n_points or resolution, not both")
+    rng = _rng(random_state, owner)
+    path = os.fspath(path)
+    fmt = lookup(path, format, owner)
+    cloud, shape = _guard(owner, path, fmt, _read_any, path, fmt, owner, normals, mesh == "sample")
+    if shape is not None and (mesh == "vertices" or fmt.name == "ply" and shape.faces.shape[0] == 0):
+        cloud, shape = (cloud if fmt.name == "ply" else Cloud(shape.vertices, None)), None
+    if shape is not None:
+        _check_vertices(shape, path, owner)
+        if shape.faces.shape[0] == 0:
+            raise FileFormatError(f"{owner}: {path!r} has no faces, so it cannot be sampled; pass mesh='vertices'")
+        count = n_points if n_points is not None or resolution is not None else MESH_POINTS
+        with np.errstate(over="ignore", invalid="ignore"):
+            out = _guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
+                         resolution=resolution, return_normals=normals is not False, random_state=rng)
+        if not np.isfinite(out).all():
+            raise FileFormatError(
+                f"{owner}: {path!r}: the mesh's coordinates are too large to sample (its areas overflow float64)"
+            )
+        return out
+    out = _finish_cloud(cloud, path, normals, owner, remove_nan)
+    if n_points is not None:
+        out = _guard(owner, path, fmt, resample, out, n_points, random_state=rng)
+    return out
+
+
+def read_mesh(path, *, format=None):
+    """Read a triangle mesh from an OFF, OBJ, STL or PLY file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file; its extension (``.off``, ``.obj``, ``.stl``, ``.ply``, any
+        case) chooses the format unless ``format`` is given.
+    format : {"off", "obj", "stl", "ply"}, default=None
+        Override the format given by the extension.
+
+    Returns
+    -------
+    mesh : Mesh
+        ``(vertices, faces)``: float64 (n_vertices, 3) and int64 (n_faces, 3).
+        Polygons are split into triangles by a fan from their first vertex.
+        OBJ texture and normal indices are ignored. A PLY file without a
+        ``face`` element gives a mesh with no faces.
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError, PermissionError
+        If the file cannot be opened; the message names it.
+    FileFormatError
+        A :class:`ValueError`: the file is empty, truncated or malformed, a
+        header count does not fit the file, a face refers to a missing
+        vertex, or a vertex is not finite (NaN or infinite vertices are
+        rejected, not dropped, since faces refer to them); the message names
+        the file and the line or byte.
+
+    Notes
+    -----
+    OFF files of ModelNet often glue the keyword to the counts on the first
+    line (``OFF490 518 0``); such files are read as if the counts were on a
+    line of their own. ``COFF``/``NOFF`` variants are read (extra vertex
+    columns are ignored), and ``#`` comments are skipped. STL files are
+    binary when their size is ``84 + 50 n`` for the triangle count ``n``
+    they declare, ASCII otherwise; their shared corners are merged into one
+    vertex each.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from eppf.io import read_mesh
+    >>> path = os.path.join(tempfile.mkdtemp(), "tri.off")
+    >>> with open(path, "w") as fh:
+    ...     _ = fh.write("OFF3 1 0\\n0 0 0\\n1 0 0\\n0 1 0\\n3 0 1 2\\n")
+    >>> read_mesh(path).faces
+    array([[0, 1, 2]])
+    """
+    owner = "read_mesh"
+    path = os.fspath(path)
+    fmt = lookup(path, format, owner, kind="mesh")
+    cloud, shape = _guard(owner, path, fmt, _read_any, path, fmt, owner, "auto", True)
+    if shape is None:  # a PLY cloud
+        shape = Mesh(np.ascontiguousarray(cloud.xyz), np.empty((0, 3), dtype=np.int64))
+    return _check_vertices(shape, path, owner)
+
+
+def write_point_cloud(path, cloud, *, format=None, binary=True):
+    """Write a point cloud to a file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination; its extension chooses the format unless ``format`` is
+        given: ``.pcd``, ``.ply``, ``.xyz``/``.txt``/``.csv``, ``.pts``,
+        ``.xyzn`` (needs normals), ``.npy``, ``.npz``.
+    cloud : array-like of shape (n_points, 3) or (n_points, 6)
+        Coordinates, optionally followed by normals.
+    format : str, default=None
+        Override the format given by the extension.
+    binary : bool, default=True
+        For PCD and PLY, write binary (little endian) rather than ASCII data.
+
+    Notes
+    -----
+    PCD and PLY files store float32, as PCL and most scanners do; text files
+    keep full float64 precision (17 significant digits), NPY/NPZ are exact.
+    Normals are written as PCD ``normal_x normal_y normal_z`` fields, PLY
+    ``nx ny nz`` properties, or columns 4 to 6.
+
+    Examples
+    --------
+    >>> import numpy as np, os, tempfile
+    >>> from eppf.io import read_point_cloud, write_point_cloud
+    >>> path = os.path.join(tempfile.mkdtemp(), "cloud.npy")
+    >>> write_point_cloud(path, np.eye(3))
+    >>> np.array_equal(read_point_cloud(path), np.eye(3))
+    True
+    """
+    owner = "write_point_cloud"
+    path = os.fspath(path)
+    fmt = lookup(path, format, owner, kind="cloud")
+    if fmt.writer is None:
+        raise ValueError(f"{owner}: eppf does not write {fmt.name} files (clouds have no colour); write .xyz instead")
+    cloud = _check_cloud_arg(cloud, owner)
+    if fmt.name == "xyzn" and cloud.shape[1] != 6:
+        raise ValueError(f"{owner}: an .xyzn file holds normals: cloud must have shape (n_points, 6), got {cloud.shape}")
+    fmt.writer(path, cloud, binary=binary)
+
+
+def write_mesh(path, vertices, faces, *, format=None, binary=True):
+    """Write a mesh to an OFF, OBJ, STL or PLY file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        Destination; its extension chooses the format unless ``format`` is given.
+    vertices : array-like of shape (n_vertices, 3)
+        Vertex coordinates.
+    faces : array-like of shape (n_faces, k)
+        Vertex indices (0-based) of each polygon, k >= 3 (STL stores
+        triangles: polygons are split by fans).
+    format : {"off", "obj", "stl", "ply"}, default=None
+        Override the format given by the extension.
+    binary : bool, default=True
+        For PLY and STL, write binary rather than ASCII data.
+
+    Examples
+    --------
+    >>> import numpy as np, os, tempfile
+    >>> from eppf.io import read_mesh, write_mesh
+    >>> path = os.path.join(tempfile.mkdtemp(), "tri.obj")
+    >>> write_mesh(path, np.eye(3), [[0, 1, 2]])
+    >>> read_mesh(path).vertices.shape
+    (3, 3)
+    """
+    owner = "write_mesh"
+    path = os.fspath(path)
+    fmt = lookup(path, format, owner, kind="mesh")
+    vertices = _check_cloud_arg(vertices, owner)
+    if vertices.shape[1] != 3:
+        raise ValueError(f"{owner}: vertices must have shape (n_vertices, 3), got {vertices.shape}")
+    faces = np.asarray(faces)
+    if faces.size == 0:
+        faces = faces.reshape(0, 3)
+    if faces.ndim != 2 or faces.shape[1] < 3 or not np.issubdtype(faces.dtype, np.integer):
+        raise ValueError(f"{owner}: faces must be an integer array of shape (n_faces, k>=3), got {faces.dtype} {faces.shape}")
+    if faces.size and (faces.min() < 0 or faces.max() >= vertices.shape[0]):
+        raise ValueError(f"{owner}: face indices must lie in 0..{vertices.shape[0] - 1}")
+    fmt.writer(path, vertices, faces.astype(np.int64), binary=binary)

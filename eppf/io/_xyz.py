@@ -1,0 +1,138 @@
+"""Text tables of points: XYZ/TXT/CSV, Open3D's PTS, XYZN and XYZRGB.
+
+- ``.xyz``, ``.txt``, ``.csv``: rows ``x y z [more columns]`` separated by
+  spaces, tabs, commas or semicolons, ``#`` comments, and one optional header
+  line of names; columns 4 to 6 are normals when every row there has unit
+  length (so ``x y z r g b`` files are not mistaken).
+- ``.pts`` (Open3D): the same rows, optionally after a first line holding
+  only the number of points; extra columns are intensity and colour, read as
+  in ``.xyz``.
+- ``.xyzn`` (Open3D): ``x y z nx ny nz``, normals always.
+- ``.xyzrgb`` (Open3D): ``x y z r g b``, the colour is ignored.
+"""
+
+import numpy as np
+
+from ._common import Cloud, content, next_line, parse_float_rows, text_lines
+from ._errors import FileFormatError
+
+try:  # compiled table parser; the line-by-line reader below does the rest
+    from ._xyz_fast import parse_float_table as _parse_float_table
+except ImportError:  # pragma: no cover - an uncompiled checkout
+    _parse_float_table = None
+
+
+def _xyz_compiled(data, start=0):
+    """The table of a plain numeric text file parsed in C, or None."""
+    if _parse_float_table is None or b"#" in data:
+        return None
+    first, pos = next_line(data, start)
+    if first is None:
+        return None
+    try:
+        float(first.replace(b",", b" ").replace(b";", b" ").split()[0])
+    except (ValueError, IndexError):  # one header line of names
+        start = pos
+    return _parse_float_table(data, start)
+
+
+def _table(path, data, owner, start=0, start_line=0):
+    """Rows of numbers of a text file from byte ``start`` (line ``start_line``, 0-based):
+    (array, 0-based line of each row, or None when the compiled parser read it)."""
+    arr = _xyz_compiled(data, start)
+    if arr is not None and arr.shape[1] >= 3:
+        return arr, None
+    lines = text_lines(data, path, owner)
+    idx, rows = content(lines[start_line:])
+    idx = [i + start_line for i in idx]
+    rows = [r.replace(",", " ").replace(";", " ") for r in rows]
+    if not rows:
+        raise FileFormatError(f"{owner}: {path!r} holds no points (only blank or comment lines)")
+    # one header line of names (e.g. "x,y,z") is allowed
+    try:
+        [float(t) for t in rows[0].split()]
+    except ValueError:
+        idx, rows = idx[1:], rows[1:]
+        if not rows:
+            raise FileFormatError(f"{owner}: {path!r} holds no points (only a header line)") from None
+    arr = parse_float_rows(rows, idx, path, owner, "point")
+    if arr.shape[1] < 3:
+        raise FileFormatError(
+            f"{owner}: {path!r} line {idx[0] + 1}: expected at least 3 columns (x y z), got {arr.shape[1]}"
+        )
+    return arr, idx
+
+
+def _guess_normals(arr):
+    """Columns 4 to 6 when they look like unit normals, else None."""
+    if arr.shape[1] < 6:
+        return None
+    cand = arr[:, 3:6]
+    lengths = np.sqrt(np.einsum("ij,ij->i", cand, cand))
+    return cand if np.all(np.abs(lengths - 1.0) < 1e-2) else None
+
+
+def read_xyz(path, data, owner, want_normals="auto"):
+    """``.xyz``/``.txt``/``.csv`` (and the rows of ``.pts``)."""
+    arr, _ = _table(path, data, owner)
+    return _columns(arr, want_normals)
+
+
+def _columns(arr, want_normals):
+    if want_normals is True and arr.shape[1] >= 6:
+        return Cloud(arr[:, :3], arr[:, 3:6])
+    return Cloud(arr[:, :3], _guess_normals(arr))
+
+
+def read_pts(path, data, owner, want_normals="auto"):
+    """Open3D's ``.pts``: an optional first line with the point count, then rows."""
+    first, pos = next_line(data, 0)
+    if first is not None and len(first.split()) == 1:
+        token = first.split()[0]
+        try:
+            count = int(token)
+        except ValueError:
+            count = None  # a header word or a one-column row: the table reader reports it
+        if count is not None:
+            line_no = data[:pos].rstrip(b"\n").count(b"\n")
+            if count < 0:
+                raise FileFormatError(f"{owner}: {path!r} line {line_no + 1}: negative point count {count}")
+            arr, idx = _table(path, data, owner, start=pos, start_line=line_no + 1)
+            if arr.shape[0] != count:
+                raise FileFormatError(
+                    f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
+                    f"but the file holds {arr.shape[0]} rows"
+                )
+            return _columns(arr, want_normals)
+    return read_xyz(path, data, owner, want_normals)
+
+
+def _fixed(path, data, owner, what):
+    arr, idx = _table(path, data, owner)
+    if arr.shape[1] != 6:
+        line = idx[0] + 1 if idx else 1
+        raise FileFormatError(f"{owner}: {path!r} line {line}: a .{what} row holds 6 values, got {arr.shape[1]}")
+    return arr
+
+
+def read_xyzn(path, data, owner, want_normals="auto"):
+    """Open3D's ``.xyzn``: ``x y z nx ny nz`` rows."""
+    arr = _fixed(path, data, owner, "xyzn")
+    return Cloud(arr[:, :3], arr[:, 3:6])
+
+
+def read_xyzrgb(path, data, owner, want_normals="auto"):
+    """Open3D's ``.xyzrgb``: ``x y z r g b`` rows; the colour is dropped."""
+    arr = _fixed(path, data, owner, "xyzrgb")
+    return Cloud(arr[:, :3], None)
+
+
+def write_xyz(path, cloud, binary=True):
+    sep = "," if str(path).lower().endswith(".csv") else " "
+    np.savetxt(path, cloud, fmt="%.17g", delimiter=sep)
+
+
+def write_xyzn(path, cloud, binary=True):
+    if cloud.shape[1] != 6:
+        raise ValueError("write_point_cloud: an .xyzn file needs normals: cloud must have shape (n_points, 6)")
+    np.savetxt(path, cloud, fmt="%.17g")

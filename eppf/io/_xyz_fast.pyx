@@ -1,0 +1,158 @@
+# cython: language_level=3
+"""Compiled parser for tables of numbers in text files (XYZ, CSV, PTS, ASCII PCD bodies).
+
+Only plain tables are handled here: every non-blank row holds the same number
+of numbers. Anything else makes the parser return None and the caller's
+line-by-line reader reads the file or names the line at fault.
+"""
+
+import numpy as np
+
+from libc.stdlib cimport strtod
+
+
+cdef inline Py_ssize_t _skip_blank(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
+    # skip spaces, tabs, carriage returns and whole blank lines
+    while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r' or s[i] == b'\n'):
+        i += 1
+    return i
+
+
+cdef inline Py_ssize_t _end_of_line(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
+    # after the last value: only spaces, tabs, \r, then \n or the end; -1 otherwise
+    while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r'):
+        i += 1
+    if i == n:
+        return i
+    if s[i] == b'\n':
+        return i + 1
+    return -1
+
+
+cdef inline bint _number_start(char c) noexcept nogil:
+    return (c >= b'0' and c <= b'9') or c == b'-' or c == b'+' or c == b'.'
+
+
+cdef inline bint _is_sep(char c) noexcept nogil:
+    return c == b' ' or c == b'\t' or c == b',' or c == b';'
+
+
+def parse_float_table(bytes data, Py_ssize_t start):
+    """Parse rows of numbers (separated by spaces, tabs, commas or semicolons) from ``data[start:]``.
+
+    Every non-blank row must hold as many numbers as the first. Returns a
+    float64 array of shape (n_rows, n_columns), or None when a row differs
+    or holds anything but numbers (the caller then reports the line).
+    """
+    cdef const char* s = data
+    cdef Py_ssize_t n = len(data)
+    cdef Py_ssize_t i = start, k = 0, n_cols = -1, row_count = 0, cols, cap
+    cdef char* end
+    cdef bint ok = True
+    cap = data.count(b"\n", start) + 1
+    # the first row fixes the column count
+    i = _skip_blank(s, i, n)
+    if i >= n:
+        return None
+    cols = 0
+    cdef Py_ssize_t j = i
+    while j < n and s[j] != b'\n':
+        while j < n and (_is_sep(s[j]) or s[j] == b'\r'):
+            j += 1
+        if j >= n or s[j] == b'\n':
+            break
+        strtod(s + j, &end)
+        if end == s + j:
+            return None
+        j = end - s
+        cols += 1
+    if cols == 0:
+        return None
+    n_cols = cols
+    out = np.empty(cap * n_cols, dtype=np.float64)
+    cdef double[::1] o = out
+    with nogil:
+        while True:
+            i = _skip_blank(s, i, n)
+            if i >= n:
+                break
+            cols = 0
+            while True:
+                while i < n and _is_sep(s[i]):
+                    i += 1
+                if i >= n or s[i] == b'\n' or s[i] == b'\r':
+                    break
+                if cols == n_cols or not _number_start(s[i]):
+                    ok = False
+                    break
+                o[k] = strtod(s + i, &end)
+                if end == s + i:
+                    ok = False
+                    break
+                i = end - s
+                k += 1
+                cols += 1
+                if i < n and not (_is_sep(s[i]) or s[i] == b'\n' or s[i] == b'\r'):
+                    ok = False
+                    break
+            if not ok or cols != n_cols:
+                ok = False
+                break
+            row_count += 1
+            i = _end_of_line(s, i, n)
+            if i < 0:
+                ok = False
+                break
+    if not ok:
+        return None
+    return out[:row_count * n_cols].reshape(row_count, n_cols)
+
+
+cdef inline bint _is_space(char c) noexcept nogil:
+    return c == b' ' or c == b'\t' or c == b'\r' or c == b'\n' or c == b'\v' or c == b'\f'
+
+
+def parse_tokens(bytes data, Py_ssize_t start):
+    """Parse every whitespace-separated number of ``data[start:]`` (ASCII PLY bodies).
+
+    Returns ``(values, -1)`` with a float64 array of all the numbers, or
+    ``(None, offset)`` with the offset of the first token that is not a
+    decimal number (hexadecimal ones are refused, as Python's ``float``
+    refuses them). Allocates one float64 per token, counted first.
+    """
+    cdef const char* s = data
+    cdef Py_ssize_t n = len(data)
+    cdef Py_ssize_t i = start, count = 0, k = 0, tok, bad = -1
+    cdef char* end
+    with nogil:
+        while i < n:
+            while i < n and _is_space(s[i]):
+                i += 1
+            if i < n:
+                count += 1
+                while i < n and not _is_space(s[i]):
+                    i += 1
+    out = np.empty(count, dtype=np.float64)
+    cdef double[::1] o = out
+    i = start
+    with nogil:
+        while i < n and k < count:
+            while i < n and _is_space(s[i]):
+                i += 1
+            if i >= n:
+                break
+            tok = i
+            while i < n and not _is_space(s[i]):
+                if s[i] == b'x' or s[i] == b'X' or s[i] == 0:
+                    bad = tok
+                i += 1
+            if bad >= 0:
+                break
+            o[k] = strtod(s + tok, &end)
+            if end != s + i:  # strtod stopped inside the token
+                bad = tok
+                break
+            k += 1
+    if bad >= 0:
+        return None, bad
+    return out, -1

@@ -1,0 +1,273 @@
+"""The format table, the public API over all formats, round trips and generic errors."""
+
+import os
+import re
+import struct
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
+
+
+def _cloud(n=40, normals=True, seed=0):
+    rng = np.random.RandomState(seed)
+    xyz = rng.uniform(-2, 3, size=(n, 3))
+    if not normals:
+        return xyz
+    nrm = rng.normal(size=(n, 3))
+    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
+
+
+def _write(path, text, mode="w"):
+    with open(path, mode) as fh:
+        fh.write(text)
+    return str(path)
+
+
+# --------------------------------------------------------------------------- round trips
+
+
+@pytest.mark.parametrize("ext", ["pcd", "ply", "xyz", "txt", "csv", "pts", "npy", "npz", "PCD", "Ply", "XYZ", "NPZ"])
+@pytest.mark.parametrize("binary", [True, False])
+@pytest.mark.parametrize("normals", [True, False])
+def test_point_cloud_round_trip(tmp_path, ext, binary, normals):
+    cloud = _cloud(normals=normals)
+    path = tmp_path / f"cloud.{ext}"
+    write_point_cloud(path, cloud, binary=binary)
+    back = read_point_cloud(path)
+    assert back.shape == cloud.shape and back.dtype == np.float64
+    # PCD and PLY store float32
+    tol = 1e-6 if ext.lower() in ("pcd", "ply") else 0
+    assert_allclose(back, cloud, rtol=tol, atol=tol)
+
+
+@pytest.mark.parametrize("ext", ["off", "obj", "ply", "stl", "OFF", "Obj", "PLY", "STL"])
+def test_mesh_round_trip(tmp_path, ext):
+    vertices = _cloud(normals=False, n=6)
+    faces = np.array([[0, 1, 2], [2, 3, 4], [4, 5, 0]])
+    path = tmp_path / f"mesh.{ext}"
+    write_mesh(path, vertices, faces)
+    mesh = read_mesh(path)
+    assert isinstance(mesh, Mesh)
+    if ext.lower() == "stl":  # triangle soup with merged corners, float32 in binary
+        assert_allclose(mesh.vertices[mesh.faces], vertices[faces], rtol=1e-6)
+        return
+    assert_allclose(mesh.vertices, vertices, rtol=1e-6 if ext.lower() == "ply" else 0)
+    assert_array_equal(mesh.faces, faces)
+
+
+def test_normals_false_drops_and_true_requires(tmp_path):
+    path = tmp_path / "c.npy"
+    write_point_cloud(path, _cloud())
+    assert read_point_cloud(path, normals=False).shape == (40, 3)
+    path3 = tmp_path / "c3.npy"
+    write_point_cloud(path3, _cloud(normals=False))
+    with pytest.raises(ValueError, match="has no normals, but normals=True"):
+        read_point_cloud(path3, normals=True)
+
+
+
+# --------------------------------------------------------------------------- generic errors
+
+
+@pytest.mark.parametrize("ext", ["pcd", "xyz", "pts", "xyzn", "npy", "npz", "off", "obj", "ply", "stl"])
+def test_empty_file(tmp_path, ext):
+    path = _write(tmp_path / f"empty.{ext}", "")
+    readers = [read_point_cloud] + ([read_mesh] if ext in ("off", "obj", "ply", "stl") else [])
+    for reader in readers:
+        with pytest.raises(FileFormatError, match=re.escape(f"{path!r} is empty")):
+            reader(path)
+
+
+def test_missing_file_and_folder(tmp_path):
+    for name in ("none.pcd", "none.npy", "none.OFF"):
+        with pytest.raises(FileNotFoundError, match="read_point_cloud: no such file") as info:
+            read_point_cloud(tmp_path / name)
+        assert info.value.filename == str(tmp_path / name) and name in str(info.value)
+    if os.path.exists("/dev/zero"):  # an endless file must not be read
+        os.symlink("/dev/zero", tmp_path / "zero.pcd")
+        with pytest.raises(OSError, match="not a regular file") as info:
+            read_point_cloud(tmp_path / "zero.pcd")
+        assert "zero.pcd" in str(info.value)
+    folder = tmp_path / "cloud.ply"
+    folder.mkdir()
+    for reader in (read_point_cloud, read_mesh):
+        with pytest.raises(IsADirectoryError, match="a folder, not a file") as info:
+            reader(folder)
+        assert "cloud.ply" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "func, args, kwargs, exc, msg",
+    [
+        (read_point_cloud, ("x.foo",), {}, ValueError, "cannot tell the format of 'x.foo' from its extension '.foo'"),
+        (read_point_cloud, ("x.pcd",), {"format": "las"}, ValueError, "unknown format 'las'"),
+        (read_point_cloud, ("x.pcd",), {"normals": "yes"}, ValueError, "normals must be 'auto', True or False"),
+        (read_mesh, ("x.las",), {}, ValueError, "cannot tell the format of 'x.las'"),
+        (read_mesh, ("x.pcd",), {}, ValueError, "'x.pcd' is a pcd file, which holds clouds, not meshes"),
+        (write_mesh, ("x.npy", np.eye(3), [[0, 1, 2]]), {}, ValueError, "'x.npy' is a npy file, which holds clouds"),
+        (read_point_cloud, ("x.pcd",), {"mesh": "faces"}, ValueError, "mesh must be 'sample' or 'vertices'"),
+        (read_point_cloud, ("x.pcd",), {"n_points": 1}, ValueError, "n_points must be >= 2, got 1"),
+        (read_point_cloud, ("x.pcd",), {"n_points": 2.5}, TypeError, "n_points must be an int or None"),
+        (read_point_cloud, ("x.pcd",), {"resolution": np.nan}, ValueError, "resolution must be positive and finite"),
+        (read_point_cloud, ("x.pcd",), {"n_points": 10, "resolution": 0.1}, ValueError, "give n_points or resolution, not both"),
+        (read_point_cloud, ("x.pcd",), {"random_state": -1}, ValueError, "an int random_state must lie in 0..2**64-1"),
+        (read_point_cloud, ("x.pcd",), {"random_state": "seed"}, TypeError, "random_state must be None, an int or a RandomState"),
+        (write_point_cloud, ("x.xyz", np.zeros((3, 2))), {}, ValueError, "cloud must have shape (n_points, 3) or (n_points, 6)"),
+        (write_point_cloud, ("x.xyz", [[np.nan, 0, 0]]), {}, ValueError, "cloud contains NaN or infinite values"),
+        (write_point_cloud, ("x.xyz", np.zeros((0, 3))), {}, ValueError, "cloud has no points"),
+        (write_point_cloud, ("x.xyz", [["a", "b", "c"]]), {}, TypeError, "cloud must be a numeric array"),
+        (write_mesh, ("x.off", np.eye(3), [[0, 1, 3]]), {}, ValueError, "face indices must lie in 0..2"),
+        (write_mesh, ("x.off", np.eye(3), [[0.5, 1, 2]]), {}, ValueError, "faces must be an integer array"),
+    ],
+)
+def test_argument_errors(tmp_path, monkeypatch, func, args, kwargs, exc, msg):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(exc, match=re.escape(msg)):
+        func(*args, **kwargs)
+
+
+def test_core_import_needs_no_optional_dependency(tmp_path):
+    import subprocess
+    import sys
+
+    # a base install reads and writes every format, PLY included, without plyfile
+    code = (
+        "import sys; sys.modules['plyfile'] = None; import eppf, eppf.io, eppf.datasets, eppf.preprocessing; "
+        "import numpy as np; "
+        f"eppf.io.write_mesh({str(tmp_path / 'm.ply')!r}, np.eye(3), [[0, 1, 2]]); "
+        f"assert eppf.io.read_point_cloud({str(tmp_path / 'm.ply')!r}, n_points=10).shape == (10, 6); "
+        "bad = [m for m in ('h5py', 'trimesh') if m in sys.modules]; "
+        "assert not bad, bad"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+
+# --------------------------------------------------------------------------- the one format table
+
+
+def test_table_discovery_and_supported_extensions_agree(tmp_path):
+    from eppf.datasets import _folder
+    from eppf.io import _formats, format_of, supported_extensions
+
+    table = set(_formats.BY_EXTENSION)
+    assert set(supported_extensions()) == table
+    assert set(supported_extensions("cloud")) | set(supported_extensions("mesh")) == table
+    assert set(supported_extensions("mesh")) == {".off", ".obj", ".stl", ".ply"}
+    assert set(supported_extensions("cloud")) & set(supported_extensions("mesh")) == {".ply"}
+    # load_folder's discovery finds exactly the table's extensions, in any case, and nothing else
+    exts = sorted(table) + [e.upper() for e in table] + [".las", ".ply.bak", ".pcd~", ".e57", ""]
+    for k, ext in enumerate(exts):
+        (tmp_path / f"f{k}{ext}").write_text("x")
+    found = {os.path.splitext(f)[1].lower() for f in _folder._object_files(str(tmp_path))}
+    assert found == table
+    assert len(_folder._object_files(str(tmp_path))) == 2 * len(table)
+    # every extension maps to a format that read_point_cloud dispatches, in any case
+    for ext in table:
+        assert format_of("a" + ext) == format_of("A" + ext.upper()) == _formats.BY_EXTENSION[ext].name
+
+
+def test_format_of():
+    from eppf.io import format_of
+
+    assert [format_of(p) for p in ("a.PLY", "b.Off", "c.txt", "d.CSV", "e.xyzn", "f.pts", "g.npz", "h.Stl")] == \
+        ["ply", "off", "xyz", "xyz", "xyzn", "pts", "npz", "stl"]
+    with pytest.raises(ValueError, match=re.escape("format_of: cannot tell the format of 'x.las'")):
+        format_of("x.las")
+    with pytest.raises(ValueError, match="kind must be None, 'cloud' or 'mesh'"):
+        from eppf.io import supported_extensions
+
+        supported_extensions("points")
+
+
+def _mesh(seed=0):
+    rng = np.random.RandomState(seed)
+    v = rng.normal(size=(8, 3))
+    f = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4], [4, 5, 6], [5, 6, 7], [7, 0, 3]])
+    return v, f
+
+
+@pytest.mark.parametrize("ext", ["off", "obj", "stl", "ply", "OFF", "Stl"])
+@pytest.mark.parametrize("normals", ["auto", False])
+def test_mesh_files_are_sampled_like_sample_mesh(tmp_path, ext, normals):
+    """read_point_cloud of a mesh file = sample_mesh of read_mesh with the per-file generator."""
+    from eppf.utils._sampling import object_rng, sample_mesh
+
+    v, f = _mesh()
+    path = tmp_path / f"m.{ext}"
+    write_mesh(path, v, f)
+    mesh = read_mesh(path)
+    seed = 2 ** 63 + 12345  # the loaders' per-file seeds use all 64 bits
+    for n_points, resolution, count in ((None, None, 2048), (500, None, 500), (None, 0.5, None)):
+        ref = sample_mesh(mesh.vertices, mesh.faces, n_points=count, resolution=resolution,
+                          return_normals=normals is not False, random_state=object_rng(seed))
+        got = read_point_cloud(path, normals=normals, n_points=n_points, resolution=resolution, random_state=seed)
+        assert_array_equal(got, ref)
+    # the same settings give the same cloud; another seed another one
+    assert_array_equal(read_point_cloud(path, random_state=3), read_point_cloud(path, random_state=3))
+    assert not np.array_equal(read_point_cloud(path, random_state=3), read_point_cloud(path, random_state=4))
+    rs = np.random.RandomState(8)
+    assert_array_equal(read_point_cloud(path, normals=normals, random_state=rs),
+                       sample_mesh(mesh.vertices, mesh.faces, n_points=2048,
+                                   return_normals=normals is not False, random_state=np.random.RandomState(8)))
+
+
+@pytest.mark.parametrize("ext", ["off", "obj", "ply"])
+def test_mesh_vertices_mode(tmp_path, ext):
+    v, f = _mesh()
+    path = tmp_path / f"m.{ext}"
+    write_mesh(path, v, f)
+    assert_allclose(read_point_cloud(path, mesh="vertices"), v, rtol=1e-6 if ext == "ply" else 0)
+
+
+def test_mesh_without_faces(tmp_path):
+    path = _write(tmp_path / "p.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n")
+    with pytest.raises(FileFormatError, match=re.escape("has no faces, so it cannot be sampled; pass mesh='vertices'")):
+        read_point_cloud(path)
+    assert read_point_cloud(path, mesh="vertices").shape == (3, 3)
+    # a PLY without faces is a cloud
+    write_point_cloud(tmp_path / "c.ply", np.eye(3))
+    assert_allclose(read_point_cloud(tmp_path / "c.ply", n_points=None), np.eye(3))
+
+
+def test_degenerate_mesh_error_names_the_file(tmp_path):
+    path = _write(tmp_path / "flat.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n")
+    with pytest.raises(FileFormatError, match=r"flat\.off'.*zero total area|flat\.off'.*area"):
+        read_point_cloud(path)
+
+
+def test_point_files_resampled_like_resample(tmp_path):
+    from eppf.utils._sampling import resample
+    from eppf.utils._sampling import object_rng
+
+    cloud = _cloud(n=50)
+    write_point_cloud(tmp_path / "c.npy", cloud)
+    for n in (20, 80):
+        assert_array_equal(read_point_cloud(tmp_path / "c.npy", n_points=n, random_state=77),
+                           resample(cloud, n, random_state=object_rng(77)))
+    # resolution applies to meshes only: point files are kept
+    assert_array_equal(read_point_cloud(tmp_path / "c.npy", resolution=0.1), cloud)
+
+
+def test_every_reader_error_is_documented(tmp_path):
+    """Bad bytes in every format raise FileFormatError or OSError naming the file, never another type."""
+    rng = np.random.RandomState(0)
+    from eppf.io import supported_extensions
+
+    for ext in supported_extensions():
+        for k in range(5):
+            data = rng.randint(0, 256, size=rng.randint(1, 300), dtype=np.uint8).tobytes()
+            if k == 1:
+                data = b"ply\nformat binary_little_endian 1.0\n" + data
+            path = tmp_path / f"r{k}{ext}"
+            path.write_bytes(data)
+            for reader in (read_point_cloud, read_mesh):
+                try:
+                    reader(path)
+                except FileFormatError as exc:
+                    assert path.name in str(exc)
+                except ValueError as exc:  # read_mesh of a cloud format: an argument error
+                    assert reader is read_mesh and "not meshes" in str(exc)

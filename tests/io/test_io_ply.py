@@ -1,0 +1,225 @@
+"""PLY clouds and meshes read without plyfile (which, when installed, serves as the reference)."""
+
+import re
+import struct
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
+
+
+def _cloud(n=40, normals=True, seed=0):
+    rng = np.random.RandomState(seed)
+    xyz = rng.uniform(-2, 3, size=(n, 3))
+    if not normals:
+        return xyz
+    nrm = rng.normal(size=(n, 3))
+    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
+
+
+def _write(path, text, mode="w"):
+    with open(path, mode) as fh:
+        fh.write(text)
+    return str(path)
+
+
+# --------------------------------------------------------------------------- PLY fixtures
+
+
+def test_ply_ascii_fixture_with_quads_and_normals(tmp_path):
+    text = (
+        "ply\nformat ascii 1.0\ncomment by hand\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0 0 0 1\n1 0 0 0 0 1\n1 1 0 0 0 1\n0 1 0 0 0 1\n4 0 1 2 3\n"
+    )
+    path = _write(tmp_path / "q.ply", text)
+    # a PLY with faces is a mesh: read_point_cloud samples it unless mesh="vertices"
+    assert_allclose(read_point_cloud(path, mesh="vertices")[:, 3:], np.tile([0, 0, 1], (4, 1)))
+    assert_array_equal(read_mesh(path).faces, [[0, 1, 2], [0, 2, 3]])
+    sampled = read_point_cloud(path, n_points=300)
+    assert sampled.shape == (300, 6) and np.all((sampled[:, :2] >= 0) & (sampled[:, :2] <= 1))
+
+
+def test_ply_truncated_binary(tmp_path):
+    path = tmp_path / "t.ply"
+    write_point_cloud(path, _cloud(n=10), binary=True)
+    path.write_bytes(path.read_bytes()[:-7])
+    with pytest.raises(FileFormatError, match=r"t\.ply' byte \d+: malformed PLY element 'vertex', row 9"):
+        read_point_cloud(path)
+
+
+def test_ply_malformed_header(tmp_path):
+    path = _write(tmp_path / "h.ply", "ply\nformat ascii 1.0\nelement vertex two\nend_header\n")
+    with pytest.raises(ValueError, match=r"h\.ply' line 3: malformed PLY header"):
+        read_point_cloud(path)
+
+
+
+# --------------------------------------------------------------------------- against plyfile
+
+
+def _header(fmt, n_v, n_f, props=("float x", "float y", "float z"), face="list uchar int vertex_indices"):
+    lines = ["ply", f"format {fmt} 1.0", "comment test", f"element vertex {n_v}"]
+    lines += [f"property {p}" for p in props]
+    if n_f is not None:
+        lines += [f"element face {n_f}", f"property {face}"]
+    return ("\n".join(lines + ["end_header"]) + "\n").encode()
+
+
+def _random_mixed_mesh(rng, fmt):
+    """Vertices with double coordinates and uchar colours, triangles and quads, then an extra element."""
+    n_v, n_f = 30, 25
+    v = rng.normal(size=(n_v, 3))
+    rgb = rng.randint(0, 256, size=(n_v, 3))
+    sizes = rng.choice([3, 4], size=n_f)
+    polys = [rng.choice(n_v, size=k, replace=False) for k in sizes]
+    endian = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt)
+    head = _header(fmt, n_v, n_f, props=("double x", "double y", "double z", "uchar red", "uchar green", "uchar blue"),
+                   face="list uchar uint vertex_indices")
+    head = head.replace(b"end_header\n", b"element edge 2\nproperty int vertex1\nproperty int vertex2\nend_header\n")
+    if endian is None:
+        body = "".join(f"{float(a)!r} {float(b)!r} {float(c)!r} {r} {g} {bl}\n" for (a, b, c), (r, g, bl) in zip(v, rgb))
+        body += "".join(f"{len(p)} " + " ".join(map(str, p)) + "\n" for p in polys) + "0 1\n1 2\n"
+        return head + body.encode(), v, polys
+    body = b"".join(struct.pack(endian + "dddBBB", *xyz, *c) for xyz, c in zip(v, rgb))
+    body += b"".join(struct.pack(f"{endian}B{len(p)}I", len(p), *p) for p in polys)
+    body += struct.pack(endian + "iiii", 0, 1, 1, 2)
+    return head + body, v, polys
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+def test_ply_mixed_polygons_match_plyfile(tmp_path, fmt):
+    data, v, polys = _random_mixed_mesh(np.random.RandomState(3), fmt)
+    path = tmp_path / "m.ply"
+    path.write_bytes(data)
+    mesh = read_mesh(path)
+    # independent expectation: the fan of every polygon
+    expected = [(p[0], p[k], p[k + 1]) for p in polys for k in range(1, len(p) - 1)]
+    assert_array_equal(mesh.faces, expected)
+    assert_array_equal(mesh.vertices, v)
+    plyfile = pytest.importorskip("plyfile")
+    ref = plyfile.PlyData.read(str(path))
+    assert_array_equal(mesh.vertices, np.column_stack([ref["vertex"][c] for c in "xyz"]))
+    ref_polys = [list(p) for p in ref["face"]["vertex_indices"]]
+    assert [list(map(int, p)) for p in polys] == ref_polys
+
+
+@pytest.mark.parametrize("binary", [True, False])
+@pytest.mark.parametrize("normals", [True, False])
+def test_ply_written_files_read_by_plyfile(tmp_path, binary, normals):
+    plyfile = pytest.importorskip("plyfile")
+    cloud = _cloud(n=25, normals=normals)
+    path = tmp_path / "c.ply"
+    write_point_cloud(path, cloud, binary=binary)
+    ref = plyfile.PlyData.read(str(path))
+    names = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals else [])
+    assert_array_equal(read_point_cloud(path), np.column_stack([ref["vertex"][c] for c in names]).astype(np.float64))
+    faces = np.array([[0, 1, 2, 3], [4, 5, 6, 7]])
+    write_mesh(tmp_path / "q.ply", cloud[:, :3], faces, binary=binary)
+    ref = plyfile.PlyData.read(str(tmp_path / "q.ply"))
+    assert_array_equal(np.vstack(ref["face"]["vertex_indices"]), faces)
+    assert_array_equal(read_mesh(tmp_path / "q.ply").faces, [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+
+
+def test_ply_reads_without_plyfile(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "plyfile", None)  # makes `import plyfile` fail
+    write_point_cloud(tmp_path / "c.ply", _cloud(n=5))
+    assert read_point_cloud(tmp_path / "c.ply").shape == (5, 6)
+    write_mesh(tmp_path / "m.ply", np.eye(3), [[0, 1, 2]], binary=False)
+    assert_array_equal(read_mesh(tmp_path / "m.ply").faces, [[0, 1, 2]])
+
+
+# --------------------------------------------------------------------------- hostile headers and data
+
+
+def test_ply_huge_face_count_in_a_tiny_binary_file(tmp_path):
+    # plyfile allocates from such a header (8 s and 900 MB for this 213-byte file)
+    data = _header("binary_little_endian", 3, 100000000) + struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0) \
+        + struct.pack("<B3i", 3, 0, 1, 2)
+    path = tmp_path / "f.ply"
+    path.write_bytes(data)
+    msg = "declares 100000000 rows of at least 1 bytes (100000000 bytes), but the file has 13 bytes left"
+    for reader in (read_mesh, read_point_cloud):
+        with pytest.raises(FileFormatError, match=re.escape(msg)):
+            reader(path)
+
+
+@pytest.mark.parametrize(
+    "data, msg",
+    [
+        (_header("ascii", 999999999999, None) + b"0 0 0\n", "declares 999999999999 rows of at least 3 values"),
+        (_header("ascii", 3, 999999999999) + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "declares 999999999999 rows"),
+        (_header("ascii", -1, None), "line 4: malformed PLY header (negative count"),
+        (_header("ascii", 1, None).replace(b"vertex 1", b"vertex 1e308") + b"0 0 0\n", "line 4: malformed PLY header"),
+        (_header("ascii", 1, None).replace(b"vertex 1", b"vertex nan") + b"0 0 0\n", "line 4: malformed PLY header"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\n0 1 0\n1e308 0 1 2\n", "list 'vertex_indices' has a bad length"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\n0 1 0\nnan 0 1 2\n", "list 'vertex_indices' has a bad length"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\n0 1 0\n-1 0 1 2\n", "list 'vertex_indices' has a bad length"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 99999999999999999999\n", "PLY face 0 has a vertex index outside 0..2"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\n0 1 0\n3 0 1 1.5\n", "PLY face 0 has a vertex index outside"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\n0 x 0\n3 0 1 2\n", "line 13: malformed number 'x' in PLY data"),
+        (_header("binary_little_endian", 3, 1, face="list char int vertex_indices") + b"\0" * 36 + b"\xff" + b"\0" * 12,
+         "list 'vertex_indices' of -1 items does not fit"),
+        (_header("binary_little_endian", 3, 1, face="list int int vertex_indices") + b"\0" * 36
+         + struct.pack("<i", 2 ** 31 - 1) + b"\0" * 12, "list 'vertex_indices' of 2147483647 items does not fit"),
+        (_header("binary_little_endian", 3, 1, face="list float int vertex_indices"), "unsupported property line"),
+        (_header("ascii", 1, None).replace(b"format ascii", b"format binary"), "unsupported format line"),
+        (_header("ascii", 1, None).replace(b"end_header\n", b""), "no 'end_header' line"),
+        (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float x\nend_header\n", "appears twice"),
+        (b"plyx\n", "expected the magic 'ply'"),
+        (_header("ascii", 1, None, props=("float x", "float y")) + b"0 0\n", "PLY 'vertex' element lacks ['z']"),
+        (_header("ascii", 3, 1) + b"0 0 0\n1 0 0\nnan 1 0\n3 0 1 2\n", "vertex 2 (counting from 0) is not finite"),
+    ],
+)
+def test_ply_hostile(tmp_path, data, msg):
+    path = tmp_path / "h.ply"
+    path.write_bytes(data)
+    with pytest.raises(FileFormatError, match=re.escape(msg)) as info:
+        read_mesh(path)
+    assert "h.ply" in str(info.value)
+
+
+def test_ply_cloud_with_nan_vertices_drops_them(tmp_path):
+    path = tmp_path / "n.ply"
+    path.write_bytes(_header("ascii", 3, None) + b"0 0 0\nnan 1 0\n1 1 1\n")
+    assert_array_equal(read_point_cloud(path), [[0, 0, 0], [1, 1, 1]])
+
+
+def test_ascii_compiled_token_parser_matches_numpy(tmp_path, monkeypatch):
+    from eppf.io import _ply
+
+    if _ply._parse_tokens is None:
+        pytest.skip("eppf.io._xyz_fast is not compiled")
+    data, v, polys = _random_mixed_mesh(np.random.RandomState(4), "ascii")
+    good = tmp_path / "g.ply"
+    good.write_bytes(data.replace(b"\n", b" \r\n", 5))
+    bad = tmp_path / "b.ply"
+    bad.write_bytes(data.replace(b"\n1 2\n", b"\n1 0x2\n"))
+    compiled = read_mesh(good)
+    with pytest.raises(FileFormatError) as c_err:
+        read_mesh(bad)
+    monkeypatch.setattr(_ply, "_parse_tokens", None)
+    reference = read_mesh(good)
+    assert_array_equal(compiled.vertices, reference.vertices)
+    assert_array_equal(compiled.faces, reference.faces)
+    with pytest.raises(FileFormatError) as n_err:
+        read_mesh(bad)
+    assert str(c_err.value) == str(n_err.value)
+    assert "malformed number '0x2' in PLY data" in str(c_err.value)
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_ply_polygon_longer_than_a_uchar_count(tmp_path, binary):
+    # a 300-gon: its length does not fit the usual 'list uchar int', so the writer uses an int count
+    angle = np.linspace(0, 2 * np.pi, 300, endpoint=False)
+    v = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(300)])
+    path = tmp_path / "g.ply"
+    write_mesh(path, v, np.arange(300)[None, :], binary=binary)
+    assert b"property list int int vertex_indices" in path.read_bytes()[:400]
+    mesh = read_mesh(path)
+    assert_array_equal(mesh.faces, [[0, k, k + 1] for k in range(1, 299)])

@@ -1,0 +1,170 @@
+"""Text tables: .xyz/.txt/.csv, Open3D's .pts, .xyzn and .xyzrgb, and the compiled table parser."""
+
+import re
+import struct
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
+
+
+def _cloud(n=40, normals=True, seed=0):
+    rng = np.random.RandomState(seed)
+    xyz = rng.uniform(-2, 3, size=(n, 3))
+    if not normals:
+        return xyz
+    nrm = rng.normal(size=(n, 3))
+    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
+
+
+def _write(path, text, mode="w"):
+    with open(path, mode) as fh:
+        fh.write(text)
+    return str(path)
+
+
+# --------------------------------------------------------------------------- text fixtures
+
+
+def test_xyz_header_and_separators(tmp_path):
+    path = _write(tmp_path / "p.csv", "x,y,z\n1,2,3\n# comment\n\n4,5,6\n")
+    assert_allclose(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
+
+
+def test_xyz_colour_columns_are_not_normals(tmp_path):
+    # S3DIS-style x y z r g b
+    path = _write(tmp_path / "p.txt", "1 2 3 255 0 12\n4 5 6 0 128 7\n")
+    assert read_point_cloud(path).shape == (2, 3)
+    assert_allclose(read_point_cloud(path, normals=True)[:, 3:], [[255, 0, 12], [0, 128, 7]])
+
+
+def test_xyz_unit_normal_columns_are_normals(tmp_path):
+    # modelnet40_normal_resampled-style x,y,z,nx,ny,nz
+    path = _write(tmp_path / "p.txt", "1,2,3,0,0,1\n4,5,6,0.6,0.8,0\n")
+    assert_allclose(read_point_cloud(path), [[1, 2, 3, 0, 0, 1], [4, 5, 6, 0.6, 0.8, 0]])
+
+
+@pytest.mark.parametrize(
+    "text, msg",
+    [
+        ("1 2 3\n4 5\n", "line 2: expected 3 values in point 1, got 2"),
+        ("1 2 3\n\n4 5 six\n", "line 3: malformed number in point 1"),
+        ("1 2\n3 4\n", "line 1: expected at least 3 columns (x y z), got 2"),
+        ("# only a comment\n", "holds no points (only blank or comment lines)"),
+    ],
+)
+def test_xyz_malformed(tmp_path, text, msg):
+    path = _write(tmp_path / "bad.xyz", text)
+    with pytest.raises(FileFormatError, match=re.escape(msg)):
+        read_point_cloud(path)
+
+
+
+@pytest.mark.parametrize(
+    "text, plain",
+    [
+        ("1,2,3,0,0,1\n4,5,6,0.6,0.8,0\n", True),
+        ("x y z\n1 2 3\n\n4\t5  6\r\n7 8 9", True),
+        ("x;y;z\n-1e-3;+2.5;.5\n", True),
+        ("1 2 3 255 0 12\n4 5 6 0 128 7\n", True),
+        ("1 2 3\n4 nan 6\n", False),  # NaN: the general reader keeps it, remove_nan drops it
+        ("1 2 3 # a comment\n4 5 6\n", False),
+    ],
+)
+def test_text_compiled_path_matches_general_reader(tmp_path, text, plain):
+    from eppf.io import _xyz as io
+
+    if io._parse_float_table is None:
+        pytest.skip("eppf.io._xyz_fast is not compiled")
+    assert (io._xyz_compiled(text.encode()) is not None) == plain
+    path = _write(tmp_path / "p.xyz", text)
+    saved = io._parse_float_table
+    try:
+        io._parse_float_table = None
+        ref = read_point_cloud(path)
+    finally:
+        io._parse_float_table = saved
+    assert_array_equal(read_point_cloud(path), ref)
+
+
+def test_text_compiled_path_random_table(tmp_path):
+    from eppf.io import _xyz as io
+
+    if io._parse_float_table is None:
+        pytest.skip("eppf.io._xyz_fast is not compiled")
+    arr = np.random.RandomState(0).normal(size=(500, 6)) * 10.0 ** np.arange(-4, 2)
+    path = tmp_path / "t.csv"
+    write_point_cloud(path, arr)  # 17 significant digits: exact round trip
+    assert_array_equal(io._xyz_compiled(path.read_bytes()), arr)
+    assert_array_equal(read_point_cloud(path, normals=True), arr)
+
+
+
+# --------------------------------------------------------------------------- Open3D's .pts, .xyzn, .xyzrgb
+
+
+@pytest.mark.parametrize("count_line", [True, False])
+def test_pts_with_and_without_count_line(tmp_path, count_line):
+    rows = "1 2 3 0.5 10 20 30\n4 5 6 0.1 40 50 60\n7 8 9 0.9 70 80 90\n"
+    path = _write(tmp_path / "p.pts", ("3\n" if count_line else "") + rows)
+    assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+
+
+def test_pts_count_line_without_final_newline_and_xyz_only(tmp_path):
+    path = _write(tmp_path / "p.PTS", "\n2\n1 2 3\n4 5 6")
+    assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
+
+
+@pytest.mark.parametrize(
+    "text, msg",
+    [
+        ("999999999\n1 2 3\n", "line 1: the count line says 999999999 points, but the file holds 1 rows"),
+        ("2\n1 2 3\n4 5 6\n7 8 9\n", "line 1: the count line says 2 points, but the file holds 3 rows"),
+        ("-5\n1 2 3\n", "line 1: negative point count -5"),
+        ("3\n", "holds no points"),
+        ("1e308\n1 2 3\n", "expected 1 values in point 1, got 3"),
+    ],
+)
+def test_pts_bad_count_line(tmp_path, text, msg):
+    path = _write(tmp_path / "bad.pts", text)
+    with pytest.raises(FileFormatError, match=re.escape(msg)) as info:
+        read_point_cloud(path)
+    assert "bad.pts" in str(info.value)
+
+
+def test_xyzn_always_normals_and_round_trip(tmp_path):
+    # normals need not be unit length in an .xyzn file: the format says they are normals
+    path = _write(tmp_path / "p.xyzn", "1 2 3 0 0 2\n4 5 6 0 3 0\n")
+    assert_array_equal(read_point_cloud(path), [[1, 2, 3, 0, 0, 2], [4, 5, 6, 0, 3, 0]])
+    assert read_point_cloud(path, normals=False).shape == (2, 3)
+    cloud = _cloud(n=20)
+    write_point_cloud(tmp_path / "c.xyzn", cloud)
+    assert_array_equal(read_point_cloud(tmp_path / "c.xyzn"), cloud)
+    with pytest.raises(ValueError, match="an .xyzn file holds normals"):
+        write_point_cloud(tmp_path / "d.xyzn", cloud[:, :3])
+
+
+def test_xyzrgb_colour_is_ignored(tmp_path):
+    # unit-length colours must not turn into normals
+    path = _write(tmp_path / "p.XYZRGB", "1 2 3 1 0 0\n4 5 6 0 1 0\n")
+    assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
+    with pytest.raises(FileFormatError, match="has no normals, but normals=True"):
+        read_point_cloud(path, normals=True)
+    with pytest.raises(ValueError, match="does not write xyzrgb files"):
+        write_point_cloud(tmp_path / "c.xyzrgb", _cloud(n=3))
+
+
+@pytest.mark.parametrize("ext", ["xyzn", "xyzrgb"])
+def test_six_column_formats_need_six_columns(tmp_path, ext):
+    path = _write(tmp_path / f"p.{ext}", "1 2 3\n4 5 6\n")
+    with pytest.raises(FileFormatError, match=re.escape(f"line 1: a .{ext} row holds 6 values, got 3")):
+        read_point_cloud(path)
+
+
+def test_text_not_utf8(tmp_path):
+    path = tmp_path / "b.xyz"
+    path.write_bytes(b"1 2 3\n\xff\xfe 1 2\n")
+    with pytest.raises(FileFormatError, match=re.escape("is not a text file (undecodable byte at offset 6)")):
+        read_point_cloud(path)
