@@ -57,6 +57,16 @@ extensions = [
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
     )
     for path in sorted(glob.glob(os.path.join("eppf", "_*.pyx")))
+] + [
+    Extension(
+        "eppf.descriptors." + os.path.splitext(os.path.basename(path))[0],
+        [path],
+        include_dirs=[np.get_include(), "eppf"],
+        extra_compile_args=base_args + omp_compile,
+        extra_link_args=omp_link,
+        define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
+    )
+    for path in sorted(glob.glob(os.path.join("eppf", "descriptors", "_*_fast.pyx")))
 ]
 
 setup(
