@@ -230,7 +230,14 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         *_, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
-        return _gasd_compute(self, clouds, 0)[1]
+        transforms = _gasd_compute(self, clouds, 0)[1]
+        bad = np.flatnonzero(~np.isfinite(transforms).all(axis=(1, 2)))
+        if bad.size:
+            raise ValueError(
+                f"{owner}: point cloud {bad[0]} lies too far from the origin for a finite transform "
+                "(its centroid's coordinates overflow)"
+            )
+        return transforms
 
     def get_feature_names_out(self, input_features=None):
         """Names of the output columns, ``gasd_<i>_<j>_<k>`` (and ``_<b>`` with ``hists_size > 1``).

@@ -8,7 +8,7 @@ not depend on the number of threads. See ``eppf/descriptors/_gasd.py`` for the
 description of every step.
 """
 from cython.parallel cimport prange
-from libc.math cimport sqrt, floor, fabs, cos, sin, atan2
+from libc.math cimport sqrt, floor, fabs, cos, sin, atan2, frexp, ldexp
 from libc.stdint cimport int8_t, int64_t
 from libc.string cimport memset
 
@@ -228,13 +228,37 @@ cdef inline int64_t _clamp_index(double t, int64_t lo, int64_t hi) noexcept nogi
     return <int64_t>floor(t)
 
 
-cdef inline void _flip_majority(const double* pts, Py_ssize_t n, const double* c, double* axis) noexcept nogil:
+cdef double pow2_scale(const double* pts, Py_ssize_t n) noexcept nogil:
+    """A power of two that brings the largest coordinate to [0.5, 1): exact to apply.
+
+    Every kernel works on ``scale * p``, so coordinates near 1e308 or in the
+    subnormal range neither overflow nor underflow (squares, sums), and any
+    other cloud gives bit for bit the result it would give unscaled.
+    """
+    cdef double m = 0.0
+    cdef Py_ssize_t i
+    cdef int e
+    for i in range(3 * n):
+        if fabs(pts[i]) > m:
+            m = fabs(pts[i])
+    if not (m > 0.0):
+        return 1.0
+    frexp(m, &e)
+    if e < -1000:
+        e = -1000
+    elif e > 1000:
+        e = 1000
+    return ldexp(1.0, -e)
+
+
+cdef inline void _flip_majority(const double* pts, Py_ssize_t n, double sc, const double* c, double* axis) noexcept nogil:
     """Point ``axis`` to the side of the centroid that holds more points (ties: positive third moment)."""
     cdef Py_ssize_t i
     cdef int64_t pos = 0, neg = 0
     cdef double t, m3 = 0.0
     for i in range(n):
-        t = ((pts[3 * i] - c[0]) * axis[0] + (pts[3 * i + 1] - c[1]) * axis[1]) + (pts[3 * i + 2] - c[2]) * axis[2]
+        t = (((pts[3 * i] * sc - c[0]) * axis[0] + (pts[3 * i + 1] * sc - c[1]) * axis[1])
+             + (pts[3 * i + 2] * sc - c[2]) * axis[2])
         if t > 0.0:
             pos += 1
         elif t < 0.0:
@@ -246,7 +270,7 @@ cdef inline void _flip_majority(const double* pts, Py_ssize_t n, const double* c
         axis[2] = -axis[2]
 
 
-cdef int _gasd_frame(const double* pts, Py_ssize_t n, const double* view, int sign_mode,
+cdef int _gasd_frame(const double* pts, Py_ssize_t n, double sc, const double* view, int sign_mode,
                      double* rot, double* c) noexcept nogil:
     """Centroid ``c`` and rotation ``rot`` (rows x, y, z) of GASD's reference frame."""
     cdef Py_ssize_t i
@@ -259,17 +283,17 @@ cdef int _gasd_frame(const double* pts, Py_ssize_t n, const double* view, int si
     c[1] = 0.0
     c[2] = 0.0
     for i in range(n):
-        c[0] += pts[3 * i]
-        c[1] += pts[3 * i + 1]
-        c[2] += pts[3 * i + 2]
+        c[0] += pts[3 * i] * sc
+        c[1] += pts[3 * i + 1] * sc
+        c[2] += pts[3 * i + 2] * sc
     c[0] /= n
     c[1] /= n
     c[2] /= n
     memset(cov, 0, 9 * sizeof(double))
     for i in range(n):
-        dx = pts[3 * i] - c[0]
-        dy = pts[3 * i + 1] - c[1]
-        dz = pts[3 * i + 2] - c[2]
+        dx = pts[3 * i] * sc - c[0]
+        dy = pts[3 * i + 1] * sc - c[1]
+        dz = pts[3 * i + 2] * sc - c[2]
         cov[0] += dx * dx
         cov[1] += dx * dy
         cov[2] += dx * dz
@@ -290,8 +314,8 @@ cdef int _gasd_frame(const double* pts, Py_ssize_t n, const double* view, int si
             rot[7] = -rot[7]
             rot[8] = -rot[8]
     else:
-        _flip_majority(pts, n, c, &rot[0])
-        _flip_majority(pts, n, c, &rot[6])
+        _flip_majority(pts, n, sc, c, &rot[0])
+        _flip_majority(pts, n, sc, c, &rot[6])
     _cross(&rot[6], &rot[0], &rot[3])
     if not (evals[2] > 0.0):
         return 1
@@ -301,8 +325,8 @@ cdef int _gasd_frame(const double* pts, Py_ssize_t n, const double* view, int si
     return 0
 
 
-cdef inline void _local(const double* rot, const double* c, const double* p, double* q) noexcept nogil:
-    cdef double dx = p[0] - c[0], dy = p[1] - c[1], dz = p[2] - c[2]
+cdef inline void _local(const double* rot, const double* c, const double* p, double sc, double* q) noexcept nogil:
+    cdef double dx = p[0] * sc - c[0], dy = p[1] * sc - c[1], dz = p[2] * sc - c[2]
     q[0] = (rot[0] * dx + rot[1] * dy) + rot[2] * dz
     q[1] = (rot[3] * dx + rot[4] * dy) + rot[5] * dz
     q[2] = (rot[6] * dx + rot[7] * dy) + rot[8] * dz
@@ -330,19 +354,20 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
     cdef int64_t g = 2 * half, hb, ax, ay, az, sx, sy, sxx
     cdef Py_ssize_t i
     cdef int j
-    if _gasd_frame(pts, n, view, sign_mode, rot, c):
+    cdef double sc = pow2_scale(pts, n)
+    if _gasd_frame(pts, n, sc, view, sign_mode, rot, c):
         return 1
     for j in range(3):
         transform[4 * j] = rot[3 * j]
         transform[4 * j + 1] = rot[3 * j + 1]
         transform[4 * j + 2] = rot[3 * j + 2]
-        transform[4 * j + 3] = -((rot[3 * j] * c[0] + rot[3 * j + 1] * c[1]) + rot[3 * j + 2] * c[2])
+        transform[4 * j + 3] = -((rot[3 * j] * c[0] + rot[3 * j + 1] * c[1]) + rot[3 * j + 2] * c[2]) / sc
     transform[12] = 0.0
     transform[13] = 0.0
     transform[14] = 0.0
     transform[15] = 1.0
     for i in range(n):
-        _local(rot, c, &pts[3 * i], q)
+        _local(rot, c, &pts[3 * i], sc, q)
         for j in range(3):
             if fabs(q[j]) > max_coord:
                 max_coord = fabs(q[j])
@@ -359,7 +384,7 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
     sy = g * hs
     sxx = g * g * hs
     for i in range(n):
-        _local(rot, c, &pts[3 * i], q)
+        _local(rot, c, &pts[3 * i], sc, q)
         d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
         t = d / step
         frac = t - floor(t)
