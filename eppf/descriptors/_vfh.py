@@ -104,6 +104,16 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
         ``|v - c| / sqrt(|v - c|^2 + 1)``: on a centred cloud with the
         viewpoint at the origin all normals fall in bins 63-64, as in PCL's
         output. False gives the paper's unit direction and ``d_max``.
+    pcl_centroid : bool, default=True
+        For the viewpoint direction, compute the centroid as PCL does: the
+        coordinates (and the viewpoint) rounded to single precision and
+        summed in single precision. It matters only when the centroid is
+        within rounding of the viewpoint, as for centred clouds viewed from
+        the origin: PCL's rounding noise then decides between bins 63 and 64,
+        and True reproduces PCL's rows exactly; False uses the
+        double-precision centroid (such normals then all fall in bin 64).
+        Clouds or viewpoints beyond single precision's range use the double
+        centroid either way.
     n_neighbors : int, default=10
         Neighbourhood size for PCA normals of clouds given without normals
         (see :func:`eppf.estimate_normals`); six-column clouds use their own
@@ -184,13 +194,14 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
     """
 
     def __init__(self, viewpoint=(0.0, 0.0, 0.0), normalize_bins=True, normalize_distances=False,
-                 size_component=False, pcl_homogeneous=True, n_neighbors=10, normal_orientation="centroid",
-                 n_jobs=None):
+                 size_component=False, pcl_homogeneous=True, pcl_centroid=True, n_neighbors=10,
+                 normal_orientation="centroid", n_jobs=None):
         self.viewpoint = viewpoint
         self.normalize_bins = normalize_bins
         self.normalize_distances = normalize_distances
         self.size_component = size_component
         self.pcl_homogeneous = pcl_homogeneous
+        self.pcl_centroid = pcl_centroid
         self.n_neighbors = n_neighbors
         self.normal_orientation = normal_orientation
         self.n_jobs = n_jobs
@@ -200,7 +211,7 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
         vp = _check_viewpoint(self.viewpoint, owner)
         flags = tuple(
             _check_bool(getattr(self, name), name, owner)
-            for name in ("normalize_bins", "normalize_distances", "size_component", "pcl_homogeneous")
+            for name in ("normalize_bins", "normalize_distances", "size_component", "pcl_homogeneous", "pcl_centroid")
         )
         k = _check_n_neighbors(self.n_neighbors, owner)
         if not (self.normal_orientation is None or (isinstance(self.normal_orientation, str)

@@ -50,8 +50,11 @@ cdef double _pow2_scale(const double* pts, Py_ssize_t n) noexcept nogil:
 
 cdef void _vfh_object(const double* pts, const double* nrm, Py_ssize_t n, const double* vp,
                       bint normalize_bins, bint normalize_distances, bint size_component,
-                      bint homogeneous, double* out) noexcept nogil:
+                      bint homogeneous, bint pcl_centroid, double* out) noexcept nogil:
     cdef double sc = _pow2_scale(pts, n)
+    cdef float cf[3]
+    cdef float fv
+    cdef bint single = pcl_centroid
     cdef double c[3]
     cdef double nc[3]
     cdef double dv[3]
@@ -130,19 +133,45 @@ cdef void _vfh_object(const double* pts, const double* nrm, Py_ssize_t n, const 
             else:
                 out[3 * N_ANGLE + _round_bin((f4 / sc) * 100.0, N_ANGLE)] += incr
     # viewpoint component: direction from the centroid to the viewpoint, in
-    # the input's units; halved so that no difference overflows
+    # the input's units
+    if single:
+        # PCL's centroid: coordinates rounded to float, summed in float (only
+        # where they fit in a float; PCL cannot hold other clouds at all)
+        for j in range(3):
+            if not (fabs(vp[j]) < 1e38):
+                single = False
+        for i in range(3 * n):
+            if not (fabs(pts[i]) < 1e38):
+                single = False
+                break
     big = 0.0
-    for j in range(3):
-        dv[j] = 0.5 * vp[j] - 0.5 * (c[j] / sc)
-        if fabs(dv[j]) > big:
-            big = fabs(dv[j])
+    if single:
+        cf[0] = 0.0
+        cf[1] = 0.0
+        cf[2] = 0.0
+        for i in range(n):
+            for j in range(3):
+                fv = <float>pts[3 * i + j]
+                cf[j] = cf[j] + fv
+        for j in range(3):
+            cf[j] = cf[j] / <float>n
+            fv = <float>vp[j]
+            fv = fv - cf[j]
+            dv[j] = <double>fv
+            if fabs(dv[j]) > big:
+                big = fabs(dv[j])
+    else:
+        for j in range(3):
+            dv[j] = 0.5 * vp[j] - 0.5 * (c[j] / sc)  # halved: no difference overflows
+            if fabs(dv[j]) > big:
+                big = fabs(dv[j])
     if big > 0.0:
         for j in range(3):
             dv[j] /= big  # |v - c| = 2 big |dv| without overflow
         m = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
         if homogeneous:
             # PCL normalises the 4-vector (v - c, -1): the centroid's w = 1 is left in
-            m = m + (0.5 / big) * (0.5 / big)
+            m = m + ((1.0 if single else 0.5) / big) * ((1.0 if single else 0.5) / big)
         m = sqrt(m)
         for j in range(3):
             dv[j] /= m
@@ -154,7 +183,7 @@ cdef void _vfh_object(const double* pts, const double* nrm, Py_ssize_t n, const 
 
 def vfh_batch(const double[:, ::1] points, const double[:, ::1] normals, const int64_t[::1] offsets,
               const double[::1] viewpoint, bint normalize_bins, bint normalize_distances,
-              bint size_component, bint homogeneous, double[:, ::1] out, int num_threads):
+              bint size_component, bint homogeneous, bint pcl_centroid, double[:, ::1] out, int num_threads):
     """VFH rows of packed objects: object k is ``points[offsets[k]:offsets[k + 1]]``.
 
     ``out`` (n_objects, 308) must be zeroed.
@@ -174,4 +203,4 @@ def vfh_batch(const double[:, ::1] points, const double[:, ::1] normals, const i
         return
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         _vfh_object(&points[offsets[k], 0], &normals[offsets[k], 0], offsets[k + 1] - offsets[k], &viewpoint[0],
-                    normalize_bins, normalize_distances, size_component, homogeneous, &out[k, 0])
+                    normalize_bins, normalize_distances, size_component, homogeneous, pcl_centroid, &out[k, 0])
