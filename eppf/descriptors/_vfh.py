@@ -112,8 +112,8 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
         the origin: PCL's rounding noise then decides between bins 63 and 64,
         and True reproduces PCL's rows exactly; False uses the
         double-precision centroid (such normals then all fall in bin 64).
-        Clouds or viewpoints beyond single precision's range use the double
-        centroid either way.
+        Clouds whose largest coordinate is outside ``[1e-30, 1e30]``, or
+        viewpoints beyond ``1e30``, use the double centroid either way.
     n_neighbors : int, default=10
         Neighbourhood size for PCA normals of clouds given without normals
         (see :func:`eppf.estimate_normals`); six-column clouds use their own

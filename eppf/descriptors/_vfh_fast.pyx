@@ -135,15 +135,18 @@ cdef void _vfh_object(const double* pts, const double* nrm, Py_ssize_t n, const 
     # viewpoint component: direction from the centroid to the viewpoint, in
     # the input's units
     if single:
-        # PCL's centroid: coordinates rounded to float, summed in float (only
-        # where they fit in a float; PCL cannot hold other clouds at all)
+        # PCL's centroid: coordinates rounded to float, summed in float; only
+        # for clouds and viewpoints of magnitude within 1e-30 to 1e30, where
+        # floats hold them (PCL cannot hold other clouds at all)
+        big = 0.0
         for j in range(3):
-            if not (fabs(vp[j]) < 1e38):
+            if not (fabs(vp[j]) <= 1e30):
                 single = False
         for i in range(3 * n):
-            if not (fabs(pts[i]) < 1e38):
-                single = False
-                break
+            if fabs(pts[i]) > big:
+                big = fabs(pts[i])
+        if not (big >= 1e-30 and big <= 1e30):
+            single = False
     big = 0.0
     if single:
         cf[0] = 0.0
