@@ -10,7 +10,7 @@ from .._chunks import transform_in_chunks
 from .._validation import check_n_jobs, check_point_clouds, pack_point_clouds
 from ._gasd_fast import gasd_batch
 
-__all__ = ["GASDTransformer", "gasd_alignment"]
+__all__ = ["GASDColorTransformer", "GASDTransformer", "gasd_alignment"]
 
 _INTERP = {"none": 0, "trilinear": 1, "quadrilinear": 2}
 _SIGNS = {"pcl": 0, "majority": 1}
@@ -126,7 +126,7 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
     Layout: cell ``(i, j, k)`` (along x, y, z), histogram bin ``b`` at
     column ``((i * 2h + j) * 2h + k) * hists_size + b``, PCL's order.
     Normals (six columns) are accepted and ignored. PCL's colour variant
-    (``GASDColorEstimation``, hue histograms) is not implemented.
+    (``GASDColorEstimation``, hue histograms) is :class:`GASDColorTransformer`.
 
     References
     ----------
@@ -267,15 +267,22 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
         return tags
 
 
-def _gasd_compute(est, clouds, first_index):
+def _gasd_compute(est, clouds, first_index, hues=None):
     owner = type(est).__name__
-    half, hs, interp, sign, view, n_threads = est._check_params()
+    half, hs, interp, sign, view, n_threads, *color = est._check_params()
     points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
-    out = np.zeros((len(clouds), (2 * half) ** 3 * hs), dtype=np.float64)
+    width = (2 * half) ** 3 * hs
+    extra = {}
+    if hues is not None:
+        chalf, chs, cinterp = color
+        width += (2 * chalf) ** 3 * chs
+        extra = dict(hue=np.ascontiguousarray(np.concatenate(hues), dtype=np.float64), chalf=chalf, chs=chs,
+                     cinterp=cinterp)
+    out = np.zeros((len(clouds), width), dtype=np.float64)
     transforms = np.zeros((len(clouds), 4, 4), dtype=np.float64)
     status = np.zeros(len(clouds), dtype=np.int8)
     n_threads = max(1, min(n_threads, len(clouds)))
-    gasd_batch(points, offsets, view, sign, half, hs, interp, out, transforms, status, n_threads)
+    gasd_batch(points, offsets, view, sign, half, hs, interp, out, transforms, status, n_threads, **extra)
     bad = np.flatnonzero(status)
     if bad.size:
         raise ValueError(f"{owner}: point cloud {first_index + bad[0]} has no principal axes (no spread)")
@@ -326,3 +333,237 @@ def gasd_alignment(cloud, *, view_direction=(0.0, 0.0, 1.0), sign_convention="pc
     if c.shape[1] == 6:
         out[:, 3:] = c[:, 3:] @ T[:3, :3].T
     return out, T
+
+
+def _hue(rgb):
+    """PCL's hue of 8-bit colours, in float32 as PCL computes it, divided by 360."""
+    rgb = rgb.astype(np.int32)
+    r, g, b = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    mx, mn = rgb.max(axis=1), rgb.min(axis=1)
+    hue = np.zeros(len(rgb), dtype=np.float32)
+    ok = mx > mn
+    inv = np.float32(1) / np.maximum(mx - mn, 1).astype(np.float32)
+    six = np.float32(60)
+    h_r = six * ((g - b).astype(np.float32) * inv)
+    h_g = six * (np.float32(2) + (b - r).astype(np.float32) * inv)
+    h_b = six * (np.float32(4) + (r - g).astype(np.float32) * inv)
+    hue = np.where(mx == r, h_r, np.where(mx == g, h_g, h_b)).astype(np.float32)
+    hue = np.where(hue < 0, hue + np.float32(360), hue).astype(np.float32)
+    hue = np.where(ok, hue, np.float32(0))
+    return (hue / np.float32(360)).astype(np.float64)
+
+
+class GASDColorTransformer(TransformerMixin, BaseEstimator):
+    """GASD with colour: a shape grid and a grid of hue histograms.
+
+    PCL 1.13's ``GASDColorEstimation`` (``GASDSignature984``): the cloud is
+    aligned as by :class:`GASDTransformer`; a ``(2 h_s)^3`` shape grid
+    (PCL: 6^3, no interpolation) is followed by a ``(2 h_c)^3`` grid of
+    circular hue histograms (PCL: 4^3 cells of 12 bins), ``216 + 768 = 984``
+    values by default.
+
+    Parameters
+    ----------
+    shape_half_grid_size : int, default=3
+        Half the side of the shape grid (PCL's colour default: 3).
+    shape_hists_size : int, default=1
+        Bins of each shape cell's distance histogram (PCL: 1).
+    color_half_grid_size : int, default=2
+        Half the side of the colour grid (PCL: 2).
+    color_hists_size : int, default=12
+        Hue bins of each colour cell (PCL: 12, 30 degrees each).
+    shape_interpolation : {"none", "trilinear", "quadrilinear"}, default="none"
+        As ``interpolation`` of :class:`GASDTransformer` (PCL's colour
+        default: none).
+    color_interpolation : {"none", "trilinear", "quadrilinear"}, default="none"
+        The same for the colour grid; the hue histogram is circular, so the
+        bins beyond its ends wrap around (PCL's reading).
+    view_direction : array-like of shape (3,), default=(0, 0, 1)
+        As in :class:`GASDTransformer`.
+    sign_convention : {"pcl", "majority"}, default="pcl"
+        As in :class:`GASDTransformer`.
+    n_jobs : int, default=None
+        Number of OpenMP threads over objects (joblib's meaning). The output
+        does not depend on it.
+
+    Attributes
+    ----------
+    n_features_out_ : int
+        ``(2 h_s)^3 shape_hists_size + (2 h_c)^3 color_hists_size``.
+
+    See Also
+    --------
+    GASDTransformer : The shape-only descriptor.
+
+    Notes
+    -----
+    Input clouds are ``(n, 6)`` arrays of coordinates and RGB, or
+    ``(n, 9)`` arrays of coordinates, normals (ignored) and RGB. Colours are
+    8-bit values in ``[0, 255]``, rounded to the nearest integer as PCL
+    stores them. The hue is PCL's (in degrees, in single precision:
+    ``60 (g - b) / (max - min)`` when red is largest, ``60 (2 + (b - r) /
+    (max - min))`` for green, ``60 (4 + (r - g) / (max - min))`` for blue,
+    plus 360 when negative; 0 for greys); its histogram coordinate is
+    ``hue / 360 * color_hists_size``. Each point adds ``100 / (n - 1)`` to
+    each grid, shared by the interpolation weights. Layout: the shape grid
+    as in :class:`GASDTransformer`, then colour cell ``(i, j, k)``, hue bin
+    ``b`` at ``shape_size + ((i * 2h_c + j) * 2h_c + k) * color_hists_size
+    + b``.
+
+    References
+    ----------
+    .. [1] J. P. Lima and V. Teichrieb, "An Efficient Global Point Cloud
+       Descriptor for Object Recognition and Pose Estimation", SIBGRAPI 2016.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.descriptors._gasd import GASDColorTransformer
+    >>> rng = np.random.default_rng(0)
+    >>> xyz = rng.normal(size=(300, 3)) * [3.0, 2.0, 1.0]
+    >>> rgb = rng.integers(0, 256, size=(300, 3))
+    >>> X = GASDColorTransformer().fit_transform([np.hstack([xyz, rgb])])
+    >>> X.shape
+    (1, 984)
+    """
+
+    def __init__(self, shape_half_grid_size=3, shape_hists_size=1, color_half_grid_size=2, color_hists_size=12,
+                 shape_interpolation="none", color_interpolation="none", view_direction=(0.0, 0.0, 1.0),
+                 sign_convention="pcl", n_jobs=None):
+        self.shape_half_grid_size = shape_half_grid_size
+        self.shape_hists_size = shape_hists_size
+        self.color_half_grid_size = color_half_grid_size
+        self.color_hists_size = color_hists_size
+        self.shape_interpolation = shape_interpolation
+        self.color_interpolation = color_interpolation
+        self.view_direction = view_direction
+        self.sign_convention = sign_convention
+        self.n_jobs = n_jobs
+
+    def _check_params(self):
+        owner = type(self).__name__
+        sizes = []
+        for h_name, s_name in (("shape_half_grid_size", "shape_hists_size"),
+                               ("color_half_grid_size", "color_hists_size")):
+            half = _check_int(getattr(self, h_name), h_name, owner, 1, 64)
+            hs = _check_int(getattr(self, s_name), s_name, owner, 1, 1024)
+            if (2 * half) ** 3 * hs > 2**24:
+                raise ValueError(f"{owner}: {h_name}={half} and {s_name}={hs} give {(2 * half) ** 3 * hs} values; "
+                                 "at most 2**24 are allowed")
+            sizes.append((half, hs))
+        interps = []
+        for name in ("shape_interpolation", "color_interpolation"):
+            value = getattr(self, name)
+            if not isinstance(value, str) or value not in _INTERP:
+                raise ValueError(f"{owner}: {name} must be 'none', 'trilinear' or 'quadrilinear', got {value!r}")
+            interps.append(_INTERP[value])
+        if not isinstance(self.sign_convention, str) or self.sign_convention not in _SIGNS:
+            raise ValueError(f"{owner}: sign_convention must be 'pcl' or 'majority', got {self.sign_convention!r}")
+        view = _check_direction(self.view_direction, owner)
+        n_threads = check_n_jobs(self.n_jobs, owner=owner)
+        (half, hs), (chalf, chs) = sizes
+        return half, hs, interps[0], _SIGNS[self.sign_convention], view, n_threads, chalf, chs, interps[1]
+
+    def _split(self, X, n_threads=1):
+        """Validated xyz clouds and their hues (hue / 360) from (n, 6) or (n, 9) arrays."""
+        owner = type(self).__name__
+        if X is None or isinstance(X, (str, bytes, dict)):
+            raise TypeError(f"{owner}: X must be a list of (n_i, 6) or (n_i, 9) arrays (xyz[, normals], rgb), "
+                            f"got {type(X).__name__}")
+        try:
+            items = list(X)
+        except TypeError:
+            raise TypeError(f"{owner}: X must be a list of point clouds, got {type(X).__name__}") from None
+        if not items:
+            raise ValueError(f"{owner}: X is empty: at least one point cloud is needed")
+        xyz, hues = [], []
+        for i, c in enumerate(items):
+            try:
+                a = np.asarray(c)
+            except Exception as exc:
+                raise TypeError(f"{owner}: point cloud {i} could not be converted to an array: {exc}") from None
+            if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool) or np.iscomplexobj(a):
+                raise TypeError(f"{owner}: point cloud {i} must hold real numbers, got dtype {a.dtype}")
+            if a.ndim != 2 or a.shape[1] not in (6, 9):
+                raise ValueError(f"{owner}: point cloud {i} must have shape (n_points, 6) (xyz, rgb) or "
+                                 f"(n_points, 9) (xyz, normals, rgb), got shape {a.shape}")
+            rgb = a[:, -3:].astype(np.float64)
+            if not np.isfinite(rgb).all() or (rgb < 0).any() or (rgb > 255).any():
+                raise ValueError(f"{owner}: point cloud {i} has colours outside [0, 255] (or NaN)")
+            xyz.append(a[:, :3])
+            hues.append(_hue(np.rint(rgb).astype(np.uint8)))
+        clouds = check_point_clouds(xyz, owner=owner, min_points=2, n_threads=n_threads)
+        return clouds, hues
+
+    def fit(self, X, y=None):
+        """Check the parameters and the clouds; GASD learns nothing from data.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 6) or (n_i, 9)
+            Coordinates (, normals) and RGB colours in [0, 255].
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : GASDColorTransformer
+            The fitted transformer.
+        """
+        half, hs, _, _, _, _, chalf, chs, _ = self._check_params()
+        self._split(X)
+        self.n_features_out_ = (2 * half) ** 3 * hs + (2 * chalf) ** 3 * chs
+        return self
+
+    def transform(self, X):
+        """Compute one colour GASD row per cloud.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 6) or (n_i, 9)
+            Coordinates (, normals) and RGB colours in [0, 255].
+
+        Returns
+        -------
+        X_new : ndarray of shape (n_objects, n_features_out_)
+            The shape grid, then the colour grid (PCL's scaling).
+        """
+        check_is_fitted(self)
+        *_, n_threads, _, _, _ = self._check_params()
+        clouds, hues = self._split(X, n_threads)
+        return transform_in_chunks(_gasd_color_chunk, self, clouds, (np.array(hues + [None], dtype=object)[:-1],),
+                                   n_features=self.n_features_out_)
+
+    def get_feature_names_out(self, input_features=None):
+        """Names of the output columns: ``gasd_...`` for the shape grid, ``gasd_hue_<i>_<j>_<k>_<b>``.
+
+        Parameters
+        ----------
+        input_features : None
+            Ignored (point clouds have no input feature names).
+
+        Returns
+        -------
+        feature_names_out : ndarray of str
+            In the output's order.
+        """
+        check_is_fitted(self)
+        half, hs, _, _, _, _, chalf, chs, _ = self._check_params()
+        g, cg = 2 * half, 2 * chalf
+        cells = [f"gasd_{i}_{j}_{k}" for i in range(g) for j in range(g) for k in range(g)]
+        if hs > 1:
+            cells = [f"{c}_{b}" for c in cells for b in range(hs)]
+        cells += [f"gasd_hue_{i}_{j}_{k}_{b}" for i in range(cg) for j in range(cg) for k in range(cg)
+                  for b in range(chs)]
+        return np.asarray(cells, dtype=object)
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.two_d_array = False
+        tags.input_tags.three_d_array = True
+        return tags
+
+
+def _gasd_color_chunk(est, clouds, hues, first_index):
+    """Colour GASD rows of one chunk of validated clouds (a joblib task)."""
+    return _gasd_compute(est, clouds, first_index, list(hues))[0]

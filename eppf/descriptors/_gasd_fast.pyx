@@ -340,8 +340,64 @@ cdef inline void _add(double* out, int64_t g, int64_t hs, int64_t ix, int64_t iy
     out[((ix * g + iy) * g + iz) * hs + h] += w
 
 
+cdef void _add_sample(double* out, const double* q, double max_coord, int64_t half, int64_t hs, int interp,
+                      double hbin, double incr, bint wrap) noexcept nogil:
+    """PCL's addSampleToHistograms for one aligned point ``q`` with histogram coordinate ``hbin``.
+
+    ``wrap``: the histogram is circular (hue), so PCL's padding bins fold
+    onto the opposite ends instead of being dropped.
+    """
+    cdef double s[3]
+    cdef double f[3]
+    cdef int64_t b[3]
+    cdef int64_t g = 2 * half, hb, h, ax, ay, az, e
+    cdef double ft, wx, wxy, w
+    cdef int j
+    for j in range(3):
+        s[j] = (q[j] / max_coord) * <double>half + <double>half
+    if interp == INTERP_NONE:
+        for j in range(3):
+            b[j] = _clamp_index(s[j], -1, g + 1)
+        hb = _clamp_index(hbin, -1, hs)
+        if wrap:
+            hb = (hb + hs) % hs
+        _add(out, g, hs, b[0], b[1], b[2], hb, incr)
+        return
+    for j in range(3):
+        s[j] -= 0.5
+        b[j] = _clamp_index(s[j], -2, g + 1)
+        f[j] = s[j] - <double>b[j]
+        if not (f[j] >= 0.0):
+            f[j] = 0.0
+        elif f[j] > 1.0:
+            f[j] = 1.0
+    hbin -= 0.5
+    hb = _clamp_index(hbin, -2, hs + 1)
+    ft = hbin - <double>hb
+    if not (ft >= 0.0):
+        ft = 0.0
+    elif ft > 1.0:
+        ft = 1.0
+    for ax in range(2):
+        wx = incr * f[0] if ax else incr - incr * f[0]
+        for ay in range(2):
+            wxy = wx * f[1] if ay else wx - wx * f[1]
+            for az in range(2):
+                w = wxy * f[2] if az else wxy - wxy * f[2]
+                if interp == INTERP_TRILINEAR:
+                    h = (hb + hs) % hs if wrap else hb
+                    _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, h, w)
+                else:
+                    for e in range(2):
+                        h = hb + e
+                        if wrap:
+                            h = (h + hs) % hs
+                        _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, h, w * ft if e else w - w * ft)
+
+
 cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int sign_mode,
-                      int64_t half, int64_t hs, int interp, double* out, double* transform) noexcept nogil:
+                      int64_t half, int64_t hs, int interp, double* out, double* transform,
+                      const double* hue, int64_t chalf, int64_t chs, int cinterp, double* cout) noexcept nogil:
     cdef double rot[9]
     cdef double c[3]
     cdef double q[3]
@@ -450,23 +506,41 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
                     else:
                         _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, hb, w - w * ft)
                         _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, hb + 1, w * ft)
+    if hue != NULL:
+        # GASDColorEstimation: the same aligned points, cube and weights, a
+        # circular histogram of hue bins in each cell of the colour grid
+        for i in range(n):
+            _local(rot, c, &pts[3 * i], sc, q)
+            _add_sample(cout, q, max_coord, chalf, chs, cinterp, hue[i] * <double>chs, incr, True)
     return 0
 
 
 def gasd_batch(const double[:, ::1] points, const int64_t[::1] offsets, const double[::1] view,
                int sign_mode, int64_t half, int64_t hs, int interp,
-               double[:, ::1] out, double[:, :, ::1] transforms, int8_t[::1] status, int num_threads):
+               double[:, ::1] out, double[:, :, ::1] transforms, int8_t[::1] status, int num_threads,
+               const double[::1] hue=None, int64_t chalf=1, int64_t chs=1, int cinterp=0):
     """GASD rows of packed objects: object k is ``points[offsets[k]:offsets[k + 1]]``.
 
-    ``out`` (n_objects, (2 half)^3 hs) must be zeroed; ``transforms``
-    receives each object's 4x4 alignment; ``status[k] = 1`` marks an object
-    whose frame is undefined (no spread).
+    ``out`` (n_objects, (2 half)^3 hs [+ (2 chalf)^3 chs]) must be zeroed;
+    ``transforms`` receives each object's 4x4 alignment; ``status[k] = 1``
+    marks an object whose frame is undefined (no spread). With ``hue``
+    (one value in [0, 1) per point: hue / 360) the colour grid follows the
+    shape grid in each row.
     """
     cdef Py_ssize_t n_objects = offsets.shape[0] - 1
     cdef Py_ssize_t k
+    cdef int64_t width = (2 * half) ** 3 * hs
+    cdef const double* hp = NULL
+    cdef Py_ssize_t cpos = 0
+    if hue is not None:
+        if hue.shape[0] != points.shape[0] or chalf < 1 or chs < 1:
+            raise ValueError("gasd_batch: hue needs one value per point and a colour grid")
+        hp = &hue[0]
+        cpos = width
+        width += (2 * chalf) ** 3 * chs
     if out.shape[0] != n_objects or transforms.shape[0] != n_objects or status.shape[0] != n_objects:
         raise ValueError("gasd_batch: output arrays do not match the number of objects")
-    if out.shape[1] != (2 * half) ** 3 * hs or transforms.shape[1] != 4 or transforms.shape[2] != 4:
+    if out.shape[1] != width or transforms.shape[1] != 4 or transforms.shape[2] != 4:
         raise ValueError("gasd_batch: output arrays have the wrong width")
     if view.shape[0] != 3 or points.shape[1] != 3:
         raise ValueError("gasd_batch: points and view need 3 columns")
@@ -479,6 +553,7 @@ def gasd_batch(const double[:, ::1] points, const int64_t[::1] offsets, const do
         status[k] = <int8_t>_gasd_object(
             &points[offsets[k], 0], offsets[k + 1] - offsets[k], &view[0], sign_mode, half, hs, interp,
             &out[k, 0], &transforms[k, 0, 0],
+            (hp + offsets[k]) if hp != NULL else NULL, chalf, chs, cinterp, &out[k, cpos],
         )
 
 

@@ -281,3 +281,87 @@ def test_gasd_alignment_helper():
     np.testing.assert_allclose(cov - np.diag(np.diag(cov)), 0.0, atol=1e-9)
     assert cov[0, 0] > cov[1, 1] > cov[2, 2]
     np.testing.assert_allclose(aligned[:, 3:], np.tile(T[:3, 0], (300, 1)), atol=1e-12)
+
+
+# --- colour variant --------------------------------------------------------
+
+from eppf.descriptors._gasd import GASDColorTransformer, _hue  # noqa: E402
+
+
+def test_hue_hand_computed():
+    rgb = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0], [255, 0, 255], [10, 10, 10], [255, 0, 128]])
+    # red 0, green 120, blue 240, yellow 60 (red is max first), magenta 300, grey 0,
+    # (255, 0, 128): 60 * (0 - 128) / 255 + 360 = 329.88
+    expected = np.array([0.0, 120, 240, 60, 300, 0, 360 - 60 * 128 / 255]) / 360
+    np.testing.assert_allclose(_hue(rgb.astype(np.uint8)), expected, rtol=1e-6)
+
+
+def test_color_box_hand_computed():
+    box = _box()
+    red = np.where(box[:, :1] > 0, [[255, 0, 0]], [[0, 0, 255]])  # x' > 0 red (hue bin 0), else blue (bin 8)
+    est = GASDColorTransformer(shape_half_grid_size=1, color_half_grid_size=1).fit([np.hstack([box, red])])
+    X = est.transform([np.hstack([box, red])])[0]
+    assert X.shape == (8 + 8 * 12,) and est.n_features_out_ == 104
+    np.testing.assert_allclose(X[:8], _grid([1, 3], [1, 3], [3, 1]) * 100.0 / 63, rtol=1e-12)
+    color = X[8:].reshape(2, 2, 2, 12)
+    counts = np.einsum("j,k->jk", [1, 3], [3, 1]) * 100.0 / 63
+    np.testing.assert_allclose(color[1, :, :, 0], 3 * counts, rtol=1e-12)  # the three red +x copies
+    np.testing.assert_allclose(color[0, :, :, 8], counts, rtol=1e-12)
+    assert np.count_nonzero(color) == 8
+    # normals in the middle columns are accepted and ignored
+    nine = np.hstack([box, np.tile([0.0, 0.0, 1.0], (64, 1)), red])
+    np.testing.assert_array_equal(est.transform([nine])[0], X)
+
+
+def test_color_hue_wraps_around():
+    c = _cloud(200, 9)
+    rgb = np.tile([255, 21, 0], (200, 1))  # hue 60 * 21 / 255 = 4.94 degrees: coordinate 0.165 of 12
+    X = GASDColorTransformer(color_interpolation="trilinear").fit_transform([np.hstack([c, rgb])])[0, 216:]
+    per_bin = X.reshape(-1, 12).sum(axis=0)
+    # interpolation shifts the coordinate by -1/2: below 0, PCL folds it onto the last bin
+    assert per_bin[11] > 0 and np.count_nonzero(per_bin) == 1
+    X = GASDColorTransformer(color_interpolation="quadrilinear").fit_transform([np.hstack([c, rgb])])[0, 216:]
+    per_bin = X.reshape(-1, 12).sum(axis=0)
+    t = 60 * 21 / 255 / 30 - 0.5 + 1  # fraction towards bin 0 from bin -1
+    np.testing.assert_allclose(per_bin[0] / per_bin[11], t / (1 - t), rtol=1e-5)
+    assert np.count_nonzero(per_bin) == 2
+
+
+def test_color_bit_identical_and_names(monkeypatch):
+    clouds = [np.hstack([_cloud(60 + 5 * s, s), np.random.default_rng(s).integers(0, 256, (60 + 5 * s, 3))])
+              for s in range(9)]
+    base = GASDColorTransformer(n_jobs=1).fit_transform(clouds)
+    monkeypatch.setattr(_chunks, "CHUNK", 4)
+    np.testing.assert_array_equal(GASDColorTransformer(n_jobs=2).fit_transform(clouds), base)
+    names = GASDColorTransformer().fit(clouds).get_feature_names_out()
+    assert len(names) == 984 and names[216] == "gasd_hue_0_0_0_0" and names[-1] == "gasd_hue_3_3_3_11"
+
+
+@pytest.mark.parametrize(
+    "X, err, msg",
+    [
+        ([np.ones((5, 3))], ValueError, "point cloud 0 must have shape (n_points, 6) (xyz, rgb) or (n_points, 9)"),
+        ([np.hstack([_cloud(5), np.full((5, 3), 256.0)])], ValueError, "point cloud 0 has colours outside [0, 255]"),
+        ([np.hstack([_cloud(5), np.full((5, 3), np.nan)])], ValueError, "point cloud 0 has colours outside [0, 255]"),
+        ([np.array([[0.0, 0, np.inf, 1, 1, 1], [0, 0, 0, 1, 1, 1]])], ValueError, "point cloud 0 contains NaN or infinite values"),
+        ([np.array([["a"] * 6])], TypeError, "point cloud 0 must hold real numbers"),
+        ([], ValueError, "X is empty"),
+        ("abc", TypeError, "X must be a list of (n_i, 6) or (n_i, 9) arrays"),
+    ],
+)
+def test_color_bad_clouds(X, err, msg):
+    with pytest.raises(err, match=re.escape("GASDColorTransformer: " + msg)):
+        GASDColorTransformer().fit(X)
+
+
+@pytest.mark.parametrize(
+    "params, msg",
+    [
+        ({"color_hists_size": 0}, "color_hists_size must be in [1, 1024], got 0"),
+        ({"color_interpolation": "linear"}, "color_interpolation must be 'none', 'trilinear' or 'quadrilinear'"),
+        ({"shape_half_grid_size": 65}, "shape_half_grid_size must be in [1, 64], got 65"),
+    ],
+)
+def test_color_bad_parameters(params, msg):
+    with pytest.raises(ValueError, match=re.escape("GASDColorTransformer: " + msg)):
+        GASDColorTransformer(**params).fit([np.hstack([_cloud(5), np.zeros((5, 3))])])
