@@ -471,7 +471,7 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
         elif ft > 1.0:
             ft = 1.0
         if interp == INTERP_TRILINEAR:
-            if hb < 0:
+            if hb < 0 or hb >= hs:
                 continue  # PCL's bin below the histogram, dropped from the output
             if b[0] >= 0 and b[0] < g - 1 and b[1] >= 0 and b[1] < g - 1 and b[2] >= 0 and b[2] < g - 1:
                 # all 8 cells inside the grid
