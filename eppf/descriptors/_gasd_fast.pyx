@@ -191,9 +191,11 @@ cdef void eigen33(const double* mat, double* evecs, double* evals) noexcept nogi
             min_el = 1
         if mm1 > mmax[max_el]:
             max_el = 1
-        # PCL compares the third row pair's length here, whichever pair won
-        mm0 = _third_len(sm, evals[0])
-        mmax[0] = _null_vector(sm, evals[0], &evecs[0])
+        # the longest cross product of each eigenvalue decides which columns
+        # are recomputed as cross products of the other two (the column with
+        # the longest stays as solved); this reproduces PCL 1.13's signs
+        mm0 = _null_vector(sm, evals[0], &evecs[0])
+        mmax[0] = mm0
         if mm0 <= mmax[min_el]:
             min_el = 0
         if mm0 > mmax[max_el]:
@@ -203,20 +205,6 @@ cdef void eigen33(const double* mat, double* evecs, double* evals) noexcept nogi
         _cross_unit(&evecs[3 * ((mid_el + 1) % 3)], &evecs[3 * ((mid_el + 2) % 3)], &evecs[3 * mid_el])
     for i in range(3):
         evals[i] *= scale
-
-
-cdef double _third_len(const double* m, double lam) noexcept nogil:
-    """Squared length of the cross product of rows 1 and 2 of ``m - lam I``."""
-    cdef double a[9]
-    cdef double v3[3]
-    cdef int i
-    for i in range(9):
-        a[i] = m[i]
-    a[0] -= lam
-    a[4] -= lam
-    a[8] -= lam
-    _cross(&a[3], &a[6], v3)
-    return _sq(v3)
 
 
 cdef inline int64_t _clamp_index(double t, int64_t lo, int64_t hi) noexcept nogil:
