@@ -490,7 +490,7 @@ class GASDColorTransformer(TransformerMixin, BaseEstimator):
             rgb = a[:, -3:].astype(np.float64)
             if not np.isfinite(rgb).all() or (rgb < 0).any() or (rgb > 255).any():
                 raise ValueError(f"{owner}: point cloud {i} has colours outside [0, 255] (or NaN)")
-            xyz.append(a[:, :3])
+            xyz.append(a[:, :6] if a.shape[1] == 9 else a[:, :3])  # normals checked, then ignored
             hues.append(_hue(np.rint(rgb).astype(np.uint8)))
         clouds = check_point_clouds(xyz, owner=owner, min_points=2, n_threads=n_threads)
         return clouds, hues

@@ -345,6 +345,7 @@ def test_color_bit_identical_and_names(monkeypatch):
         ([np.hstack([_cloud(5), np.full((5, 3), np.nan)])], ValueError, "point cloud 0 has colours outside [0, 255]"),
         ([np.array([[0.0, 0, np.inf, 1, 1, 1], [0, 0, 0, 1, 1, 1]])], ValueError, "point cloud 0 contains NaN or infinite values"),
         ([np.array([["a"] * 6])], TypeError, "point cloud 0 must hold real numbers"),
+        ([np.hstack([_cloud(5), np.zeros((5, 3)), np.ones((5, 3))])], ValueError, "point cloud 0 has 5 zero-length"),
         ([], ValueError, "X is empty"),
         ("abc", TypeError, "X must be a list of (n_i, 6) or (n_i, 9) arrays"),
     ],
