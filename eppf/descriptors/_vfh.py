@@ -149,8 +149,8 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
 
     - :math:`f_1 = \\operatorname{atan2}(w \\cdot t, u \\cdot t)`,
     - :math:`f_2 = v \\cdot t`,
-    - :math:`f_3 = u \\cdot d / |d|` (of the unflipped pair: ``-n.d/|d|``
-      after the swap),
+    - :math:`f_3 = u \\cdot d / |d|` (with the flipped :math:`d` after a
+      swap, so :math:`-n \\cdot d / |d|` of the original),
     - :math:`f_4 = |d|`.
 
     Pairs with :math:`d = 0` or :math:`d \\times u = 0` are skipped (PCL's
