@@ -8,6 +8,7 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 __version__ = "0.1.0"
 
 from .descriptors import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
+from .descriptors import GASDTransformer, VFHTransformer
 from .descriptors import descriptor_pool
 from .neighbors import KLNearestNeighbors, symmetric_kl_distances
 from .classifiers import EPPF4DClassifier, PointNetClassifier
@@ -20,9 +21,11 @@ __all__ = [
     "EPPFTransformer",
     "ESFTransformer",
     "FUNCTIONS",
+    "GASDTransformer",
     "KLNearestNeighbors",
     "OURCVFHTransformer",
     "PointNetClassifier",
+    "VFHTransformer",
     "WahlTransformer",
     "descriptor_pool",
     "estimate_normals",

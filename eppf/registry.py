@@ -149,6 +149,8 @@ DESCRIPTORS = {
         DescriptorSpec("eppf_short", "EPPF short", f"{_D}:EPPFTransformer", "n_pairs", "kl", True,
                        {"n_bins": (15, 3, 4, 3)}),
         DescriptorSpec("eppf", "EPPF", f"{_D}:EPPFTransformer", "n_pairs", "kl", True),
+        DescriptorSpec("vfh", "VFH", f"{_D}:VFHTransformer", None, "l1"),
+        DescriptorSpec("gasd", "GASD", f"{_D}:GASDTransformer", None, "kl"),
     )
 }
 

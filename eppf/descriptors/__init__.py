@@ -10,20 +10,29 @@ its own module with its compiled kernel beside it (``_esf.py`` over
 - :class:`WahlTransformer`: surflet-pair relation histograms (Wahl et al. 2003);
 - :class:`OURCVFHTransformer`: oriented, unique and repeatable clustered VFH
   (Aldoma et al. 2012);
+- :class:`VFHTransformer`: Viewpoint Feature Histogram (Rusu et al. 2010);
+- :class:`GASDTransformer`, :class:`GASDColorTransformer`: Globally Aligned
+  Spatial Distribution (Lima & Teichrieb 2016), shape and shape + colour;
 - :func:`descriptor_pool`: several seeded draws of one descriptor per object.
 """
 
 from ._eppf import FUNCTIONS, EPPFTransformer
 from ._esf import ESFTransformer
+from ._gasd import GASDColorTransformer, GASDTransformer, gasd_alignment
 from ._ourcvfh import OURCVFHTransformer
 from ._pool import descriptor_pool
+from ._vfh import VFHTransformer
 from ._wahl import WahlTransformer
 
 __all__ = [
     "EPPFTransformer",
     "ESFTransformer",
     "FUNCTIONS",
+    "GASDColorTransformer",
+    "GASDTransformer",
     "OURCVFHTransformer",
+    "VFHTransformer",
     "WahlTransformer",
     "descriptor_pool",
+    "gasd_alignment",
 ]
