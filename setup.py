@@ -47,7 +47,7 @@ base_args = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fn
 
 extensions = [
     Extension(
-        "eppf." + os.path.splitext(os.path.basename(path))[0],
+        os.path.splitext(path)[0].replace(os.sep, "."),
         [path],
         include_dirs=[np.get_include(), "eppf"],
         # C headers and the shared .pxd: editing one rebuilds the extensions
@@ -57,6 +57,7 @@ extensions = [
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
     )
     for path in sorted(glob.glob(os.path.join("eppf", "_*.pyx")))
+    + sorted(glob.glob(os.path.join("eppf", "descriptors", "_*_fast.pyx")))
 ]
 
 setup(
