@@ -248,7 +248,8 @@ class GRSDTransformer(TransformerMixin, BaseEstimator):
 
 def _single(points, normals, offsets, width, owner, first_index):
     """Single-precision copies (PCL's clouds), checked for the kernel's grid."""
-    p32 = points.astype(np.float32)
+    with np.errstate(over="ignore"):
+        p32 = points.astype(np.float32)
     n32 = normals.astype(np.float32)
     inv = np.float32(1.0) / np.float32(width)
     for k in range(len(offsets) - 1):
