@@ -58,16 +58,17 @@ def _radius_normals(points, radius):
     return out
 
 
-def _cvfh_object(points, normals, *, eps_angle, curvature_threshold, cluster_tolerance, radius_normals,
-                 min_points, normalize_bins, n_neighbors):
-    """CVFH signatures of one centred, scaled object.
+def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_tolerance, radius_normals,
+                  min_points, n_neighbors, **_):
+    """Stable regions of one centred, scaled object and their references.
 
-    Returns ``(signatures, sizes)``: an (m, 308) array, one row per stable
-    region in PCL's order (by lowest point index), and the regions' point
-    counts; without any region, one row of the whole object and ``[n]``.
+    Returns ``(clusters, centroids, ref_normals)``: the regions as arrays of
+    point indices in PCL's order (by lowest index), and float32 (m, 3)
+    arrays of their centroids and unit mean (second) normals; without any
+    region, ``[]`` and PCL's fallback: the object's centroid and its
+    unnormalised mean input normal.
     """
     p32 = points.astype(np.float32)
-    n32 = normals.astype(np.float32)
     n = len(points)
     if curvature_threshold < 0.5:  # surface variation never exceeds 1/3
         keep = np.flatnonzero(_curvature(points, n_neighbors) <= curvature_threshold)
@@ -82,21 +83,29 @@ def _cvfh_object(points, normals, *, eps_angle, curvature_threshold, cluster_tol
             tol = float(np.nextafter(cluster_tolerance, 0.0))
             cos_eps = float(np.cos(np.float64(np.float32(eps_angle))))
             clusters = _smooth_clusters(sub, np.where(finite[:, None], rn, 0.0), finite, tol, cos_eps, min_points)
-    if clusters:
-        cents, refs = [], []
-        for cl in clusters:
-            cents.append(_f32_mean(sub[cl]))
-            avg = _f32_mean(rn[cl])
-            refs.append(avg / np.sqrt(np.float32(avg[0] * avg[0] + avg[2] * avg[2]) + np.float32(avg[1] * avg[1])))
-        sizes = [len(cl) for cl in clusters]
-    else:
-        # PCL: the object's centroid and its (unnormalised) mean normal
-        cents, refs, sizes = [_f32_mean(p32)], [_f32_mean(n32)], [n]
-    cents = np.ascontiguousarray(cents, dtype=np.float32)
-    refs = np.ascontiguousarray(refs, dtype=np.float32)
+    if not clusters:
+        return [], _f32_mean(p32)[None, :], _f32_mean(normals.astype(np.float32))[None, :]
+    cents, refs = [], []
+    for cl in clusters:
+        cents.append(_f32_mean(sub[cl]))
+        avg = _f32_mean(rn[cl])
+        # Eigen's Vector4f normalisation: |v|^2 summed as (x^2 + z^2) + y^2
+        refs.append(avg / np.sqrt(np.float32(avg[0] * avg[0] + avg[2] * avg[2]) + np.float32(avg[1] * avg[1])))
+    return [keep[cl] for cl in clusters], np.asarray(cents, np.float32), np.asarray(refs, np.float32)
+
+
+def _cvfh_object(points, normals, **params):
+    """CVFH signatures of one centred, scaled object.
+
+    Returns ``(signatures, sizes)``: an (m, 308) array, one row per stable
+    region in PCL's order, and the regions' point counts; without any
+    region, one row of the whole object and ``[n]``.
+    """
+    clusters, cents, refs = _cvfh_regions(points, normals, **params)
     out = np.empty((len(cents), N_FEATURES), dtype=np.float64)
-    vfh_signatures(p32, n32, cents, refs, bool(normalize_bins), out)
-    return out, sizes
+    vfh_signatures(points.astype(np.float32), normals.astype(np.float32), np.ascontiguousarray(cents),
+                   np.ascontiguousarray(refs), params["normalize_bins"], out)
+    return out, [len(c) for c in clusters] or [len(points)]
 
 
 class CVFHTransformer(TransformerMixin, BaseEstimator):
