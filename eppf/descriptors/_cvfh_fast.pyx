@@ -53,6 +53,8 @@ cdef void _vfh_one(const float* p, const float* nrm, int64_t n, const float* c, 
         if dist > best:
             best = dist
             far = i
+    if far < 0:  # only NaN distances
+        far = 0
     dx = c[0] - p[3 * far]
     dy = c[1] - p[3 * far + 1]
     dz = c[2] - p[3 * far + 2]

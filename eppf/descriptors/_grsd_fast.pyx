@@ -494,6 +494,18 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
     return n_vox
 
 
+def _check_arrays(points, normals, int n_subdivisions, thresholds):
+    """Shapes the kernel relies on (the transformer passes valid ones)."""
+    if points.shape[1] != 3 or normals.shape[0] != points.shape[0] or normals.shape[1] != 3:
+        raise ValueError("GRSD kernel: points and normals must both have shape (n, 3)")
+    if not 1 <= n_subdivisions <= MAX_SUBDIV:
+        raise ValueError(f"GRSD kernel: n_subdivisions must be in [1, {MAX_SUBDIV}]")
+    if thresholds.shape[0] != 4:
+        raise ValueError("GRSD kernel: 4 class thresholds are needed")
+    if points.shape[0] >= 2**30:
+        raise ValueError("GRSD kernel: at most 2**30 points per object")
+
+
 def _scratch(int num_threads, int64_t max_n):
     m = max(int(max_n), 1)
     n_nodes = 2 * m
@@ -546,8 +558,16 @@ def grsd_batch(const float[:, ::1] points, const float[:, ::1] normals,
     cdef float[:, ::1] hd2 = s["hd2"]
     cdef double[:, ::1] work = s["work"]
     cdef float w = <float>width
+    _check_arrays(points, normals, n_subdivisions, thresholds)
+    if offsets.shape[0] < 1 or out.shape[0] != n_objects or out.shape[1] != N_BINS:
+        raise ValueError("grsd_batch: out must have shape (n_objects, 21)")
     if n_objects == 0:
         return
+    if offsets[0] != 0 or offsets[n_objects] != points.shape[0]:
+        raise ValueError("grsd_batch: offsets must run from 0 to len(points)")
+    for k in range(n_objects):
+        if offsets[k + 1] - offsets[k] < 1:
+            raise ValueError("grsd_batch: every object needs at least one point")
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
         _grsd_object(&points[offsets[k], 0], &normals[offsets[k], 0],
@@ -563,6 +583,9 @@ def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double 
     """Test hook: one object's (voxel cells (V, 3), centroids (V, 3), classes (V,),
     counts (21,)), voxels in key order (x fastest)."""
     cdef int64_t n = points.shape[0]
+    _check_arrays(points, normals, n_subdivisions, thresholds)
+    if n < 1:
+        raise ValueError("grsd_voxels: at least one point is needed")
     s = _scratch(1, n)
     cdef int64_t[:, ::1] ki = s["ki"]
     cdef int64_t[:, ::1] ukeys = s["ukeys"]

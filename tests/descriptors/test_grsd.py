@@ -444,3 +444,34 @@ def test_not_fitted():
 
     with pytest.raises(NotFittedError):
         GRSDTransformer().transform([_cloud()])
+
+
+def test_kernel_rejects_bad_arrays():
+    from eppf.descriptors._grsd_fast import grsd_batch
+
+    p = np.zeros((4, 3), dtype=f32)
+    out = np.zeros((1, 21))
+    with pytest.raises(ValueError, match="at least one point"):
+        grsd_voxels(p[:0], p[:0], 0.05, 5, 0.2, THR)
+    with pytest.raises(ValueError, match="shape"):
+        grsd_voxels(p, p[:2], 0.05, 5, 0.2, THR)
+    with pytest.raises(ValueError, match="n_subdivisions"):
+        grsd_voxels(p, p, 0.05, 65, 0.2, THR)
+    with pytest.raises(ValueError, match="thresholds"):
+        grsd_voxels(p, p, 0.05, 5, 0.2, THR[:3])
+    with pytest.raises(ValueError, match="offsets"):
+        grsd_batch(p, p, np.array([0, 3], dtype=np.int64), 0.05, 5, 0.2, THR, out, 1)
+    with pytest.raises(ValueError, match="at least one point"):
+        grsd_batch(p, p, np.array([0, 0, 4], dtype=np.int64), 0.05, 5, 0.2, THR, np.zeros((2, 21)), 1)
+    with pytest.raises(ValueError, match="out must have shape"):
+        grsd_batch(p, p, np.array([0, 4], dtype=np.int64), 0.05, 5, 0.2, THR, np.zeros((1, 20)), 1)
+
+
+def test_kernel_survives_non_finite_values():
+    # the transformer rejects them; the kernel itself must still stay in bounds
+    p = np.random.default_rng(0).normal(size=(40, 3)).astype(f32)
+    p[3] = np.nan
+    p[7] = np.inf
+    n = np.ones_like(p) / np.sqrt(f32(3))
+    _, _, types, counts = grsd_voxels(p, n, 0.05, 5, 0.2, THR)
+    assert np.all((types >= 0) & (types <= 4)) and np.all(np.isfinite(counts))
