@@ -8,7 +8,8 @@ from sklearn.utils.validation import check_is_fitted
 
 from .._chunks import transform_in_chunks
 from .._validation import check_point_clouds
-from ._cvfh_fast import vfh_signatures
+from ._cvfh_fast import pcl_region_growing, vfh_signatures
+from ._grsd_fast import radius_neighbors_flann
 from ._regions import _check_common, _check_int, _check_real, _curvature, _fit_scale, _prepared, _smooth_clusters
 
 __all__ = ["CVFHTransformer"]
@@ -59,7 +60,7 @@ def _radius_normals(points, radius):
 
 
 def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_tolerance, radius_normals,
-                  min_points, n_neighbors, **_):
+                  min_points, n_neighbors, region_growing="components", **_):
     """Stable regions of one centred, scaled object and their references.
 
     Returns ``(clusters, centroids, ref_normals)``: the regions as arrays of
@@ -79,7 +80,12 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
         sub = p32[keep].astype(np.float64)
         rn = _radius_normals(sub, radius_normals)
         finite = np.isfinite(rn[:, 0])
-        if finite.sum() >= min_points:
+        if finite.sum() >= min_points and region_growing == "pcl":
+            nbr, off = radius_neighbors_flann(p32[keep], float(np.float32(cluster_tolerance)))
+            labels = np.empty(len(sub), dtype=np.int64)
+            m = pcl_region_growing(nbr, off, rn.astype(np.float32), float(np.float32(eps_angle)), min_points, labels)
+            clusters = [np.flatnonzero(labels == c) for c in range(m)]
+        elif finite.sum() >= min_points:
             tol = float(np.nextafter(cluster_tolerance, 0.0))
             cos_eps = float(np.cos(np.float64(np.float32(eps_angle))))
             clusters = _smooth_clusters(sub, np.where(finite[:, None], rn, 0.0), finite, tol, cos_eps, min_points)
@@ -119,8 +125,9 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
     component (distances to the centroid) and the viewpoint component, 308
     bins (PCL's ``VFHSignature308``). ``aggregate`` turns an object's
     signatures into one row. On the PCL reference runs the first signature
-    reproduces PCL's rows on all ModelNet10 objects (where no region forms)
-    and most DALES objects.
+    is identical to PCL's row for 99.9% of the ModelNet10 objects (where no
+    region forms) and, with ``region_growing="pcl"``, 92% of the DALES
+    objects (86% with the default region growing).
 
     Read more in the paper's baseline section (Bobkov et al. 2018).
 
@@ -154,6 +161,12 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
     min_points : int, default=50
         Smallest stable region, and smallest number of points left by the
         curvature filter for regions to be grown at all (PCL's default).
+    region_growing : {"components", "pcl"}, default="components"
+        ``"components"``: the regions are the connected components of the
+        "close and similar normals" graph, the region growing shared with
+        :class:`eppf.OURCVFHTransformer`. ``"pcl"``: PCL's seeded growth
+        step by step, which skips the first point of each radius search
+        (see Notes) and so reproduces PCL's regions.
     normalize_bins : bool, default=False
         PCL's option: each angle and distance bin counts ``100 / (n - 1)``
         per point and each viewpoint bin ``100 / n``, instead of 1.
@@ -216,12 +229,19 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
     defaults of 0.015 give no region at all; larger ``radius_normals`` and
     ``cluster_tolerance`` do.
 
-    Differences from PCL: the region growing links every pair of close
-    points with similar normals, while PCL's skips the first point each of
-    its (unsorted) radius searches returns, which is not always the seed
-    itself, so PCL's regions can be slightly smaller; the second normals are
-    computed in double precision. No randomness: the output is
-    deterministic.
+    Region growing: PCL grows a region from each unassigned seed in point
+    order, adding the unassigned neighbours (radius search) of each member
+    whose normal is within ``eps_angle`` of that member's. It skips the
+    first point each search returns, assuming it is the query itself; but
+    PCL's k-d tree search is unsorted and returns points in its depth-first
+    order, so a true neighbour is sometimes skipped and PCL's regions can be
+    smaller or split. ``region_growing="components"`` (the default) links
+    every such pair; ``"pcl"`` rebuilds FLANN's tree to skip the same points
+    as PCL. On the DALES reference objects with regions (55 of 499), the
+    first signature matches PCL's exactly for 64% of them with ``"pcl"``
+    and 5% with ``"components"``; leave-one-out accuracy is the same. The
+    second normals are computed in double precision (PCL: single). No
+    randomness: the output is deterministic.
 
     References
     ----------
@@ -254,6 +274,7 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
         cluster_tolerance=0.015,
         radius_normals=0.015,
         min_points=50,
+        region_growing="components",
         normalize_bins=False,
         normalize=True,
         n_neighbors=10,
@@ -267,6 +288,7 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
         self.cluster_tolerance = cluster_tolerance
         self.radius_normals = radius_normals
         self.min_points = min_points
+        self.region_growing = region_growing
         self.normalize_bins = normalize_bins
         self.normalize = normalize
         self.n_neighbors = n_neighbors
@@ -278,6 +300,8 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
         if self.aggregate not in ("largest", "first", "mean"):
             raise ValueError(f"{owner}: aggregate must be 'largest', 'first' or 'mean', got {self.aggregate!r}")
         n_neighbors, n_threads = _check_common(self, owner)
+        if self.region_growing not in ("components", "pcl"):
+            raise ValueError(f"{owner}: region_growing must be 'components' or 'pcl', got {self.region_growing!r}")
         if not isinstance(self.normalize_bins, (bool, np.bool_)):
             raise TypeError(f"{owner}: normalize_bins must be a bool, got {type(self.normalize_bins).__name__}")
         params = dict(
@@ -287,6 +311,7 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
             radius_normals=_check_real(self.radius_normals, "radius_normals", owner, 1e-15, 1e15),
             min_points=_check_int(self.min_points, "min_points", owner, 1),
             normalize_bins=bool(self.normalize_bins),
+            region_growing=self.region_growing,
             n_neighbors=n_neighbors,
         )
         return params, n_threads

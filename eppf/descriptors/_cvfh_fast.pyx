@@ -9,8 +9,10 @@ pair features (f1, f2, f3) between the reference and every point, the
 distance histogram (f4 over the largest distance) and 128 viewpoint bins.
 """
 
-from libc.math cimport floor, acosf, atan2f, sqrtf, fabsf
-from libc.stdint cimport int64_t
+from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf
+from libc.stdint cimport int32_t, int64_t
+
+import numpy as np
 from libc.string cimport memset
 
 cdef enum:
@@ -154,3 +156,61 @@ def vfh_signatures(const float[:, ::1] points, const float[:, ::1] normals,
         for r in range(centroids.shape[0]):
             _vfh_one(&points[0, 0], &normals[0, 0], n, &centroids[r, 0], &ref_normals[r, 0],
                      normalize_bins, hist, &out[r, 0])
+
+
+def pcl_region_growing(const int32_t[::1] neighbors, const int64_t[::1] offsets,
+                       const float[:, ::1] normals, double eps_angle, int64_t min_points,
+                       int64_t[::1] labels):
+    """PCL's ``extractEuclideanClustersSmooth``, seed by seed.
+
+    Point ``i``'s radius neighbours are ``neighbors[offsets[i]:offsets[i + 1]]``
+    in the search's order; as PCL, the first one is skipped (taken to be the
+    query itself) and an unprocessed neighbour joins when
+    ``acos(n_s . n_j) < eps_angle`` for the point ``s`` being expanded
+    (single-precision dot products; NaN normals join nothing). Regions of at
+    least ``min_points`` points are numbered in seed order into ``labels``
+    (-1 elsewhere). Returns the number of regions.
+    """
+    cdef int64_t n = labels.shape[0], i, j, t, head, tail, s, k, n_regions = 0
+    cdef float dot
+    if (offsets.shape[0] != n + 1 or normals.shape[0] != n or normals.shape[1] != 3
+            or (n > 0 and (offsets[0] != 0 or offsets[n] != neighbors.shape[0]))):
+        raise ValueError("pcl_region_growing: inconsistent array shapes")
+    for i in range(n):
+        if offsets[i + 1] < offsets[i]:
+            raise ValueError("pcl_region_growing: offsets must not decrease")
+    for k in range(neighbors.shape[0]):
+        if neighbors[k] < 0 or neighbors[k] >= n:
+            raise ValueError("pcl_region_growing: neighbour index out of range")
+    queue_arr = np.empty(max(n, 1), dtype=np.int64)
+    done_arr = np.zeros(max(n, 1), dtype=np.int8)
+    cdef int64_t[::1] queue = queue_arr
+    cdef signed char[::1] done = done_arr
+    with nogil:
+        for i in range(n):
+            labels[i] = -1
+        for i in range(n):
+            if done[i]:
+                continue
+            done[i] = 1
+            queue[0] = i
+            head = 0
+            tail = 1
+            while head < tail:
+                s = queue[head]
+                head += 1
+                for k in range(offsets[s] + 1, offsets[s + 1]):
+                    j = neighbors[k]
+                    if done[j]:
+                        continue
+                    dot = normals[s, 0] * normals[j, 0] + normals[s, 1] * normals[j, 1]
+                    dot = dot + normals[s, 2] * normals[j, 2]
+                    if acos(<double>dot) < eps_angle:
+                        done[j] = 1
+                        queue[tail] = j
+                        tail += 1
+            if tail >= min_points:
+                for t in range(tail):
+                    labels[queue[t]] = n_regions
+                n_regions += 1
+    return n_regions

@@ -612,3 +612,60 @@ def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double 
     return (np.asarray(s["vijk"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["cent"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["types"][0, :n_vox]).copy(), counts)
+
+
+def radius_neighbors_flann(const float[:, ::1] points, double radius):
+    """Every point's neighbours in the order PCL's unsorted radius search gives.
+
+    Neighbours are the points whose single-precision squared distance is
+    below ``float(radius**2)`` (the point itself included), listed in the
+    depth-first order of FLANN's single k-d tree, as PCL's
+    ``search::KdTree(false)`` returns them. Returns ``(indices, offsets)``:
+    point ``i``'s neighbours are ``indices[offsets[i]:offsets[i + 1]]``.
+    """
+    cdef int64_t n = points.shape[0], i, total = 0, m
+    cdef int d
+    if points.shape[1] != 3:
+        raise ValueError("radius_neighbors_flann: points must have shape (n, 3)")
+    if n >= 2**30:
+        raise ValueError("radius_neighbors_flann: at most 2**30 points")
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    if n == 0:
+        return np.zeros(0, dtype=np.int32), offsets
+    s = _scratch(1, n)
+    cdef int32_t[::1] vind = s["vind"][0]
+    cdef int32_t[::1] ni = s["ni"][0]
+    cdef float[::1] nf = s["nf"][0]
+    cdef int32_t[::1] stk = s["stk"][0]
+    cdef float[::1] sbox = s["sbox"][0]
+    cdef int32_t[::1] hits = s["hits"][0]
+    cdef float[::1] hd2 = s["hd2"][0]
+    cdef int64_t[::1] off = offsets
+    cdef float root_box[6]
+    cdef float r2 = <float>(radius * radius)
+    cdef const float* p = &points[0, 0]
+    with nogil:
+        for d in range(3):
+            root_box[d] = p[d]
+            root_box[3 + d] = p[d]
+        for i in range(1, n):
+            for d in range(3):
+                if p[3 * i + d] < root_box[d]:
+                    root_box[d] = p[3 * i + d]
+                if p[3 * i + d] > root_box[3 + d]:
+                    root_box[3 + d] = p[3 * i + d]
+        _build_tree(p, <int>n, &vind[0], &ni[0], &nf[0], &stk[0], &sbox[0])
+        for i in range(n):
+            m = _radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
+                               &hits[0], &hd2[0])
+            total += m
+            off[i + 1] = total
+    indices = np.empty(total, dtype=np.int32)
+    cdef int32_t[::1] idx = indices
+    with nogil:
+        for i in range(n):
+            m = _radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
+                               &hits[0], &hd2[0])
+            for d in range(<int>m):
+                idx[off[i] + d] = hits[d]
+    return indices, offsets

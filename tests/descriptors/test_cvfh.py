@@ -236,6 +236,7 @@ def _cloud(n=60, seed=0):
     "params, err, match",
     [
         ({"aggregate": "max"}, ValueError, "aggregate must be"),
+        ({"region_growing": "flood"}, ValueError, "region_growing must be"),
         ({"eps_angle": -0.1}, ValueError, "eps_angle must be finite and in"),
         ({"eps_angle": 4.0}, ValueError, "eps_angle"),
         ({"eps_angle": "5"}, TypeError, "eps_angle must be a float"),
@@ -293,3 +294,83 @@ def test_not_fitted():
 
     with pytest.raises(NotFittedError):
         CVFHTransformer().transform([_cloud()])
+
+
+# ----------------------------------------------------------- PCL's region growing
+def test_pcl_region_growing_hand_cases():
+    from eppf.descriptors._cvfh_fast import pcl_region_growing
+
+    up = np.tile(np.float32([0, 0, 1]), (3, 1))
+
+    def grow(lists, normals, min_points=1, eps=0.1):
+        nbr = np.concatenate([np.asarray(x, dtype=np.int32) for x in lists])
+        off = np.r_[0, np.cumsum([len(x) for x in lists])].astype(np.int64)
+        labels = np.empty(len(lists), dtype=np.int64)
+        m = pcl_region_growing(nbr, off, np.ascontiguousarray(normals, dtype=np.float32), eps, min_points, labels)
+        return m, labels.tolist()
+
+    # the search returns the query first: 0 -> 1 -> 2 all join
+    assert grow([[0, 1], [1, 0, 2], [2, 1]], up) == (1, [0, 0, 0])
+    # point 0's search returns 1 first, which PCL skips; 1 is then a region of its own
+    assert grow([[1, 0], [1, 0], [2]], up[:3]) == (3, [0, 1, 2])
+    # min_points drops the singletons
+    assert grow([[1, 0], [1, 0], [2]], up, min_points=2) == (0, [-1, -1, -1])
+    # normals further apart than eps do not join; NaN normals join nothing
+    tilted = up.copy()
+    tilted[1] = [0, np.sin(0.2), np.cos(0.2)]
+    assert grow([[0, 1], [1, 0, 2], [2, 1]], tilted) == (3, [0, 1, 2])
+    nan = up.copy()
+    nan[2] = np.nan
+    assert grow([[0, 1, 2], [1, 0], [2, 0]], nan) == (2, [0, 0, 1])
+    with pytest.raises(ValueError, match="out of range"):
+        grow([[0, 5], [1], [2]], up)
+
+
+def test_flann_radius_lists():
+    from eppf.descriptors._grsd_fast import radius_neighbors_flann
+
+    rng = np.random.default_rng(4)
+    p = rng.uniform(size=(300, 3)).astype(np.float32)
+    nbr, off = radius_neighbors_flann(p, 0.1)
+    d = p[:, None, :] - p[None, :, :]
+    d2 = (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
+    for i in range(len(p)):
+        assert sorted(nbr[off[i] : off[i + 1]].tolist()) == np.flatnonzero(d2[i] < np.float32(0.01)).tolist()
+    # 15 points or fewer are one leaf: the order is the point order
+    small, small_off = radius_neighbors_flann(p[:15], 10.0)
+    assert_array_equal(small.reshape(15, 15), np.tile(np.arange(15), (15, 1)))
+    assert_array_equal(small_off, 15 * np.arange(16))
+
+
+def test_pcl_region_growing_on_two_planes():
+    pts, nrm, ia, ib = _two_planes()
+    comp, _, _ = _cvfh_regions(pts, nrm, **PARAMS)
+    pcl, cents, refs = _cvfh_regions(pts, nrm, region_growing="pcl", **PARAMS)
+    assert len(pcl) == 2
+    for a, b in zip(pcl, comp):
+        # PCL's skipped neighbours can only shrink a region
+        assert set(a.tolist()) <= set(b.tolist()) and len(a) >= 0.95 * len(b)
+    assert_allclose(refs[1], [0.0, -np.sin(PHI), np.cos(PHI)], atol=1e-6)
+    # the same seed-by-seed growth in Python over the same neighbour lists
+    from eppf.descriptors._cvfh import _radius_normals
+    from eppf.descriptors._grsd_fast import radius_neighbors_flann
+
+    p32 = pts.astype(np.float32)
+    rn = _radius_normals(p32.astype(np.float64), 0.015).astype(np.float32)
+    nbr, off = radius_neighbors_flann(p32, float(np.float32(0.015)))
+    eps = float(np.float32(0.125))
+    done, regions = np.zeros(len(pts), bool), []
+    for i in range(len(pts)):
+        if done[i]:
+            continue
+        done[i] = True
+        queue = [i]
+        for s in queue:
+            for j in nbr[off[s] + 1 : off[s + 1]]:
+                dot = float(np.float32(rn[s, 0] * rn[j, 0] + rn[s, 1] * rn[j, 1]) + np.float32(rn[s, 2] * rn[j, 2]))
+                if not done[j] and np.arccos(dot) < eps:
+                    done[j] = True
+                    queue.append(j)
+        if len(queue) >= 50:
+            regions.append(sorted(queue))
+    assert [r.tolist() for r in pcl] == regions
