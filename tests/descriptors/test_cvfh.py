@@ -374,3 +374,20 @@ def test_pcl_region_growing_on_two_planes():
         if len(queue) >= 50:
             regions.append(sorted(queue))
     assert [r.tolist() for r in pcl] == regions
+
+
+def test_pipeline_clone_and_tags(shapes):
+    from sklearn.base import clone
+    from sklearn.model_selection import GridSearchCV
+    from sklearn.pipeline import make_pipeline
+
+    from eppf import KLNearestNeighbors
+
+    X, y = shapes
+    est = CVFHTransformer(aggregate="mean")
+    assert clone(est).get_params() == est.get_params()
+    tags = est.__sklearn_tags__()
+    assert tags.input_tags.three_d_array and not tags.input_tags.two_d_array
+    pipe = make_pipeline(CVFHTransformer(), KLNearestNeighbors())
+    search = GridSearchCV(pipe, {"cvfhtransformer__region_growing": ["components", "pcl"]}, cv=2).fit(X, y)
+    assert search.best_params_["cvfhtransformer__region_growing"] in ("components", "pcl")

@@ -475,3 +475,20 @@ def test_kernel_survives_non_finite_values():
     n = np.ones_like(p) / np.sqrt(f32(3))
     _, _, types, counts = grsd_voxels(p, n, 0.05, 5, 0.2, THR)
     assert np.all((types >= 0) & (types <= 4)) and np.all(np.isfinite(counts))
+
+
+def test_pipeline_clone_and_tags(shapes):
+    from sklearn.base import clone
+    from sklearn.model_selection import GridSearchCV
+    from sklearn.pipeline import make_pipeline
+
+    from eppf import KLNearestNeighbors
+
+    X, y = shapes
+    est = GRSDTransformer(radius=0.1)
+    assert clone(est).get_params() == est.get_params()
+    tags = est.__sklearn_tags__()
+    assert tags.input_tags.three_d_array and not tags.input_tags.two_d_array
+    pipe = make_pipeline(GRSDTransformer(), KLNearestNeighbors())
+    search = GridSearchCV(pipe, {"grsdtransformer__radius": [0.05, 0.1]}, cv=2).fit(X, y)
+    assert search.best_params_["grsdtransformer__radius"] in (0.05, 0.1)
