@@ -121,9 +121,9 @@ class GRSDTransformer(TransformerMixin, BaseEstimator):
     Rotation: the voxel grid is axis-aligned, so GRSD is not rotation
     invariant. A rotation by a multiple of 90 degrees about a coordinate
     axis maps the grid onto itself, leaving the occupied cells (hence the
-    sum of the "empty" bins and the row sum of occupied pairs) unchanged up
-    to points on cell faces; the classes may still change through the
-    reference neighbour, which depends on the k-d tree. Other rotations
+    sum of the "empty" bins, the number of occupied-empty neighbour pairs)
+    unchanged up to points on cell faces; the classes may still change
+    through the reference neighbour, which depends on the k-d tree. Other rotations
     change the voxelisation itself. The descriptor is invariant to
     translation (objects are centred) and, with ``scaling="object"``, to
     uniform scaling. No randomness: the output is deterministic.
