@@ -17,6 +17,8 @@ __all__ = ["CVFHTransformer"]
 N_ANGLE_BINS = 45
 N_VIEW_BINS = 128
 N_FEATURES = 4 * N_ANGLE_BINS + N_VIEW_BINS  # 308, PCL's VFHSignature308
+#: Most neighbour pairs the radius searches of one object may hold in memory.
+MAX_PAIRS = 5_000_000
 
 
 def _f32_mean(a):
@@ -78,6 +80,14 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
     clusters = []
     if keep.size >= min_points:
         sub = p32[keep].astype(np.float64)
+        if keep.size * (keep.size - 1) // 2 > MAX_PAIRS:
+            tree = cKDTree(sub)
+            pairs = (tree.count_neighbors(tree, max(radius_normals, cluster_tolerance)) - keep.size) // 2
+            if pairs > MAX_PAIRS:
+                raise ValueError(
+                    f"radius_normals and cluster_tolerance give {pairs} neighbour pairs, more than "
+                    f"{MAX_PAIRS}: use smaller radii"
+                )
         rn = _radius_normals(sub, radius_normals)
         finite = np.isfinite(rn[:, 0])
         if finite.sum() >= min_points and region_growing == "pcl":
@@ -410,11 +420,15 @@ def _cvfh_chunk(est, clouds, first_index):
             f"{owner}: point cloud {first_index + bad[0]} has coordinates beyond single precision after "
             "scaling; use scaling='object'"
         )
-    spans = [(offsets[k], offsets[k + 1]) for k in range(len(clouds))]
+    def row(k):
+        a, b = offsets[k], offsets[k + 1]
+        try:
+            return est._row(points[a:b], normals[a:b], params)
+        except ValueError as exc:
+            raise ValueError(f"{owner}: point cloud {first_index + k}: {exc}") from None
+
     if n_threads == 1:
-        rows = [est._row(points[a:b], normals[a:b], params) for a, b in spans]
+        rows = [row(k) for k in range(len(clouds))]
     else:
-        rows = Parallel(n_jobs=n_threads, prefer="threads")(
-            delayed(est._row)(points[a:b], normals[a:b], params) for a, b in spans
-        )
+        rows = Parallel(n_jobs=n_threads, prefer="threads")(delayed(row)(k) for k in range(len(clouds)))
     return np.vstack(rows)

@@ -391,3 +391,12 @@ def test_pipeline_clone_and_tags(shapes):
     pipe = make_pipeline(CVFHTransformer(), KLNearestNeighbors())
     search = GridSearchCV(pipe, {"cvfhtransformer__region_growing": ["components", "pcl"]}, cv=2).fit(X, y)
     assert search.best_params_["cvfhtransformer__region_growing"] in ("components", "pcl")
+
+
+def test_radii_too_large_for_memory(monkeypatch):
+    monkeypatch.setattr(cvfh_module, "MAX_PAIRS", 1000)
+    cloud = _cloud(200)
+    est = CVFHTransformer(radius_normals=10.0, cluster_tolerance=10.0, curvature_threshold=1.0).fit([cloud])
+    with pytest.raises(ValueError, match=r"CVFHTransformer: point cloud 0: radius_normals and cluster_tolerance "
+                                         r"give 19900 neighbour pairs, more than 1000"):
+        est.transform([cloud])
