@@ -130,6 +130,26 @@ def bench_vfh_gasd(clouds, repeats=3):
               f"PCL 1.13: {pcl_ms:.2f} ({ms / pcl_ms:.0%} of PCL's)", flush=True)
 
 
+def time_grsd_cvfh(clouds, repeats=1):
+    """GRSD and CVFH beside PCL 1.13's time per object (1 thread, 1,024 points,
+    normals given; PCL's figures from the reference README), with the PCL
+    reference runs' settings, and CVFH also with PCL's defaults."""
+    from eppf.descriptors._cvfh import CVFHTransformer
+    from eppf.descriptors._grsd import GRSDTransformer
+
+    specs = (
+        ("GRSD", 2.42, lambda rs: GRSDTransformer(normalize=False, n_jobs=1)),
+        ("CVFH", 3.38, lambda rs: CVFHTransformer(
+            aggregate="first", eps_angle=float(np.deg2rad(5.0)), curvature_threshold=1.0, normalize=False, n_jobs=1)),
+        ("CVFH, PCL's defaults", None, lambda rs: CVFHTransformer(aggregate="first", normalize=False, n_jobs=1)),
+    )
+    for name, pcl_ms, factory in specs:
+        cpu, wall = time_descriptor(factory, clouds, repeats)
+        ref = f"; PCL 1.13: {pcl_ms:.2f}" if pcl_ms else ""
+        print(f"{name}: {cpu:.2f} ms/object at 1,024 points (CPU time, 1 thread; wall clock {wall:.2f}){ref}",
+              flush=True)
+
+
 def fmt(values):
     v = 100 * np.asarray(values)
     if len(v) == 1:
@@ -162,6 +182,7 @@ def main(argv=None):
     print(f"normals (PCA, k=10): {1e3 * t_n1k / len(c1k):.2f} ms/object at 1,024 points, "
           f"{1e3 * t_n10k / len(c10k):.2f} at 10,000", flush=True)
     bench_vfh_gasd(c1k, args.repeats)
+    time_grsd_cvfh(c1k, args.repeats)
     for name in list(args.descriptors):
         factory, _, metrics = specs[name]
         try:

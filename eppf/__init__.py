@@ -8,7 +8,7 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 __version__ = "0.1.0"
 
 from .descriptors import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
-from .descriptors import GASDTransformer, VFHTransformer
+from .descriptors import CVFHTransformer, GASDTransformer, GRSDTransformer, VFHTransformer
 from .descriptors import descriptor_pool
 from .neighbors import KLNearestNeighbors, symmetric_kl_distances
 from .classifiers import EPPF4DClassifier, PointNetClassifier
@@ -17,11 +17,13 @@ from .preprocessing import estimate_normals
 from ._persist import load_model, save_model
 
 __all__ = [
+    "CVFHTransformer",
     "EPPF4DClassifier",
     "EPPFTransformer",
     "ESFTransformer",
     "FUNCTIONS",
     "GASDTransformer",
+    "GRSDTransformer",
     "KLNearestNeighbors",
     "OURCVFHTransformer",
     "PointNetClassifier",

@@ -14,8 +14,10 @@ set's scaling setting.
 Examples
 --------
 >>> from eppf.registry import DESCRIPTORS, make_descriptor
->>> sorted(DESCRIPTORS)[:3]
-['eppf', 'eppf_short', 'esf']
+>>> [name for name in DESCRIPTORS if name.startswith("eppf")]
+['eppf_short', 'eppf']
+>>> DESCRIPTORS["gasd"].metric, DESCRIPTORS["ourcvfh"].metric
+('kl', 'l1')
 >>> make_descriptor("esf", n_samples=5000, random_state=0)
 ESFTransformer(n_triplets=5000, random_state=0)
 """
@@ -151,6 +153,8 @@ DESCRIPTORS = {
         DescriptorSpec("eppf", "EPPF", f"{_D}:EPPFTransformer", "n_pairs", "kl", True),
         DescriptorSpec("vfh", "VFH", f"{_D}:VFHTransformer", None, "l1"),
         DescriptorSpec("gasd", "GASD", f"{_D}:GASDTransformer", None, "kl"),
+        DescriptorSpec("cvfh", "CVFH", f"{_D}:CVFHTransformer", None, "l1"),
+        DescriptorSpec("grsd", "GRSD", f"{_D}:GRSDTransformer", None, "l1"),
     )
 }
 

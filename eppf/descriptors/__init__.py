@@ -11,25 +11,31 @@ its own module with its compiled kernel beside it (``_esf.py`` over
 - :class:`OURCVFHTransformer`: oriented, unique and repeatable clustered VFH
   (Aldoma et al. 2012);
 - :class:`VFHTransformer`: Viewpoint Feature Histogram (Rusu et al. 2010);
+- :class:`CVFHTransformer`: Clustered VFH (Aldoma et al. 2011);
+- :class:`GRSDTransformer`: Global Radius-based Surface Descriptor (Marton et al. 2010);
 - :class:`GASDTransformer`, :class:`GASDColorTransformer`: Globally Aligned
   Spatial Distribution (Lima & Teichrieb 2016), shape and shape + colour;
 - :func:`descriptor_pool`: several seeded draws of one descriptor per object.
 """
 
 from ._eppf import FUNCTIONS, EPPFTransformer
+from ._cvfh import CVFHTransformer
 from ._esf import ESFTransformer
 from ._gasd import GASDColorTransformer, GASDTransformer, gasd_alignment
+from ._grsd import GRSDTransformer
 from ._ourcvfh import OURCVFHTransformer
 from ._pool import descriptor_pool
 from ._vfh import VFHTransformer
 from ._wahl import WahlTransformer
 
 __all__ = [
+    "CVFHTransformer",
     "EPPFTransformer",
     "ESFTransformer",
     "FUNCTIONS",
     "GASDColorTransformer",
     "GASDTransformer",
+    "GRSDTransformer",
     "OURCVFHTransformer",
     "VFHTransformer",
     "WahlTransformer",

@@ -4,13 +4,12 @@ import numbers
 
 import numpy as np
 from joblib import Parallel, delayed
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..utils import check_int as _check_int
 from ..utils import check_n_jobs
 from ._base import PointCloudDescriptor
+from ._regions import _curvature, _pair_features, _smooth_clusters
 
 __all__ = ["OURCVFHTransformer"]
 
@@ -35,80 +34,6 @@ def _check_float(value, name, owner, low=0.0, low_open=True, high=None):
             rng += f" and <= {high}"
         raise ValueError(f"{owner}: {name} must be finite and {rng}, got {value}")
     return value
-
-
-def _curvature(points, k):
-    """Surface variation lambda_min / sum(lambda) of the k nearest neighbours."""
-    n = points.shape[0]
-    k = min(k, n)
-    _, idx = cKDTree(points).query(points, k=k)
-    nb = points[idx.reshape(n, k)]
-    nb = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb)
-    ev = np.linalg.eigvalsh(cov)
-    total = ev.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        curv = np.where(total > 0, ev[:, 0] / total, 0.0)
-    return np.clip(curv, 0.0, None)
-
-
-def _smooth_clusters(points, normals, keep, tolerance, cos_eps, min_points):
-    """Components of the graph 'closer than tolerance and normals within eps'.
-
-    This is what PCL's seeded region growing returns: a point joins a region
-    when a member within ``tolerance`` has a normal less than eps away.
-    Returns a list of index arrays (into ``points``), in order of their
-    lowest index, with at least ``min_points`` points each.
-    """
-    sub = np.flatnonzero(keep)
-    if sub.size == 0:
-        return []
-    pairs = cKDTree(points[sub]).query_pairs(tolerance, output_type="ndarray")
-    if pairs.size:
-        dots = np.einsum("ij,ij->i", normals[sub[pairs[:, 0]]], normals[sub[pairs[:, 1]]])
-        pairs = pairs[dots > cos_eps]
-    m = sub.size
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
-    n_comp, labels = connected_components(graph, directed=False)
-    counts = np.bincount(labels, minlength=n_comp)
-    # Order the components by their first member, like PCL's scan.
-    first = np.full(n_comp, m, dtype=np.int64)
-    np.minimum.at(first, labels, np.arange(m))
-    clusters = []
-    for c in np.argsort(first, kind="stable"):
-        if counts[c] >= min_points:
-            clusters.append(sub[labels == c])
-    return clusters
-
-
-def _pair_features(c, nc, points, normals):
-    """PCL's pair features (f1, f2, f3) of (c, nc) against every point.
-
-    Source is the more parallel normal (PCL's rule): with d = p - c,
-    u = source normal, v = d x u / |d x u|, w = u x v: f1 = atan2(w . n_t,
-    u . n_t), f2 = v . n_t, f3 = u . d / |d|. Undefined pairs are dropped.
-    """
-    d = points - c
-    dist = np.linalg.norm(d, axis=1)
-    ok = dist > 0
-    d, dist, nt_all = d[ok], dist[ok], normals[ok]
-    dh = d / dist[:, None]
-    a1 = dh @ nc
-    a2 = np.einsum("ij,ij->i", nt_all, dh)
-    swap = np.arccos(np.clip(np.abs(a1), 0, 1)) > np.arccos(np.clip(np.abs(a2), 0, 1))
-    u = np.where(swap[:, None], nt_all, nc[None, :])
-    nt = np.where(swap[:, None], nc[None, :], nt_all)
-    dd = np.where(swap[:, None], -d, d)
-    f3 = np.where(swap, -a2, a1)
-    v = np.cross(dd, u)
-    vn = np.linalg.norm(v, axis=1)
-    good = vn > 0
-    v = v[good] / vn[good, None]
-    u, nt, f3 = u[good], nt[good], f3[good]
-    w = np.cross(u, v)
-    f1 = np.arctan2(np.einsum("ij,ij->i", w, nt), np.einsum("ij,ij->i", u, nt))
-    f2 = np.einsum("ij,ij->i", v, nt)
-    return f1, f2, f3
 
 
 def _angle_hist(f):

@@ -1,0 +1,671 @@
+# cython: language_level=3
+"""Compiled GRSD kernel (see :class:`GRSDTransformer` for the formulas).
+
+Per object, in single precision as PCL 1.13 computes it:
+
+1. voxelise on an axis-aligned grid of width ``w`` anchored at multiples of
+   ``w`` (PCL's ``VoxelGrid``); each occupied voxel is represented by the
+   mean of its points;
+2. build a k-d tree over the object's points with the splitting rule and
+   leaf size of FLANN's single-index tree (the tree PCL's ``KdTree`` wraps),
+   because PCL's RSD takes the normal of the *first* neighbour the tree
+   returns as the reference normal, and an unsorted radius search returns
+   neighbours in the tree's depth-first order;
+3. radius search (radius ``w``) around each voxel centroid, RSD radii from
+   the min/max normal angle per distance bin, surface class;
+4. count, for every occupied voxel, the classes of its 26 neighbour cells
+   (empty cells are class 5) and fold the 6 x 6 matrix to its 21 upper
+   triangular entries, ``T[i, j] + T[j, i]``.
+
+Work is parallel over objects (``prange``); each object's result depends on
+that object alone. Scratch memory is allocated once per thread before the
+loop.
+"""
+
+from cython.parallel cimport prange, threadid
+from libc.math cimport floorf, floor, sqrt, acos
+from libc.stdint cimport int64_t, int32_t, int8_t
+from libc.stdlib cimport qsort
+from libc.string cimport memset
+
+import numpy as np
+
+cdef enum:
+    LEAF_MAX = 15       # FLANN leaf size PCL's KdTreeFLANN asks for
+    N_CLASSES = 6       # noise, plane, cylinder, sphere, edge, empty
+    N_BINS = 21
+    MAX_SUBDIV = 64
+
+cdef struct KeyIdx:
+    int64_t key
+    int64_t idx
+
+
+cdef int _cmp_keyidx(const void* a, const void* b) noexcept nogil:
+    cdef const KeyIdx* x = <const KeyIdx*>a
+    cdef const KeyIdx* y = <const KeyIdx*>b
+    if x.key < y.key:
+        return -1
+    if x.key > y.key:
+        return 1
+    if x.idx < y.idx:
+        return -1
+    if x.idx > y.idx:
+        return 1
+    return 0
+
+
+cdef inline int _clamp_cell(float t, int hi) noexcept nogil:
+    """Cell index from a float, bounded for every float (NaN -> 0)."""
+    if not (t > 0):
+        return 0
+    if t >= hi:
+        return hi
+    return <int>t
+
+
+cdef inline int _clamp_signed(float t, int lim) noexcept nogil:
+    """Integer-valued float to int in [-lim, lim], for every float (NaN -> -lim)."""
+    if not (t > -lim):
+        return -lim
+    if t >= lim:
+        return lim
+    return <int>t
+
+
+# ---------------------------------------------------------------- k-d tree
+# Node arrays (n_nodes <= 2 n - 1):
+#   ni[5 * id + 0..4] = left, right (leaf point range), divfeat (-1 for a leaf),
+#                       child1, child2
+#   nf[2 * id + 0..1] = divlow, divhigh
+
+cdef int _build_tree(const float* p, int n, int32_t* vind, int32_t* ni, float* nf,
+                     int32_t* stk, float* sbox) noexcept nogil:
+    """FLANN 1.9 KDTreeSingleIndex::buildIndex (middleSplit, leaf size 15),
+    iteratively. Returns the number of nodes (the root is node 0)."""
+    cdef int i, d, n_nodes = 1, top = 0, node, left, right, count
+    cdef int cutfeat, k, lo_i, hi_i, lim1, lim2, idx, c1, c2, t
+    cdef float mn, mx, span, max_span, cutval, v
+    cdef float* box
+    for i in range(n):
+        vind[i] = i
+    # root box: exact bounds
+    box = sbox
+    for d in range(3):
+        box[d] = p[d]
+        box[3 + d] = p[d]
+    for i in range(1, n):
+        for d in range(3):
+            v = p[3 * i + d]
+            if v < box[d]:
+                box[d] = v
+            if v > box[3 + d]:
+                box[3 + d] = v
+    stk[0] = 0
+    stk[1] = 0
+    stk[2] = n
+    top = 1
+    while top > 0:
+        top -= 1
+        node = stk[3 * top]
+        left = stk[3 * top + 1]
+        right = stk[3 * top + 2]
+        box = sbox + 6 * top
+        count = right - left
+        if count <= LEAF_MAX:
+            ni[5 * node] = left
+            ni[5 * node + 1] = right
+            ni[5 * node + 2] = -1
+            ni[5 * node + 3] = -1
+            ni[5 * node + 4] = -1
+            continue
+        # middleSplit: largest side of the approximate box, refined by exact spreads
+        max_span = box[3] - box[0]
+        cutfeat = 0
+        for d in range(1, 3):
+            span = box[3 + d] - box[d]
+            if span > max_span:
+                max_span = span
+                cutfeat = d
+        mn = p[3 * vind[left] + cutfeat]
+        mx = mn
+        for i in range(left + 1, right):
+            v = p[3 * vind[i] + cutfeat]
+            if v < mn:
+                mn = v
+            if v > mx:
+                mx = v
+        cutval = (mn + mx) / <float>2.0
+        max_span = mx - mn
+        k = cutfeat
+        for d in range(3):
+            if d == k:
+                continue
+            span = box[3 + d] - box[d]
+            if span > max_span:
+                mn = p[3 * vind[left] + d]
+                mx = mn
+                for i in range(left + 1, right):
+                    v = p[3 * vind[i] + d]
+                    if v < mn:
+                        mn = v
+                    if v > mx:
+                        mx = v
+                span = mx - mn
+                if span > max_span:
+                    max_span = span
+                    cutfeat = d
+                    cutval = (mn + mx) / <float>2.0
+        # planeSplit: < cutval | == cutval | > cutval
+        lo_i = 0
+        hi_i = count - 1
+        while True:
+            while lo_i <= hi_i and p[3 * vind[left + lo_i] + cutfeat] < cutval:
+                lo_i += 1
+            while lo_i <= hi_i and p[3 * vind[left + hi_i] + cutfeat] >= cutval:
+                hi_i -= 1
+            if lo_i > hi_i:
+                break
+            t = vind[left + lo_i]
+            vind[left + lo_i] = vind[left + hi_i]
+            vind[left + hi_i] = t
+            lo_i += 1
+            hi_i -= 1
+        lim1 = lo_i
+        hi_i = count - 1
+        while True:
+            while lo_i <= hi_i and p[3 * vind[left + lo_i] + cutfeat] <= cutval:
+                lo_i += 1
+            while lo_i <= hi_i and p[3 * vind[left + hi_i] + cutfeat] > cutval:
+                hi_i -= 1
+            if lo_i > hi_i:
+                break
+            t = vind[left + lo_i]
+            vind[left + lo_i] = vind[left + hi_i]
+            vind[left + hi_i] = t
+            lo_i += 1
+            hi_i -= 1
+        lim2 = lo_i
+        if lim1 > count // 2:
+            idx = lim1
+        elif lim2 < count // 2:
+            idx = lim2
+        else:
+            idx = count // 2
+        c1 = n_nodes
+        c2 = n_nodes + 1
+        n_nodes += 2
+        ni[5 * node] = left
+        ni[5 * node + 1] = right
+        ni[5 * node + 2] = cutfeat
+        ni[5 * node + 3] = c1
+        ni[5 * node + 4] = c2
+        # divlow / divhigh: the children's exact bounds along cutfeat
+        mx = p[3 * vind[left] + cutfeat]
+        for i in range(left + 1, left + idx):
+            v = p[3 * vind[i] + cutfeat]
+            if v > mx:
+                mx = v
+        mn = p[3 * vind[left + idx] + cutfeat]
+        for i in range(left + idx + 1, right):
+            v = p[3 * vind[i] + cutfeat]
+            if v < mn:
+                mn = v
+        nf[2 * node] = mx
+        nf[2 * node + 1] = mn
+        # children's approximate boxes: the parent's with the cut applied;
+        # child2 pushed first (it reuses this slot), child1 on top
+        for d in range(6):
+            sbox[6 * (top + 1) + d] = box[d]
+        box[cutfeat] = cutval                       # slot top, child2: low = cutval
+        sbox[6 * (top + 1) + 3 + cutfeat] = cutval  # slot top + 1, child1: high = cutval
+        stk[3 * top] = c2
+        stk[3 * top + 1] = left + idx
+        stk[3 * top + 2] = right
+        stk[3 * (top + 1)] = c1
+        stk[3 * (top + 1) + 1] = left
+        stk[3 * (top + 1) + 2] = left + idx
+        top += 2
+    return n_nodes
+
+
+cdef int _radius_search(const float* p, const float* q, float r2, const int32_t* vind,
+                        const int32_t* ni, const float* nf, const float* root_box,
+                        int32_t* sn, float* sf, int32_t* hits, float* hd2) noexcept nogil:
+    """FLANN's exact radius search (squared distance < r2, single precision),
+    hits in the tree's depth-first order, best child first. Returns the count."""
+    cdef int top = 0, node, i, j, feat, n_hits = 0, best, other
+    cdef float mind, d0, d1, d2, dist, diff, val, diff1, diff2, cut, dst, nm
+    cdef float* ent
+    # initial distances to the root box
+    sf[0] = 0.0
+    for j in range(3):
+        sf[1 + j] = 0.0
+        if q[j] < root_box[j]:
+            diff = q[j] - root_box[j]
+            sf[1 + j] = diff * diff
+            sf[0] = sf[0] + sf[1 + j]
+        if q[j] > root_box[3 + j]:
+            diff = q[j] - root_box[3 + j]
+            sf[1 + j] = diff * diff
+            sf[0] = sf[0] + sf[1 + j]
+    sn[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        node = sn[top]
+        ent = sf + 4 * top
+        feat = ni[5 * node + 2]
+        if feat < 0:
+            for i in range(ni[5 * node], ni[5 * node + 1]):
+                j = vind[i]
+                diff = q[0] - p[3 * j]
+                dist = diff * diff
+                diff = q[1] - p[3 * j + 1]
+                dist = dist + diff * diff
+                diff = q[2] - p[3 * j + 2]
+                dist = dist + diff * diff
+                if dist < r2:
+                    hits[n_hits] = j
+                    hd2[n_hits] = dist
+                    n_hits += 1
+            continue
+        val = q[feat]
+        diff1 = val - nf[2 * node]
+        diff2 = val - nf[2 * node + 1]
+        if diff1 + diff2 < 0:
+            best = ni[5 * node + 3]
+            other = ni[5 * node + 4]
+            diff = val - nf[2 * node + 1]
+        else:
+            best = ni[5 * node + 4]
+            other = ni[5 * node + 3]
+            diff = val - nf[2 * node]
+        cut = diff * diff
+        mind = ent[0]
+        d0 = ent[1]
+        d1 = ent[2]
+        d2 = ent[3]
+        dst = ent[1 + feat]
+        nm = mind + cut - dst
+        # the other child goes below the best one (visited after its subtree)
+        if nm <= r2:
+            sn[top] = other
+            sf[4 * top] = nm
+            sf[4 * top + 1] = d0
+            sf[4 * top + 2] = d1
+            sf[4 * top + 3] = d2
+            sf[4 * top + 1 + feat] = cut
+            top += 1
+        sn[top] = best
+        sf[4 * top] = mind
+        sf[4 * top + 1] = d0
+        sf[4 * top + 2] = d1
+        sf[4 * top + 3] = d2
+        top += 1
+    return n_hits
+
+
+# --------------------------------------------------------------- RSD class
+
+cdef int _rsd_class(const float* nrm, const int32_t* hits, const float* hd2, int n_hits,
+                    double max_dist, int nsub, double plane_radius, const double* thr,
+                    double* amin, double* amax) noexcept nogil:
+    """PCL's computeRSD (distance-sorted variant) then getSimpleType."""
+    cdef int i, b, ref
+    cdef float c32, rmin, rmax, tmp
+    cdef double c, a, dist, f, aa = 0.0, ad = 0.0, bb = 0.0, bd = 0.0, t
+    cdef double half_pi = 1.5707963267948966
+    if n_hits < 2:
+        rmin = 0.0
+        rmax = 0.0
+    else:
+        for b in range(nsub):
+            amin[b] = 1.7976931348623157e308
+            amax[b] = -1.7976931348623157e308
+        amin[0] = 0.0
+        amax[0] = 0.0
+        ref = hits[0]
+        for i in range(1, n_hits):
+            c32 = nrm[3 * hits[i]] * nrm[3 * ref] + nrm[3 * hits[i] + 1] * nrm[3 * ref + 1]
+            c32 = c32 + nrm[3 * hits[i] + 2] * nrm[3 * ref + 2]
+            c = c32
+            if c > 1:
+                c = 1
+            if c < -1:
+                c = -1
+            a = acos(c)
+            if a > half_pi:
+                a = 3.141592653589793 - a
+            dist = sqrt(<double>hd2[i])
+            if dist > max_dist:
+                continue
+            t = floor(nsub * dist / max_dist)
+            if not (t > 0):
+                b = 0
+            elif t >= nsub:
+                b = nsub - 1
+            else:
+                b = <int>t
+            if a < amin[b]:
+                amin[b] = a
+            if a > amax[b]:
+                amax[b] = a
+        for b in range(nsub):
+            if amax[b] >= 0:
+                f = (b + 0.5) * max_dist / nsub
+                aa = aa + amin[b] * amin[b]
+                ad = ad + amin[b] * f
+                bb = bb + amax[b] * amax[b]
+                bd = bd + amax[b] * f
+        if aa == 0.0:
+            rmin = <float>plane_radius
+        else:
+            rmin = <float>(ad / aa if ad / aa < plane_radius else plane_radius)
+        if bb == 0.0:
+            rmax = <float>plane_radius
+        else:
+            rmax = <float>(bd / bb if bd / bb < plane_radius else plane_radius)
+        rmin = rmin * <float>1.1
+        rmax = rmax * <float>0.9
+        if not (rmin < rmax):
+            tmp = rmin
+            rmin = rmax
+            rmax = tmp
+    # thr = min_radius_plane, max_radius_noise, min_radius_cylinder, max_min_radius_diff
+    if rmin > thr[0]:
+        return 1
+    if rmax > thr[2]:
+        return 2
+    if rmin < thr[1]:
+        return 0
+    if <float>(rmax - rmin) < thr[3]:
+        return 3
+    return 4
+
+
+cdef int64_t _find(const int64_t* keys, int64_t n, int64_t key) noexcept nogil:
+    cdef int64_t lo = 0, hi = n - 1, mid
+    while lo <= hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < key:
+            lo = mid + 1
+        elif keys[mid] > key:
+            hi = mid - 1
+        else:
+            return mid
+    return -1
+
+
+cdef int _grsd_object(const float* p, const float* nrm, int n, float width, double max_dist,
+                      int nsub, double plane_radius, const double* thr,
+                      KeyIdx* ki, int64_t* ukeys, int32_t* vijk, float* cent, int8_t* types,
+                      int32_t* vind, int32_t* ni, float* nf, int32_t* stk, float* sbox,
+                      int32_t* hits, float* hd2, double* work, double* out) noexcept nogil:
+    """One object's 21 transition counts into out; voxel classes into types.
+    Returns the number of occupied voxels."""
+    cdef int i, d, v, n_vox, start, cnt, dx, dy, dz, t, n_hits
+    cdef int64_t key, nk
+    cdef float inv = (<float>1.0) / width
+    cdef float mins[3]
+    cdef float maxs[3]
+    cdef int minb[3]
+    cdef int dims[3]
+    cdef int cell[3]
+    cdef float sx, sy, sz, fc, r2
+    cdef float root_box[6]
+    cdef int64_t T[N_CLASSES * N_CLASSES]
+    cdef int a, b, k
+    for d in range(3):
+        mins[d] = p[d]
+        maxs[d] = p[d]
+    for i in range(1, n):
+        for d in range(3):
+            if p[3 * i + d] < mins[d]:
+                mins[d] = p[3 * i + d]
+            if p[3 * i + d] > maxs[d]:
+                maxs[d] = p[3 * i + d]
+    for d in range(3):
+        root_box[d] = mins[d]
+        root_box[3 + d] = maxs[d]
+        # the caller checked that the grid has fewer than 2**31 cells
+        minb[d] = _clamp_signed(floorf(mins[d] * inv), 1 << 30)
+        dims[d] = _clamp_cell(floorf(maxs[d] * inv) - <float>minb[d], 1 << 30) + 1
+    for i in range(n):
+        for d in range(3):
+            cell[d] = _clamp_cell(floorf(p[3 * i + d] * inv) - <float>minb[d], dims[d] - 1)
+        ki[i].key = cell[0] + <int64_t>dims[0] * (cell[1] + <int64_t>dims[1] * cell[2])
+        ki[i].idx = i
+    qsort(ki, n, sizeof(KeyIdx), _cmp_keyidx)
+    # voxels: unique keys, centroids (float sums in point order, as PCL's VoxelGrid)
+    n_vox = 0
+    start = 0
+    while start < n:
+        key = ki[start].key
+        cnt = 0
+        sx = 0.0
+        sy = 0.0
+        sz = 0.0
+        while start + cnt < n and ki[start + cnt].key == key:
+            i = <int>ki[start + cnt].idx
+            sx = sx + p[3 * i]
+            sy = sy + p[3 * i + 1]
+            sz = sz + p[3 * i + 2]
+            cnt += 1
+        fc = <float>cnt
+        cent[3 * n_vox] = sx / fc
+        cent[3 * n_vox + 1] = sy / fc
+        cent[3 * n_vox + 2] = sz / fc
+        ukeys[n_vox] = key
+        vijk[3 * n_vox] = <int32_t>(key % dims[0])
+        vijk[3 * n_vox + 1] = <int32_t>((key // dims[0]) % dims[1])
+        vijk[3 * n_vox + 2] = <int32_t>(key // (<int64_t>dims[0] * dims[1]))
+        n_vox += 1
+        start += cnt
+    _build_tree(p, n, vind, ni, nf, stk, sbox)
+    r2 = <float>(max_dist * max_dist)
+    for v in range(n_vox):
+        n_hits = _radius_search(p, &cent[3 * v], r2, vind, ni, nf, root_box, stk,
+                                sbox, hits, hd2)
+        types[v] = <int8_t>_rsd_class(nrm, hits, hd2, n_hits, max_dist, nsub, plane_radius,
+                                      thr, work, work + MAX_SUBDIV)
+    memset(T, 0, sizeof(T))
+    for v in range(n_vox):
+        for dz in range(-1, 2):
+            for dy in range(-1, 2):
+                for dx in range(-1, 2):
+                    if dx == 0 and dy == 0 and dz == 0:
+                        continue
+                    cell[0] = vijk[3 * v] + dx
+                    cell[1] = vijk[3 * v + 1] + dy
+                    cell[2] = vijk[3 * v + 2] + dz
+                    t = N_CLASSES - 1
+                    if (cell[0] >= 0 and cell[0] < dims[0] and cell[1] >= 0 and cell[1] < dims[1]
+                            and cell[2] >= 0 and cell[2] < dims[2]):
+                        nk = _find(ukeys, n_vox, cell[0] + <int64_t>dims[0] * (cell[1] + <int64_t>dims[1] * cell[2]))
+                        if nk >= 0:
+                            t = types[nk]
+                    T[types[v] * N_CLASSES + t] += 1
+    k = 0
+    for a in range(N_CLASSES):
+        for b in range(a, N_CLASSES):
+            out[k] = <double>(T[a * N_CLASSES + b] + T[b * N_CLASSES + a])
+            k += 1
+    return n_vox
+
+
+def _check_arrays(points, normals, int n_subdivisions, thresholds):
+    """Shapes the kernel relies on (the transformer passes valid ones)."""
+    if points.shape[1] != 3 or normals.shape[0] != points.shape[0] or normals.shape[1] != 3:
+        raise ValueError("GRSD kernel: points and normals must both have shape (n, 3)")
+    if not 1 <= n_subdivisions <= MAX_SUBDIV:
+        raise ValueError(f"GRSD kernel: n_subdivisions must be in [1, {MAX_SUBDIV}]")
+    if thresholds.shape[0] != 4:
+        raise ValueError("GRSD kernel: 4 class thresholds are needed")
+    if points.shape[0] >= 2**30:
+        raise ValueError("GRSD kernel: at most 2**30 points per object")
+
+
+def _scratch(int num_threads, int64_t max_n):
+    m = max(int(max_n), 1)
+    n_nodes = 2 * m
+    return dict(
+        ki=np.empty((num_threads, 2 * m), dtype=np.int64),
+        ukeys=np.empty((num_threads, m), dtype=np.int64),
+        vijk=np.empty((num_threads, 3 * m), dtype=np.int32),
+        cent=np.empty((num_threads, 3 * m), dtype=np.float32),
+        types=np.empty((num_threads, m), dtype=np.int8),
+        vind=np.empty((num_threads, m), dtype=np.int32),
+        ni=np.empty((num_threads, 5 * n_nodes), dtype=np.int32),
+        nf=np.empty((num_threads, 2 * n_nodes), dtype=np.float32),
+        stk=np.empty((num_threads, 3 * n_nodes), dtype=np.int32),
+        sbox=np.empty((num_threads, 6 * n_nodes), dtype=np.float32),
+        hits=np.empty((num_threads, m), dtype=np.int32),
+        hd2=np.empty((num_threads, m), dtype=np.float32),
+        work=np.empty((num_threads, 2 * MAX_SUBDIV), dtype=np.float64),
+    )
+
+
+def grsd_batch(const float[:, ::1] points, const float[:, ::1] normals,
+               const int64_t[::1] offsets, double width, int n_subdivisions,
+               double plane_radius, const double[::1] thresholds, double[:, ::1] out,
+               int num_threads):
+    """Fill ``out`` (n_objects, 21) with GRSD transition counts.
+
+    ``points`` and ``normals`` are single precision, packed by ``offsets``;
+    objects have at least one point and a grid of fewer than 2**31 cells
+    (checked by the caller); ``n_subdivisions`` is in [1, 64].
+    """
+    cdef Py_ssize_t n_objects = offsets.shape[0] - 1
+    cdef Py_ssize_t k
+    cdef int64_t max_n = 0
+    cdef int tid
+    for k in range(n_objects):
+        if offsets[k + 1] - offsets[k] > max_n:
+            max_n = offsets[k + 1] - offsets[k]
+    s = _scratch(num_threads, max_n)
+    cdef int64_t[:, ::1] ki = s["ki"]
+    cdef int64_t[:, ::1] ukeys = s["ukeys"]
+    cdef int32_t[:, ::1] vijk = s["vijk"]
+    cdef float[:, ::1] cent = s["cent"]
+    cdef int8_t[:, ::1] types = s["types"]
+    cdef int32_t[:, ::1] vind = s["vind"]
+    cdef int32_t[:, ::1] ni = s["ni"]
+    cdef float[:, ::1] nf = s["nf"]
+    cdef int32_t[:, ::1] stk = s["stk"]
+    cdef float[:, ::1] sbox = s["sbox"]
+    cdef int32_t[:, ::1] hits = s["hits"]
+    cdef float[:, ::1] hd2 = s["hd2"]
+    cdef double[:, ::1] work = s["work"]
+    cdef float w = <float>width
+    _check_arrays(points, normals, n_subdivisions, thresholds)
+    if offsets.shape[0] < 1 or out.shape[0] != n_objects or out.shape[1] != N_BINS:
+        raise ValueError("grsd_batch: out must have shape (n_objects, 21)")
+    if n_objects == 0:
+        return
+    if offsets[0] != 0 or offsets[n_objects] != points.shape[0]:
+        raise ValueError("grsd_batch: offsets must run from 0 to len(points)")
+    for k in range(n_objects):
+        if offsets[k + 1] - offsets[k] < 1:
+            raise ValueError("grsd_batch: every object needs at least one point")
+    for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
+        tid = threadid()
+        _grsd_object(&points[offsets[k], 0], &normals[offsets[k], 0],
+                     <int>(offsets[k + 1] - offsets[k]), w, width, n_subdivisions, plane_radius,
+                     &thresholds[0], <KeyIdx*>&ki[tid, 0], &ukeys[tid, 0], &vijk[tid, 0],
+                     &cent[tid, 0], &types[tid, 0], &vind[tid, 0], &ni[tid, 0], &nf[tid, 0],
+                     &stk[tid, 0], &sbox[tid, 0], &hits[tid, 0], &hd2[tid, 0], &work[tid, 0],
+                     &out[k, 0])
+
+
+def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double width,
+                int n_subdivisions, double plane_radius, const double[::1] thresholds):
+    """Test hook: one object's (voxel cells (V, 3), centroids (V, 3), classes (V,),
+    counts (21,)), voxels in key order (x fastest)."""
+    cdef int64_t n = points.shape[0]
+    _check_arrays(points, normals, n_subdivisions, thresholds)
+    if n < 1:
+        raise ValueError("grsd_voxels: at least one point is needed")
+    s = _scratch(1, n)
+    cdef int64_t[:, ::1] ki = s["ki"]
+    cdef int64_t[:, ::1] ukeys = s["ukeys"]
+    cdef int32_t[:, ::1] vijk = s["vijk"]
+    cdef float[:, ::1] cent = s["cent"]
+    cdef int8_t[:, ::1] types = s["types"]
+    cdef int32_t[:, ::1] vind = s["vind"]
+    cdef int32_t[:, ::1] ni = s["ni"]
+    cdef float[:, ::1] nf = s["nf"]
+    cdef int32_t[:, ::1] stk = s["stk"]
+    cdef float[:, ::1] sbox = s["sbox"]
+    cdef int32_t[:, ::1] hits = s["hits"]
+    cdef float[:, ::1] hd2 = s["hd2"]
+    cdef double[:, ::1] work = s["work"]
+    counts = np.zeros(N_BINS, dtype=np.float64)
+    cdef double[::1] cv = counts
+    cdef int n_vox
+    with nogil:
+        n_vox = _grsd_object(&points[0, 0], &normals[0, 0], <int>n, <float>width, width,
+                             n_subdivisions, plane_radius, &thresholds[0], <KeyIdx*>&ki[0, 0],
+                             &ukeys[0, 0], &vijk[0, 0], &cent[0, 0], &types[0, 0], &vind[0, 0],
+                             &ni[0, 0], &nf[0, 0], &stk[0, 0], &sbox[0, 0], &hits[0, 0],
+                             &hd2[0, 0], &work[0, 0], &cv[0])
+    return (np.asarray(s["vijk"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
+            np.asarray(s["cent"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
+            np.asarray(s["types"][0, :n_vox]).copy(), counts)
+
+
+def radius_neighbors_flann(const float[:, ::1] points, double radius):
+    """Every point's neighbours in the order PCL's unsorted radius search gives.
+
+    Neighbours are the points whose single-precision squared distance is
+    below ``float(radius**2)`` (the point itself included), listed in the
+    depth-first order of FLANN's single k-d tree, as PCL's
+    ``search::KdTree(false)`` returns them. Returns ``(indices, offsets)``:
+    point ``i``'s neighbours are ``indices[offsets[i]:offsets[i + 1]]``.
+    """
+    cdef int64_t n = points.shape[0], i, total = 0, m
+    cdef int d
+    if points.shape[1] != 3:
+        raise ValueError("radius_neighbors_flann: points must have shape (n, 3)")
+    if n >= 2**30:
+        raise ValueError("radius_neighbors_flann: at most 2**30 points")
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    if n == 0:
+        return np.zeros(0, dtype=np.int32), offsets
+    s = _scratch(1, n)
+    cdef int32_t[::1] vind = s["vind"][0]
+    cdef int32_t[::1] ni = s["ni"][0]
+    cdef float[::1] nf = s["nf"][0]
+    cdef int32_t[::1] stk = s["stk"][0]
+    cdef float[::1] sbox = s["sbox"][0]
+    cdef int32_t[::1] hits = s["hits"][0]
+    cdef float[::1] hd2 = s["hd2"][0]
+    cdef int64_t[::1] off = offsets
+    cdef float root_box[6]
+    cdef float r2 = <float>(radius * radius)
+    cdef const float* p = &points[0, 0]
+    with nogil:
+        for d in range(3):
+            root_box[d] = p[d]
+            root_box[3 + d] = p[d]
+        for i in range(1, n):
+            for d in range(3):
+                if p[3 * i + d] < root_box[d]:
+                    root_box[d] = p[3 * i + d]
+                if p[3 * i + d] > root_box[3 + d]:
+                    root_box[3 + d] = p[3 * i + d]
+        _build_tree(p, <int>n, &vind[0], &ni[0], &nf[0], &stk[0], &sbox[0])
+        for i in range(n):
+            m = _radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
+                               &hits[0], &hd2[0])
+            total += m
+            off[i + 1] = total
+    indices = np.empty(total, dtype=np.int32)
+    cdef int32_t[::1] idx = indices
+    with nogil:
+        for i in range(n):
+            m = _radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
+                               &hits[0], &hd2[0])
+            for d in range(<int>m):
+                idx[off[i] + d] = hits[d]
+    return indices, offsets
