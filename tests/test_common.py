@@ -19,6 +19,7 @@ Every check takes an unfitted estimator and fits its own clones, so the checks
 are independent of each other and of their order.
 """
 
+import copy
 import inspect
 import pickle
 import re
@@ -391,9 +392,9 @@ def check_output_dtype_and_shape(est):
     X, y = _data(est)
     copies = [np.array(c, copy=True) for c in X]
     fitted = _fit(clone(est), X, y)
-    for a, b in zip(X, copies):
-        assert_array_equal(a, b)  # the input is not modified
     out = _output(fitted, X)
+    for a, b in zip(X, copies):
+        assert_array_equal(a, b)  # neither fit nor transform/predict modifies the input
     if is_classifier(est):
         assert_array_equal(fitted.classes_, np.unique(y))
         assert isinstance(out, np.ndarray) and out.shape == (len(X), len(fitted.classes_))
@@ -536,3 +537,72 @@ def test_sklearn_checks_cover_descriptor_matrix_classifiers():
         est = _tiny(spec.estimator_class(), **spec.fixed)
         if spec.input == "descriptors" and "n_bins" not in est.get_params():
             assert type(est).__name__ in FULL_CHECKS, spec.name
+
+
+# ------------------------------------------------- the checks catch mistakes
+# Broken variants of one transformer: each check that guards the rule broken must fail.
+
+from eppf.descriptors import ESFTransformer  # noqa: E402
+
+
+class _ConvertsInInit(ESFTransformer):
+    def __init__(self, n_triplets=300, grid_size=64, n_bins=64, random_state=0, n_jobs=None):
+        super().__init__(copy.copy(n_triplets), grid_size, n_bins, random_state, n_jobs)
+
+
+class _IgnoresSeed(ESFTransformer):
+    def transform(self, X):
+        return super().transform(X) + np.random.uniform(0, 1e-12)
+
+
+class _NoFitCheck(ESFTransformer):
+    def transform(self, X):
+        if not hasattr(self, "n_features_out_"):
+            self.fit(X)
+        return super().transform(X)
+
+
+class _SetsNFeaturesIn(ESFTransformer):
+    def fit(self, X, y=None):
+        self.n_features_in_ = 3
+        return super().fit(X, y)
+
+
+class _ShortNames(ESFTransformer):
+    def get_feature_names_out(self, input_features=None):
+        return super().get_feature_names_out()[:-1]
+
+
+class _AnonymousErrors(ESFTransformer):
+    def transform(self, X):
+        try:
+            return super().transform(X)
+        except ValueError as exc:
+            raise ValueError(str(exc).split(": ", 1)[1]) from None
+
+
+class _ModifiesInput(ESFTransformer):
+    def fit(self, X, y=None):
+        super().fit(X, y)
+        X[0][0, 0] += 1.0
+        return self
+
+
+@pytest.mark.parametrize(
+    "broken, check",
+    [
+        (_ConvertsInInit(), check_init_stores_params_unchanged),
+        (_IgnoresSeed(n_triplets=300, random_state=0), check_deterministic_under_int_random_state),
+        (_IgnoresSeed(n_triplets=300, random_state=0), check_pickle_round_trip),
+        (_NoFitCheck(n_triplets=300, random_state=0), check_not_fitted),
+        (_SetsNFeaturesIn(n_triplets=300, random_state=0), check_no_n_features_in_for_point_clouds),
+        (_ShortNames(n_triplets=300, random_state=0), check_get_feature_names_out),
+        (_AnonymousErrors(n_triplets=300, random_state=0), check_rejects_bad_input),
+        (_ModifiesInput(n_triplets=300, random_state=0), check_output_dtype_and_shape),
+    ],
+    ids=lambda v: type(v).__name__.strip("_") if isinstance(v, BaseEstimator) else v.__name__,
+)
+def test_checks_fail_on_broken_estimators(broken, check):
+    with pytest.raises((AssertionError, pytest.fail.Exception)):
+        check(broken)
+    check(ESFTransformer(n_triplets=300, random_state=0))  # the unbroken one passes
