@@ -47,6 +47,23 @@ def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose
     Returns
     -------
     X : ndarray of shape (len(clouds), n_features)
+        The tasks' rows, in the order of ``clouds``.
+
+    See Also
+    --------
+    object_seeds : Per-object seeds drawn before chunking.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import transform_in_chunks
+    >>> def centroid(est, chunk, first_index):
+    ...     return np.array([c.mean(axis=0) for c in chunk])
+    >>> clouds = [np.full((4, 3), float(k)) for k in range(3)]
+    >>> transform_in_chunks(centroid, None, clouds, n_features=3)
+    array([[0., 0., 0.],
+           [1., 1., 1.],
+           [2., 2., 2.]])
     """
     n = len(clouds)
     bounds = list(range(0, n, CHUNK)) + [n]
