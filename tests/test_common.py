@@ -394,6 +394,13 @@ def check_deterministic_under_int_random_state(est):
         assert _differs(_output(_fit(other, X, y), X), first)
 
 
+def check_random_state_none_draws_afresh(est):
+    # random_state=None: every fit (and, for stateless transformers, every call) draws anew
+    X, y = _data(est)
+    unseeded = clone(est).set_params(**{k: None for k in _seed_params(est)})
+    assert _differs(_output(_fit(clone(unseeded), X, y), X), _output(_fit(clone(unseeded), X, y), X))
+
+
 def check_output_dtype_and_shape(est):
     X, y = _data(est)
     copies = [np.array(c, copy=True) for c in X]
@@ -484,6 +491,7 @@ API_CHECKS = [
     check_three_d_array_as_declared,
     check_fit_transform_equals_fit_then_transform,
     check_deterministic_under_int_random_state,
+    check_random_state_none_draws_afresh,
     check_output_dtype_and_shape,
     check_rejects_bad_input,
 ]
@@ -504,6 +512,7 @@ _APPLIES = {
     # point-cloud estimators should all take 3D arrays (check_input_tags), so all are tried
     check_three_d_array_as_declared: lambda est: get_tags(est).input_tags.three_d_array or _input_kind(est) == "points",
     check_fit_transform_equals_fit_then_transform: lambda est: hasattr(est, "transform"),
+    check_random_state_none_draws_afresh: lambda est: bool(_seed_params(est)),
 }
 
 
