@@ -80,6 +80,11 @@ def retrieval_scores(y_true, y_pred):
           with ``zero_division=0``). ``macro_f1`` is the mean of per-class
           F1 scores, not the harmonic mean of the two macro averages.
 
+    See Also
+    --------
+    leave_one_out_retrieval : The paper's retrieval protocol, scored with this.
+    repeated_retrieval : The scores over repeated descriptor draws.
+
     Notes
     -----
     Per-class accuracy is per-class recall, so ``mean_class_accuracy`` equals
@@ -169,6 +174,11 @@ def leave_one_out_retrieval(
     indices : ndarray of shape (n_samples,)
         Index of that neighbour; only returned if ``return_indices=True``.
 
+    See Also
+    --------
+    repeated_retrieval : The same over repeated descriptor draws.
+    eppf.neighbors.KLNearestNeighbors : The matcher, for queries outside the training set.
+
     Notes
     -----
     The distance matrix is symmetric, so only the blocks on and above its
@@ -208,16 +218,25 @@ def leave_one_out_retrieval(
 class RepeatedRetrievalResult:
     """Retrieval scores over repeated descriptor draws.
 
-    Attributes
+    Parameters
     ----------
     per_repeat : dict of str to ndarray of shape (n_repeats,)
-        Each metric of :func:`retrieval_scores`, one value per draw.
+        Each metric of :func:`retrieval_scores`, one value per draw (kept as
+        the attribute of the same name).
     seeds : ndarray of shape (n_repeats,)
-        The ``random_state`` given to the transformer for each draw.
+        The ``random_state`` given to the transformer for each draw (kept as
+        the attribute of the same name).
+
+    Attributes
+    ----------
     mean : dict of str to float
         Mean of each metric over the draws.
     std : dict of str to float
         Standard deviation of each metric over the draws (``ddof=0``).
+
+    See Also
+    --------
+    repeated_retrieval : Makes these results.
 
     Examples
     --------
@@ -301,13 +320,24 @@ def repeated_retrieval(
     random_state : int, RandomState instance or None, default=None
         Source of the per-draw seeds given to the transformer's
         ``random_state``; an int makes the whole experiment reproducible.
-    floor, renormalize, chunk_size, n_jobs
+    floor : "auto" or float, default="auto"
+        Passed to :func:`leave_one_out_retrieval`.
+    renormalize : bool, default=False
+        Passed to :func:`leave_one_out_retrieval`.
+    chunk_size : int, default=None
+        Passed to :func:`leave_one_out_retrieval`.
+    n_jobs : int, default=None
         Passed to :func:`leave_one_out_retrieval`.
 
     Returns
     -------
     result : RepeatedRetrievalResult
         Per-draw scores, their mean and std; ``print(result)`` shows a table.
+
+    See Also
+    --------
+    leave_one_out_retrieval : One draw.
+    RepeatedRetrievalResult : The result.
 
     Examples
     --------

@@ -223,7 +223,7 @@ def _check_fitted_4d(classifier, owner):
 
 
 def filter_responses(classifier, descriptor, *, layers=(0, 1)):
-    """Responses of the 4D convolution layers of a fitted classifier to one descriptor.
+    """Record the responses of the 4D convolution layers of a fitted classifier to one descriptor.
 
     Parameters
     ----------
@@ -239,6 +239,11 @@ def filter_responses(classifier, descriptor, *, layers=(0, 1)):
     responses : list of ndarray of shape (n_filters, n1, n2, n3, n4)
         One per entry of ``layers``: the layer's output after its ReLU, the
         input standardised as ``predict`` does, recorded by forward hooks.
+
+    See Also
+    --------
+    plot_filter_responses : Plot these responses.
+    plot_descriptor : Plot the input descriptor.
 
     Examples
     --------
@@ -451,6 +456,11 @@ def plot_confusion_matrix(
         If the lengths differ, ``normalize`` is unknown or the display names
         do not match the labels.
 
+    See Also
+    --------
+    eppf.metrics.retrieval_scores : Scores of the same labels.
+    plot_scores_bar : Per-method scores as bars.
+
     Examples
     --------
     >>> import matplotlib
@@ -544,6 +554,11 @@ def plot_noise_curve(sigmas, scores, *, ax=None, ylabel="total accuracy", xlabel
         If a method's scores do not have one row per noise level, or hold
         NaN.
 
+    See Also
+    --------
+    eppf.experiments.run_noise : The experiment that draws this curve.
+    plot_scores_bar : Scores at one noise level.
+
     Examples
     --------
     >>> import matplotlib
@@ -614,6 +629,11 @@ def plot_scores_bar(scores, *, ax=None, ylabel="F1", errors=None, sort=False):
     ValueError
         If ``scores`` is empty, a value is not a number or a pair, or
         ``errors`` names a key that is not in ``scores``.
+
+    See Also
+    --------
+    plot_noise_curve : Scores against the noise level.
+    eppf.metrics.retrieval_scores : Computes the scores.
 
     Examples
     --------
@@ -713,6 +733,11 @@ def plot_learning_curve(history_or_classifier, *, ax=None, keys=("train_loss", "
         If the classifier is not fitted.
     ValueError
         If the history is empty or none of ``keys`` is in it.
+
+    See Also
+    --------
+    eppf.classifiers.EPPF4DClassifier : Records its history in ``net_.history``.
+    eppf.classifiers.PointNetClassifier : Likewise.
 
     Examples
     --------

@@ -52,12 +52,19 @@ class DescriptorSpec:
     fixed : dict
         Parameters that define the entry (EPPF short's bins).
 
+    See Also
+    --------
+    make_descriptor : Build a registered descriptor by name.
+    ClassifierSpec : The same for classifiers.
+
     Examples
     --------
     >>> from eppf.registry import DESCRIPTORS
-    >>> spec = DESCRIPTORS["esf"]
+    >>> spec = DESCRIPTORS["eppf_short"]
     >>> spec.sampling, spec.metric, spec.deterministic
-    ('n_triplets', 'kl', False)
+    ('n_pairs', 'kl', False)
+    >>> spec.make(n_samples=1000, random_state=0)
+    EPPFTransformer(n_bins=(15, 3, 4, 3), n_pairs=1000, random_state=0)
     """
 
     name: str
@@ -70,22 +77,48 @@ class DescriptorSpec:
 
     @property
     def deterministic(self):
-        """True when one draw of the descriptor is all there is."""
+        """Whether one draw of the descriptor is all there is (no sampling parameter)."""
         return self.sampling is None
 
     def estimator_class(self):
-        """The transformer class (imported now)."""
+        """Import and return the transformer class.
+
+        Returns
+        -------
+        cls : type
+            The class named by ``cls``.
+        """
         import importlib
 
         module, name = self.cls.split(":")
         return getattr(importlib.import_module(module), name)
 
     def make(self, *, n_samples=None, scaling=None, random_state=None, n_jobs=None, **params):
-        """An unfitted transformer with the given settings.
+        """Build an unfitted transformer with the given settings.
 
-        ``n_samples`` goes to the sampling parameter (ignored for
-        deterministic descriptors), ``scaling`` only where ``data_scaling``;
-        other keyword arguments are passed through when the class has them.
+        Settings the class has no parameter for are dropped, so one set of
+        settings serves every descriptor.
+
+        Parameters
+        ----------
+        n_samples : int, default=None
+            Value of the sampling parameter (pairs or triplets per object);
+            ignored for deterministic descriptors. None keeps the default.
+        scaling : str, default=None
+            EPPF's ``scaling``, passed only where ``data_scaling``. None
+            keeps the default.
+        random_state : int, RandomState instance or None, default=None
+            Seed, passed to descriptors that draw samples.
+        n_jobs : int, default=None
+            Threads (joblib's meaning).
+        **params
+            Any other parameter of the class; parameters in ``fixed`` cannot
+            be overridden.
+
+        Returns
+        -------
+        transformer : estimator
+            The unfitted transformer.
         """
         cls = self.estimator_class()
         accepted = cls().get_params(deep=False)
@@ -118,11 +151,18 @@ class ClassifierSpec:
     fixed : dict
         Parameters that define the entry (the network variant).
 
+    See Also
+    --------
+    DescriptorSpec : The same for descriptors.
+
     Examples
     --------
     >>> from eppf.registry import CLASSIFIERS
-    >>> CLASSIFIERS["4d"].fixed, CLASSIFIERS["pointnet"].input
-    ({'conv': '4d'}, 'points')
+    >>> spec = CLASSIFIERS["3d"]
+    >>> spec.input, spec.fixed
+    ('descriptors', {'conv': '3d'})
+    >>> spec.estimator_class().__name__
+    'EPPF4DClassifier'
     """
 
     name: str
@@ -132,7 +172,13 @@ class ClassifierSpec:
     fixed: dict = field(default_factory=dict)
 
     def estimator_class(self):
-        """The classifier class (imported now)."""
+        """Import and return the classifier class.
+
+        Returns
+        -------
+        cls : type
+            The class named by ``cls``.
+        """
         import importlib
 
         module, name = self.cls.split(":")
@@ -194,11 +240,15 @@ def make_descriptor(name, **settings):
     ValueError
         If ``name`` is not registered.
 
+    See Also
+    --------
+    DescriptorSpec.make : What the settings mean.
+
     Examples
     --------
     >>> from eppf.registry import make_descriptor
-    >>> make_descriptor("eppf_short", n_samples=1000, random_state=0).n_bins
-    (15, 3, 4, 3)
+    >>> make_descriptor("wahl", n_samples=2000, scaling="object", random_state=1)
+    WahlTransformer(n_pairs=2000, random_state=1)
     """
     try:
         spec = DESCRIPTORS[name]

@@ -118,10 +118,3 @@ def test_random_state_none_warns(tmp_path):
 def test_errors(transformer, memory, exc, msg):
     with pytest.raises(exc, match=re.escape(msg)):
         CachedTransformer(transformer, memory=memory).fit(_clouds(0))
-
-
-def test_transform_before_fit():
-    from sklearn.exceptions import NotFittedError
-
-    with pytest.raises(NotFittedError):
-        CachedTransformer(_Histogram()).transform(_clouds(0))

@@ -9,7 +9,6 @@ from numpy.testing import assert_allclose, assert_array_equal
 from sklearn.model_selection import GridSearchCV, StratifiedKFold, cross_val_score
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import Normalizer
-from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from eppf import KLNearestNeighbors, symmetric_kl_distances
 
@@ -167,15 +166,7 @@ def test_distances_errors(kwargs, err, msg):
 # ------------------------------------------------------------- the estimator
 
 
-@parametrize_with_checks(
-    [
-        KLNearestNeighbors(),
-        KLNearestNeighbors(n_neighbors=3, weights="distance", chunk_size=7),
-        KLNearestNeighbors(floor=1e-3, renormalize=True),
-    ]
-)
-def test_sklearn_compatible(estimator, check):
-    check(estimator)
+# scikit-learn's estimator checks for KLNearestNeighbors are in test_common.py.
 
 
 def test_tags():

@@ -37,6 +37,11 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
     transformer_ : estimator
         The fitted clone of ``transformer``.
 
+    See Also
+    --------
+    eppf.descriptors.EPPFTransformer : A descriptor worth caching.
+    eppf.descriptors.descriptor_pool : Several draws of a descriptor per object.
+
     Notes
     -----
     Only cache transformers with a fixed ``random_state``: with

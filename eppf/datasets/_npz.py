@@ -41,6 +41,11 @@ def load_npz(path, *, return_X_y=False):
     ValueError
         If the file is not a readable ``.npz`` or its arrays are inconsistent.
 
+    See Also
+    --------
+    make_shapes : The built-in synthetic data set, in the same layout.
+    load_folder : Point clouds from a folder of files.
+
     Examples
     --------
     Two objects of 3 and 2 points, one per class:

@@ -47,6 +47,11 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
         :meth:`eppf.classifiers.EPPF4DClassifier.fit` (a fresh draw per object every
         epoch) or to ``predict_proba`` (probabilities averaged over draws).
 
+    See Also
+    --------
+    eppf.classifiers.EPPF4DClassifier : Trains on descriptor pools.
+    eppf.nn.DescriptorPoolDataset : Draws one descriptor per object and epoch.
+
     Examples
     --------
     >>> import numpy as np

@@ -80,6 +80,11 @@ def run_ablation(
         ``"rows"`` (as in the CSV), ``"scores"`` (label -> metric -> per-draw
         array), ``"paths"``, ``"cache"``.
 
+    See Also
+    --------
+    run_retrieval : The same protocol over all descriptors.
+    eppf.descriptors.EPPFTransformer : Its ``functions`` parameter removes a function.
+
     Examples
     --------
     >>> import tempfile

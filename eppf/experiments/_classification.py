@@ -233,6 +233,11 @@ def run_classification(
     result : dict
         ``"rows"`` (as in the CSV), ``"paths"``, ``"cache"``.
 
+    See Also
+    --------
+    run_noise : The same models as noise grows.
+    run_retrieval : Retrieval without training.
+
     Examples
     --------
     The 4D network for one epoch and the KL 1-NN on the quick built-in set:

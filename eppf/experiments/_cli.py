@@ -103,6 +103,14 @@ def main(argv=None):
         0 on success, 2 on a bad argument or input (with a one-line message
         on stderr).
 
+    See Also
+    --------
+    run_retrieval : Table II.
+    run_classification : Table III.
+    run_ablation : EPPF without each function.
+    run_noise : Accuracy against noise.
+    run_runtime : Descriptor timings.
+
     Examples
     --------
     >>> import tempfile

@@ -35,6 +35,10 @@ class ExperimentError(ValueError):
     A subclass of :class:`ValueError`; the command line prints its message
     as one line and exits with status 2.
 
+    See Also
+    --------
+    main : The command line that reports these errors.
+
     Examples
     --------
     >>> from eppf.experiments import ExperimentError, load_data
@@ -78,7 +82,9 @@ class Logger:
 class Dataset:
     """Point clouds of one data set, ready for the experiments.
 
-    Attributes
+    Every parameter is kept as the attribute of the same name.
+
+    Parameters
     ----------
     name : str
         Short name (``"builtin"`` or the file's stem); names output folders.
@@ -96,6 +102,20 @@ class Dataset:
         How the split was made.
     default_scaling : str
         EPPF ``scaling`` used when the experiment is given ``scaling="auto"``.
+    _hashes : dict, default={}
+        Hashes of the clouds, filled in on first use by the descriptor
+        cache; not meant to be passed.
+
+    Attributes
+    ----------
+    train : ndarray of int
+        Indices of the training objects.
+    test : ndarray of int
+        Indices of the test objects.
+
+    See Also
+    --------
+    load_data : Load a data set by name or path.
 
     Examples
     --------
@@ -128,7 +148,13 @@ class Dataset:
         return np.flatnonzero(self.split == "test")
 
     def summary(self):
-        """Markdown lines describing the data set."""
+        """Describe the data set in Markdown.
+
+        Returns
+        -------
+        lines : list of str
+            Bullet lines: source, objects and split, classes, points per object.
+        """
         sizes = np.array([len(c) for c in self.clouds])
         counts = np.bincount(self.y, minlength=len(self.target_names))
         per_class = ", ".join(f"{n} {c}" for n, c in zip(self.target_names, counts))
@@ -187,6 +213,11 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
     ------
     ExperimentError
         If the file or folder does not exist or cannot be read.
+
+    See Also
+    --------
+    Dataset : What is returned.
+    eppf.datasets.load_npz : The ``.npz`` layout read here.
 
     Examples
     --------

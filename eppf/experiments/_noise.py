@@ -90,7 +90,21 @@ def run_noise(
         ``quick``) when None.
     models : list of str, default=None
         Keys of the classification models; None runs ``4d pointnet kl``.
-    epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, precision, train_per_class, test_per_class
+    epochs : int, default=None
+        As in :func:`run_classification`.
+    pointnet_epochs : int, default=None
+        As in :func:`run_classification`.
+    pointnet_points : int, default=None
+        As in :func:`run_classification`.
+    validation_fraction : float, default=0.1
+        As in :func:`run_classification`.
+    patience : int, default=None
+        As in :func:`run_classification`.
+    precision : {"float32", "bfloat16"}, default="float32"
+        As in :func:`run_classification`.
+    train_per_class : int, default=None
+        As in :func:`run_classification`.
+    test_per_class : int, default=None
         As in :func:`run_classification`.
     scaling : {"auto", "fit", "object", "none"}, default="auto"
         EPPF scaling.
@@ -113,6 +127,11 @@ def run_noise(
         ``"rows"`` (one per level and model, as in the CSV), ``"drops"``
         (model -> total-accuracy drop from the lowest level to
         ``REPORTED_LEVEL`` when both were run), ``"paths"``, ``"cache"``.
+
+    See Also
+    --------
+    run_classification : The same models without noise.
+    eppf.preprocessing.GaussianNoise : The noise added.
 
     Examples
     --------

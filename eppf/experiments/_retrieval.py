@@ -108,6 +108,11 @@ def run_retrieval(
         ``"rows"`` (one dict per descriptor, as in the CSV), ``"scores"``
         (descriptor -> metric -> per-draw array), ``"paths"``, ``"cache"``.
 
+    See Also
+    --------
+    eppf.metrics.repeated_retrieval : The protocol for one descriptor.
+    run_ablation : EPPF with each function removed.
+
     Examples
     --------
     >>> import os, tempfile

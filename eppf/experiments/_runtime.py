@@ -60,7 +60,7 @@ def run_runtime(
     verbose=True,
     command=None,
 ):
-    """Milliseconds per object of every descriptor and of normal estimation.
+    """Time every descriptor and normal estimation, in milliseconds per object.
 
     ``n_objects`` objects spread evenly over the data set are described at
     their own point counts, on one thread and on ``n_jobs`` threads. Normals
@@ -97,6 +97,10 @@ def run_runtime(
     -------
     result : dict
         ``"rows"`` (as in the CSV) and ``"paths"``.
+
+    See Also
+    --------
+    run_retrieval : The descriptors timed here, scored.
 
     Examples
     --------

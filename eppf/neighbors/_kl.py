@@ -190,7 +190,7 @@ def _validate_histograms(X, owner, name):
 
 
 def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_size=None, n_jobs=None):
-    """All-pairs symmetric Kullback-Leibler divergence between histograms.
+    """Compute the symmetric Kullback-Leibler divergence between all pairs of histograms.
 
     Parameters
     ----------
@@ -369,7 +369,7 @@ def _loo_nearest(P, block=None):
 
 
 class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
-    """k-nearest-neighbour classifier on histograms with symmetric KL divergence.
+    """Nearest-neighbour classifier on histograms with symmetric KL divergence.
 
     The paper's retrieval matcher: descriptors are compared with the
     symmetric Kullback-Leibler divergence after raising empty bins to a

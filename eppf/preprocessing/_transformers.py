@@ -208,6 +208,11 @@ class RandomRotation(_CloudTransformer):
     random_state : int, RandomState instance or None, default=None
         Seed of the rotations.
 
+    See Also
+    --------
+    RandomScaling : Random stretches along the axes.
+    GaussianNoise : Noise on the coordinates.
+
     Examples
     --------
     >>> import numpy as np
@@ -300,6 +305,11 @@ class Resampler(_CloudTransformer):
         Points per output cloud, >= 2 (the paper feeds PointNet 2,048).
     random_state : int, RandomState instance or None, default=None
         Seed of the draw.
+
+    See Also
+    --------
+    RandomDropout : Remove a share of the points.
+    sample_mesh : Sample points from the surface of a mesh.
 
     Examples
     --------

@@ -83,15 +83,23 @@ def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose
     Returns
     -------
     X : ndarray of shape (len(clouds), n_features)
+        The tasks' rows, in the order of ``clouds``.
+
+    See Also
+    --------
+    object_seeds : Per-object seeds drawn before chunking.
 
     Examples
     --------
     >>> import numpy as np
     >>> from eppf.utils import transform_in_chunks
-    >>> def sizes(est, clouds, first_index):
-    ...     return np.array([[len(c)] for c in clouds], dtype=float)
-    >>> transform_in_chunks(sizes, None, [np.zeros((n, 3)) for n in (2, 5)], n_features=1).ravel()
-    array([2., 5.])
+    >>> def centroid(est, chunk, first_index):
+    ...     return np.array([c.mean(axis=0) for c in chunk])
+    >>> clouds = [np.full((4, 3), float(k)) for k in range(3)]
+    >>> transform_in_chunks(centroid, None, clouds, n_features=3)
+    array([[0., 0., 0.],
+           [1., 1., 1.],
+           [2., 2., 2.]])
     """
     n = len(clouds)
     chunks = _chunk_bounds(clouds, CHUNK, CHUNK_POINTS * _n_threads(est))

@@ -123,6 +123,11 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
         zero total area, or both or neither of ``n_points`` and
         ``resolution`` are given.
 
+    See Also
+    --------
+    eppf.io.read_mesh : Read a mesh from a file.
+    Resampler : Draw a fixed number of points from clouds.
+
     Notes
     -----
     A point inside triangle (a, b, c) is
