@@ -163,7 +163,10 @@ def leave_one_out_retrieval(
         (memory: two blocks of ``chunk_size**2`` floats besides the floored
         histograms and their logarithms). ``None`` means 1024.
     n_jobs : int, default=None
-        Threads for the BLAS matrix products (``None`` leaves them as they are).
+        Threads over blocks of distances (joblib's meaning; ``None``
+        is the OpenMP default, see :func:`eppf.utils.check_n_jobs`). Each
+        block's matrix products run on one BLAS thread, so the result is
+        bit-identical for any value.
     return_indices : bool, default=False
         Whether to return the index of each query's nearest neighbour too.
 
@@ -208,8 +211,8 @@ def leave_one_out_retrieval(
     if floor == "auto":
         floor = _learn_floor([X], owner)
     prepared = _prepare(X, floor, renormalize, owner)
-    with _blas_limits(n_jobs, owner):
-        indices, _ = _loo_nearest(prepared, chunk_size)
+    with _blas_limits(n_jobs, owner) as n_threads:
+        indices, _ = _loo_nearest(prepared, chunk_size, n_threads)
     y_pred = y[indices]
     return (y_pred, indices) if return_indices else y_pred
 

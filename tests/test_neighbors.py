@@ -387,3 +387,30 @@ def test_not_fitted(method):
 
     with pytest.raises(NotFittedError, match="KLNearestNeighbors instance is not fitted yet"):
         getattr(KLNearestNeighbors(), method)([[0.5, 0.5]])
+
+
+@pytest.mark.parametrize("blas_threads", [1, 2])
+@pytest.mark.parametrize("n_jobs", [1, 2, 3, None])
+def test_distances_bit_identical_for_any_thread_count(n_jobs, blas_threads):
+    # OpenBLAS rounds a product differently with 1 and 2 threads: the
+    # products run single-threaded over blocks whose shapes ignore n_jobs
+    from threadpoolctl import threadpool_limits
+
+    from eppf.metrics import leave_one_out_retrieval
+
+    rng = np.random.default_rng(0)
+    X = rng.dirichlet(np.full(300, 0.3), size=260)
+    Y = rng.dirichlet(np.full(300, 0.3), size=90)
+    y = rng.integers(0, 4, size=260)
+    with threadpool_limits(1, user_api="blas"):
+        ref_d = symmetric_kl_distances(X, Y, n_jobs=1, chunk_size=7)
+        ref_l = leave_one_out_retrieval(X, y, n_jobs=1, chunk_size=64, return_indices=True)[1]
+        ref_k = KLNearestNeighbors(n_neighbors=3, n_jobs=1, chunk_size=7).fit(X, y).kneighbors(Y)
+    with threadpool_limits(blas_threads, user_api="blas"):
+        d = symmetric_kl_distances(X, Y, n_jobs=n_jobs, chunk_size=7)
+        l = leave_one_out_retrieval(X, y, n_jobs=n_jobs, chunk_size=64, return_indices=True)[1]
+        k = KLNearestNeighbors(n_neighbors=3, n_jobs=n_jobs, chunk_size=7).fit(X, y).kneighbors(Y)
+    assert_array_equal(d, ref_d)
+    assert_array_equal(l, ref_l)
+    assert_array_equal(k[0], ref_k[0])
+    assert_array_equal(k[1], ref_k[1])

@@ -58,17 +58,55 @@ def _check_renormalize(renormalize, owner):
     return bool(renormalize)
 
 
-def _blas_limits(n_jobs, owner):
-    """Context manager limiting BLAS threads to ``n_jobs`` (no-op for None)."""
-    from contextlib import nullcontext
+class _blas_limits:
+    """Context for the distance computations: every matrix product single-threaded.
 
-    if n_jobs is None:
-        return nullcontext()
-    from threadpoolctl import threadpool_limits
+    OpenBLAS rounds a product differently depending on its thread count (and
+    on the shape of the operands), so the products run on one BLAS thread
+    each, over row blocks whose shapes never depend on ``n_jobs``; the
+    blocks themselves are spread over ``n_jobs`` threads (joblib's meaning)
+    by :func:`_ordered_map`. Distances are therefore bit-identical for any
+    thread count. Entering the context gives the number of threads.
+    """
 
-    from ..utils._validation import check_n_jobs
+    def __init__(self, n_jobs, owner):
+        from ..utils._validation import check_n_jobs
 
-    return threadpool_limits(limits=check_n_jobs(n_jobs, owner=owner), user_api="blas")
+        self.n_threads = check_n_jobs(n_jobs, owner=owner)
+
+    def __enter__(self):
+        from threadpoolctl import threadpool_limits
+
+        self._limits = threadpool_limits(limits=1, user_api="blas")
+        self._limits.__enter__()
+        return self.n_threads
+
+    def __exit__(self, *exc):
+        return self._limits.__exit__(*exc)
+
+
+def _ordered_map(func, items, n_threads):
+    """``func`` over ``items`` in up to ``n_threads`` threads, results yielded in order.
+
+    At most ``2 * n_threads`` results are pending at a time, so memory stays
+    bounded however many items there are.
+    """
+    items = list(items)
+    if n_threads <= 1 or len(items) <= 1:
+        for item in items:
+            yield func(item)
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=n_threads) as pool:
+        pending = deque()
+        for item in items:
+            pending.append(pool.submit(func, item))
+            if len(pending) >= 2 * n_threads:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def _check_non_negative(X, owner, name="X"):
@@ -152,25 +190,26 @@ def _auto_chunk(n_ref):
     return max(1, _BLOCK_ENTRIES // max(1, n_ref))
 
 
-def _iter_kl_chunks(P, Q, chunk_size, with_tolerance=False):
+def _iter_kl_chunks(P, Q, chunk_size, with_tolerance=False, n_threads=1):
     """Yield ``(start, D, T)``: distances of rows ``start:start+len(D)`` of P to all of Q.
 
-    ``T`` holds the tie tolerance of each entry (None unless asked for). The
-    buffers are reused, so a consumer must be done with a block before
-    asking for the next one.
+    ``T`` holds the tie tolerance of each entry (None unless asked for).
+    Blocks are computed in up to ``n_threads`` threads (call it inside
+    :class:`_blas_limits`) and yielded in row order; their shapes depend on
+    ``chunk_size`` and the data only.
     """
     n_p, n_q = P.H.shape[0], Q.H.shape[0]
     step = chunk_size if chunk_size is not None else _auto_chunk(n_q)
     step = min(step, max(n_p, 1))
-    buf = np.empty((step, n_q))
-    tmp = np.empty((step, n_q))
-    for start in range(0, n_p, step):
+
+    def block(start):
         stop = min(start + step, n_p)
-        c = stop - start
         Pc = P.rows(start, stop)
-        D = _kl_block(Pc, Q, buf[:c], tmp[:c])
-        T = _tie_tolerance(Pc, Q, tmp[:c]) if with_tolerance else None
-        yield start, D, T
+        D = _kl_block(Pc, Q, np.empty((stop - start, n_q)), np.empty((stop - start, n_q)))
+        T = _tie_tolerance(Pc, Q, np.empty((stop - start, n_q))) if with_tolerance else None
+        return start, D, T
+
+    yield from _ordered_map(block, range(0, n_p, step), n_threads)
 
 
 def _named(owner, func, *args, **kwargs):
@@ -214,8 +253,10 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
         ``(chunk_size, n_samples_Y)``. ``None`` picks blocks of about 64 MiB.
         The result does not depend on it.
     n_jobs : int, default=None
-        Threads for the BLAS matrix products (joblib's meaning; ``None``
-        leaves the BLAS thread count as it is).
+        Threads over blocks of distances (joblib's meaning; ``None``
+        is the OpenMP default, see :func:`eppf.utils.check_n_jobs`). Each
+        block's matrix products run on one BLAS thread, so the result is
+        bit-identical for any value.
 
     Returns
     -------
@@ -271,8 +312,8 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
     PX = _prepare(X, floor, renormalize, owner)
     PY = PX if same else _prepare(Y, floor, renormalize, owner)
     D = np.empty((X.shape[0], PY.H.shape[0]))
-    with _blas_limits(n_jobs, owner):
-        for start, block, _ in _iter_kl_chunks(PX, PY, chunk_size):
+    with _blas_limits(n_jobs, owner) as n_threads:
+        for start, block, _ in _iter_kl_chunks(PX, PY, chunk_size, n_threads=n_threads):
             D[start : start + block.shape[0]] = block
     if same:
         np.fill_diagonal(D, 0.0)
@@ -322,13 +363,15 @@ def _smallest_k(D, T, k):
     return out
 
 
-def _loo_nearest(P, block=None):
+def _loo_nearest(P, block=None, n_threads=1):
     """Leave-one-out nearest neighbour of every row of ``P`` among the others.
 
     Uses the symmetry of the distance: only blocks on or above the block
     diagonal are computed, each serving both its rows and its columns, so
     the cost is half that of the full matrix. Near-ties (within rounding)
-    go to the lowest index.
+    go to the lowest index. Blocks run in up to ``n_threads`` threads (call
+    it inside :class:`_blas_limits`) and are merged in a fixed order, so the
+    result does not depend on the thread count.
 
     Returns ``(indices, distances)``, each of shape (n_samples,).
     """
@@ -337,8 +380,6 @@ def _loo_nearest(P, block=None):
     best_d = np.full(n, np.inf)
     best_t = np.zeros(n)
     best_i = np.full(n, n, dtype=np.intp)
-    buf = np.empty((b, b))
-    tmp = np.empty((b, b))
 
     def merge(rows, cand_d, cand_t, cand_i):
         cur_d, cur_t, cur_i = best_d[rows], best_t[rows], best_i[rows]
@@ -348,23 +389,30 @@ def _loo_nearest(P, block=None):
         best_t[rows] = np.where(better, cand_t, cur_t)
         best_i[rows] = np.where(better, cand_i, cur_i)
 
-    for i0 in range(0, n, b):
-        i1 = min(i0 + b, n)
-        Pi = P.rows(i0, i1)
-        for j0 in range(i0, n, b):
-            j1 = min(j0 + b, n)
-            Pj = P.rows(j0, j1)
-            D = _kl_block(Pi, Pj, buf[: i1 - i0, : j1 - j0], tmp[: i1 - i0, : j1 - j0])
-            T = _tie_tolerance(Pi, Pj, tmp[: i1 - i0, : j1 - j0])
-            if i0 == j0:
-                np.fill_diagonal(D, np.inf)
-            arg = _first_near_min(D, T, axis=1)
-            r = np.arange(i1 - i0)
-            merge(slice(i0, i1), D[r, arg], T[r, arg], arg + j0)
-            if j0 != i0:
-                arg = _first_near_min(D, T, axis=0)
-                c = np.arange(j1 - j0)
-                merge(slice(j0, j1), D[arg, c], T[arg, c], arg + i0)
+    def candidates(pair):
+        """Each row's and each column's nearest candidate in block (i0, j0)."""
+        i0, j0 = pair
+        i1, j1 = min(i0 + b, n), min(j0 + b, n)
+        Pi, Pj = P.rows(i0, i1), P.rows(j0, j1)
+        D = _kl_block(Pi, Pj, np.empty((i1 - i0, j1 - j0)), np.empty((i1 - i0, j1 - j0)))
+        T = _tie_tolerance(Pi, Pj, np.empty((i1 - i0, j1 - j0)))
+        if i0 == j0:
+            np.fill_diagonal(D, np.inf)
+        arg = _first_near_min(D, T, axis=1)
+        r = np.arange(i1 - i0)
+        rows = (D[r, arg], T[r, arg], arg + j0)
+        cols = None
+        if j0 != i0:
+            arg = _first_near_min(D, T, axis=0)
+            c = np.arange(j1 - j0)
+            cols = (D[arg, c], T[arg, c], arg + i0)
+        return i0, i1, j0, j1, rows, cols
+
+    pairs = [(i0, j0) for i0 in range(0, n, b) for j0 in range(i0, n, b)]
+    for i0, i1, j0, j1, rows, cols in _ordered_map(candidates, pairs, n_threads):
+        merge(slice(i0, i1), *rows)
+        if cols is not None:
+            merge(slice(j0, j1), *cols)
     return best_i, best_d
 
 
@@ -398,9 +446,10 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         blocks of ``chunk_size * n_samples_fit`` floats. ``None`` picks blocks
         of about 64 MiB. Results do not depend on it.
     n_jobs : int, default=None
-        Threads for the BLAS matrix products that compute the distances
-        (joblib's meaning; ``None`` leaves the BLAS thread count as it is,
-        which honours ``threadpoolctl`` limits set by the caller).
+        Threads over blocks of distances (joblib's meaning; ``None``
+        is the OpenMP default, see :func:`eppf.utils.check_n_jobs`). Each
+        block's matrix products run on one BLAS thread, so the result is
+        bit-identical for any value.
 
     Attributes
     ----------
@@ -570,8 +619,9 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         n_q = P.H.shape[0]
         ind = np.empty((n_q, k), dtype=np.intp)
         dist = np.empty((n_q, k)) if return_distance else None
-        with _blas_limits(self.n_jobs, name):
-            for start, D, T in _iter_kl_chunks(P, self._fit_data, chunk_size, with_tolerance=True):
+        with _blas_limits(self.n_jobs, name) as n_threads:
+            for start, D, T in _iter_kl_chunks(P, self._fit_data, chunk_size, with_tolerance=True,
+                                               n_threads=n_threads):
                 c = D.shape[0]
                 if loo:
                     D[np.arange(c), np.arange(start, start + c)] = np.inf
