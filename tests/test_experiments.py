@@ -312,3 +312,15 @@ def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path):
                                 precision="bfloat16")
     assert result["rows"][0]["model"] == "EPPF 4D"
     assert "precision='bfloat16'" in (tmp_path / "classification.md").read_text()
+
+
+def test_retrieval_runs_every_registered_descriptor(tiny, tmp_path):
+    # the experiment reads the registry: a new descriptor gets its column with no code here
+    from eppf.registry import DESCRIPTORS
+
+    res = run_retrieval(tiny, out=str(tmp_path), draws=1, n_jobs=1, quick=True, verbose=False)
+    md, rows = check_outputs(res["paths"], "retrieval")
+    assert [r["descriptor"] for r in rows] == [spec.title for spec in DESCRIPTORS.values()]
+    for r in rows:
+        assert 0.0 <= float(r["total_accuracy_mean"]) <= 1.0
+        assert f"| {r['descriptor']} |" in md
