@@ -321,6 +321,7 @@ class Objects:
     split: np.ndarray = None   # "train"/"test" per object, or None
     skipped: list = field(default_factory=list)
     name: str = ""
+    sampling: dict = None      # how they were read (with the seed root of a data folder)
 
     def subset(self, mask):
         idx = np.flatnonzero(mask)
@@ -405,13 +406,16 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
                 with_class = [e for e in with_class if e[2][1]]
             entries = with_class
             class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
-    seeds_by_root = {}
-    for f, r, _ in entries:
-        seeds_by_root.setdefault(r, []).append(f)
+    # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
+    # however it is named on the command line (the folder itself, a subfolder, the file alone).
+    seed_root = sampling.get("root")
     seed_of = {}
-    for r, files in seeds_by_root.items():
-        for f, s in zip(files, file_seeds(sampling["random_state"], r, files)):
-            seed_of[(r, f)] = s
+    for f, r, _ in entries:
+        real = os.path.realpath(f)
+        if seed_root and real.startswith(os.path.join(seed_root, "")):
+            seed_of[(r, f)] = file_seeds(sampling["random_state"], seed_root, [real])[0]
+        else:
+            seed_of[(r, f)] = file_seeds(sampling["random_state"], r, [f])[0]
     from ..io import read_point_cloud
 
     clouds, kept, skipped = [], [], []
@@ -466,9 +470,12 @@ def load_labelled(args, sampling, cmd):
         raise FileNotFoundError(f"--data {data}: the {what} does not exist")
     if os.path.isfile(data) and not data.lower().endswith(".npz"):
         raise ValueError(f"--data {data}: give a .npz data set or a folder of class subfolders, not one file")
+    if os.path.isdir(data) and not sampling.get("root"):
+        sampling = dict(sampling, root=os.path.realpath(data))
     objects = read_inputs([data], sampling, on_error=getattr(args, "on_error", "skip"),
                           progress=progress_of(args), cmd=cmd, labelled=True)
     objects.name = data
+    objects.sampling = sampling
     return objects
 
 

@@ -103,14 +103,15 @@ def _main(argv):
     parser = build_parser()
     if argv[:1] == ["experiment"]:
         # The experiments have their own parser (and their own --help).
-        return SUBCOMMANDS["experiment"].run(argv[1:])
-    args = parser.parse_args(argv)
-    name = args.command or "run"
-    prefix = "eppf" if args.command is None else f"eppf {name}"
-    args.prog = prefix
+        name, prefix, args = "experiment", "eppf experiment", argv[1:]
+    else:
+        args = parser.parse_args(argv)
+        name = args.command or "run"
+        prefix = "eppf" if args.command is None else f"eppf {name}"
+        args.prog = prefix
     try:
-        SUBCOMMANDS[name].run(args)
-        return 0
+        status = SUBCOMMANDS[name].run(args)
+        return status if name == "experiment" else 0
     except ModuleNotFoundError as exc:
         advice = _install_advice(exc)
         if advice is None:

@@ -196,7 +196,7 @@ def run_train(args, out=None):
     params = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
               if k not in ("func", "prog")}
     saved = {"format": MODEL_FORMAT, "model": model, "eppf_version": __version__, "params": params,
-             "classes": [str(c) for c in class_names], "data": str(name), "sampling": sampling,
+             "classes": [str(c) for c in class_names], "data": str(name), "sampling": objects.sampling or sampling,
              "train_ids": [str(i) for i in fit_objects.ids], "train_keys": list(fit_objects.keys)}
     if scores is not None:
         saved["held_out_scores"] = {k: float(v) for k, v in scores.items() if np.isscalar(v)}

@@ -198,6 +198,16 @@ def test_predict_reuses_the_models_sampling(tmp_path, capsys, mixed):
     expected = dict(zip(bunch.filenames, bunch.target_names[pipe.predict(bunch.data)]))
     assert {r["file"]: r["class"] for r in rows} == expected
     assert all(float(r["distance"]) < 1e-9 for r in rows)  # the very same clouds as in training
+    # a mesh named alone (or through a subfolder) is read with its training seed: the model keeps its folder
+    from eppf.cli._common import read_inputs
+
+    mesh = str(folder / "box" / "mesh.OFF")
+    k = list(bunch.filenames).index(mesh)
+    for item in (mesh, folder / "box"):
+        got = read_inputs([item], saved["sampling"], cmd="test")
+        np.testing.assert_array_equal(got.clouds[list(got.ids).index(mesh)], bunch.data[k])
+    other = dict(saved["sampling"], root=None)  # without the rule: seeded from the file's own folder
+    assert not np.array_equal(read_inputs([mesh], other, cmd="test").clouds[0], bunch.data[k])
 
 
 @pytest.mark.parametrize("command", ["describe", "predict", "train", "evaluate"])
