@@ -10,7 +10,9 @@ one subparser per entry. Errors are reported in one line:
   (the status argparse gives a bad option);
 - a missing optional dependency: the same line with the command that
   installs it, exit status 2;
-- Ctrl-C: ``eppf: interrupted``, exit status 130.
+- Ctrl-C: ``eppf: interrupted``, exit status 130;
+- the reader of standard output gone (``eppf predict ... | head``): no
+  message, exit status 141.
 """
 
 import argparse
@@ -96,6 +98,12 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("eppf: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # `eppf predict ... | head`: the reader left; stop quietly, as other commands do
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
 
 
 def _main(argv):
@@ -118,6 +126,8 @@ def _main(argv):
             raise
         print(f"{prefix}: error: {advice}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        raise
     except (ValueError, TypeError, OSError) as exc:
         text = " ".join(str(exc).split()) or type(exc).__name__
         print(f"{prefix}: error: {text}", file=sys.stderr)

@@ -51,6 +51,17 @@ def test_main_bad_input_gives_one_line_error_and_status_2(tmp_path, capsys):
     assert "does not exist" in err[0]
 
 
+def test_main_job_old_n_neighbors_flag_is_normal_neighbors_with_a_warning(tmp_path, capsys):
+    _write_npz(tmp_path / "tiny.npz")
+    argv = ["--data", str(tmp_path / "tiny.npz"), "--n-pairs", "500", "--n-jobs", "1", "--no-progress"]
+    assert main(argv + ["--n-neighbors", "6"]) == 0
+    old = capsys.readouterr()
+    assert "--n-neighbors is now --normal-neighbors" in old.err
+    assert main(argv + ["--normal-neighbors", "6"]) == 0
+    new = capsys.readouterr()
+    assert new.err == "" and new.out.split("Descriptor:")[0] == old.out.split("Descriptor:")[0]
+
+
 def test_readme_main_command_runs_on_built_in_data():
     # The README's first command ends in `eppf`; run it the same way, as a process.
     env = dict(os.environ, OMP_NUM_THREADS="2")
