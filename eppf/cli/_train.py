@@ -6,7 +6,6 @@ same way, and which objects it was trained on so that ``eppf evaluate``
 can say when it is scored on them.
 """
 
-import argparse
 import sys
 import time
 
@@ -88,8 +87,9 @@ def make_pipeline_from_args(args):
     descriptor = make_descriptor(args.descriptor, settings)
     if name == "kl":
         if DESCRIPTORS[args.descriptor].metric != "kl":
+            kl_names = ", ".join(k for k, s in DESCRIPTORS.items() if s.metric == "kl")
             raise ValueError(f"the {args.descriptor} descriptor is compared by L1, not by KL divergence; the "
-                             f"'kl' classifier needs one of {', '.join(k for k, s in DESCRIPTORS.items() if s.metric == 'kl')}")
+                             f"'kl' classifier needs one of {kl_names}")
         clf = cls(n_neighbors=args.n_neighbors, n_jobs=args.n_jobs)
     else:
         n_bins = descriptor.get_params().get("n_bins")

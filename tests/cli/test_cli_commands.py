@@ -82,7 +82,7 @@ import re  # noqa: E402
 import joblib  # noqa: E402
 
 import eppf  # noqa: E402
-from eppf import EPPFTransformer, KLNearestNeighbors, symmetric_kl_distances  # noqa: E402
+from eppf import EPPFTransformer, symmetric_kl_distances  # noqa: E402
 from eppf.cli import load_model, make_pipeline_from_args  # noqa: E402
 from eppf.datasets import load_npz  # noqa: E402
 from eppf.io import read_point_cloud, write_point_cloud  # noqa: E402

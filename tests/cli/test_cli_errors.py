@@ -1,9 +1,6 @@
 """Error paths of the ``eppf`` command: one line naming the right thing, exit status 2, no traceback."""
 
 import dataclasses
-import os
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -161,12 +158,3 @@ def test_experiment_takes_no_progress_and_keeps_quiet_as_deprecated(monkeypatch,
     assert main(["experiment", "retrieval", "--quiet"]) == 0
     assert seen == [["retrieval", "--quick", "--quiet"], ["retrieval", "--quiet"]]
     assert "--quiet is deprecated" in capsys.readouterr().err
-
-
-def test_python_m_eppf_reports_errors_in_one_line(tmp_path):
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    proc = subprocess.run([sys.executable, "-m", "eppf", "describe", str(tmp_path / "none.ply"), "-o",
-                           str(tmp_path / "d.npz")], capture_output=True, text=True, env=env, timeout=120,
-                          cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert proc.stderr.strip().splitlines() == [f"eppf describe: error: no such file or folder: {tmp_path}/none.ply"]

@@ -15,6 +15,7 @@ from eppf.datasets import load_folder
 from eppf.io import write_mesh, write_point_cloud
 
 N_PAIRS = "800"
+SMALL = ["--n-bins", "4", "2", "2", "2"]  # a small 4D network: fast epochs
 COMMON = ["--n-pairs", N_PAIRS, "--n-jobs", "1", "--no-progress"]
 
 
@@ -242,7 +243,7 @@ def test_train_holds_out_says_so_and_evaluate_warns_about_seen_objects(tmp_path,
 def test_cnn_training_prints_one_line_per_epoch_and_predict_gives_probabilities(tmp_path, capsys, mixed):
     folder, files, _ = mixed
     model = tmp_path / "cnn.model"
-    status, out, _ = _run(["train", "--data", folder, "-o", model, "--classifier", "4d", "--max-epochs", "2",
+    status, out, _ = _run(["train", "--data", folder, "-o", model, "--classifier", "4d", "--max-epochs", "2", *SMALL,
                            "--test-size", "0", "--n-pairs", N_PAIRS, "--n-jobs", "1"], capsys)
     assert status == 0
     epochs = [line for line in out.splitlines() if line.startswith("epoch")]
@@ -253,6 +254,6 @@ def test_cnn_training_prints_one_line_per_epoch_and_predict_gives_probabilities(
     assert status == 0 and len(rows) == len(files)
     assert all(0.5 <= float(r["probability"]) <= 1 for r in rows)  # the top class of two
     # --no-progress silences the epochs
-    status, out, _ = _run(["train", "--data", folder, "-o", model, "--classifier", "4d", "--max-epochs", "1",
+    status, out, _ = _run(["train", "--data", folder, "-o", model, "--classifier", "4d", "--max-epochs", "1", *SMALL,
                            "--test-size", "0", *COMMON], capsys)
     assert status == 0 and not any(line.startswith("epoch") for line in out.splitlines())
