@@ -45,7 +45,9 @@ def run_evaluate(args, out=None):
     -------
     report : dict
         ``"retrieval"`` and/or ``"model"``: the scores of
-        :func:`eppf.metrics.retrieval_scores` (fractions).
+        :func:`eppf.metrics.retrieval_scores` (fractions); with
+        ``"model_unseen"`` the model's scores on the objects it was not
+        trained on, when some of the others were.
     """
     from ..metrics import leave_one_out_retrieval, retrieval_scores
     from ..registry import DESCRIPTORS
@@ -96,6 +98,10 @@ def run_evaluate(args, out=None):
         report["model"] = retrieval_scores(scored.labels, pred)
         where = "test split" if objects.split is not None else "all objects"
         rows += _score_rows(f"model, {where} ({int(test.sum())})", report["model"])
+        unseen = np.array([k not in seen for k in scored.keys])
+        if n_seen and unseen.any():
+            report["model_unseen"] = retrieval_scores(scored.labels[unseen], np.asarray(pred)[unseen])
+            rows += _score_rows(f"model, objects not seen in training ({int(unseen.sum())})", report["model_unseen"])
     emit(rows, ["evaluation", "metric", "percent"], None, out)
     if args.output:
         emit(rows, ["evaluation", "metric", "percent"], args.output, out)

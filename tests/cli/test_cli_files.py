@@ -4,6 +4,7 @@ them, one unreadable file skipped (or fatal with --on-error raise)."""
 
 import csv
 import os
+import re
 import struct
 
 import numpy as np
@@ -232,12 +233,17 @@ def test_train_holds_out_says_so_and_evaluate_warns_about_seen_objects(tmp_path,
     folder, _, _ = mixed
     model = tmp_path / "m.model"
     status, out, _ = _run(["train", "--data", folder, "-o", model, *COMMON], capsys)
+    train_out = out
     assert status == 0
     assert "holding out 6 of 24 objects" in out and "held-out score on 6 objects: accuracy" in out
     assert "on 18 objects" in out
     status, out, err = _run(["evaluate", "--data", folder, "--model", model, "--no-retrieval", *COMMON], capsys)
     assert status == 0 and "model, all objects (24)" in out
     assert "18 of the 24 objects scored were seen in training" in err
+    # the held-out objects are scored on their own too, as train scored them
+    held = re.search(r"held-out score on 6 objects: accuracy ([0-9.]+)%", train_out).group(1)
+    unseen = [line for line in out.splitlines() if "not seen in training (6)" in line and "total_accuracy" in line]
+    assert len(unseen) == 1 and float(unseen[0].split("|")[2]) == pytest.approx(float(held), abs=0.01)
 
 
 def test_cnn_training_prints_one_line_per_epoch_and_predict_gives_probabilities(tmp_path, capsys, mixed):
