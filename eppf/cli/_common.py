@@ -448,7 +448,7 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
         split = split if (split != "").all() else None
         present = set(labels.tolist())
         lost = [class_names[k] for k in range(len(class_names)) if k not in present]
-        if lost:
+        if lost and labelled:
             raise ValueError(f"no file of the class {lost[0]!r} could be read")
     return Objects(clouds, ids, keys, labels, class_names, split, skipped, " ".join(inputs))
 

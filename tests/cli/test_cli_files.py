@@ -201,13 +201,22 @@ def test_predict_reuses_the_models_sampling(tmp_path, capsys, mixed):
     assert {r["file"]: r["class"] for r in rows} == expected
     assert all(float(r["distance"]) < 1e-9 for r in rows)  # the very same clouds as in training
     # a mesh named alone (or through a subfolder) is read with its training seed: the model keeps its folder
-    from eppf.cli._common import read_inputs
+    from eppf.cli._common import file_seeds, read_inputs
+    from eppf.io import read_point_cloud
 
     mesh = str(folder / "box" / "mesh.OFF")
     k = list(bunch.filenames).index(mesh)
     for item in (mesh, folder / "box"):
         got = read_inputs([item], saved["sampling"], cmd="test")
         np.testing.assert_array_equal(got.clouds[list(got.ids).index(mesh)], bunch.data[k])
+    # --resolution instead of --n-points: saved the same way, and the voxel-grid sampling of load's reader
+    assert _run(["train", "--data", folder, "-o", model, "--test-size", "0", "--resolution", "0.2", *COMMON],
+                capsys)[0] == 0
+    res = load_model(model)["sampling"]
+    assert res["resolution"] == 0.2 and res["n_points"] is None
+    got = read_inputs([mesh], res, cmd="test").clouds[0]
+    np.testing.assert_array_equal(got, read_point_cloud(mesh, resolution=0.2,
+                                                        random_state=file_seeds(0, str(folder), [mesh])[0]))
     other = dict(saved["sampling"], root=None)  # without the rule: seeded from the file's own folder
     assert not np.array_equal(read_inputs([mesh], other, cmd="test").clouds[0], bunch.data[k])
 
