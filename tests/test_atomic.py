@@ -108,7 +108,7 @@ def test_full_disk_in_cli_describe_keeps_old_output(tmp_path, monkeypatch, capsy
     before = out.read_bytes()
     _fail_after(monkeypatch, 300, _enospc())
     capsys.readouterr()
-    assert main(argv + ["--random-state", "5"]) == 1
+    assert main(argv + ["--random-state", "5"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "No space left" in err[0]
     assert out.read_bytes() == before
@@ -116,7 +116,7 @@ def test_full_disk_in_cli_describe_keeps_old_output(tmp_path, monkeypatch, capsy
 
 
 def test_csv_output_is_atomic(tmp_path, monkeypatch, capsys):
-    from eppf.cli._app import _emit
+    from eppf.cli._common import emit as _emit
 
     path = tmp_path / "rows.csv"
     path.write_text("old\n")

@@ -186,7 +186,7 @@ def test_pickle_with_code_payload_is_refused_without_trust(tmp_path):
 
     cloud = tmp_path / "c.xyz"
     np.savetxt(cloud, np.random.default_rng(0).normal(size=(40, 3)))
-    assert main(["predict", str(cloud), "--model", str(path), "--no-progress"]) == 1
+    assert main(["predict", str(cloud), "--model", str(path), "--no-progress"]) == 2
     assert not marker.exists()
     # plain pickle.dump files are refused the same way
     with open(tmp_path / "evil.pkl", "wb") as fh:
@@ -345,7 +345,7 @@ def test_cli_train_writes_a_safe_file_that_predict_and_evaluate_read(tmp_path, c
     assert zipfile.is_zipfile(model)
     saved = load_model(model)
     assert saved["format"] == "eppf-model" and len(saved["classes"]) == 10
-    assert saved["params"]["n_pairs"] == 300 and saved["params"]["classifier"] == "knn"
+    assert saved["params"]["n_pairs"] == 300 and saved["params"]["classifier"] == "kl"
     X, _ = make_shapes(1, random_state=9, return_X_y=True)
     folder = tmp_path / "clouds"
     folder.mkdir()
@@ -358,7 +358,7 @@ def test_cli_train_writes_a_safe_file_that_predict_and_evaluate_read(tmp_path, c
     # an old pickled model: refused with a hint, accepted with --trust
     old = tmp_path / "old.joblib"
     joblib.dump(saved, old)
-    assert main(["predict", str(folder), "--model", str(old), "--no-progress"]) == 1
+    assert main(["predict", str(folder), "--model", str(old), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "--trust" in err and len(err.strip().splitlines()) == 1
     assert main(["predict", str(folder), "--model", str(old), "--trust", "--no-progress"]) == 0

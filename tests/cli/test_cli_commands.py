@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from eppf.cli._app import build_parser, main, run_main_job
+from eppf.cli import build_parser, main, run_main_job
 
 
 def _write_npz(path, n_per_class=6, with_split=True):
@@ -44,10 +44,22 @@ def test_main_job_on_npz_prints_metrics_table(tmp_path, with_split):
     assert report["retrieval"][0]["total_accuracy"] >= 0.9
 
 
-def test_main_bad_input_gives_one_line_error_and_status_1(tmp_path, capsys):
-    assert main(["--data", str(tmp_path / "missing.npz"), "--no-progress"]) == 1
+def test_main_bad_input_gives_one_line_error_and_status_2(tmp_path, capsys):
+    assert main(["--data", str(tmp_path / "missing.npz"), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("eppf: error:") and "missing.npz" in err[0]
+    assert "does not exist" in err[0]
+
+
+def test_main_job_old_n_neighbors_flag_is_normal_neighbors_with_a_warning(tmp_path, capsys):
+    _write_npz(tmp_path / "tiny.npz")
+    argv = ["--data", str(tmp_path / "tiny.npz"), "--n-pairs", "500", "--n-jobs", "1", "--no-progress"]
+    assert main(argv + ["--n-neighbors", "6"]) == 0
+    old = capsys.readouterr()
+    assert "--n-neighbors is now --normal-neighbors" in old.err
+    assert main(argv + ["--normal-neighbors", "6"]) == 0
+    new = capsys.readouterr()
+    assert new.err == "" and new.out.split("Descriptor:")[0] == old.out.split("Descriptor:")[0]
 
 
 def test_readme_main_command_runs_on_built_in_data():
@@ -70,8 +82,8 @@ import re  # noqa: E402
 import joblib  # noqa: E402
 
 import eppf  # noqa: E402
-from eppf import EPPFTransformer, KLNearestNeighbors, symmetric_kl_distances  # noqa: E402
-from eppf.cli._app import load_model, make_pipeline_from_args  # noqa: E402
+from eppf import EPPFTransformer, symmetric_kl_distances  # noqa: E402
+from eppf.cli import load_model, make_pipeline_from_args  # noqa: E402
 from eppf.datasets import load_npz  # noqa: E402
 from eppf.io import read_point_cloud, write_point_cloud  # noqa: E402
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores  # noqa: E402
@@ -168,7 +180,8 @@ def test_retrieve_descriptors_top_k_table_and_csv(tmp_path, capsys):
                            "-k", "3", "--no-progress"], capsys)
     assert status == 0
     lines = out.splitlines()
-    assert lines[0].split() == ["query", "|", "rank", "|", "match", "|", "label", "|", "distance"]
+    assert lines[0].split() == ["query", "|", "query_label", "|", "rank", "|", "match", "|", "label", "|",
+                                "distance"]
     assert len(lines) == 2 + 2 * 3
     status, _, _ = _run(["retrieve", "--database", tmp_path / "db.npz", "--query-descriptors", tmp_path / "q.npy",
                          "-k", "3", "-o", tmp_path / "r.csv", "--no-progress"], capsys)
@@ -257,9 +270,9 @@ def test_predict_with_bad_model_file_gives_one_line_error(tmp_path, capsys, kind
     cloud = tmp_path / "c.ply"
     write_point_cloud(cloud, np.random.default_rng(0).normal(size=(50, 3)))
     status, out, err = _run(["predict", cloud, "--model", model, "--no-progress"], capsys)
-    assert status == 1 and out == ""
+    assert status == 2 and out == ""
     lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("eppf: error:") and message in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("eppf predict: error:") and message in lines[0]
     assert "Traceback" not in err
     with pytest.raises((ValueError, FileNotFoundError), match=re.escape(message)):
         load_model(model)
@@ -313,8 +326,9 @@ def test_bench_prints_one_row_per_setting(capsys):
 @pytest.mark.parametrize("argv, message", [
     (["describe", "{tmp}/files", "-o", "{tmp}/d.txt"], "--output must end in .npy or .npz"),
     (["describe", "{tmp}/nowhere", "-o", "{tmp}/d.npz"], "no such file or folder"),
-    (["describe", "{tmp}/empty", "-o", "{tmp}/d.npz"], "no point cloud files"),
+    (["describe", "{tmp}/empty", "-o", "{tmp}/d.npz"], "no point cloud or mesh files"),
     (["describe", "{tmp}/bad.xyz", "-o", "{tmp}/d.npz"], "bad.xyz"),
+    (["describe", "{tmp}/bad.xyz", "-o", "{tmp}/d.npz", "--on-error", "raise"], "bad.xyz"),
     (["describe", "{tmp}/bad.npz", "-o", "{tmp}/d.npz"], "cannot read"),
     (["retrieve", "--database", "{tmp}/db.npz"], "give query files or --query-descriptors"),
     (["retrieve", "--database", "{tmp}/db.npz", "--query-descriptors", "{tmp}/wrong.npy"], "bins"),
@@ -323,7 +337,7 @@ def test_bench_prints_one_row_per_setting(capsys):
     (["train", "--data", "{tmp}/tiny.npz", "-o", "{tmp}/m.joblib", "--test-size", "2"], "--test-size"),
     (["evaluate", "--data", "{tmp}/tiny.npz", "--no-retrieval"], "nothing to evaluate"),
 ])
-def test_bad_input_gives_one_line_error_and_status_1(tmp_path, capsys, argv, message):
+def test_bad_input_gives_one_line_error_and_status_2(tmp_path, capsys, argv, message):
     _write_files(tmp_path / "files")
     (tmp_path / "empty").mkdir()
     (tmp_path / "bad.xyz").write_text("1 2 three\n")
@@ -334,9 +348,10 @@ def test_bad_input_gives_one_line_error_and_status_1(tmp_path, capsys, argv, mes
     np.savez(tmp_path / "ids.npz", descriptors=np.full((3, 5), 0.2), ids=np.array(["a", "b"]))
     argv = [a.format(tmp=tmp_path) for a in argv] + ["--no-progress"]
     status, _, err = _run(argv, capsys)
-    assert status == 1
+    assert status == 2
     lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("eppf: error:") and message in lines[0], err
+    assert len(lines) == 1 and lines[0].startswith(f"eppf {argv[0]}: error:") and message in lines[0], err
+    assert "Traceback" not in err
 
 
 def test_train_on_a_folder_of_class_subfolders(tmp_path, capsys):

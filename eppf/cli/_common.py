@@ -1,0 +1,605 @@
+"""What every subcommand shares: option types and groups, the table of
+subcommands, output helpers, and the one way files are read.
+
+Reading
+-------
+:func:`read_inputs` is the only reader of the command line. Folders are
+searched recursively for every extension of
+:func:`eppf.io.supported_extensions` (in any case; hidden files are skipped),
+and every file is read by :func:`eppf.io.read_point_cloud` with
+``normals="auto"`` and the sampling settings of :func:`sampling_from_args`
+(meshes: ``n_points`` or ``resolution``, 2,048 points when neither is given).
+Each file's seed is the one :func:`eppf.datasets.load_folder` gives it: a
+hash of the base seed and the file's path relative to the folder named on
+the command line (relative to its own folder for a file named directly), so
+a file is the same cloud in ``train``, ``predict``, ``describe``,
+``retrieve`` and ``evaluate`` and in ``load_folder``. A folder of class
+subfolders (``<class>/...``, ``train|test/<class>/...`` or
+``<class>/train|test/...``) gives labels, class names and the split.
+"""
+
+import argparse
+import csv
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..registry import CLASSIFIERS, DESCRIPTORS
+from ..utils._atomic import atomic_write
+
+__all__ = []
+
+# ---------------------------------------------------------------------------
+# The table of subcommands
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Command:
+    """One subcommand: its name, help line, argument setup and runner."""
+
+    name: str
+    help: str
+    description: str
+    add_arguments: object
+    run: object
+    parser_kwargs: dict = field(default_factory=dict)
+
+
+#: Subcommand name -> :class:`Command`, in the order of ``eppf --help``.
+SUBCOMMANDS = {}
+
+
+def register(command):
+    """Add a :class:`Command` to :data:`SUBCOMMANDS` and return it."""
+    if command.name in SUBCOMMANDS:
+        raise RuntimeError(f"subcommand {command.name!r} registered twice")
+    SUBCOMMANDS[command.name] = command
+    return command
+
+
+# ---------------------------------------------------------------------------
+# Option types and shared option groups
+# ---------------------------------------------------------------------------
+
+DESCRIPTOR_NAMES = tuple(DESCRIPTORS)
+#: Names of 0.1 kept as aliases of registry classifiers.
+CLASSIFIER_ALIASES = {"knn": "kl", "cnn": "4d"}
+CLASSIFIER_NAMES = tuple(CLASSIFIERS) + tuple(CLASSIFIER_ALIASES)
+
+MODEL_HELP = ("a model saved by 'eppf train' (safe to load from anyone: the model format cannot run code; "
+              "pickled eppf 0.1 models need --trust)")
+TRUST_HELP = ("load a pickled (eppf 0.1, joblib) model file; pickles can run any code while loading, so use "
+              "this only for files you made yourself")
+
+
+def positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+def n_jobs_type(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+    if value == 0:
+        raise argparse.ArgumentTypeError("0 has no meaning; use a positive count or -1 for all cores")
+    return value
+
+
+def add_runtime(parser, n_jobs=True):
+    """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand."""
+    if n_jobs:
+        parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (-1: all cores)")
+    parser.add_argument("--random-state", type=int, default=0,
+                        help="seed of everything random: descriptor draws, mesh sampling, splits (default: 0)")
+    parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
+
+
+def add_descriptor(parser, choice=True, default="eppf"):
+    """``--descriptor``, ``--n-pairs``, ``--scaling`` and ``--normal-neighbors``."""
+    if choice:
+        parser.add_argument("--descriptor", choices=DESCRIPTOR_NAMES, default=default,
+                            help=f"which registered descriptor (default: {default})")
+    parser.add_argument("--n-pairs", type=positive_int, default=20000,
+                        help="random samples per object: point pairs (EPPF, Wahl) or triplets (ESF); "
+                             "deterministic descriptors ignore it")
+    parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,
+                        help="descriptor scaling: 'fit' (the paper's data-set scale, EPPF's default), "
+                             "'object' (each object to unit size; for files in mixed units) or 'none'; "
+                             "descriptors without this setting keep their own")
+    parser.add_argument("--normal-neighbors", type=positive_int, default=None,
+                        help="neighbours of the PCA normal estimation (default: the descriptor's)")
+
+
+def add_sampling(parser):
+    """``--n-points``, ``--resolution`` (how meshes are sampled) and ``--on-error``."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--n-points", type=positive_int, default=None,
+                       help="points per object: meshes are sampled with this many (default 2,048), point "
+                            "files resampled to it (default: kept as they are)")
+    group.add_argument("--resolution", type=positive_float, default=None,
+                       help="instead of --n-points, sample meshes on a voxel grid of this cell size")
+    add_on_error(parser)
+
+
+def add_on_error(parser):
+    parser.add_argument("--on-error", choices=["skip", "raise"], default="skip",
+                        help="a file that cannot be read: skip it with a summary on stderr (default) or stop")
+
+
+def add_data_source(parser):
+    group = parser.add_mutually_exclusive_group(required=True)
+    group.add_argument("--data", metavar="FILE.npz|FOLDER",
+                       help="a .npz data set (points, offsets, labels, class_names[, split][, ids]) or a folder "
+                            "with one subfolder of point cloud or mesh files per class (optionally inside "
+                            "train/ and test/)")
+    group.add_argument("--built-in", action="store_true", help="the built-in synthetic shapes")
+
+
+def progress_of(args):
+    return not getattr(args, "no_progress", False)
+
+
+def warn(cmd, text):
+    print(f"{cmd}: warning: {text}", file=sys.stderr)
+
+
+def descriptor_settings(args, progress=None):
+    """Settings of :meth:`eppf.registry.DescriptorSpec.make` from the shared options."""
+    progress = progress_of(args) if progress is None else progress
+    settings = dict(n_samples=args.n_pairs, n_jobs=args.n_jobs, random_state=args.random_state,
+                    verbose=1 if progress else 0)
+    if args.scaling is not None:
+        settings["scaling"] = args.scaling
+    if getattr(args, "normal_neighbors", None) is not None:
+        settings["n_neighbors"] = args.normal_neighbors
+    return settings
+
+
+def make_descriptor(name, settings):
+    """A registered descriptor, refusing a ``--normal-neighbors`` it cannot use."""
+    spec = DESCRIPTORS[name]
+    est = spec.make(**settings)
+    if "n_neighbors" in settings and "n_neighbors" not in est.get_params():
+        raise ValueError(f"--normal-neighbors: the {name} descriptor estimates no normals")
+    return est
+
+
+# ---------------------------------------------------------------------------
+# Output
+# ---------------------------------------------------------------------------
+
+
+def check_output(path, suffixes=None, option="--output"):
+    """Refuse an output path before any work: wrong suffix, missing folder, a folder."""
+    if path is None:
+        return None
+    path = str(path)
+    if suffixes and not path.lower().endswith(tuple(suffixes)):
+        raise ValueError(f"{option} must end in {' or '.join(suffixes)}, got {path}")
+    if os.path.isdir(path):
+        raise ValueError(f"{option} {path} is a folder; give a file name")
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise ValueError(f"{option} {path}: the folder {os.path.dirname(path) or '.'} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise ValueError(f"{option} {path}: the folder {os.path.dirname(path) or '.'} is not writable")
+    return path
+
+
+def emit(rows, header, output, out):
+    """Rows as a printed table, or as a CSV file written atomically."""
+    out = out or sys.stdout
+    if output:
+        with atomic_write(output, "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(header)
+            for row in rows:
+                writer.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in row])
+        print(f"eppf: {len(rows)} rows -> {output}", file=out)
+        return
+    cells = [[f"{v:.4f}" if isinstance(v, float) else str(v) for v in row] for row in rows]
+    widths = [max([len(h)] + [len(c[i]) for c in cells]) for i, h in enumerate(header)]
+    print(" | ".join(h.ljust(w) for h, w in zip(header, widths)).rstrip(), file=out)
+    print("-+-".join("-" * w for w in widths), file=out)
+    for c in cells:
+        print(" | ".join(v.ljust(w) for v, w in zip(c, widths)).rstrip(), file=out)
+
+
+class Progress:
+    """A tqdm bar, or a plain iterator when progress is off or tqdm is missing."""
+
+    def __init__(self, iterable, enabled, desc):
+        self.iterable, self.enabled, self.desc = iterable, enabled, desc
+
+    def __iter__(self):
+        if self.enabled:
+            try:
+                from tqdm.auto import tqdm
+            except ImportError:  # pragma: no cover
+                return iter(self.iterable)
+            return iter(tqdm(self.iterable, desc=self.desc, file=sys.stderr, leave=False))
+        return iter(self.iterable)
+
+
+# ---------------------------------------------------------------------------
+# Reading: the one way
+# ---------------------------------------------------------------------------
+
+#: The seed rule saved in models, so that a later eppf can tell whether it still applies.
+SEED_RULE = "blake2b-relpath-v1"
+
+_SPLITS = ("train", "test")
+
+
+def sampling_from_args(args):
+    """The sampling settings of the reading options (saved in models by ``train``)."""
+    return {"n_points": getattr(args, "n_points", None), "resolution": getattr(args, "resolution", None),
+            "normals": "auto", "random_state": int(args.random_state), "seed_rule": SEED_RULE}
+
+
+def file_seeds(random_state, root, files):
+    """Per-file sampling seeds, exactly those of :func:`eppf.datasets.load_folder`.
+
+    A public helper for this rule belongs in :mod:`eppf.datasets`; until it
+    is there the command line calls the loader's own function.
+    """
+    from ..datasets._loaders import _file_seeds
+
+    return _file_seeds(random_state, root, files)
+
+
+def _is_hidden(name):
+    return name.startswith(".")
+
+
+def find_files(item):
+    """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder."""
+    from ..io import supported_extensions
+
+    extensions = supported_extensions()
+    path = Path(item)
+    if path.is_dir():
+        found = []
+        for dirpath, dirnames, filenames in os.walk(path):
+            dirnames[:] = sorted(d for d in dirnames if not _is_hidden(d))
+            found += [os.path.join(dirpath, f) for f in filenames
+                      if not _is_hidden(f) and os.path.splitext(f)[1].lower() in extensions]
+        if not found:
+            raise ValueError(f"no point cloud or mesh files ({' '.join(extensions)}, any case) in the folder {item}")
+        return str(path), sorted(found)
+    if path.is_file():
+        return os.path.dirname(str(path)) or ".", [str(path)]
+    if path.exists():
+        raise ValueError(f"{item} is neither a file nor a folder")
+    if str(item).endswith(("/", os.sep)):
+        raise FileNotFoundError(f"the folder {item} does not exist")
+    raise FileNotFoundError(f"no such file or folder: {item}")
+
+
+def _class_of(rel):
+    """(class, split) of a path relative to a data folder, None when it sits outside class folders."""
+    parts = rel.split("/")
+    if len(parts) >= 3 and parts[0] in _SPLITS:
+        return parts[1], parts[0]
+    if len(parts) >= 3 and parts[1] in _SPLITS:
+        return parts[0], parts[1]
+    if len(parts) >= 2:
+        return parts[0], ""
+    return None
+
+
+@dataclass
+class Objects:
+    """Objects read from the command line's inputs."""
+
+    clouds: list
+    ids: np.ndarray            # shown in tables: the file path as given, or the data set's id
+    keys: list                 # stable identity (resolved path, or data set path + id) for seen-in-training checks
+    labels: np.ndarray = None  # int labels when the input has them
+    class_names: np.ndarray = None
+    split: np.ndarray = None   # "train"/"test" per object, or None
+    skipped: list = field(default_factory=list)
+    name: str = ""
+    sampling: dict = None      # how they were read (with the seed root of a data folder)
+
+    def subset(self, mask):
+        idx = np.flatnonzero(mask)
+        return Objects([self.clouds[i] for i in idx], self.ids[idx], [self.keys[i] for i in idx],
+                       None if self.labels is None else self.labels[idx], self.class_names,
+                       None if self.split is None else self.split[idx], self.skipped, self.name)
+
+
+def _read_npz_data_set(path):
+    from ..datasets import load_npz
+
+    bunch = load_npz(path)
+    n = len(bunch.data)
+    ids = bunch.ids if bunch.ids is not None else [str(i) for i in range(n)]
+    ids = np.asarray(ids, dtype=str)
+    real = os.path.realpath(path)
+    return Objects([np.asarray(c, dtype=np.float64) for c in bunch.data], ids, [f"{real}#{i}" for i in ids],
+                   np.asarray(bunch.target), np.asarray(bunch.target_names, dtype=str),
+                   None if bunch.split is None else np.asarray(bunch.split, dtype=str), [], str(path))
+
+
+def _is_npz_data_set(path):
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return "offsets" in f.files
+    except Exception as exc:  # not a zip, pickled, truncated...
+        raise ValueError(f"cannot read {path} as .npz: {type(exc).__name__}: {exc}") from None
+
+
+def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf", labelled=None):
+    """Read files, folders or one ``.npz`` data set the one way (see the module docstring).
+
+    Parameters
+    ----------
+    inputs : list of str
+        Files and folders, or one ``.npz`` data set.
+    sampling : dict
+        From :func:`sampling_from_args` or a saved model.
+    on_error : {"skip", "raise"}
+        A file that cannot be read is skipped (counted in a summary on
+        stderr) or stops the command.
+    progress : bool
+        Show a progress bar while reading.
+    cmd : str
+        The command's name for messages.
+    labelled : bool or None
+        True: the inputs must give labels (one folder of class subfolders or
+        a data set); None: labels when the input has them; False: none.
+    """
+    inputs = [str(i) for i in inputs]
+    if len(inputs) == 1 and inputs[0].lower().endswith(".npz") and os.path.isfile(inputs[0]) \
+            and _is_npz_data_set(inputs[0]):
+        return _read_npz_data_set(inputs[0])
+    if labelled and (len(inputs) != 1 or not os.path.isdir(inputs[0])):
+        if len(inputs) == 1 and not os.path.exists(inputs[0]):
+            raise FileNotFoundError(f"--data {inputs[0]}: no such file or folder")
+        raise ValueError(f"--data must be a .npz data set or a folder of class subfolders, got {' '.join(inputs)}")
+    groups = [find_files(item) for item in inputs]
+    folder_input = len(inputs) == 1 and os.path.isdir(inputs[0])
+    root = groups[0][0] if folder_input else None
+    entries = []  # (file, root, class, split)
+    for r, files in groups:
+        for f in files:
+            cls = _class_of(os.path.relpath(f, r).replace(os.sep, "/")) if folder_input and labelled is not False \
+                else None
+            entries.append((f, r, cls))
+    class_names = labels = split = None
+    if folder_input and labelled is not False:
+        with_class = [e for e in entries if e[2] is not None]
+        if labelled and not with_class:
+            raise ValueError(f"{root} holds no class subfolders with object files; expected <class>/<file>, "
+                             "train|test/<class>/<file> or <class>/train|test/<file>")
+        if with_class and (labelled or len(with_class) == len(entries)):
+            loose = len(entries) - len(with_class)
+            if loose:
+                warn(cmd, f"{loose} files directly in {root} (outside the class subfolders) are left out")
+            has_split = any(e[2][1] for e in with_class)
+            if has_split:
+                dropped = sum(1 for e in with_class if not e[2][1])
+                if dropped:
+                    warn(cmd, f"{dropped} files of {root} are outside its train/test folders and are left out")
+                with_class = [e for e in with_class if e[2][1]]
+            entries = with_class
+            class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
+    # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
+    # however it is named on the command line (the folder itself, a subfolder, the file alone).
+    seed_root = sampling.get("root")
+    seed_of = {}
+    for f, r, _ in entries:
+        real = os.path.realpath(f)
+        if seed_root and real.startswith(os.path.join(seed_root, "")):
+            seed_of[(r, f)] = file_seeds(sampling["random_state"], seed_root, [real])[0]
+        else:
+            seed_of[(r, f)] = file_seeds(sampling["random_state"], r, [f])[0]
+    from ..io import read_point_cloud
+
+    clouds, kept, skipped = [], [], []
+    for e in Progress(entries, progress, "reading"):
+        f, r, _ = e
+        try:
+            cloud = read_point_cloud(f, normals=sampling.get("normals", "auto"), n_points=sampling.get("n_points"),
+                                     resolution=sampling.get("resolution"), random_state=seed_of[(r, f)])
+        except (ValueError, OSError, KeyError) as exc:
+            msg = str(exc)
+            msg = msg if f in msg else f"{f}: {msg}"
+            if on_error == "raise":
+                raise ValueError(f"{msg} (--on-error skip reads the other files)") from None
+            skipped.append((f, msg))
+            continue
+        clouds.append(np.asarray(cloud, dtype=np.float64))
+        kept.append(e)
+    if skipped:
+        first = "; ".join(f"{m}" for _, m in skipped[:3])
+        more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
+        if not clouds:
+            raise ValueError(f"no file could be read ({len(skipped)} of {len(entries)}): {first}{more}")
+        warn(cmd, f"skipped {len(skipped)} of {len(entries)} files that could not be read: {first}{more}")
+    ids = np.asarray([f for f, _, _ in kept], dtype=str)
+    keys = [os.path.realpath(f) for f, _, _ in kept]
+    if class_names is not None:
+        index = {c: k for k, c in enumerate(class_names)}
+        labels = np.asarray([index[c[0]] for _, _, c in kept], dtype=np.int64)
+        split = np.asarray([c[1] for _, _, c in kept], dtype=str)
+        split = split if (split != "").all() else None
+        present = set(labels.tolist())
+        lost = [class_names[k] for k in range(len(class_names)) if k not in present]
+        if lost and labelled:
+            raise ValueError(f"no file of the class {lost[0]!r} could be read")
+    return Objects(clouds, ids, keys, labels, class_names, split, skipped, " ".join(inputs))
+
+
+def load_labelled(args, sampling, cmd):
+    """Objects of ``--data`` or ``--built-in``, with labels."""
+    if getattr(args, "built_in", False):
+        from ..datasets import make_shapes
+
+        bunch = make_shapes(random_state=args.random_state)
+        n = len(bunch.data)
+        ids = np.asarray([str(i) for i in range(n)])
+        return Objects(list(bunch.data), ids, [f"built-in:{args.random_state}#{i}" for i in ids],
+                       np.asarray(bunch.target), np.asarray(bunch.target_names, dtype=str), None, [],
+                       "built-in synthetic shapes")
+    data = str(args.data)
+    if not os.path.exists(data):
+        what = "folder" if data.endswith(("/", os.sep)) or not data.lower().endswith(".npz") else "file"
+        raise FileNotFoundError(f"--data {data}: the {what} does not exist")
+    if os.path.isfile(data) and not data.lower().endswith(".npz"):
+        raise ValueError(f"--data {data}: give a .npz data set or a folder of class subfolders, not one file")
+    if os.path.isdir(data) and not sampling.get("root"):
+        sampling = dict(sampling, root=os.path.realpath(data))
+    objects = read_inputs([data], sampling, on_error=getattr(args, "on_error", "skip"),
+                          progress=progress_of(args), cmd=cmd, labelled=True)
+    objects.name = data
+    objects.sampling = sampling
+    return objects
+
+
+def check_classes(objects, cmd, need_two_per_class=False):
+    """Refuse one-class data, and classes too small for a stratified split, by name."""
+    counts = np.bincount(objects.labels, minlength=len(objects.class_names))
+    present = np.flatnonzero(counts)
+    if len(present) < 2:
+        only = objects.class_names[present[0]] if len(present) else "none"
+        raise ValueError(f"{objects.name} has one class ({only!r}); a classifier needs at least two classes")
+    if need_two_per_class:
+        small = [str(objects.class_names[k]) for k in present if counts[k] < 2]
+        if small:
+            raise ValueError(f"the class {small[0]!r} of {objects.name} has only one object; a held-out test "
+                             "set needs at least two per class (add objects, or --test-size 0 to train on all)")
+
+
+def min_points_needed(est):
+    """Fewest points per cloud the descriptor can describe, and why."""
+    params = est.get_params()
+    k = params.get("n_neighbors")
+    if isinstance(k, int):
+        return k + 1, f"normal estimation from {k} neighbours (--normal-neighbors) needs {k + 1} points"
+    return 3, "a descriptor needs at least 3 points"
+
+
+def warn_tiny(clouds, ids, est, cmd, name):
+    """Warn, naming the files, about clouds with fewer points than the descriptor needs."""
+    need, why = min_points_needed(est)
+    tiny = [(str(i), len(c)) for c, i in zip(clouds, ids)
+            if len(c) < need and not (np.asarray(c).shape[1] >= 6 and len(c) >= 3)]
+    if tiny:
+        listed = ", ".join(f"{i} ({n} points)" for i, n in tiny[:5]) + (f" and {len(tiny) - 5} more"
+                                                                         if len(tiny) > 5 else "")
+        warn(cmd, f"{len(tiny)} objects have too few points for {name}: {why}; their results are unreliable: "
+                  f"{listed}")
+    return [i for i, _ in tiny]
+
+
+# ---------------------------------------------------------------------------
+# Saved models
+# ---------------------------------------------------------------------------
+
+
+def load_model(path, trust=False):
+    """Load a model saved by ``eppf train``.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The model file.
+    trust : bool, default=False
+        Also load a pickled model of eppf 0.1; see :func:`eppf.load_model`
+        (a pickle can run any code, so only for files you made yourself).
+
+    Returns
+    -------
+    saved : dict
+        With keys ``"model"``, ``"eppf_version"``, ``"params"`` and
+        ``"classes"``, and, for models of this eppf, ``"sampling"`` and
+        ``"train_ids"``/``"train_keys"``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the file does not exist.
+    ValueError
+        If the file cannot be read, is a pickle and ``trust`` is False, or is
+        not an eppf model. A warning is printed on standard error if it was
+        saved by another eppf version.
+    """
+    import warnings
+
+    from .. import __version__
+    from .._persist import load_model as _load_model_file
+
+    path = str(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        saved = _load_model_file(path, trust=trust)
+    for w in caught:
+        print(f"eppf: warning: {w.message}", file=sys.stderr)
+    if not (isinstance(saved, dict) and saved.get("format") == "eppf-model" and hasattr(saved.get("model"), "predict")):
+        raise ValueError(f"{path} is not an eppf model (write one with 'eppf train')")
+    if saved.get("eppf_version") != __version__ and not caught:
+        print(f"eppf: warning: {path} was saved by eppf {saved.get('eppf_version')}, this is eppf {__version__}",
+              file=sys.stderr)
+    return saved
+
+
+def model_sampling(saved, cmd):
+    """How the model's training files were read; eppf 0.1 models read point files as they are."""
+    sampling = saved.get("sampling")
+    if not isinstance(sampling, dict):
+        warn(cmd, "the model does not record how its training files were read (eppf 0.1); meshes are sampled "
+                  "with 2,048 points and seed 0")
+        return {"n_points": None, "resolution": None, "normals": "auto", "random_state": 0, "seed_rule": SEED_RULE}
+    if sampling.get("seed_rule") != SEED_RULE:
+        warn(cmd, f"the model's seed rule {sampling.get('seed_rule')!r} is not this eppf's {SEED_RULE!r}; "
+                  "sampled meshes will differ from the training ones")
+    return dict(sampling)
+
+
+def set_runtime(model, n_jobs, progress):
+    """Set threads and progress of a loaded pipeline where it has those parameters."""
+    names = model.get_params()
+    updates = {}
+    if "descriptor__verbose" in names:
+        updates["descriptor__verbose"] = 1 if progress else 0
+    if n_jobs is not None:
+        from .. import EPPF4DClassifier, PointNetClassifier
+
+        for key in names:
+            owner_name = key.rsplit("__", 1)[0]
+            if key.endswith("__n_jobs") and owner_name in names:
+                torch_owned = isinstance(names[owner_name], (EPPF4DClassifier, PointNetClassifier))
+                updates[key] = (None if n_jobs < 0 else n_jobs) if torch_owned else n_jobs
+    if updates:
+        model.set_params(**updates)
+
+
+def class_name(saved, label):
+    classes = saved.get("classes") or []
+    try:
+        return str(classes[int(label)])
+    except (IndexError, ValueError, TypeError):
+        return str(label)
