@@ -401,3 +401,18 @@ def test_hostile_values_in_the_tree_give_value_errors_naming_the_file(model_file
         zf.writestr("arrays.npz", _npz())
     with pytest.raises(ValueError, match=re.escape(str(model_file))):
         load_model(model_file)
+
+
+def test_every_registered_descriptor_round_trips(tmp_path):
+    # the allow-list covers every descriptor the registry offers, so 'eppf train --descriptor X' can save
+    from eppf.datasets import make_shapes
+    from eppf.registry import DESCRIPTORS
+
+    X, y = make_shapes(2, n_points=96, classes=["box", "sphere"], return_X_y=True, random_state=0)
+    for name, spec in DESCRIPTORS.items():
+        est = spec.make(n_samples=300, random_state=0, n_jobs=1).fit(X)
+        path = tmp_path / f"{name}.eppf"
+        save_model(est, path)
+        back = load_model(path)
+        assert type(back) is type(est), name
+        np.testing.assert_array_equal(back.transform(X), est.transform(X), err_msg=name)
