@@ -136,3 +136,66 @@ def test_failed_write_leaves_the_old_file(tmp_path, monkeypatch):
     assert path.read_bytes() == before
     assert os.listdir(tmp_path) == ["set.npz"]
     assert zipfile.is_zipfile(path) and load_npz(path).target_names.tolist() == ["old"]
+
+
+
+def _script():
+    import importlib.util
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    spec = importlib.util.spec_from_file_location("make_modelnet_npz", os.path.join(root, "scripts", "make_modelnet_npz.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_make_modelnet_npz_from_a_local_folder(tmp_path, capsys):
+    # a two-class ModelNet10 folder in Princeton's layout: one tetrahedron mesh per file
+    mesh = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 3\n3 0 2 3\n3 1 2 3\n"
+    for cls, parts in (("chair", ("train", "train", "test")), ("table", ("train", "test"))):
+        for k, part in enumerate(parts):
+            folder = tmp_path / "ModelNet10" / cls / part
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / f"{cls}_{k:04d}.off").write_text(mesh)
+    out = tmp_path / "mn.npz"
+    main = _script().main
+    assert main(["--root", str(tmp_path / "ModelNet10"), "-o", str(out), "--n-points", "64"]) == 0
+    assert "5 objects (3 train / 2 test), 2 classes" in capsys.readouterr().out
+    data = load_npz(out)
+    assert data.target_names.tolist() == ["chair", "table"]
+    assert sorted(data.ids.tolist()) == ["chair_0000", "chair_0001", "chair_0002", "table_0000", "table_0001"]
+    assert all(c.shape == (64, 3) for c in data.data)
+    # sampled points lie on the mesh: in the unit tetrahedron, x, y, z >= 0 and x + y + z <= 1
+    pts = np.concatenate(data.data)
+    assert pts.min() >= 0 and pts.sum(axis=1).max() <= 1 + 1e-9
+    split_of = dict(zip(data.ids, data.split))
+    assert split_of["chair_0002"] == "test" and split_of["table_0000"] == "train"
+    # seeded: a second run writes the same clouds
+    assert main(["--root", str(tmp_path / "ModelNet10"), "-o", str(tmp_path / "again.npz"), "--n-points", "64"]) == 0
+    assert all(np.array_equal(a, b) for a, b in zip(load_npz(tmp_path / "again.npz").data, data.data))
+
+
+def test_make_modelnet_npz_missing_folder_says_what_to_do(tmp_path, capsys):
+    main = _script().main
+    assert main(["--root", str(tmp_path / "nowhere"), "-o", str(tmp_path / "x.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "no such folder" in err and "--download" in err
+    assert main(["--root", str(tmp_path), "-o", str(tmp_path / "x.npz")]) == 2  # no ModelNet inside
+    assert "make_modelnet_npz: load_modelnet" in capsys.readouterr().err
+    assert main(["--root", str(tmp_path), "-o", str(tmp_path / "no" / "x.npz")]) == 2
+    assert "no such folder" in capsys.readouterr().err
+    assert not (tmp_path / "x.npz").exists()
+    with pytest.raises(SystemExit) as exc:  # neither --root nor --download
+        main(["-o", str(tmp_path / "x.npz")])
+    assert exc.value.code == 2 and "--root" in capsys.readouterr().err
+
+
+def test_make_modelnet_npz_as_a_program_exits_2_without_traceback(tmp_path):
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    res = subprocess.run([sys.executable, os.path.join(root, "scripts", "make_modelnet_npz.py"),
+                          "--root", str(tmp_path / "nowhere"), "-o", str(tmp_path / "x.npz")],
+                         capture_output=True, text=True, env={**os.environ, "PYTHONPATH": root})
+    assert res.returncode == 2 and "no such folder" in res.stderr and "Traceback" not in res.stderr
