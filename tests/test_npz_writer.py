@@ -139,11 +139,11 @@ def test_failed_write_leaves_the_old_file(tmp_path, monkeypatch):
 
 
 
-def _script():
+def _script(name="make_modelnet_npz"):
     import importlib.util
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    spec = importlib.util.spec_from_file_location("make_modelnet_npz", os.path.join(root, "scripts", "make_modelnet_npz.py"))
+    spec = importlib.util.spec_from_file_location(name, os.path.join(root, "scripts", f"{name}.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -199,3 +199,20 @@ def test_make_modelnet_npz_as_a_program_exits_2_without_traceback(tmp_path):
                           "--root", str(tmp_path / "nowhere"), "-o", str(tmp_path / "x.npz")],
                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": root})
     assert res.returncode == 2 and "no such folder" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_reproduce_retrieval_needs_its_data_and_says_how_to_get_it(tmp_path, capsys, monkeypatch):
+    main = _script("reproduce_retrieval").main
+    monkeypatch.delenv("EPPF_BENCH_DATA", raising=False)
+    assert main([]) == 2
+    err = capsys.readouterr().err
+    assert "--data-dir" in err and "make_modelnet_npz.py" in err
+    assert main(["--data-dir", str(tmp_path)]) == 2
+    assert "missing" in capsys.readouterr().err
+    # with a (tiny) modelnet10_1024.npz present, the table is printed for the requested set
+    shapes = make_shapes(3, n_points=60, random_state=0)
+    save_npz(tmp_path / "modelnet10_1024.npz", shapes.data, shapes.target, shapes.target_names)
+    monkeypatch.setenv("EPPF_BENCH_DATA", str(tmp_path))
+    assert main(["--sets", "modelnet10_1024", "--repeats", "1", "--n-jobs", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 2 and lines[1].split()[:2] == ["modelnet10_1024", "object"]
