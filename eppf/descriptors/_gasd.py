@@ -525,7 +525,7 @@ class GASDColorTransformer(TransformerMixin, BaseEstimator):
 
         Returns
         -------
-        X_new : ndarray of shape (n_objects, n_features_out_)
+        X_new : ndarray of shape (n_objects, n_features_out)
             The shape grid, then the colour grid (PCL's scaling).
         """
         check_is_fitted(self)
