@@ -35,7 +35,7 @@ def test_portable_command_cases():
     # relative --out is kept; = forms are rewritten; builtin stays; folders keep a slash only when they exist
     assert portable_command("p x --data=/a/b/c.npz --out=docs/results/c") == "p x --data c.npz --out docs/results/c"
     assert portable_command("p x --data builtin --cache-dir=/tmp/c --n-jobs 2") == "p x --data builtin --n-jobs 2"
-    assert portable_command("p x --data ../shared/data/m.npz") == "p x --data m.npz"
+    assert portable_command("p x --data ../elsewhere/data/m.npz") == "p x --data m.npz"
     assert portable_command("p x --data") == "p x --data"
     # a recorded function call and an unparsable string are left alone
     call = "eppf.experiments.run_noise(...)  # function call; see the protocol"
