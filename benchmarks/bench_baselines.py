@@ -8,8 +8,9 @@ passes) at 1,024 points
 set the total accuracy, mean class accuracy, macro precision, recall and F1
 of leave-one-out 1-NN retrieval, as mean ± std over ``--draws`` descriptor
 draws where the descriptor is random.
-PCL 1.13's own ESF and OUR-CVFH outputs (``../shared/reference``) are
-scored the same way as a yardstick.
+PCL 1.13's own ESF and OUR-CVFH outputs (``pcl_<data set>.npz`` files with
+arrays ``esf`` and ``ourcvfh``, one row per object, in ``--reference-dir``)
+are scored the same way as a yardstick when given.
 
 Every object is centred on its mean and scaled so its largest bounding-box
 side is 1 (as the PCL reference runs), and gets PCA normals over 10
@@ -18,11 +19,13 @@ descriptor (normal estimation is timed separately).
 
 Usage::
 
-    python benchmarks/bench_baselines.py                      # everything
-    python benchmarks/bench_baselines.py --draws 3 --descriptors esf wahl
-    python benchmarks/bench_baselines.py --no-retrieval       # timings only
+    python benchmarks/bench_baselines.py --data-dir DIR       # everything
+    python benchmarks/bench_baselines.py --data-dir DIR --draws 3 --descriptors esf wahl
+    python benchmarks/bench_baselines.py --data-dir DIR --no-retrieval   # timings only
 
-Needs ``../shared/data``; exits with a message when it is absent.
+Needs ``modelnet10_1024.npz`` and ``dales_objects.npz`` in ``--data-dir``
+(default: ``$EPPF_BENCH_DATA``, no other default); exits with status 2 and
+how to make them when they are absent (``scripts/make_modelnet_npz.py``).
 """
 
 import argparse
@@ -40,7 +43,8 @@ from eppf.utils._validation import pack_point_clouds
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.environ.get("EPPF_SHARED", os.path.join(HERE, "..", "..", "shared"))
+sys.path.insert(0, HERE)
+from _data import default_dir, in_dir  # noqa: E402
 DATASETS = {"modelnet10": "modelnet10_1024", "dales": "dales_objects"}
 METRICS = ("total_accuracy", "mean_class_accuracy", "macro_precision", "macro_recall", "macro_f1")
 SHORT = ("acc", "mAcc", "P", "R", "F1")
@@ -61,8 +65,11 @@ def descriptors():
     }
 
 
+DATA_DIR = None  # set by main()
+
+
 def load(name):
-    path = os.path.join(SHARED, "data", DATASETS[name] + ".npz")
+    path = in_dir("bench_baselines", DATA_DIR, DATASETS[name])
     d = np.load(path)
     pts, off = d["points"].astype(np.float64), d["offsets"]
     clouds = []
@@ -166,9 +173,14 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=3, help="timing passes, the best one reported (default 3)")
     ap.add_argument("--no-retrieval", action="store_true")
     ap.add_argument("--no-reference", action="store_true", help="skip PCL's reference rows")
+    ap.add_argument("--data-dir", default=default_dir(),
+                    help="folder with modelnet10_1024.npz and dales_objects.npz (default: $EPPF_BENCH_DATA)")
+    ap.add_argument("--reference-dir", default=None, help="folder with PCL's pcl_<data set>.npz outputs (optional)")
     args = ap.parse_args(argv)
-    if not os.path.isdir(os.path.join(SHARED, "data")):
-        sys.exit(f"bench_baselines: no data folder at {SHARED}/data (set EPPF_SHARED)")
+    global DATA_DIR
+    DATA_DIR = args.data_dir
+    for name in {"modelnet10", "dales"} | set(args.datasets):  # both are timed; check before any work
+        in_dir("bench_baselines", DATA_DIR, DATASETS[name])
     table = {}  # (descriptor, metric) -> {"ms1k", "ms10k", dataset: {metric: values}}
     specs = descriptors()
 
@@ -217,8 +229,8 @@ def main(argv=None):
                     table[(name, m)]["n_bins"] = X.shape[1]
                 print(f"{ds} {name}: {draws} draw(s) in {time.perf_counter() - t:.0f} s, "
                       + ", ".join(f"{m} acc {fmt(res[m]['total_accuracy'])}" for m in metrics), flush=True)
-            ref = os.path.join(SHARED, "reference", f"pcl_{DATASETS[ds]}.npz")
-            if not args.no_reference and os.path.exists(ref):
+            ref = os.path.join(args.reference_dir or "", f"pcl_{DATASETS[ds]}.npz")
+            if not args.no_reference and args.reference_dir and os.path.exists(ref):
                 r = np.load(ref)
                 for key in ("esf", "ourcvfh"):
                     X = r[key].astype(np.float64)

@@ -180,7 +180,10 @@ import time
 
 import numpy as np
 
-DATA = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "modelnet10_1024.npz")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _data import default_dir, require  # noqa: E402
+
+DATA = os.path.join(default_dir(), "modelnet10_1024.npz") if default_dir() else None
 CACHE = "/tmp/eppf_bench_cnn_modelnet10.npz"
 
 
@@ -364,7 +367,7 @@ def descriptors(args):
     from eppf.datasets import load_npz
     from eppf.preprocessing import RandomScaling
 
-    data = load_npz(args.data)
+    data = load_npz(require("bench_cnn descriptors", args.data))
     t0 = time.perf_counter()
     extra = {}
     tr = eppf.EPPFTransformer(scaling="object", n_neighbors=args.n_neighbors, n_jobs=args.threads)
@@ -464,7 +467,8 @@ def main(argv=None):
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--data", default=DATA)
+    parser.add_argument("--data", default=DATA,
+                        help="modelnet10_1024.npz for 'descriptors' (default: $EPPF_BENCH_DATA/modelnet10_1024.npz)")
     parser.add_argument("--cache", default=CACHE)
     parser.add_argument("--draws", type=int, default=4)
     parser.add_argument("--n-neighbors", type=int, default=30)

@@ -5,9 +5,10 @@ given) and with PCA normal estimation, at 1,024 / 2,048 / 10,000 points, on 1
 and 2 threads, then the time and peak memory of leave-one-out symmetric-KL
 retrieval over 5,000 and 12,000 descriptors of 1,200 bins.
 
-Clouds come from ``../shared/data/modelnet10_1024.npz`` when it is there (real
-CAD objects; larger sizes are drawn by resampling their points with a small
-jitter) and from the built-in synthetic shapes otherwise.
+Clouds come from ``--data modelnet10_1024.npz`` when given (real CAD
+objects, made by ``scripts/make_modelnet_npz.py``; larger sizes are drawn by
+resampling their points with a small jitter) and from the built-in synthetic
+shapes otherwise.
 
 The load average is printed with the table: wall-clock speed-ups over threads
 only mean something on an otherwise idle machine, CPU time per object is robust
@@ -20,7 +21,7 @@ pair is the hardware's (shared core, caches or memory bandwidth) and bounds
 the two-thread speed-up any code can reach on the machine.
 
 Usage: ``python benchmarks/bench_descriptor.py [--objects 200] [--repeats 3] [--quick]
-[--sizes 1024 2048 10000] [--no-retrieval] [--contention]``
+[--sizes 1024 2048 10000] [--no-retrieval] [--contention] [--data modelnet10_1024.npz]``
 """
 
 import argparse
@@ -33,14 +34,17 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-SHARED = os.path.join(HERE, "..", "..", "shared", "data", "modelnet10_1024.npz")
+sys.path.insert(0, HERE)
+from _data import require  # noqa: E402
+
+DATA = None  # the --data file, set by main()
 
 
 def _clouds(n_objects, n_points, rng):
     from eppf.datasets import load_npz, make_shapes
 
-    if os.path.exists(SHARED):
-        base = load_npz(SHARED).data
+    if DATA is not None:
+        base = load_npz(DATA).data
         pick = rng.choice(len(base), size=n_objects, replace=False)
         out = []
         for k in pick:
@@ -49,7 +53,7 @@ def _clouds(n_objects, n_points, rng):
                 idx = rng.integers(0, len(c), size=n_points)
                 c = c[idx] + rng.normal(scale=2e-3, size=(n_points, 3))
             out.append(c)
-        return out, "ModelNet10 (shared)"
+        return out, f"ModelNet10 ({os.path.basename(DATA)})"
     per_class = max(1, n_objects // 10)
     shapes = make_shapes(per_class, n_points=n_points, random_state=0)
     return shapes.data[:n_objects], "built-in shapes"
@@ -145,6 +149,7 @@ def bench_contention(n_objects, repeats, sizes):
     rows = []
     for n_points in sizes:
         cmd = [sys.executable, __file__, "--contention-child", str(n_objects), str(n_points), str(repeats)]
+        cmd += ["--data", DATA] if DATA is not None else []
         alone = float(subprocess.run(cmd, capture_output=True, text=True, check=True).stdout)
         procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True) for _ in range(2)]
         pair = [float(p.communicate()[0]) for p in procs]
@@ -163,7 +168,10 @@ def main():
                         help="also time two independent one-thread processes side by side (a machine check)")
     parser.add_argument("--loo-child", nargs=2, type=int, help=argparse.SUPPRESS)
     parser.add_argument("--contention-child", nargs=3, type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--data", default=None, help="modelnet10_1024.npz for real objects (default: built-in shapes)")
     args = parser.parse_args()
+    global DATA
+    DATA = None if args.data is None else require("bench_descriptor", args.data)
     if args.loo_child:
         _loo_child(*args.loo_child)
         return

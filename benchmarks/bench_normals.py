@@ -13,16 +13,18 @@ k = 10, 20 and 30 neighbours:
 - ``reference``: scipy's cKDTree plus batched ``np.linalg.eigh`` on one object,
   for scale (numpy's own threads are limited to one).
 
-Objects are noisy, bumpy ellipsoid surfaces (object-like); when
-``../shared/data/modelnet10_1024.npz`` exists, real ModelNet10 objects of
-1,024 points are timed too. Each figure is the best of ``--repeats`` runs.
+Objects are noisy, bumpy ellipsoid surfaces (object-like); with
+``--data modelnet10_1024.npz`` (made by ``scripts/make_modelnet_npz.py``),
+real ModelNet10 objects of 1,024 points are timed too. Each figure is the
+best of ``--repeats`` runs.
 
-Usage: ``python benchmarks/bench_normals.py [--repeats 5] [--quick]``
+Usage: ``python benchmarks/bench_normals.py [--repeats 5] [--quick] [--data modelnet10_1024.npz]``
 """
 
 import argparse
 import os
 import platform
+import sys
 import time
 
 import numpy as np
@@ -33,7 +35,8 @@ from eppf import estimate_normals
 from eppf.preprocessing._normals import estimate_normals_batch
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-MODELNET = os.path.join(HERE, "..", "..", "shared", "data", "modelnet10_1024.npz")
+sys.path.insert(0, HERE)
+from _data import require  # noqa: E402
 
 
 def surface(rng, n):
@@ -86,14 +89,15 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="fewer objects and repeats")
+    parser.add_argument("--data", default=None, help="modelnet10_1024.npz, to time real objects too (optional)")
     args = parser.parse_args()
     repeats = 2 if args.quick else args.repeats
     budget = 50_000 if args.quick else 200_000  # points per timed batch
     rng = np.random.default_rng(0)
 
     datasets = []
-    if os.path.exists(MODELNET):
-        data = np.load(MODELNET)
+    if args.data is not None:
+        data = np.load(require("bench_normals", args.data))
         off = data["offsets"]
         n_obj = budget // 1024
         pts = data["points"][: off[n_obj]].astype(np.float64)

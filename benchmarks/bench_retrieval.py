@@ -13,10 +13,15 @@ process's peak resident memory (interpreter, libraries and the input
 included). ``--compare`` also times ``KLNearestNeighbors().fit(X, y).kneighbors()``
 (the full, non-symmetric route) and checks both give the same neighbours.
 
-When the PCL reference descriptors of the shared data are present
-(``/work/shared/reference``), the leave-one-out accuracies of ESF and
-OUR-CVFH are printed next to the values in that folder's README, an
-independent check of the whole matching path.
+When PCL's reference descriptors are given (``--reference-dir`` with
+``pcl_modelnet10_1024.npz`` / ``pcl_dales_objects.npz``, arrays ``esf`` and
+``ourcvfh``) together with the data sets' labels (``--data-dir`` or
+``$EPPF_BENCH_DATA``, holding ``modelnet10_1024.npz`` / ``dales_objects.npz``;
+see ``scripts/make_modelnet_npz.py``), the leave-one-out accuracies of ESF
+and OUR-CVFH are printed next to the values published with those reference
+files, an independent check of the whole matching path. Without them the
+check is skipped (and said so); a ``--reference-dir`` whose files or labels
+are missing is exit status 2.
 """
 
 import argparse
@@ -29,9 +34,10 @@ import time
 
 import numpy as np
 
-REFERENCE = "/work/shared/reference"
-DATA = "/work/shared/data"
-# leave-one-out total accuracy by symmetric KL, from the reference README
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _data import default_dir, in_dir, require  # noqa: E402
+
+# leave-one-out total accuracy by symmetric KL, as published with the reference files
 # (OUR-CVFH histograms L1-normalised first, which is how those figures arise)
 README_ACCURACY = {
     ("modelnet10_1024", "esf"): 78.85,
@@ -100,15 +106,13 @@ def run_size(n, n_bins, compare, n_jobs=None):
     return out
 
 
-def reference_check():
+def reference_check(reference_dir, data_dir):
     from eppf.metrics import leave_one_out_retrieval
 
     rows = []
     for (name, key), expected in README_ACCURACY.items():
-        ref_path = os.path.join(REFERENCE, f"pcl_{name}.npz")
-        data_path = os.path.join(DATA, f"{name}.npz")
-        if not (os.path.exists(ref_path) and os.path.exists(data_path)):
-            continue
+        ref_path = require("bench_retrieval", os.path.join(reference_dir, f"pcl_{name}.npz"), "reference file")
+        data_path = in_dir("bench_retrieval", data_dir, name)
         X = np.load(ref_path)[key].astype(np.float64)
         X /= X.sum(axis=1, keepdims=True)
         y = np.load(data_path)["labels"]
@@ -125,7 +129,14 @@ def main(argv=None):
     parser.add_argument("--n-jobs", type=int, default=None, help="BLAS threads (default: BLAS's own setting)")
     parser.add_argument("--compare", action="store_true", help="also time KLNearestNeighbors.kneighbors()")
     parser.add_argument("--no-reference", action="store_true", help="skip the check on the PCL reference descriptors")
+    parser.add_argument("--reference-dir", default=None, help="folder with PCL's pcl_<data set>.npz (optional)")
+    parser.add_argument("--data-dir", default=default_dir(),
+                        help="folder with the data sets' .npz, for their labels (default: $EPPF_BENCH_DATA)")
     args = parser.parse_args(argv)
+    if args.reference_dir and not args.no_reference:  # check the inputs before the long timings
+        for name, _ in README_ACCURACY:
+            require("bench_retrieval", os.path.join(args.reference_dir, f"pcl_{name}.npz"), "reference file")
+            in_dir("bench_retrieval", args.data_dir, name)
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"machine: {os.cpu_count()} CPUs, load average {load:.2f}; leave-one-out 1-NN, symmetric KL, float64")
@@ -141,13 +152,17 @@ def main(argv=None):
             line += f" {r['t_full']:>12.2f} {r['same']:>8}"
         print(line, flush=True)
 
-    if not args.no_reference:
-        rows = reference_check()
-        if rows:
-            print("\nPCL reference descriptors (L1-normalised), leave-one-out total accuracy")
-            print(f"{'data':<16} {'desc':<8} {'shape':<12} {'eppf %':>7} {'README %':>8} {'s':>6}")
-            for name, key, shape, acc, expected, t in rows:
-                print(f"{name:<16} {key:<8} {str(shape):<12} {acc:>7.2f} {expected:>8.2f} {t:>6.2f}")
+    if args.no_reference:
+        return
+    if not args.reference_dir:
+        print("\n(PCL reference check skipped: no --reference-dir given)")
+        return
+    rows = reference_check(args.reference_dir, args.data_dir)
+    if rows:
+        print("\nPCL reference descriptors (L1-normalised), leave-one-out total accuracy")
+        print(f"{'data':<16} {'desc':<8} {'shape':<12} {'eppf %':>7} {'published %':>11} {'s':>6}")
+        for name, key, shape, acc, expected, t in rows:
+            print(f"{name:<16} {key:<8} {str(shape):<12} {acc:>7.2f} {expected:>11.2f} {t:>6.2f}")
 
 
 if __name__ == "__main__":

@@ -60,12 +60,17 @@ if os.environ.get("EPPF_DOCS_INTERSPHINX") == "1":
 else:
     intersphinx_mapping = {}
 
+# The API reference is grouped by subpackage in the navigation: api.rst's
+# sections become pages of their own (_write_api_pages below), which both
+# themes list by title under "API reference".
 try:
     import pydata_sphinx_theme  # noqa: F401
 
     html_theme = "pydata_sphinx_theme"
+    html_theme_options = {"navigation_depth": 3, "show_toc_level": 1}
 except ImportError:  # pragma: no cover - the docs extra installs it
     html_theme = "alabaster"
+    html_sidebars = {"**": ["about.html", "navigation_titles.html", "relations.html", "searchbox.html"]}
 html_title = f"eppf {release}"
 html_static_path = []
 
@@ -107,6 +112,51 @@ def _write_cli_help(directory):
 
 
 _write_cli_help(os.path.join(os.path.dirname(os.path.abspath(__file__)), "generated", "cli"))
+
+
+def _write_if_changed(path, text):
+    """Write ``text`` to ``path`` unless it already holds it (keeps rebuilds incremental)."""
+    if os.path.exists(path):
+        with open(path) as f:
+            if f.read() == text:
+                return
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def _write_api_pages(docs_dir):
+    """One page per section of api.rst, so the navigation groups the API by subpackage.
+
+    api.rst is the one list of public names (tests/test_docs.py checks it is
+    complete); each of its sections, in its order, becomes
+    ``generated/api/<n>_<slug>.rst`` with the same text and an autosummary
+    whose ``:toctree:`` makes the stub pages; api.rst's hidden toctree globs
+    them in that numbered order. The sidebar then reads API reference >
+    Foundations (eppf.utils) > check_int, ...
+    """
+    import re
+
+    with open(os.path.join(docs_dir, "api.rst")) as f:
+        text = f.read()
+    folder = os.path.join(docs_dir, "generated", "api")
+    os.makedirs(folder, exist_ok=True)
+    heads = list(re.finditer(r"^(\S[^\n]*)\n-{3,}\n", text, flags=re.M))
+    names = []
+    for k, head in enumerate(heads):
+        title = head.group(1).strip()
+        body = text[head.end():heads[k + 1].start() if k + 1 < len(heads) else len(text)].strip("\n")
+        body = body.replace(".. autosummary::\n", ".. autosummary::\n   :toctree: ..\n")
+        slug = re.sub(r"[^a-z0-9]+", "_", title.split(" (")[0].lower()).strip("_")
+        name = f"{k + 1:02d}_{slug}"
+        names.append(name)
+        _write_if_changed(os.path.join(docs_dir, "generated", "api", name + ".rst"),
+                          f"{title}\n{'=' * len(title)}\n\n{body}\n")
+    for f in set(os.listdir(folder)) - {n + ".rst" for n in names}:  # sections renamed or removed
+        os.remove(os.path.join(folder, f))
+
+
+_write_api_pages(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _data_docstring(app, what, name, obj, options, lines):

@@ -210,7 +210,7 @@ def test_npz_data(tiny, tmp_path, capsys):
     assert main(argv) == 0
     with open(out / "retrieval.md") as f:
         md = f.read()
-    assert str(path) in md and "EPPF scaling: object" in md and "the file's split" in md
+    assert str(path) not in md and "- data: `tiny_set.npz`" in md and "EPPF scaling: object" in md and "the file's split" in md
     rows = read_csv(out / "retrieval.csv")
     assert [r["descriptor"] for r in rows] == ["EPPF short"]
     data = load_data(path)

@@ -1,6 +1,6 @@
 """Data sets: the built-in synthetic shapes and loaders for files on disk."""
 
-from ._npz import load_npz
+from ._npz import load_npz, save_npz
 from ._synthetic import make_shapes
 from ._loaders import load_modelnet, load_s3dis_objects, load_scannet_objects
 from ._fetch import clear_data_home, fetch_file, fetch_modelnet, get_data_home
@@ -19,4 +19,5 @@ __all__ = [
     "load_s3dis_objects",
     "load_scannet_objects",
     "make_shapes",
+    "save_npz",
 ]

@@ -5,6 +5,7 @@ import hashlib
 import io
 import os
 import platform
+import shlex
 import sys
 import time
 from dataclasses import dataclass, field
@@ -270,7 +271,7 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
     clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
     return Dataset(
         name=data_name(spec),
-        source=f"`{os.path.abspath(spec)}`",
+        source=f"`{_base_name(spec)}`",
         clouds=clouds,
         y=y,
         target_names=np.asarray(b.target_names).astype(str),
@@ -370,7 +371,10 @@ def write_report(out, name, *, title, command, data, protocol, table, csv_rows, 
     title : str
         Heading of the Markdown file.
     command : str
-        The command line (or call) that made the results.
+        The command line (or call) that made the results. It is recorded
+        without machine-local paths: the value of ``--data`` becomes the
+        file's or folder's base name, an absolute ``--out`` its base name, and
+        ``--cache-dir`` (which does not change the results) is dropped.
     data : Dataset
         Described in the Markdown file.
     protocol : dict
@@ -408,7 +412,7 @@ def write_report(out, name, *, title, command, data, protocol, table, csv_rows, 
         png = _draw(plot, os.path.join(out, f"{name}.png"), log)
         if png:
             paths["png"] = png
-    md = [f"# {title}", "", "Made by:", "", "```", command, "```", "", "## Data", ""]
+    md = [f"# {title}", "", "Made by:", "", "```", portable_command(command), "```", "", "## Data", ""]
     md += data.summary()
     md += ["", "## Protocol", ""]
     md += [f"- {k}: {v}" for k, v in protocol.items()]
@@ -426,6 +430,68 @@ def write_report(out, name, *, title, command, data, protocol, table, csv_rows, 
         f.write("\n".join(md))
     log(f"wrote {', '.join(paths.values())}")
     return paths
+
+
+def _base_name(path):
+    """The last component of ``path`` (a folder keeps a trailing ``/``)."""
+    path = os.fspath(path)
+    base = os.path.basename(os.path.normpath(path))
+    return base + "/" if os.path.isdir(path) else base
+
+
+def portable_command(command):
+    """``command`` with its machine-local paths removed, for a report.
+
+    ``--data PATH`` keeps only the base name of ``PATH`` (``builtin`` stays),
+    an absolute ``--out PATH`` keeps its base name, and ``--cache-dir PATH`` is
+    dropped, so a report regenerated on another machine reads the same.
+    A command that is not a shell-like command line is returned unchanged.
+
+    Parameters
+    ----------
+    command : str
+        The command line.
+
+    Returns
+    -------
+    command : str
+        The command line to record.
+
+    Examples
+    --------
+    >>> from eppf.experiments._common import portable_command
+    >>> portable_command("eppf-experiments retrieval --data /home/me/sets/modelnet10_1024.npz --cache-dir /tmp/c")
+    'eppf-experiments retrieval --data modelnet10_1024.npz'
+    """
+    try:
+        tokens = shlex.split(command)
+    except ValueError:
+        return command
+    if "#" in tokens:  # a recorded function call, not a command line
+        return command
+    out, k = [], 0
+    while k < len(tokens):
+        tok = tokens[k]
+        opt, eq, value = tok.partition("=")
+        if opt in ("--data", "--out", "--cache-dir"):
+            if not eq:
+                if k + 1 >= len(tokens):
+                    out.append(tok)
+                    break
+                value = tokens[k + 1]
+                k += 1
+            k += 1
+            if opt == "--cache-dir":
+                continue
+            if opt == "--data" and value != "builtin":
+                value = _base_name(value)
+            elif opt == "--out" and os.path.isabs(value):
+                value = os.path.basename(os.path.normpath(value))
+            out += [opt, value]
+            continue
+        out.append(tok)
+        k += 1
+    return shlex.join(out)
 
 
 def _draw(plot, path, log):
