@@ -16,6 +16,8 @@ __all__ = ["CVFHTransformer"]
 
 N_ANGLE_BINS = 45
 N_VIEW_BINS = 128
+#: A length in the scaled cloud's units.
+_LENGTH = [Interval(numbers.Real, 1e-15, 1e15, closed="both", description="a float in [1e-15, 1e+15]")]
 N_FEATURES = 4 * N_ANGLE_BINS + N_VIEW_BINS  # 308, PCL's VFHSignature308
 #: Most neighbour pairs the radius searches of one object may hold in memory.
 MAX_PAIRS = 5_000_000
@@ -266,7 +268,7 @@ class CVFHTransformer(PointCloudDescriptor):
     --------
     >>> import numpy as np
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._cvfh import CVFHTransformer
+    >>> from eppf.descriptors import CVFHTransformer
     >>> X, y = make_shapes(2, n_points=512, return_X_y=True)
     >>> C = CVFHTransformer().fit_transform(X)
     >>> C.shape
@@ -310,8 +312,8 @@ class CVFHTransformer(PointCloudDescriptor):
         "scaling": SCALING,
         "eps_angle": [Interval(numbers.Real, 0, np.pi, closed="both")],
         "curvature_threshold": [Interval(numbers.Real, 0, 1e300, closed="both")],
-        "cluster_tolerance": [Interval(numbers.Real, 1e-15, 1e15, closed="both")],
-        "radius_normals": [Interval(numbers.Real, 1e-15, 1e15, closed="both")],
+        "cluster_tolerance": _LENGTH,
+        "radius_normals": _LENGTH,
         "min_points": [Interval(numbers.Integral, 1, None, closed="left")],
         "region_growing": [StrOptions(["components", "pcl"])],
         "normalize_bins": [Options(bool)],

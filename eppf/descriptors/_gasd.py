@@ -141,7 +141,7 @@ class GASDTransformer(PointCloudDescriptor):
     Examples
     --------
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._gasd import GASDTransformer
+    >>> from eppf.descriptors import GASDTransformer
     >>> data = make_shapes(2, n_points=256, random_state=0)
     >>> X = GASDTransformer().fit_transform(data.data)
     >>> X.shape
@@ -270,7 +270,7 @@ def gasd_alignment(cloud, *, view_direction=(0.0, 0.0, 1.0), sign_convention="pc
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf.descriptors._gasd import gasd_alignment
+    >>> from eppf.descriptors import gasd_alignment
     >>> rng = np.random.default_rng(0)
     >>> cloud = rng.normal(size=(500, 3)) * [3.0, 2.0, 1.0] + 5.0
     >>> aligned, T = gasd_alignment(cloud)
@@ -371,7 +371,7 @@ class GASDColorTransformer(PointCloudDescriptor):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf.descriptors._gasd import GASDColorTransformer
+    >>> from eppf.descriptors import GASDColorTransformer
     >>> rng = np.random.default_rng(0)
     >>> xyz = rng.normal(size=(300, 3)) * [3.0, 2.0, 1.0]
     >>> rgb = rng.integers(0, 256, size=(300, 3))

@@ -16,6 +16,8 @@ CLASSES = ("noise", "plane", "cylinder", "sphere", "edge", "empty")
 #: getSimpleType's thresholds: min_radius_plane, max_radius_noise,
 #: min_radius_cylinder, max_min_radius_diff (PCL's defaults, in cloud units).
 THRESHOLDS = (0.100, 0.015, 0.175, 0.050)
+#: A length in the scaled cloud's units.
+_LENGTH = [Interval(numbers.Real, 1e-15, 1e15, closed="both", description="a float in [1e-15, 1e+15]")]
 N_FEATURES = 21
 # PCL's VoxelGrid refuses grids of more than INT32_MAX cells; cells must also
 # stay within +-2**30 of the origin for the kernel's integer cell indices.
@@ -142,7 +144,7 @@ class GRSDTransformer(PointCloudDescriptor):
     --------
     >>> import numpy as np
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._grsd import GRSDTransformer
+    >>> from eppf.descriptors import GRSDTransformer
     >>> X, y = make_shapes(2, n_points=512, return_X_y=True)
     >>> G = GRSDTransformer().fit_transform(X)
     >>> G.shape
@@ -172,10 +174,10 @@ class GRSDTransformer(PointCloudDescriptor):
         self.n_jobs = n_jobs
 
     _parameter_constraints = {
-        "radius": [Interval(numbers.Real, 1e-15, 1e15, closed="both")],
+        "radius": _LENGTH,
         "scaling": SCALING,
         "n_subdivisions": [Interval(numbers.Integral, 1, 64, closed="both")],
-        "plane_radius": [Interval(numbers.Real, 1e-15, 1e15, closed="both")],
+        "plane_radius": _LENGTH,
         "normalize": [Options(bool)],
         "n_neighbors": N_NEIGHBORS,
         "normal_orientation": NORMAL_ORIENTATION,

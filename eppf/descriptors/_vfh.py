@@ -141,7 +141,7 @@ class VFHTransformer(PointCloudDescriptor):
     Examples
     --------
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._vfh import VFHTransformer
+    >>> from eppf.descriptors import VFHTransformer
     >>> data = make_shapes(2, n_points=256, random_state=0)
     >>> X = VFHTransformer().fit_transform(data.data)
     >>> X.shape
