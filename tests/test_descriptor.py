@@ -541,10 +541,10 @@ def test_bad_input_raises(X, match, exc):
 @pytest.mark.parametrize(
     "params, match, exc",
     [
-        ({"n_bins": (20, 4, 5)}, "n_bins must be a tuple of 4 ints in [1, 64], got (20, 4, 5)", ValueError),
-        ({"n_bins": (20, 0, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64], got (20, 0, 5, 3)", ValueError),
-        ({"n_bins": (20, 4.5, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64], got (20, 4.5, 5, 3)", TypeError),
-        ({"n_bins": 20}, "n_bins must be a tuple of 4 ints in [1, 64], got 20", TypeError),
+        ({"n_bins": (20, 4, 5)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got (20, 4, 5)", ValueError),
+        ({"n_bins": (20, 0, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got (20, 0, 5, 3)", ValueError),
+        ({"n_bins": (20, 4.5, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got (20, 4.5, 5, 3)", TypeError),
+        ({"n_bins": 20}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got 20", TypeError),
         ({"n_pairs": 0}, "n_pairs must be an int in [1, 2147483647], got 0", ValueError),
         ({"n_pairs": 10.0}, "n_pairs must be an int in [1, 2147483647], got 10.0", TypeError),
         ({"c": 1.0}, "c must be a finite float > 1 (so that ln(i/N + c) > 0), got 1.0", ValueError),

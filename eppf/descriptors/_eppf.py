@@ -173,7 +173,7 @@ class EPPFTransformer(PointCloudDescriptor):
         self.verbose = verbose
 
     _parameter_constraints = {
-        "n_bins": [IntTuple(4, 1, 64)],
+        "n_bins": [IntTuple(4, 1, 64, description="a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4)")],
         "n_pairs": [Interval(numbers.Integral, 1, 2**31 - 1, closed="both")],
         "c": [Interval(numbers.Real, 1, None, closed="neither",
                        description="a finite float > 1 (so that ln(i/N + c) > 0)")],

@@ -116,7 +116,11 @@ class WahlTransformer(PointCloudDescriptor):
         self.n_jobs = n_jobs
 
     _parameter_constraints = {
-        "n_bins": [Interval(numbers.Integral, 1, 1024, closed="both"), IntTuple(4, 1, 1024, max_product=2**26)],
+        "n_bins": [
+            Interval(numbers.Integral, 1, 1024, closed="both"),
+            IntTuple(4, 1, 1024, max_product=2**26,
+                     description="a tuple of 4 ints in [1, 1024] (alpha, beta, gamma, delta; at most 2**26 bins in all)"),
+        ],
         "n_pairs": [Interval(numbers.Integral, 1, 2**31 - 1, closed="both")],
         "source": [StrOptions(["perpendicular", "parallel"])],
         "n_neighbors": N_NEIGHBORS,
