@@ -538,12 +538,19 @@ def test_bad_input_raises(X, match, exc):
     _err(X, match, exc)
 
 
+_FUNCTIONS = ("functions must be a non-empty sequence of distinct names from "
+              "('distance', 'angle', 'normal', 'occupancy'), got ")
+
+
 @pytest.mark.parametrize(
     "params, match, exc",
     [
-        ({"n_bins": (20, 4, 5)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got (20, 4, 5)", ValueError),
-        ({"n_bins": (20, 0, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got (20, 0, 5, 3)", ValueError),
-        ({"n_bins": (20, 4.5, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got (20, 4.5, 5, 3)", TypeError),
+        ({"n_bins": (20, 4, 5)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), "
+                                 "got (20, 4, 5)", ValueError),
+        ({"n_bins": (20, 0, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), "
+                                    "got (20, 0, 5, 3)", ValueError),
+        ({"n_bins": (20, 4.5, 5, 3)}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), "
+                                      "got (20, 4.5, 5, 3)", TypeError),
         ({"n_bins": 20}, "n_bins must be a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4), got 20", TypeError),
         ({"n_pairs": 0}, "n_pairs must be an int in [1, 2147483647], got 0", ValueError),
         ({"n_pairs": 10.0}, "n_pairs must be an int in [1, 2147483647], got 10.0", TypeError),
@@ -551,9 +558,9 @@ def test_bad_input_raises(X, match, exc):
         ({"c": float("nan")}, "c must be a finite float > 1 (so that ln(i/N + c) > 0), got nan", ValueError),
         ({"c": "1.2"}, "c must be a finite float > 1 (so that ln(i/N + c) > 0), got '1.2'", TypeError),
         ({"grid_size": 1}, "grid_size must be an int in [2, 1023], got 1", ValueError),
-        ({"functions": ("distance", "colour")}, "functions must be a non-empty sequence of distinct names from ('distance', 'angle', 'normal', 'occupancy'), got ('distance', 'colour')", ValueError),
-        ({"functions": ()}, "functions must be a non-empty sequence of distinct names from ('distance', 'angle', 'normal', 'occupancy'), got ()", ValueError),
-        ({"functions": ("angle", "angle")}, "functions must be a non-empty sequence of distinct names from ('distance', 'angle', 'normal', 'occupancy'), got ('angle', 'angle')", ValueError),
+        ({"functions": ("distance", "colour")}, _FUNCTIONS + "('distance', 'colour')", ValueError),
+        ({"functions": ()}, _FUNCTIONS + "()", ValueError),
+        ({"functions": ("angle", "angle")}, _FUNCTIONS + "('angle', 'angle')", ValueError),
         ({"scaling": "unit"}, "scaling must be one of 'fit', 'object', 'none', got 'unit'", ValueError),
         ({"n_neighbors": 2}, "n_neighbors must be an int in [3, 1000000], got 2", ValueError),
         ({"normal_orientation": "up"}, "normal_orientation must be 'centroid', 'origin' or None, got 'up'", ValueError),

@@ -125,13 +125,18 @@ def test_pipeline_and_grid_search():
     assert search.best_score_ > 0.8
 
 
+_N_BINS = ("n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024] "
+           "(alpha, beta, gamma, delta; at most 2**26 bins in all), got ")
+
+
 @pytest.mark.parametrize(
     "params, err, msg",
     [
-        ({"n_bins": (5, 5, 5)}, ValueError, "n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024] (alpha, beta, gamma, delta; at most 2**26 bins in all), got (5, 5, 5)"),
-        ({"n_bins": 0}, ValueError, "n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024] (alpha, beta, gamma, delta; at most 2**26 bins in all), got 0"),
-        ({"n_bins": "5"}, ValueError, "n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024] (alpha, beta, gamma, delta; at most 2**26 bins in all), got '5'"),
-        ({"n_bins": 2.5}, TypeError, "n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024] (alpha, beta, gamma, delta; at most 2**26 bins in all), got 2.5"),
+        ({"n_bins": (5, 5, 5)}, ValueError, _N_BINS + "(5, 5, 5)"),
+        ({"n_bins": 0}, ValueError, _N_BINS + "0"),
+        ({"n_bins": "5"}, ValueError, _N_BINS + "'5'"),
+        ({"n_bins": 2.5}, TypeError, _N_BINS + "2.5"),
+        ({"n_bins": (1024, 1024, 64, 2)}, ValueError, _N_BINS + "(1024, 1024, 64, 2)"),  # 2**27 bins
         ({"n_pairs": 0}, ValueError, "n_pairs must be an int in [1, 2147483647], got 0"),
         ({"source": "target"}, ValueError, "source must be 'perpendicular' or 'parallel', got 'target'"),
         ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),

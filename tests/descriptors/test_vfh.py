@@ -247,13 +247,16 @@ def test_extreme_scales():
     assert np.isfinite(VFHTransformer().fit_transform([tiny])).all()
 
 
+_VIEWPOINT = "viewpoint must be an array-like of 3 finite numbers of magnitude at most 1e+300, got "
+
+
 @pytest.mark.parametrize(
     "params, err, msg",
     [
-        ({"viewpoint": (0, 0)}, ValueError, "viewpoint must be an array-like of 3 finite numbers of magnitude at most 1e+300, got (0, 0)"),
-        ({"viewpoint": (0, np.inf, 0)}, ValueError, "viewpoint must be an array-like of 3 finite numbers of magnitude at most 1e+300, got (0, inf, 0)"),
-        ({"viewpoint": (0, 1e301, 0)}, ValueError, "viewpoint must be an array-like of 3 finite numbers of magnitude at most 1e+300, got (0, 1e+301, 0)"),
-        ({"viewpoint": "here"}, TypeError, "viewpoint must be an array-like of 3 finite numbers of magnitude at most 1e+300, got 'here'"),
+        ({"viewpoint": (0, 0)}, ValueError, _VIEWPOINT + "(0, 0)"),
+        ({"viewpoint": (0, np.inf, 0)}, ValueError, _VIEWPOINT + "(0, inf, 0)"),
+        ({"viewpoint": (0, 1e301, 0)}, ValueError, _VIEWPOINT + "(0, 1e+301, 0)"),
+        ({"viewpoint": "here"}, TypeError, _VIEWPOINT + "'here'"),
         ({"normalize_bins": 1}, TypeError, "normalize_bins must be True or False, got 1"),
         ({"size_component": "yes"}, TypeError, "size_component must be True or False, got 'yes'"),
         ({"pcl_centroid": None}, TypeError, "pcl_centroid must be True or False, got None"),
