@@ -39,26 +39,8 @@ IGNORED = {
 }
 
 # Failures in files that other engineers are editing in parallel: listed by
-# name so that their merges stay clean.
-# docstring fixed by its owner after the merge
+# name so that their merges stay clean (each fixed by its owner after the merge).
 SKIP = {
-    "eppf.descriptors.CVFHTransformer.get_feature_names_out": ('SS05',),  # docstring fixed by its owner after the merge
-    "eppf.descriptors.GASDColorTransformer.get_feature_names_out": ('SS05',),  # docstring fixed by its owner after the merge
-    "eppf.descriptors.GASDTransformer.get_feature_names_out": ('SS05',),  # docstring fixed by its owner after the merge
-    "eppf.descriptors.GRSDTransformer.get_feature_names_out": ('SS05',),  # docstring fixed by its owner after the merge
-    "eppf.descriptors.VFHTransformer.get_feature_names_out": ('SS05',),  # docstring fixed by its owner after the merge
-    "eppf.descriptors.gasd_alignment": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.io.FileFormatError": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.io.format_of": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.nn.AugmentedPointClouds": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.nn.PointNet": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.nn.PointNet.forward": ('GL08',),  # docstring fixed by its owner after the merge
-    "eppf.nn.PointNetLoss": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.nn.PointNetLoss.forward": ('GL08',),  # docstring fixed by its owner after the merge
-    "eppf.nn.TNet": ('SA01',),  # docstring fixed by its owner after the merge
-    "eppf.nn.TNet.forward": ('GL08',),  # docstring fixed by its owner after the merge
-    "eppf.nn.orthogonality_penalty": ('RT03', 'SA01'),  # docstring fixed by its owner after the merge
-    "eppf.utils.check_int": ('SA01',),  # docstring fixed by its owner after the merge
     "eppf.datasets.clear_data_home": ("SA01",),
     "eppf.datasets.fetch_file": ("SA01",),
     "eppf.datasets.fetch_modelnet": ("SA01",),
@@ -66,14 +48,6 @@ SKIP = {
     "eppf.datasets.load_folder": ("SA01",),
     "eppf.datasets.load_s3dis_objects": ("SA01",),
     "eppf.datasets.load_scannet_objects": ("SA01",),
-    "eppf.descriptors.EPPFTransformer.get_feature_names_out": ("SS05",),
-    "eppf.descriptors.ESFTransformer.get_feature_names_out": ("SS05",),
-    "eppf.descriptors.OURCVFHTransformer.get_feature_names_out": ("SS05",),
-    "eppf.descriptors.WahlTransformer.get_feature_names_out": ("SS05",),
-    "eppf.io.Mesh": ("PR01", "SA01"),
-    "eppf.io.read_mesh": ("SA01",),
-    "eppf.io.write_mesh": ("SA01",),
-    "eppf.io.write_point_cloud": ("SA01",),
     "eppf.nn.Conv4d.extra_repr": ("GL08",),
     "eppf.nn.Conv4d.forward": ("PR01", "RT01"),
     "eppf.nn.Conv4d.forward_folded": ("PR07", "RT03"),

@@ -234,12 +234,12 @@ def test_pipeline_and_grid_search():
 @pytest.mark.parametrize(
     "params, err, msg",
     [
-        ({"n_triplets": 0}, ValueError, "ESFTransformer: n_triplets must be in [1, 536870912], got 0"),
-        ({"n_triplets": 1.5}, TypeError, "ESFTransformer: n_triplets must be an int, got float"),
-        ({"grid_size": 63}, ValueError, "ESFTransformer: grid_size must be even, got 63"),
-        ({"grid_size": 2}, ValueError, "ESFTransformer: grid_size must be in [4, 1024], got 2"),
-        ({"n_bins": 0}, ValueError, "ESFTransformer: n_bins must be in [1, 4096], got 0"),
-        ({"n_jobs": 0}, ValueError, "n_jobs == 0 has no meaning"),
+        ({"n_triplets": 0}, ValueError, "ESFTransformer: n_triplets must be an int in [1, 536870912], got 0"),
+        ({"n_triplets": 1.5}, TypeError, "ESFTransformer: n_triplets must be an int in [1, 536870912], got 1.5"),
+        ({"grid_size": 63}, ValueError, "ESFTransformer: grid_size must be an even int in [4, 1024], got 63"),
+        ({"grid_size": 2}, ValueError, "ESFTransformer: grid_size must be an even int in [4, 1024], got 2"),
+        ({"n_bins": 0}, ValueError, "ESFTransformer: n_bins must be an int in [1, 4096], got 0"),
+        ({"n_jobs": 0}, ValueError, "n_jobs must be None or a non-zero int (-1: all cores), got 0"),
     ],
 )
 def test_bad_parameters(params, err, msg):

@@ -10,7 +10,8 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import make_pipeline
 
 from eppf import KLNearestNeighbors, OURCVFHTransformer
-from eppf.descriptors._ourcvfh import _ourcvfh_object, _pair_features
+from eppf.descriptors._ourcvfh import _ourcvfh_object
+from eppf.descriptors._regions import pair_features
 
 
 def _plane(n_side=20):
@@ -47,7 +48,7 @@ def test_plane_is_one_cluster():
     assert len(clusters) == 1
     assert_array_equal(clusters[0], np.arange(len(p)))
     # Source normal equals every target normal: f1 = atan2(0, 1) = 0, f2 = 0, f3 = 0
-    f1, f2, f3 = _pair_features(p.mean(axis=0), np.array([0.0, 0.0, 1.0]), p, n)
+    f1, f2, f3 = pair_features(p.mean(axis=0), np.array([0.0, 0.0, 1.0]), p, n)
     assert_allclose(np.c_[f1, f2, f3], 0.0, atol=1e-12)
     # so each angle histogram holds every defined pair in one bin, floor(45 * (0 + pi) / (2 pi)) = 22
     sig = sigs[0]
@@ -158,19 +159,19 @@ def test_pipeline_and_grid_search():
 @pytest.mark.parametrize(
     "params, err, msg",
     [
-        ({"aggregate": "max"}, ValueError, "aggregate must be 'largest', 'first' or 'mean', got 'max'"),
-        ({"scaling": "unit"}, ValueError, "scaling must be 'object', 'fit' or 'none', got 'unit'"),
-        ({"curvature_threshold": 0.0}, ValueError, "curvature_threshold must be finite and > 0.0, got 0.0"),
-        ({"eps_angle": 4.0}, ValueError, "eps_angle must be finite and > 0.0 and <= 3.14159"),
-        ({"eps_angle": "a"}, TypeError, "eps_angle must be a float, got str"),
-        ({"cluster_tolerance": -1.0}, ValueError, "cluster_tolerance must be finite and > 0.0, got -1.0"),
-        ({"min_points": 0}, ValueError, "min_points must be >= 1, got 0"),
-        ({"axis_ratio": 1.5}, ValueError, "axis_ratio must be finite and > 0.0 and <= 1.0, got 1.5"),
-        ({"sigma": np.nan}, ValueError, "sigma must be finite and > 0.0, got nan"),
-        ({"normalize": 1}, TypeError, "normalize must be a bool, got int"),
-        ({"n_neighbors": 2}, ValueError, "n_neighbors must be >= 3, got 2"),
+        ({"aggregate": "max"}, ValueError, "aggregate must be one of 'largest', 'first', 'mean', got 'max'"),
+        ({"scaling": "unit"}, ValueError, "scaling must be one of 'object', 'fit', 'none', got 'unit'"),
+        ({"curvature_threshold": 0.0}, ValueError, "curvature_threshold must be a float in (0.0, inf), got 0.0"),
+        ({"eps_angle": 4.0}, ValueError, "eps_angle must be a float in (0.0, 3.141592653589793], got 4.0"),
+        ({"eps_angle": "a"}, TypeError, "eps_angle must be a float in (0.0, 3.141592653589793], got 'a'"),
+        ({"cluster_tolerance": -1.0}, ValueError, "cluster_tolerance must be None or a float in (0.0, inf), got -1.0"),
+        ({"min_points": 0}, ValueError, "min_points must be an int >= 1, got 0"),
+        ({"axis_ratio": 1.5}, ValueError, "axis_ratio must be a float in (0.0, 1.0], got 1.5"),
+        ({"sigma": np.nan}, ValueError, "sigma must be a float in (0.0, inf), got nan"),
+        ({"normalize": 1}, TypeError, "normalize must be True or False, got 1"),
+        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation must be 'centroid', 'origin' or None, got 'up'"),
-        ({"n_jobs": 0}, ValueError, "n_jobs == 0 has no meaning"),
+        ({"n_jobs": 0}, ValueError, "n_jobs must be None or a non-zero int (-1: all cores), got 0"),
     ],
 )
 def test_bad_parameters(params, err, msg):

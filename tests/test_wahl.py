@@ -125,16 +125,21 @@ def test_pipeline_and_grid_search():
     assert search.best_score_ > 0.8
 
 
+_N_BINS = ("n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024] "
+           "(alpha, beta, gamma, delta; at most 2**26 bins in all), got ")
+
+
 @pytest.mark.parametrize(
     "params, err, msg",
     [
-        ({"n_bins": (5, 5, 5)}, ValueError, "n_bins must have 4 entries (alpha, beta, gamma, delta), got 3"),
-        ({"n_bins": 0}, ValueError, "each entry of n_bins must be in [1, 1024], got 0"),
-        ({"n_bins": "5"}, ValueError, "n_bins must have 4 entries"),
-        ({"n_bins": 2.5}, TypeError, "n_bins must be an int or a sequence of 4 ints, got float"),
-        ({"n_pairs": 0}, ValueError, "n_pairs must be in [1, 2147483647], got 0"),
+        ({"n_bins": (5, 5, 5)}, ValueError, _N_BINS + "(5, 5, 5)"),
+        ({"n_bins": 0}, ValueError, _N_BINS + "0"),
+        ({"n_bins": "5"}, ValueError, _N_BINS + "'5'"),
+        ({"n_bins": 2.5}, TypeError, _N_BINS + "2.5"),
+        ({"n_bins": (1024, 1024, 64, 2)}, ValueError, _N_BINS + "(1024, 1024, 64, 2)"),  # 2**27 bins
+        ({"n_pairs": 0}, ValueError, "n_pairs must be an int in [1, 2147483647], got 0"),
         ({"source": "target"}, ValueError, "source must be 'perpendicular' or 'parallel', got 'target'"),
-        ({"n_neighbors": 2}, ValueError, "n_neighbors must be >= 3, got 2"),
+        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation must be 'centroid', 'origin' or None, got 'up'"),
     ],
 )

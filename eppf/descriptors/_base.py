@@ -4,30 +4,96 @@ A descriptor maps a list of point clouds (arrays of shape (n_i, 3), or (n_i, 6)
 with normals in columns 3-5) to one row per object. What every descriptor does
 the same way is written here once:
 
-- ``fit`` checks the parameters and the clouds, lets the subclass learn from
-  them (:meth:`PointCloudDescriptor._learn`, e.g. EPPF's data-set scale) and
+- parameters are checked against the class's ``_parameter_constraints``
+  (:func:`eppf.utils._param_validation.validate_params`: one message style,
+  naming the estimator, the parameter and what it accepts), then resolved by
+  the subclass (:meth:`PointCloudDescriptor._resolve_params`);
+- ``fit`` checks the clouds, lets the subclass learn from them
+  (:meth:`PointCloudDescriptor._learn`, e.g. EPPF's data-set scale) and
   records ``n_features_out_``;
 - ``transform`` validates the clouds once (all of them, in one compiled pass),
   draws the per-object inputs (seeds from ``random_state``, scales) for the
   whole input before chunking, and hands chunks of objects to joblib
   (:func:`eppf.utils.transform_in_chunks`), so results never depend on threads,
   chunk sizes or where a chunk runs;
+- clouds may carry extra per-point columns after the coordinates (and
+  normals), such as GASD colour's RGB: ``_extra_columns`` says how many, and
+  :meth:`PointCloudDescriptor._check_extra_columns` checks and converts them;
+  they reach ``_describe`` as its last per-object argument;
 - kernel status codes become a ``ValueError`` naming the estimator and the
   object (:meth:`PointCloudDescriptor._raise_for_status`);
+- packing clouds with their normals (estimated where missing), optionally
+  centred and scaled per object (:meth:`PointCloudDescriptor._centred_points_and_normals`);
 - tags for ragged (non-tabular) input and ``get_feature_names_out``.
 
-A subclass provides ``_check_params`` (validated, resolved parameters),
-``_n_features``, ``_describe`` (the rows of one chunk) and
-``_feature_names``, and sets ``_min_points``.
+A subclass declares ``_parameter_constraints`` and provides
+``_resolve_params`` (resolved parameters), ``_n_features``, ``_describe`` (the
+rows of one chunk) and ``_feature_names``, and sets ``_min_points``.
+
+The constraint lists that several descriptors share are the module's public
+constants (``NORMAL_ORIENTATION``, ``N_JOBS``, ...).
 """
+
+import numbers
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds, transform_in_chunks
+from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
 
-__all__ = ["PointCloudDescriptor"]
+__all__ = [
+    "N_JOBS",
+    "N_NEIGHBORS",
+    "NORMAL_ORIENTATION",
+    "RANDOM_STATE",
+    "SCALING",
+    "VERBOSE",
+    "PointCloudDescriptor",
+    "as_vector3",
+]
+
+
+def _nonzero_int(value):
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value != 0
+
+
+def as_vector3(value):
+    """``value`` as a float64 array of 3 finite real numbers, or None if it is not one.
+
+    For vector parameters (VFH's ``viewpoint``, GASD's ``view_direction``):
+    their constraints accept what this converts, their ``_resolve_params``
+    converts with it.
+    """
+    try:
+        v = np.asarray(value)
+    except Exception:
+        return None
+    if v.dtype == object or np.iscomplexobj(v) or not (np.issubdtype(v.dtype, np.number) or v.dtype == bool):
+        return None
+    if v.shape != (3,):
+        return None
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    return v if np.isfinite(v).all() else None
+
+
+#: ``n_jobs``: None (OpenMP's default) or joblib's non-zero ints.
+N_JOBS = [None, Satisfies(_nonzero_int, "a non-zero int (-1: all cores)")]
+#: ``random_state``: what :func:`sklearn.utils.check_random_state` takes.
+RANDOM_STATE = [
+    None,
+    Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
+    Options(np.random.RandomState, description="a numpy RandomState"),
+]
+#: ``verbose``: a non-negative int (or a bool).
+VERBOSE = [Interval(numbers.Integral, 0, None, closed="left"), Options(bool)]
+#: ``normal_orientation`` of estimated normals.
+NORMAL_ORIENTATION = [StrOptions(["centroid", "origin"], description="'centroid', 'origin'"), None]
+#: ``n_neighbors`` of PCA normals (a plane needs three points).
+N_NEIGHBORS = [Interval(numbers.Integral, 3, None, closed="left")]
+#: ``scaling`` of the descriptors that centre each object and scale it to a unit box.
+SCALING = [StrOptions(["object", "fit", "none"])]
 
 
 class PointCloudDescriptor(TransformerMixin, BaseEstimator):
@@ -38,14 +104,25 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
     when a subclass has them.
     """
 
+    #: Parameter name -> accepted values (see :mod:`eppf.utils._param_validation`).
+    _parameter_constraints = {}
     #: Fewest points a cloud may have.
     _min_points = 2
     #: Label of the progress bar (``verbose``).
     _progress_label = ""
+    #: Extra per-point columns after the coordinates (and normals), e.g. 3 for RGB.
+    _extra_columns = 0
+    #: What the extra columns hold, for messages (``"rgb"``).
+    _extra_columns_name = ""
 
     # ----------------------------------------------------------------- hooks
-    def _check_params(self):  # pragma: no cover - every subclass overrides it
-        """Validate the parameters; return them resolved (any object the other hooks take)."""
+    def _check_params(self):
+        """Validate the parameters against ``_parameter_constraints``; return them resolved."""
+        validate_params(self)
+        return self._resolve_params()
+
+    def _resolve_params(self):  # pragma: no cover - every subclass overrides it
+        """The validated parameters resolved (any object the other hooks take); cross-parameter checks."""
         raise NotImplementedError
 
     def _n_features(self, params):  # pragma: no cover - every subclass overrides it
@@ -56,8 +133,18 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """Learn from the validated training clouds (nothing by default)."""
 
     def _per_object(self, clouds, params):
-        """Per-object inputs drawn for the whole input before chunking: one seed per object."""
-        return (object_seeds(getattr(self, "random_state", None), len(clouds)),)
+        """Per-object inputs drawn for the whole input before chunking.
+
+        By default one seed per object when the descriptor has a
+        ``random_state``, nothing otherwise.
+        """
+        if "random_state" not in self.get_params(deep=False):
+            return ()
+        return (object_seeds(self.random_state, len(clouds)),)
+
+    def _check_extra_columns(self, index, values):  # pragma: no cover - overridden where _extra_columns > 0
+        """Check and convert the extra columns ``values`` (n, _extra_columns) of cloud ``index``."""
+        raise NotImplementedError
 
     def _describe(self, clouds, params, *per_object, first_index):  # pragma: no cover - overridden
         """The rows of one chunk of validated clouds."""
@@ -72,7 +159,40 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         return check_n_jobs(getattr(self, "n_jobs", None), owner=type(self).__name__)
 
     def _validate_clouds(self, X, n_threads=1):
-        return check_point_clouds(X, owner=type(self).__name__, min_points=self._min_points, n_threads=n_threads)
+        """Validated clouds, and the list of their checked extra columns (None without any)."""
+        if not self._extra_columns:
+            return check_point_clouds(X, owner=type(self).__name__, min_points=self._min_points,
+                                      n_threads=n_threads), None
+        return self._split_extra_columns(X, n_threads)
+
+    def _split_extra_columns(self, X, n_threads):
+        """Split clouds of shape (n, 3 + e) or (n, 6 + e) into validated clouds and checked extras."""
+        owner = type(self).__name__
+        e, what = self._extra_columns, self._extra_columns_name
+        if X is None or isinstance(X, (str, bytes, dict)):
+            raise TypeError(f"{owner}: X must be a list of (n_i, {3 + e}) or (n_i, {6 + e}) arrays "
+                            f"(xyz[, normals], {what}), got {type(X).__name__}")
+        try:
+            items = list(X)
+        except TypeError:
+            raise TypeError(f"{owner}: X must be a list of point clouds, got {type(X).__name__}") from None
+        if not items:
+            raise ValueError(f"{owner}: X is empty: at least one point cloud is needed")
+        xyz, extras = [], []
+        for i, c in enumerate(items):
+            try:
+                a = np.asarray(c)
+            except Exception as exc:
+                raise TypeError(f"{owner}: point cloud {i} could not be converted to an array: {exc}") from None
+            if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool) or np.iscomplexobj(a):
+                raise TypeError(f"{owner}: point cloud {i} must hold real numbers, got dtype {a.dtype}")
+            if a.ndim != 2 or a.shape[1] not in (3 + e, 6 + e):
+                raise ValueError(f"{owner}: point cloud {i} must have shape (n_points, {3 + e}) (xyz, {what}) or "
+                                 f"(n_points, {6 + e}) (xyz, normals, {what}), got shape {a.shape}")
+            extras.append(self._check_extra_columns(i, a[:, -e:]))
+            xyz.append(a[:, :-e])
+        clouds = check_point_clouds(xyz, owner=owner, min_points=self._min_points, n_threads=n_threads)
+        return clouds, extras
 
     def _points_and_normals(self, clouds, n_neighbors, orientation, n_threads):
         """Pack validated clouds into ``points``, ``normals`` (N, 3) and ``offsets``.
@@ -95,6 +215,30 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
                                          owner=type(self).__name__)
             for j, k in enumerate(missing):
                 normals[offsets[k] : offsets[k + 1]] = est[sub_off[j] : sub_off[j + 1]]
+        return points, normals, offsets
+
+    def _fit_scale(self, clouds):
+        """With ``scaling="fit"``, 1 / the largest bounding-box side of any cloud; else 1."""
+        if self.scaling != "fit":
+            return 1.0
+        return 1.0 / max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
+
+    def _centred_points_and_normals(self, clouds, n_neighbors, n_threads):
+        """:meth:`_points_and_normals` (oriented by ``normal_orientation``), each object centred.
+
+        Each object's points (a copy) are centred on their mean, then divided
+        by their largest bounding-box side (``scaling="object"``) or
+        multiplied by ``scale_`` (``scaling="fit"``).
+        """
+        points, normals, offsets = self._points_and_normals(clouds, n_neighbors, self.normal_orientation, n_threads)
+        points = points.copy()
+        for k in range(len(clouds)):
+            p = points[offsets[k] : offsets[k + 1]]
+            p -= p.mean(axis=0)
+            if self.scaling == "object":
+                p /= np.ptp(p, axis=0).max()
+            elif self.scaling == "fit":
+                p *= self.scale_
         return points, normals, offsets
 
     def _raise_for_status(self, status, first_index, messages):
@@ -127,7 +271,7 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
             The fitted transformer.
         """
         params = self._check_params()
-        clouds = self._validate_clouds(X)
+        clouds, _ = self._validate_clouds(X)
         self._learn(clouds, params)
         self.n_features_out_ = int(self._n_features(params))
         return self
@@ -147,15 +291,19 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """
         check_is_fitted(self, "n_features_out_")
         params = self._check_params()
-        clouds = self._validate_clouds(X, self._threads())
+        clouds, extras = self._validate_clouds(X, self._threads())
         per_object = self._per_object(clouds, params)
+        if extras is not None:
+            holder = np.empty(len(extras), dtype=object)
+            holder[:] = extras
+            per_object = tuple(per_object) + (holder,)
         return transform_in_chunks(
             _describe_chunk, self, clouds, per_object, n_features=self.n_features_out_,
             verbose=getattr(self, "verbose", 0), desc=self._progress_label,
         )
 
     def get_feature_names_out(self, input_features=None):
-        """Names of the output columns.
+        """Get the names of the output columns.
 
         Parameters
         ----------

@@ -1,21 +1,23 @@
 """Clustered Viewpoint Feature Histogram (CVFH), Aldoma et al. (2011), as in PCL 1.13."""
 
+import numbers
+
 import numpy as np
 from joblib import Parallel, delayed
 from scipy.spatial import cKDTree
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils.validation import check_is_fitted
 
-from ..utils._chunks import transform_in_chunks
-from ..utils._validation import check_point_clouds
+from ..utils import check_n_jobs
+from ..utils._param_validation import Interval, Options, StrOptions
+from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
 from ._cvfh_fast import pcl_region_growing, vfh_signatures
-from ._grsd_fast import radius_neighbors_flann
-from ._regions import _check_common, _check_int, _check_real, _curvature, _fit_scale, _prepared, _smooth_clusters
+from ._regions import curvature, radius_neighbors_flann, smooth_clusters
 
 __all__ = ["CVFHTransformer"]
 
 N_ANGLE_BINS = 45
 N_VIEW_BINS = 128
+#: A length in the scaled cloud's units.
+_LENGTH = [Interval(numbers.Real, 1e-15, 1e15, closed="both", description="a float in [1e-15, 1e+15]")]
 N_FEATURES = 4 * N_ANGLE_BINS + N_VIEW_BINS  # 308, PCL's VFHSignature308
 #: Most neighbour pairs the radius searches of one object may hold in memory.
 MAX_PAIRS = 5_000_000
@@ -74,7 +76,7 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
     p32 = points.astype(np.float32)
     n = len(points)
     if curvature_threshold < 0.5:  # surface variation never exceeds 1/3
-        keep = np.flatnonzero(_curvature(points, n_neighbors) <= curvature_threshold)
+        keep = np.flatnonzero(curvature(points, n_neighbors) <= curvature_threshold)
     else:
         keep = np.arange(n)
     clusters = []
@@ -98,7 +100,7 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
         elif finite.sum() >= min_points:
             tol = float(np.nextafter(cluster_tolerance, 0.0))
             cos_eps = float(np.cos(np.float64(np.float32(eps_angle))))
-            clusters = _smooth_clusters(sub, np.where(finite[:, None], rn, 0.0), finite, tol, cos_eps, min_points)
+            clusters = smooth_clusters(sub, np.where(finite[:, None], rn, 0.0), finite, tol, cos_eps, min_points)
     if not clusters:
         return [], _f32_mean(p32)[None, :], _f32_mean(normals.astype(np.float32))[None, :]
     cents, refs = [], []
@@ -124,7 +126,7 @@ def _cvfh_object(points, normals, **params):
     return out, [len(c) for c in clusters] or [len(points)]
 
 
-class CVFHTransformer(TransformerMixin, BaseEstimator):
+class CVFHTransformer(PointCloudDescriptor):
     """Clustered Viewpoint Feature Histogram (CVFH) of point clouds.
 
     CVFH (Aldoma et al. 2011) after PCL 1.13's ``CVFHEstimation``: points of
@@ -266,7 +268,7 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
     --------
     >>> import numpy as np
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._cvfh import CVFHTransformer
+    >>> from eppf.descriptors import CVFHTransformer
     >>> X, y = make_shapes(2, n_points=512, return_X_y=True)
     >>> C = CVFHTransformer().fit_transform(X)
     >>> C.shape
@@ -305,48 +307,49 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
         self.normal_orientation = normal_orientation
         self.n_jobs = n_jobs
 
-    def _check_params(self):
-        owner = type(self).__name__
-        if self.aggregate not in ("largest", "first", "mean"):
-            raise ValueError(f"{owner}: aggregate must be 'largest', 'first' or 'mean', got {self.aggregate!r}")
-        n_neighbors, n_threads = _check_common(self, owner)
-        if self.region_growing not in ("components", "pcl"):
-            raise ValueError(f"{owner}: region_growing must be 'components' or 'pcl', got {self.region_growing!r}")
-        if not isinstance(self.normalize_bins, (bool, np.bool_)):
-            raise TypeError(f"{owner}: normalize_bins must be a bool, got {type(self.normalize_bins).__name__}")
+    _parameter_constraints = {
+        "aggregate": [StrOptions(["largest", "first", "mean"])],
+        "scaling": SCALING,
+        "eps_angle": [Interval(numbers.Real, 0, np.pi, closed="both")],
+        "curvature_threshold": [Interval(numbers.Real, 0, 1e300, closed="both")],
+        "cluster_tolerance": _LENGTH,
+        "radius_normals": _LENGTH,
+        "min_points": [Interval(numbers.Integral, 1, None, closed="left")],
+        "region_growing": [StrOptions(["components", "pcl"])],
+        "normalize_bins": [Options(bool)],
+        "normalize": [Options(bool)],
+        "n_neighbors": N_NEIGHBORS,
+        "normal_orientation": NORMAL_ORIENTATION,
+        "n_jobs": N_JOBS,
+    }
+
+    _min_points = 3
+
+    def _resolve_params(self):
         params = dict(
-            eps_angle=_check_real(self.eps_angle, "eps_angle", owner, 0.0, np.pi),
-            curvature_threshold=_check_real(self.curvature_threshold, "curvature_threshold", owner, 0.0, 1e300),
-            cluster_tolerance=_check_real(self.cluster_tolerance, "cluster_tolerance", owner, 1e-15, 1e15),
-            radius_normals=_check_real(self.radius_normals, "radius_normals", owner, 1e-15, 1e15),
-            min_points=_check_int(self.min_points, "min_points", owner, 1),
+            eps_angle=float(self.eps_angle),
+            curvature_threshold=float(self.curvature_threshold),
+            cluster_tolerance=float(self.cluster_tolerance),
+            radius_normals=float(self.radius_normals),
+            min_points=int(self.min_points),
             normalize_bins=bool(self.normalize_bins),
             region_growing=self.region_growing,
-            n_neighbors=n_neighbors,
+            n_neighbors=int(self.n_neighbors),
         )
-        return params, n_threads
+        # None means one thread (see n_jobs).
+        return params, 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=type(self).__name__)
 
-    def fit(self, X, y=None):
-        """Check the parameters and clouds; learn the scale for ``scaling="fit"``.
+    def _learn(self, clouds, params):
+        self.scale_ = self._fit_scale(clouds)
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points, with normals in columns 3-5
-            when available.
-        y : None
-            Ignored.
+    def _n_features(self, params):
+        return N_FEATURES
 
-        Returns
-        -------
-        self : CVFHTransformer
-            The fitted transformer.
-        """
-        self._check_params()
-        clouds = check_point_clouds(X, owner=type(self).__name__, min_points=3)
-        self.scale_ = _fit_scale(clouds, self.scaling)
-        self.n_features_out_ = N_FEATURES
-        return self
+    def _feature_names(self):
+        """``cvfh_f1_<i>``, ``cvfh_f2_<i>``, ``cvfh_f3_<i>``, ``cvfh_sdc_<i>`` (distances), ``cvfh_view_<i>``."""
+        names = [f"cvfh_{f}_{i}" for f in ("f1", "f2", "f3", "sdc") for i in range(N_ANGLE_BINS)]
+        names += [f"cvfh_view_{i}" for i in range(N_VIEW_BINS)]
+        return names
 
     def _row(self, points, normals, params):
         sigs, sizes = _cvfh_object(points, normals, **params)
@@ -360,75 +363,29 @@ class CVFHTransformer(TransformerMixin, BaseEstimator):
             row = row / row.sum()
         return row
 
-    def transform(self, X):
-        """Compute one CVFH row per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points; normals are estimated for
-            clouds with three columns.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, 308)
-            One row per cloud (summing to one when ``normalize``).
-        """
-        check_is_fitted(self)
+    def _describe(self, clouds, params, *, first_index):
+        """CVFH rows of one chunk of validated clouds."""
         owner = type(self).__name__
-        _, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
-        return transform_in_chunks(_cvfh_chunk, self, clouds, n_features=N_FEATURES)
+        params, n_threads = params
+        points, normals, offsets = self._centred_points_and_normals(clouds, params["n_neighbors"], n_threads)
+        with np.errstate(over="ignore"):
+            bad = [k for k in range(len(clouds))
+                   if not np.isfinite(points[offsets[k] : offsets[k + 1]].astype(np.float32)).all()]
+        if bad:
+            raise ValueError(
+                f"{owner}: point cloud {first_index + bad[0]} has coordinates beyond single precision after "
+                "scaling; use scaling='object'"
+            )
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns.
+        def row(k):
+            a, b = offsets[k], offsets[k + 1]
+            try:
+                return self._row(points[a:b], normals[a:b], params)
+            except ValueError as exc:
+                raise ValueError(f"{owner}: point cloud {first_index + k}: {exc}") from None
 
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            ``cvfh_f1_<i>``, ``cvfh_f2_<i>``, ``cvfh_f3_<i>``, ``cvfh_sdc_<i>``
-            (the distance histogram), ``cvfh_view_<i>``, in the output's order.
-        """
-        check_is_fitted(self)
-        names = [f"cvfh_{f}_{i}" for f in ("f1", "f2", "f3", "sdc") for i in range(N_ANGLE_BINS)]
-        names += [f"cvfh_view_{i}" for i in range(N_VIEW_BINS)]
-        return np.asarray(names, dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        return tags
-
-
-def _cvfh_chunk(est, clouds, first_index):
-    """CVFH rows of one chunk of validated clouds (a joblib task)."""
-    owner = type(est).__name__
-    params, n_threads = est._check_params()
-    points, normals, offsets = _prepared(
-        clouds, params["n_neighbors"], est.normal_orientation, est.scaling, est.scale_, n_threads, owner
-    )
-    with np.errstate(over="ignore"):
-        bad = [k for k in range(len(clouds)) if not np.isfinite(points[offsets[k] : offsets[k + 1]].astype(np.float32)).all()]
-    if bad:
-        raise ValueError(
-            f"{owner}: point cloud {first_index + bad[0]} has coordinates beyond single precision after "
-            "scaling; use scaling='object'"
-        )
-    def row(k):
-        a, b = offsets[k], offsets[k + 1]
-        try:
-            return est._row(points[a:b], normals[a:b], params)
-        except ValueError as exc:
-            raise ValueError(f"{owner}: point cloud {first_index + k}: {exc}") from None
-
-    if n_threads == 1:
-        rows = [row(k) for k in range(len(clouds))]
-    else:
-        rows = Parallel(n_jobs=n_threads, prefer="threads")(delayed(row)(k) for k in range(len(clouds)))
-    return np.vstack(rows)
+        if n_threads == 1:
+            rows = [row(k) for k in range(len(clouds))]
+        else:
+            rows = Parallel(n_jobs=n_threads, prefer="threads")(delayed(row)(k) for k in range(len(clouds)))
+        return np.vstack(rows)

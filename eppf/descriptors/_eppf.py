@@ -7,7 +7,8 @@ from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, object_seeds, pack_point_clouds
 from ..utils._validation import _bounding_sides, _stacked_view
-from ._base import PointCloudDescriptor
+from ..utils._param_validation import Interval, IntTuple, Satisfies, StrOptions
+from ._base import N_JOBS, NORMAL_ORIENTATION, RANDOM_STATE, VERBOSE, PointCloudDescriptor
 from ._eppf_fast import eppf_counts
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
@@ -17,6 +18,12 @@ FUNCTIONS = ("distance", "angle", "normal", "occupancy")
 _SHORT = {"distance": "d", "angle": "a", "normal": "n", "occupancy": "o"}
 _SCALINGS = ("fit", "object", "none")
 _F1_MAX = float(np.sqrt(3.0))
+
+
+def _is_function_list(value):
+    """A function name, or a non-empty sequence of distinct names from FUNCTIONS."""
+    names = (value,) if isinstance(value, str) else tuple(value)
+    return bool(names) and len(set(names)) == len(names) and all(isinstance(f, str) and f in FUNCTIONS for f in names)
 
 
 class EPPFTransformer(PointCloudDescriptor):
@@ -165,55 +172,28 @@ class EPPFTransformer(PointCloudDescriptor):
         self.n_jobs = n_jobs
         self.verbose = verbose
 
-    # ------------------------------------------------------------------ params
-    def _validate_params(self):
-        name = type(self).__name__
-        n_bins = self.n_bins
-        if isinstance(n_bins, (str, bytes)) or not hasattr(n_bins, "__len__"):
-            raise TypeError(f"{name}: n_bins must be a tuple of 4 ints, got {n_bins!r}")
-        if len(n_bins) != 4:
-            raise ValueError(f"{name}: n_bins must have 4 entries (f1, f2, f3, f4), got {len(n_bins)}")
-        for b in n_bins:
-            if isinstance(b, bool) or not isinstance(b, numbers.Integral):
-                raise TypeError(f"{name}: n_bins entries must be ints, got {b!r}")
-            if not 1 <= b <= 64:
-                raise ValueError(f"{name}: n_bins entries must lie in [1, 64], got {tuple(n_bins)}")
-        functions = self.functions
-        if isinstance(functions, str):
-            functions = (functions,)
-        try:
-            functions = tuple(functions)
-        except TypeError:
-            raise TypeError(f"{name}: functions must be a sequence of names from {FUNCTIONS}") from None
-        unknown = [f for f in functions if f not in FUNCTIONS]
-        if unknown:
-            raise ValueError(f"{name}: unknown function(s) {unknown}; choose from {FUNCTIONS}")
-        if not functions:
-            raise ValueError(f"{name}: functions must name at least one of {FUNCTIONS}")
-        if len(set(functions)) != len(functions):
-            raise ValueError(f"{name}: functions has duplicates: {functions}")
-        functions = tuple(f for f in FUNCTIONS if f in functions)
-        _check_int(self.n_pairs, "n_pairs", 1, 2**31 - 1, name)
-        _check_int(self.grid_size, "grid_size", 2, 1023, name)
-        c = self.c
-        if isinstance(c, bool) or not isinstance(c, numbers.Real):
-            raise TypeError(f"{name}: c must be a real number, got {c!r}")
-        if not (np.isfinite(c) and c > 1):
-            raise ValueError(f"{name}: c must be a finite number greater than 1 (so ln(i/N + c) > 0), got {c!r}")
-        if self.scaling not in _SCALINGS:
-            raise ValueError(f"{name}: scaling must be one of {_SCALINGS}, got {self.scaling!r}")
-        _check_int(self.n_neighbors, "n_neighbors", 3, 10**6, name)
-        if self.normal_orientation not in ("centroid", "origin", None):
-            raise ValueError(
-                f"{name}: normal_orientation must be 'centroid', 'origin' or None, got {self.normal_orientation!r}"
-            )
-        return tuple(int(b) for b in n_bins), functions
+    _parameter_constraints = {
+        "n_bins": [IntTuple(4, 1, 64, description="a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4)")],
+        "n_pairs": [Interval(numbers.Integral, 1, 2**31 - 1, closed="both")],
+        "c": [Interval(numbers.Real, 1, None, closed="neither",
+                       description="a finite float > 1 (so that ln(i/N + c) > 0)")],
+        "grid_size": [Interval(numbers.Integral, 2, 1023, closed="both")],
+        "functions": [Satisfies(_is_function_list, f"a non-empty sequence of distinct names from {FUNCTIONS}")],
+        "scaling": [StrOptions(list(_SCALINGS))],
+        "n_neighbors": [Interval(numbers.Integral, 3, 10**6, closed="both")],
+        "normal_orientation": NORMAL_ORIENTATION,
+        "random_state": RANDOM_STATE,
+        "n_jobs": N_JOBS,
+        "verbose": VERBOSE,
+    }
 
     # ---------------------------------------------------------------- sklearn
     _progress_label = "EPPF"
 
-    def _check_params(self):
-        n_bins, functions = self._validate_params()
+    def _resolve_params(self):
+        functions = (self.functions,) if isinstance(self.functions, str) else tuple(self.functions)
+        functions = tuple(f for f in FUNCTIONS if f in functions)
+        n_bins = tuple(int(b) for b in self.n_bins)
         return n_bins, functions, check_n_jobs(self.n_jobs, owner=type(self).__name__)
 
     def _learn(self, clouds, params):
@@ -344,13 +324,6 @@ class EPPFTransformer(PointCloudDescriptor):
                 f"(histogram {self.histogram_shape_}), got shape {X.shape}"
             )
         return X.reshape(X.shape[:-1] + self.histogram_shape_)
-
-def _check_int(value, what, lo, hi, owner):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{owner}: {what} must be an int, got {value!r}")
-    if not lo <= value <= hi:
-        raise ValueError(f"{owner}: {what} must lie in [{lo}, {hi}], got {value}")
-
 
 def _weight_and_normalise(counts, kernel_bins, c, weighted):
     """Apply ``ln(i / N1 + c)`` along f1 and L1-normalise each row."""

@@ -1,10 +1,12 @@
 """Ensemble of Shape Functions (ESF), Wohlkinger & Vincze (2011), as in PCL 1.13."""
 
+import numbers
+
 import numpy as np
 
-from ..utils import check_int as _check_int
 from ..utils import check_n_jobs, pack_point_clouds
-from ._base import PointCloudDescriptor
+from ..utils._param_validation import Interval, Satisfies
+from ._base import N_JOBS, RANDOM_STATE, PointCloudDescriptor
 from ._esf_fast import esf_batch
 
 __all__ = ["ESFTransformer"]
@@ -15,6 +17,10 @@ _HISTOGRAMS = ("a3_in", "a3_out", "a3_mix", "d3_in", "d3_out", "d3_mix", "d2_in"
 # voxel units of its 64^3 grid (radius 32): a triangle of area below ~0.03
 # voxel^2. Kept in voxel units for any grid size.
 _AREA_EPS = 0.001
+
+
+def _even_grid(value):
+    return Interval(numbers.Integral, 4, 1024, closed="both").is_satisfied_by(value) and value % 2 == 0
 
 
 class ESFTransformer(PointCloudDescriptor):
@@ -117,15 +123,17 @@ class ESFTransformer(PointCloudDescriptor):
         self.random_state = random_state
         self.n_jobs = n_jobs
 
-    def _check_params(self):
-        owner = type(self).__name__
-        n_triplets = _check_int(self.n_triplets, "n_triplets", owner, 1, 2**31 // 4)
-        grid_size = _check_int(self.grid_size, "grid_size", owner, 4, 1024)
-        if grid_size % 2:
-            raise ValueError(f"{owner}: grid_size must be even, got {grid_size}")
-        n_bins = _check_int(self.n_bins, "n_bins", owner, 1, 4096)
-        n_threads = check_n_jobs(self.n_jobs, owner=owner)
-        return n_triplets, grid_size, n_bins, n_threads
+    _parameter_constraints = {
+        "n_triplets": [Interval(numbers.Integral, 1, 2**31 // 4, closed="both")],
+        "grid_size": [Satisfies(_even_grid, "an even int in [4, 1024]")],
+        "n_bins": [Interval(numbers.Integral, 1, 4096, closed="both")],
+        "random_state": RANDOM_STATE,
+        "n_jobs": N_JOBS,
+    }
+
+    def _resolve_params(self):
+        n_threads = check_n_jobs(self.n_jobs, owner=type(self).__name__)
+        return int(self.n_triplets), int(self.grid_size), int(self.n_bins), n_threads
 
     _min_points = 3
 

@@ -3,48 +3,51 @@
 import numbers
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils._chunks import transform_in_chunks
-from ..utils._validation import check_n_jobs, check_point_clouds, pack_point_clouds
+from ..utils import check_n_jobs, check_point_clouds, pack_point_clouds
+from ..utils._param_validation import Interval, Satisfies, StrOptions
+from ._base import N_JOBS, PointCloudDescriptor, as_vector3
 from ._gasd_fast import gasd_batch
 
 __all__ = ["GASDColorTransformer", "GASDTransformer", "gasd_alignment"]
 
 _INTERP = {"none": 0, "trilinear": 1, "quadrilinear": 2}
 _SIGNS = {"pcl": 0, "majority": 1}
+#: Most values of one grid (cells times histogram bins).
+_MAX_VALUES = 2**24
+
+_HALF_GRID = [Interval(numbers.Integral, 1, 64, closed="both")]
+_HISTS = [Interval(numbers.Integral, 1, 1024, closed="both")]
+_INTERPOLATION = [StrOptions(["trilinear", "none", "quadrilinear"])]
+_SIGN_CONVENTION = [StrOptions(["pcl", "majority"])]
 
 
-def _check_int(value, name, owner, low, high):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{owner}: {name} must be an int, got {type(value).__name__}")
-    if value < low or value > high:
-        raise ValueError(f"{owner}: {name} must be in [{low}, {high}], got {value}")
-    return int(value)
+def _is_direction(value):
+    v = as_vector3(value)
+    return v is not None and np.abs(v).max() > 0
 
 
-def _check_direction(value, owner):
-    """A finite, non-zero 3-vector, returned with unit length (float64)."""
-    try:
-        v = np.asarray(value)
-    except Exception:
-        v = None
-    if v is None or v.dtype == object or not (np.issubdtype(v.dtype, np.number) or v.dtype == bool):
-        raise TypeError(f"{owner}: view_direction must be an array-like of 3 numbers, got {type(value).__name__}")
-    if np.iscomplexobj(v) or v.shape != (3,):
-        raise ValueError(f"{owner}: view_direction must have shape (3,), got shape {v.shape}")
-    v = v.astype(np.float64)
-    if not np.isfinite(v).all():
-        raise ValueError(f"{owner}: view_direction contains NaN or infinite values")
-    big = np.abs(v).max()
-    if big == 0:
-        raise ValueError(f"{owner}: view_direction must not be the zero vector")
-    v = v / big  # no overflow in the norm, even for 1e308
+_VIEW_DIRECTION = [Satisfies(_is_direction, "an array-like of 3 finite numbers, not all zero")]
+
+
+def _unit(value):
+    """The validated direction with unit length (float64)."""
+    v = as_vector3(value)
+    v = v / np.abs(v).max()  # no overflow in the norm, even for 1e308
     return np.ascontiguousarray(v / np.linalg.norm(v))
 
 
-class GASDTransformer(TransformerMixin, BaseEstimator):
+def _grid_size(owner, h_name, half, s_name, hs):
+    """Values of one grid; a ValueError naming both parameters beyond 2**24."""
+    size = (2 * half) ** 3 * hs
+    if size > _MAX_VALUES:
+        raise ValueError(f"{owner}: {h_name}={half} and {s_name}={hs} give {size} values; "
+                         "at most 2**24 are allowed")
+    return size
+
+
+class GASDTransformer(PointCloudDescriptor):
     """Globally Aligned Spatial Distribution (GASD) shape descriptor.
 
     Aligns each cloud with its principal axes (a PCA reference frame at the
@@ -138,7 +141,7 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
     Examples
     --------
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._gasd import GASDTransformer
+    >>> from eppf.descriptors import GASDTransformer
     >>> data = make_shapes(2, n_points=256, random_state=0)
     >>> X = GASDTransformer().fit_transform(data.data)
     >>> X.shape
@@ -154,63 +157,34 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
         self.sign_convention = sign_convention
         self.n_jobs = n_jobs
 
-    def _check_params(self):
+    _parameter_constraints = {
+        "half_grid_size": _HALF_GRID,
+        "hists_size": _HISTS,
+        "interpolation": _INTERPOLATION,
+        "view_direction": _VIEW_DIRECTION,
+        "sign_convention": _SIGN_CONVENTION,
+        "n_jobs": N_JOBS,
+    }
+
+    def _resolve_params(self):
         owner = type(self).__name__
-        half = _check_int(self.half_grid_size, "half_grid_size", owner, 1, 64)
-        hs = _check_int(self.hists_size, "hists_size", owner, 1, 1024)
-        if (2 * half) ** 3 * hs > 2**24:
-            raise ValueError(
-                f"{owner}: half_grid_size={half} and hists_size={hs} give {(2 * half) ** 3 * hs} values; "
-                "at most 2**24 are allowed"
-            )
-        if not isinstance(self.interpolation, str) or self.interpolation not in _INTERP:
-            raise ValueError(
-                f"{owner}: interpolation must be 'trilinear', 'none' or 'quadrilinear', got {self.interpolation!r}"
-            )
-        if not isinstance(self.sign_convention, str) or self.sign_convention not in _SIGNS:
-            raise ValueError(f"{owner}: sign_convention must be 'pcl' or 'majority', got {self.sign_convention!r}")
-        view = _check_direction(self.view_direction, owner)
+        half, hs = int(self.half_grid_size), int(self.hists_size)
+        _grid_size(owner, "half_grid_size", half, "hists_size", hs)
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
-        return half, hs, _INTERP[self.interpolation], _SIGNS[self.sign_convention], view, n_threads
+        return half, hs, _INTERP[self.interpolation], _SIGNS[self.sign_convention], _unit(self.view_direction), n_threads
 
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; GASD learns nothing from data.
+    def _n_features(self, params):
+        half, hs = params[:2]
+        return (2 * half) ** 3 * hs
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 2 distinct points (normals are ignored).
-        y : None
-            Ignored.
+    def _feature_names(self):
+        """``gasd_<i>_<j>_<k>`` (and ``_<b>`` with ``hists_size > 1``)."""
+        half, hs = int(self.half_grid_size), int(self.hists_size)
+        return _cell_names(half, hs)
 
-        Returns
-        -------
-        self : GASDTransformer
-            The fitted transformer.
-        """
-        half, hs, *_ = self._check_params()
-        check_point_clouds(X, owner=type(self).__name__, min_points=2)
-        self.n_features_out_ = (2 * half) ** 3 * hs
-        return self
-
-    def transform(self, X):
-        """Compute one GASD row per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 2 distinct points.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, (2 * half_grid_size) ** 3 * hists_size)
-            PCL-scaled grids (each point carries ``100 / (n - 1)``).
-        """
-        check_is_fitted(self)
-        owner = type(self).__name__
-        half, hs, *_, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
-        return transform_in_chunks(_gasd_chunk, self, clouds, n_features=(2 * half) ** 3 * hs)
+    def _describe(self, clouds, params, *, first_index):
+        """GASD rows of one chunk of validated clouds."""
+        return _gasd_compute(self, clouds, params, first_index)[0]
 
     def alignment_transforms(self, X):
         """The 4x4 rigid transforms that map each cloud into GASD's frame.
@@ -226,11 +200,11 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
             ``T[k] @ [p, 1]`` is point ``p`` of cloud ``k`` in its frame
             (PCL's ``getTransform()``).
         """
-        check_is_fitted(self)
+        check_is_fitted(self, "n_features_out_")
         owner = type(self).__name__
-        *_, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
-        transforms = _gasd_compute(self, clouds, 0)[1]
+        params = self._check_params()
+        clouds, _ = self._validate_clouds(X, params[5])
+        transforms = _gasd_compute(self, clouds, params, 0)[1]
         bad = np.flatnonzero(~np.isfinite(transforms).all(axis=(1, 2)))
         if bad.size:
             raise ValueError(
@@ -239,37 +213,18 @@ class GASDTransformer(TransformerMixin, BaseEstimator):
             )
         return transforms
 
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns, ``gasd_<i>_<j>_<k>`` (and ``_<b>`` with ``hists_size > 1``).
 
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            In the output's order.
-        """
-        check_is_fitted(self)
-        half, hs, *_ = self._check_params()
-        g = 2 * half
-        cells = [f"gasd_{i}_{j}_{k}" for i in range(g) for j in range(g) for k in range(g)]
-        if hs == 1:
-            return np.asarray(cells, dtype=object)
-        return np.asarray([f"{c}_{b}" for c in cells for b in range(hs)], dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        return tags
+def _cell_names(half, hs, prefix="gasd"):
+    g = 2 * half
+    cells = [f"{prefix}_{i}_{j}_{k}" for i in range(g) for j in range(g) for k in range(g)]
+    if hs == 1:
+        return cells
+    return [f"{c}_{b}" for c in cells for b in range(hs)]
 
 
-def _gasd_compute(est, clouds, first_index, hues=None):
-    owner = type(est).__name__
-    half, hs, interp, sign, view, n_threads, *color = est._check_params()
+def _gasd_compute(est, clouds, params, first_index, hues=None):
+    """GASD rows and alignment transforms of validated clouds (with ``hues``: the colour grid too)."""
+    half, hs, interp, sign, view, n_threads, *color = params
     points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
     width = (2 * half) ** 3 * hs
     extra = {}
@@ -283,15 +238,8 @@ def _gasd_compute(est, clouds, first_index, hues=None):
     status = np.zeros(len(clouds), dtype=np.int8)
     n_threads = max(1, min(n_threads, len(clouds)))
     gasd_batch(points, offsets, view, sign, half, hs, interp, out, transforms, status, n_threads, **extra)
-    bad = np.flatnonzero(status)
-    if bad.size:
-        raise ValueError(f"{owner}: point cloud {first_index + bad[0]} has no principal axes (no spread)")
+    est._raise_for_status(status, first_index, {1: "has no principal axes (no spread)"})
     return out, transforms
-
-
-def _gasd_chunk(est, clouds, first_index):
-    """GASD rows of one chunk of validated clouds (a joblib task)."""
-    return _gasd_compute(est, clouds, first_index)[0]
 
 
 def gasd_alignment(cloud, *, view_direction=(0.0, 0.0, 1.0), sign_convention="pcl"):
@@ -314,10 +262,15 @@ def gasd_alignment(cloud, *, view_direction=(0.0, 0.0, 1.0), sign_convention="pc
     transform : ndarray of shape (4, 4)
         The rigid transform used.
 
+    See Also
+    --------
+    GASDTransformer.alignment_transforms : The transforms of many clouds at once.
+    GASDTransformer : The descriptor computed in this frame.
+
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf.descriptors._gasd import gasd_alignment
+    >>> from eppf.descriptors import gasd_alignment
     >>> rng = np.random.default_rng(0)
     >>> cloud = rng.normal(size=(500, 3)) * [3.0, 2.0, 1.0] + 5.0
     >>> aligned, T = gasd_alignment(cloud)
@@ -353,7 +306,7 @@ def _hue(rgb):
     return (hue / np.float32(360)).astype(np.float64)
 
 
-class GASDColorTransformer(TransformerMixin, BaseEstimator):
+class GASDColorTransformer(PointCloudDescriptor):
     """GASD with colour: a shape grid and a grid of hue histograms.
 
     PCL 1.13's ``GASDColorEstimation`` (``GASDSignature984``): the cloud is
@@ -418,7 +371,7 @@ class GASDColorTransformer(TransformerMixin, BaseEstimator):
     Examples
     --------
     >>> import numpy as np
-    >>> from eppf.descriptors._gasd import GASDColorTransformer
+    >>> from eppf.descriptors import GASDColorTransformer
     >>> rng = np.random.default_rng(0)
     >>> xyz = rng.normal(size=(300, 3)) * [3.0, 2.0, 1.0]
     >>> rgb = rng.integers(0, 256, size=(300, 3))
@@ -440,130 +393,50 @@ class GASDColorTransformer(TransformerMixin, BaseEstimator):
         self.sign_convention = sign_convention
         self.n_jobs = n_jobs
 
-    def _check_params(self):
+    _parameter_constraints = {
+        "shape_half_grid_size": _HALF_GRID,
+        "shape_hists_size": _HISTS,
+        "color_half_grid_size": _HALF_GRID,
+        "color_hists_size": _HISTS,
+        "shape_interpolation": _INTERPOLATION,
+        "color_interpolation": _INTERPOLATION,
+        "view_direction": _VIEW_DIRECTION,
+        "sign_convention": _SIGN_CONVENTION,
+        "n_jobs": N_JOBS,
+    }
+
+    _extra_columns = 3
+    _extra_columns_name = "rgb"
+
+    def _resolve_params(self):
         owner = type(self).__name__
-        sizes = []
-        for h_name, s_name in (("shape_half_grid_size", "shape_hists_size"),
-                               ("color_half_grid_size", "color_hists_size")):
-            half = _check_int(getattr(self, h_name), h_name, owner, 1, 64)
-            hs = _check_int(getattr(self, s_name), s_name, owner, 1, 1024)
-            if (2 * half) ** 3 * hs > 2**24:
-                raise ValueError(f"{owner}: {h_name}={half} and {s_name}={hs} give {(2 * half) ** 3 * hs} values; "
-                                 "at most 2**24 are allowed")
-            sizes.append((half, hs))
-        interps = []
-        for name in ("shape_interpolation", "color_interpolation"):
-            value = getattr(self, name)
-            if not isinstance(value, str) or value not in _INTERP:
-                raise ValueError(f"{owner}: {name} must be 'none', 'trilinear' or 'quadrilinear', got {value!r}")
-            interps.append(_INTERP[value])
-        if not isinstance(self.sign_convention, str) or self.sign_convention not in _SIGNS:
-            raise ValueError(f"{owner}: sign_convention must be 'pcl' or 'majority', got {self.sign_convention!r}")
-        view = _check_direction(self.view_direction, owner)
+        half, hs = int(self.shape_half_grid_size), int(self.shape_hists_size)
+        chalf, chs = int(self.color_half_grid_size), int(self.color_hists_size)
+        _grid_size(owner, "shape_half_grid_size", half, "shape_hists_size", hs)
+        _grid_size(owner, "color_half_grid_size", chalf, "color_hists_size", chs)
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
-        (half, hs), (chalf, chs) = sizes
-        return half, hs, interps[0], _SIGNS[self.sign_convention], view, n_threads, chalf, chs, interps[1]
+        return (half, hs, _INTERP[self.shape_interpolation], _SIGNS[self.sign_convention], _unit(self.view_direction),
+                n_threads, chalf, chs, _INTERP[self.color_interpolation])
 
-    def _split(self, X, n_threads=1):
-        """Validated xyz clouds and their hues (hue / 360) from (n, 6) or (n, 9) arrays."""
-        owner = type(self).__name__
-        if X is None or isinstance(X, (str, bytes, dict)):
-            raise TypeError(f"{owner}: X must be a list of (n_i, 6) or (n_i, 9) arrays (xyz[, normals], rgb), "
-                            f"got {type(X).__name__}")
-        try:
-            items = list(X)
-        except TypeError:
-            raise TypeError(f"{owner}: X must be a list of point clouds, got {type(X).__name__}") from None
-        if not items:
-            raise ValueError(f"{owner}: X is empty: at least one point cloud is needed")
-        xyz, hues = [], []
-        for i, c in enumerate(items):
-            try:
-                a = np.asarray(c)
-            except Exception as exc:
-                raise TypeError(f"{owner}: point cloud {i} could not be converted to an array: {exc}") from None
-            if a.dtype == object or not (np.issubdtype(a.dtype, np.number) or a.dtype == bool) or np.iscomplexobj(a):
-                raise TypeError(f"{owner}: point cloud {i} must hold real numbers, got dtype {a.dtype}")
-            if a.ndim != 2 or a.shape[1] not in (6, 9):
-                raise ValueError(f"{owner}: point cloud {i} must have shape (n_points, 6) (xyz, rgb) or "
-                                 f"(n_points, 9) (xyz, normals, rgb), got shape {a.shape}")
-            rgb = a[:, -3:].astype(np.float64)
-            if not np.isfinite(rgb).all() or (rgb < 0).any() or (rgb > 255).any():
-                raise ValueError(f"{owner}: point cloud {i} has colours outside [0, 255] (or NaN)")
-            xyz.append(a[:, :6] if a.shape[1] == 9 else a[:, :3])  # normals checked, then ignored
-            hues.append(_hue(np.rint(rgb).astype(np.uint8)))
-        clouds = check_point_clouds(xyz, owner=owner, min_points=2, n_threads=n_threads)
-        return clouds, hues
+    def _check_extra_columns(self, index, values):
+        """PCL's hue / 360 of the RGB columns (8-bit values in [0, 255], rounded); normals are checked, then ignored."""
+        rgb = values.astype(np.float64)
+        if not np.isfinite(rgb).all() or (rgb < 0).any() or (rgb > 255).any():
+            raise ValueError(f"{type(self).__name__}: point cloud {index} has colours outside [0, 255] (or NaN)")
+        return _hue(np.rint(rgb).astype(np.uint8))
 
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; GASD learns nothing from data.
+    def _n_features(self, params):
+        half, hs, *_, chalf, chs, _ = params
+        return (2 * half) ** 3 * hs + (2 * chalf) ** 3 * chs
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 6) or (n_i, 9)
-            Coordinates (, normals) and RGB colours in [0, 255].
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : GASDColorTransformer
-            The fitted transformer.
-        """
-        half, hs, _, _, _, _, chalf, chs, _ = self._check_params()
-        self._split(X)
-        self.n_features_out_ = (2 * half) ** 3 * hs + (2 * chalf) ** 3 * chs
-        return self
-
-    def transform(self, X):
-        """Compute one colour GASD row per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 6) or (n_i, 9)
-            Coordinates (, normals) and RGB colours in [0, 255].
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, `n_features_out_`)
-            The shape grid, then the colour grid (PCL's scaling).
-        """
-        check_is_fitted(self)
-        *_, n_threads, _, _, _ = self._check_params()
-        clouds, hues = self._split(X, n_threads)
-        return transform_in_chunks(_gasd_color_chunk, self, clouds, (np.array(hues + [None], dtype=object)[:-1],),
-                                   n_features=self.n_features_out_)
-
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns: ``gasd_...`` for the shape grid, ``gasd_hue_<i>_<j>_<k>_<b>``.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            In the output's order.
-        """
-        check_is_fitted(self)
-        half, hs, _, _, _, _, chalf, chs, _ = self._check_params()
-        g, cg = 2 * half, 2 * chalf
-        cells = [f"gasd_{i}_{j}_{k}" for i in range(g) for j in range(g) for k in range(g)]
-        if hs > 1:
-            cells = [f"{c}_{b}" for c in cells for b in range(hs)]
+    def _feature_names(self):
+        """``gasd_...`` for the shape grid, then ``gasd_hue_<i>_<j>_<k>_<b>``."""
+        cells = _cell_names(int(self.shape_half_grid_size), int(self.shape_hists_size))
+        cg, chs = 2 * int(self.color_half_grid_size), int(self.color_hists_size)
         cells += [f"gasd_hue_{i}_{j}_{k}_{b}" for i in range(cg) for j in range(cg) for k in range(cg)
                   for b in range(chs)]
-        return np.asarray(cells, dtype=object)
+        return cells
 
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        return tags
-
-
-def _gasd_color_chunk(est, clouds, hues, first_index):
-    """Colour GASD rows of one chunk of validated clouds (a joblib task)."""
-    return _gasd_compute(est, clouds, first_index, list(hues))[0]
+    def _describe(self, clouds, params, hues, *, first_index):
+        """Colour GASD rows of one chunk of validated clouds (``hues``: one array per cloud)."""
+        return _gasd_compute(self, clouds, params, first_index, list(hues))[0]

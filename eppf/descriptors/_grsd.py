@@ -1,13 +1,13 @@
 """Global Radius-based Surface Descriptor (GRSD), Marton et al., as in PCL 1.13."""
 
-import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils.validation import check_is_fitted
+import numbers
 
-from ..utils._chunks import transform_in_chunks
-from ..utils._validation import check_point_clouds
+import numpy as np
+
+from ..utils import check_n_jobs
+from ..utils._param_validation import Interval, Options
+from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
 from ._grsd_fast import grsd_batch
-from ._regions import _check_common, _check_int, _check_real, _fit_scale, _prepared
 
 __all__ = ["GRSDTransformer"]
 
@@ -16,6 +16,8 @@ CLASSES = ("noise", "plane", "cylinder", "sphere", "edge", "empty")
 #: getSimpleType's thresholds: min_radius_plane, max_radius_noise,
 #: min_radius_cylinder, max_min_radius_diff (PCL's defaults, in cloud units).
 THRESHOLDS = (0.100, 0.015, 0.175, 0.050)
+#: A length in the scaled cloud's units.
+_LENGTH = [Interval(numbers.Real, 1e-15, 1e15, closed="both", description="a float in [1e-15, 1e+15]")]
 N_FEATURES = 21
 # PCL's VoxelGrid refuses grids of more than INT32_MAX cells; cells must also
 # stay within +-2**30 of the origin for the kernel's integer cell indices.
@@ -23,7 +25,7 @@ _MAX_CELLS = 2**31 - 1
 _MAX_CELL_INDEX = 2**30
 
 
-class GRSDTransformer(TransformerMixin, BaseEstimator):
+class GRSDTransformer(PointCloudDescriptor):
     """Global Radius-based Surface Descriptor (GRSD) of point clouds.
 
     The cloud is voxelised; every occupied voxel gets a surface class from
@@ -142,7 +144,7 @@ class GRSDTransformer(TransformerMixin, BaseEstimator):
     --------
     >>> import numpy as np
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._grsd import GRSDTransformer
+    >>> from eppf.descriptors import GRSDTransformer
     >>> X, y = make_shapes(2, n_points=512, return_X_y=True)
     >>> G = GRSDTransformer().fit_transform(X)
     >>> G.shape
@@ -171,81 +173,53 @@ class GRSDTransformer(TransformerMixin, BaseEstimator):
         self.normal_orientation = normal_orientation
         self.n_jobs = n_jobs
 
-    def _check_params(self):
-        owner = type(self).__name__
-        n_neighbors, n_threads = _check_common(self, owner)
+    _parameter_constraints = {
+        "radius": _LENGTH,
+        "scaling": SCALING,
+        "n_subdivisions": [Interval(numbers.Integral, 1, 64, closed="both")],
+        "plane_radius": _LENGTH,
+        "normalize": [Options(bool)],
+        "n_neighbors": N_NEIGHBORS,
+        "normal_orientation": NORMAL_ORIENTATION,
+        "n_jobs": N_JOBS,
+    }
+
+    _min_points = 3
+
+    def _resolve_params(self):
         params = dict(
-            radius=_check_real(self.radius, "radius", owner, 1e-15, 1e15),
-            n_subdivisions=_check_int(self.n_subdivisions, "n_subdivisions", owner, 1, 64),
-            plane_radius=_check_real(self.plane_radius, "plane_radius", owner, 1e-15, 1e15),
-            n_neighbors=n_neighbors,
+            radius=float(self.radius),
+            n_subdivisions=int(self.n_subdivisions),
+            plane_radius=float(self.plane_radius),
+            n_neighbors=int(self.n_neighbors),
         )
-        return params, n_threads
+        # None means one thread (see n_jobs).
+        return params, 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=type(self).__name__)
 
-    def fit(self, X, y=None):
-        """Check the parameters and clouds; learn the scale for ``scaling="fit"``.
+    def _learn(self, clouds, params):
+        self.scale_ = self._fit_scale(clouds)
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points, with normals in columns 3-5
-            when available.
-        y : None
-            Ignored.
+    def _n_features(self, params):
+        return N_FEATURES
 
-        Returns
-        -------
-        self : GRSDTransformer
-            The fitted transformer.
-        """
-        self._check_params()
-        clouds = check_point_clouds(X, owner=type(self).__name__, min_points=3)
-        self.scale_ = _fit_scale(clouds, self.scaling)
-        self.n_features_out_ = N_FEATURES
-        return self
+    def _feature_names(self):
+        """``grsd_<class>_<class>`` for the 21 class pairs in PCL's order, e.g. ``grsd_plane_empty``."""
+        return [f"grsd_{a}_{b}" for i, a in enumerate(CLASSES) for b in CLASSES[i:]]
 
-    def transform(self, X):
-        """Compute one GRSD row per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 3 points; normals are estimated for
-            clouds with three columns.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, 21)
-            One row per cloud (summing to one when ``normalize``).
-        """
-        check_is_fitted(self)
+    def _describe(self, clouds, params, *, first_index):
+        """GRSD rows of one chunk of validated clouds."""
+        params, n_threads = params
         owner = type(self).__name__
-        _, n_threads = self._check_params()
-        clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
-        return transform_in_chunks(_grsd_chunk, self, clouds, n_features=N_FEATURES)
-
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns, e.g. ``grsd_plane_empty``.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            ``grsd_<class>_<class>`` for the 21 class pairs in PCL's order.
-        """
-        check_is_fitted(self)
-        names = [f"grsd_{a}_{b}" for i, a in enumerate(CLASSES) for b in CLASSES[i:]]
-        return np.asarray(names, dtype=object)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        return tags
+        points, normals, offsets = self._centred_points_and_normals(clouds, params["n_neighbors"], n_threads)
+        p32, n32 = _single(points, normals, offsets, params["radius"], owner, first_index)
+        out = np.zeros((len(clouds), N_FEATURES), dtype=np.float64)
+        grsd_batch(
+            p32, n32, offsets, params["radius"], params["n_subdivisions"], params["plane_radius"],
+            np.asarray(THRESHOLDS, dtype=np.float64), out, max(1, min(n_threads, len(clouds))),
+        )
+        if self.normalize:
+            out /= out.sum(axis=1, keepdims=True)
+        return out
 
 
 def _single(points, normals, offsets, width, owner, first_index):
@@ -271,21 +245,3 @@ def _single(points, normals, offsets, width, owner, first_index):
                 "limit): use a larger radius or scaling='object'"
             )
     return p32, n32
-
-
-def _grsd_chunk(est, clouds, first_index):
-    """GRSD rows of one chunk of validated clouds (a joblib task)."""
-    owner = type(est).__name__
-    params, n_threads = est._check_params()
-    points, normals, offsets = _prepared(
-        clouds, params["n_neighbors"], est.normal_orientation, est.scaling, est.scale_, n_threads, owner
-    )
-    p32, n32 = _single(points, normals, offsets, params["radius"], owner, first_index)
-    out = np.zeros((len(clouds), N_FEATURES), dtype=np.float64)
-    grsd_batch(
-        p32, n32, offsets, params["radius"], params["n_subdivisions"], params["plane_radius"],
-        np.asarray(THRESHOLDS, dtype=np.float64), out, max(1, min(n_threads, len(clouds))),
-    )
-    if est.normalize:
-        out /= out.sum(axis=1, keepdims=True)
-    return out

@@ -6,10 +6,10 @@ import numpy as np
 from joblib import Parallel, delayed
 from scipy.spatial import cKDTree
 
-from ..utils import check_int as _check_int
 from ..utils import check_n_jobs
-from ._base import PointCloudDescriptor
-from ._regions import _curvature, _pair_features, _smooth_clusters
+from ..utils._param_validation import Interval, Options, StrOptions
+from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
+from ._regions import curvature, pair_features, smooth_clusters
 
 __all__ = ["OURCVFHTransformer"]
 
@@ -21,19 +21,6 @@ N_SHELLS = 13
 # VFH signature, so only the viewpoint bins 59-127 survive at 239-307.
 VIEW_KEPT = 308 - 3 * N_ANGLE_BINS - N_OCTANTS * N_SHELLS
 N_FEATURES = 308
-
-
-def _check_float(value, name, owner, low=0.0, low_open=True, high=None):
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{owner}: {name} must be a float, got {type(value).__name__}")
-    value = float(value)
-    bad = not np.isfinite(value) or (value <= low if low_open else value < low) or (high is not None and value > high)
-    if bad:
-        rng = f"> {low}" if low_open else f">= {low}"
-        if high is not None:
-            rng += f" and <= {high}"
-        raise ValueError(f"{owner}: {name} must be finite and {rng}, got {value}")
-    return value
 
 
 def _angle_hist(f):
@@ -113,9 +100,9 @@ def _ourcvfh_object(points, normals, *, n_neighbors=10, curvature_threshold=0.03
         cluster_tolerance = 5.0 * float(np.median(dist[:, 1]))
         if cluster_tolerance <= 0:
             cluster_tolerance = 5.0 * float(dist[:, 1].max())
-    keep = _curvature(points, n_neighbors) <= curvature_threshold
+    keep = curvature(points, n_neighbors) <= curvature_threshold
     cos_eps = np.cos(eps_angle)
-    raw = _smooth_clusters(points, normals, keep, cluster_tolerance, cos_eps, min_points)
+    raw = smooth_clusters(points, normals, keep, cluster_tolerance, cos_eps, min_points)
     cos_refine = np.cos(eps_angle * refine)
     clusters = []
     for cl in raw:
@@ -135,7 +122,7 @@ def _ourcvfh_object(points, normals, *, n_neighbors=10, curvature_threshold=0.03
         nc = normals[cl].mean(axis=0)
         norm = np.linalg.norm(nc)
         nc = nc / norm if norm > 1e-12 else np.array([0.0, 0.0, 1.0])
-        f1, f2, f3 = _pair_features(c, nc, points, normals)
+        f1, f2, f3 = pair_features(c, nc, points, normals)
         angles = np.concatenate([_angle_hist(f1), _angle_hist(f2), _angle_hist(f3)])
         # Viewpoint component, viewpoint at the origin (the object's centroid).
         vp = -c
@@ -285,45 +272,40 @@ class OURCVFHTransformer(PointCloudDescriptor):
         self.normal_orientation = normal_orientation
         self.n_jobs = n_jobs
 
-    def _check_params(self):
-        owner = type(self).__name__
-        if self.aggregate not in ("largest", "first", "mean"):
-            raise ValueError(f"{owner}: aggregate must be 'largest', 'first' or 'mean', got {self.aggregate!r}")
-        if self.scaling not in ("object", "fit", "none"):
-            raise ValueError(f"{owner}: scaling must be 'object', 'fit' or 'none', got {self.scaling!r}")
+    _parameter_constraints = {
+        "aggregate": [StrOptions(["largest", "first", "mean"])],
+        "scaling": SCALING,
+        "curvature_threshold": [Interval(numbers.Real, 0, None, closed="neither")],
+        "eps_angle": [Interval(numbers.Real, 0, np.pi, closed="right")],
+        "cluster_tolerance": [None, Interval(numbers.Real, 0, None, closed="neither")],
+        "min_points": [Interval(numbers.Integral, 1, None, closed="left")],
+        "axis_ratio": [Interval(numbers.Real, 0, 1, closed="right")],
+        "sigma": [Interval(numbers.Real, 0, None, closed="neither")],
+        "normalize": [Options(bool)],
+        "n_neighbors": N_NEIGHBORS,
+        "normal_orientation": NORMAL_ORIENTATION,
+        "n_jobs": N_JOBS,
+    }
+
+    def _resolve_params(self):
         params = dict(
-            curvature_threshold=_check_float(self.curvature_threshold, "curvature_threshold", owner),
-            eps_angle=_check_float(self.eps_angle, "eps_angle", owner, high=np.pi),
-            cluster_tolerance=None
-            if self.cluster_tolerance is None
-            else _check_float(self.cluster_tolerance, "cluster_tolerance", owner),
-            min_points=_check_int(self.min_points, "min_points", owner, 1),
-            axis_ratio=_check_float(self.axis_ratio, "axis_ratio", owner, high=1.0),
-            sigma=_check_float(self.sigma, "sigma", owner),
-            n_neighbors=_check_int(self.n_neighbors, "n_neighbors", owner, 3),
+            curvature_threshold=float(self.curvature_threshold),
+            eps_angle=float(self.eps_angle),
+            cluster_tolerance=None if self.cluster_tolerance is None else float(self.cluster_tolerance),
+            min_points=int(self.min_points),
+            axis_ratio=float(self.axis_ratio),
+            sigma=float(self.sigma),
+            n_neighbors=int(self.n_neighbors),
         )
-        if self.normal_orientation not in ("centroid", "origin", None):
-            raise ValueError(
-                f"{owner}: normal_orientation must be 'centroid', 'origin' or None, got {self.normal_orientation!r}"
-            )
-        if not isinstance(self.normalize, (bool, np.bool_)):
-            raise TypeError(f"{owner}: normalize must be a bool, got {type(self.normalize).__name__}")
-        n_threads = check_n_jobs(self.n_jobs, owner=owner)
-        return params, n_threads
+        return params, check_n_jobs(self.n_jobs, owner=type(self).__name__)
 
     _min_points = 3
 
     def _learn(self, clouds, params):
-        self.scale_ = 1.0
-        if self.scaling == "fit":
-            side = max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
-            self.scale_ = 1.0 / side
+        self.scale_ = self._fit_scale(clouds)
 
     def _n_features(self, params):
         return N_FEATURES
-
-    def _per_object(self, clouds, params):
-        return ()
 
     def _feature_names(self):
         names = [f"ourcvfh_{f}_{i}" for f in ("f1", "f2", "f3") for i in range(N_ANGLE_BINS)]

@@ -3,12 +3,10 @@
 import numbers
 
 import numpy as np
-from sklearn.base import BaseEstimator, TransformerMixin
-from sklearn.utils.validation import check_is_fitted
 
-from ..utils._chunks import transform_in_chunks
-from ..preprocessing._normals import estimate_normals_batch
-from ..utils._validation import check_n_jobs, check_point_clouds, pack_point_clouds
+from ..utils import check_n_jobs
+from ..utils._param_validation import Interval, Options, Satisfies
+from ._base import N_JOBS, NORMAL_ORIENTATION, PointCloudDescriptor, as_vector3
 from ._vfh_fast import vfh_batch
 
 __all__ = ["VFHTransformer"]
@@ -18,56 +16,15 @@ N_VIEW_BINS = 128
 N_FEATURES = 4 * N_ANGLE_BINS + N_VIEW_BINS
 # Beyond this the centroid-to-viewpoint difference could overflow.
 _MAX_COORD = 1e300
+_FLAGS = ("normalize_bins", "normalize_distances", "size_component", "pcl_homogeneous", "pcl_centroid")
 
 
-def _check_bool(value, name, owner):
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{owner}: {name} must be a bool, got {type(value).__name__}")
-    return bool(value)
+def _is_viewpoint(value):
+    v = as_vector3(value)
+    return v is not None and np.abs(v).max() <= _MAX_COORD
 
 
-def _check_viewpoint(value, owner):
-    try:
-        v = np.asarray(value)
-    except Exception:
-        v = None
-    if v is None or v.dtype == object or not (np.issubdtype(v.dtype, np.number) or v.dtype == bool):
-        raise TypeError(f"{owner}: viewpoint must be an array-like of 3 numbers, got {type(value).__name__}")
-    if np.iscomplexobj(v) or v.shape != (3,):
-        raise ValueError(f"{owner}: viewpoint must have shape (3,), got shape {v.shape}")
-    v = np.ascontiguousarray(v, dtype=np.float64)
-    if not np.isfinite(v).all():
-        raise ValueError(f"{owner}: viewpoint contains NaN or infinite values")
-    if np.abs(v).max() > _MAX_COORD:
-        raise ValueError(f"{owner}: viewpoint coordinates must be at most {_MAX_COORD:g} in magnitude, got {v}")
-    return v
-
-
-def _check_n_neighbors(value, owner):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{owner}: n_neighbors must be an int, got {type(value).__name__}")
-    if value < 3:
-        raise ValueError(f"{owner}: n_neighbors must be >= 3 (a plane needs three points), got {value}")
-    return int(value)
-
-
-def _points_and_normals(clouds, n_neighbors, orientation, n_threads, owner):
-    """Pack validated clouds; estimate PCA normals for those given without."""
-    points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
-    normals = np.empty_like(points)
-    missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
-    for k, c in enumerate(clouds):
-        if c.shape[1] == 6:
-            normals[offsets[k] : offsets[k + 1]] = c[:, 3:]
-    if missing:
-        sub_pts, _, sub_off = pack_point_clouds([clouds[k][:, :3] for k in missing])
-        est = estimate_normals_batch(sub_pts, sub_off, n_neighbors, orientation, n_threads, owner=owner)
-        for j, k in enumerate(missing):
-            normals[offsets[k] : offsets[k + 1]] = est[sub_off[j] : sub_off[j + 1]]
-    return points, normals, offsets
-
-
-class VFHTransformer(TransformerMixin, BaseEstimator):
+class VFHTransformer(PointCloudDescriptor):
     """Viewpoint Feature Histogram (VFH) global descriptor.
 
     Pairs the centroid surflet (the centroid with the mean normal) with every
@@ -184,7 +141,7 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
     Examples
     --------
     >>> from eppf.datasets import make_shapes
-    >>> from eppf.descriptors._vfh import VFHTransformer
+    >>> from eppf.descriptors import VFHTransformer
     >>> data = make_shapes(2, n_points=256, random_state=0)
     >>> X = VFHTransformer().fit_transform(data.data)
     >>> X.shape
@@ -206,25 +163,23 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
         self.normal_orientation = normal_orientation
         self.n_jobs = n_jobs
 
-    def _check_params(self):
-        owner = type(self).__name__
-        vp = _check_viewpoint(self.viewpoint, owner)
-        flags = tuple(
-            _check_bool(getattr(self, name), name, owner)
-            for name in ("normalize_bins", "normalize_distances", "size_component", "pcl_homogeneous", "pcl_centroid")
-        )
-        k = _check_n_neighbors(self.n_neighbors, owner)
-        if not (self.normal_orientation is None or (isinstance(self.normal_orientation, str)
-                                                    and self.normal_orientation in ("centroid", "origin"))):
-            raise ValueError(
-                f"{owner}: normal_orientation must be 'centroid', 'origin' or None, got {self.normal_orientation!r}"
-            )
-        n_threads = check_n_jobs(self.n_jobs, owner=owner)
-        return vp, flags, k, n_threads
+    _parameter_constraints = {
+        "viewpoint": [Satisfies(_is_viewpoint, f"an array-like of 3 finite numbers of magnitude at most {_MAX_COORD:g}")],
+        **{name: [Options(bool)] for name in _FLAGS},
+        "n_neighbors": [Interval(numbers.Integral, 3, None, closed="left",
+                                 description="an int >= 3 (a plane needs three points)")],
+        "normal_orientation": NORMAL_ORIENTATION,
+        "n_jobs": N_JOBS,
+    }
 
-    def _check_clouds(self, X, n_threads=1):
+    def _resolve_params(self):
+        flags = tuple(bool(getattr(self, name)) for name in _FLAGS)
+        n_threads = check_n_jobs(self.n_jobs, owner=type(self).__name__)
+        return as_vector3(self.viewpoint), flags, int(self.n_neighbors), n_threads
+
+    def _validate_clouds(self, X, n_threads=1):
         owner = type(self).__name__
-        clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
+        clouds, extras = super()._validate_clouds(X, n_threads)
         for i, c in enumerate(clouds):
             big = np.abs(c[:, :3]).max()
             if big > _MAX_COORD:
@@ -237,79 +192,22 @@ class VFHTransformer(TransformerMixin, BaseEstimator):
                     f"{owner}: point cloud {i} has {c.shape[0]} points and no normals; estimating normals "
                     "needs at least 3 points"
                 )
-        return clouds
+        return clouds, extras
 
-    def fit(self, X, y=None):
-        """Check the parameters and the clouds; VFH learns nothing from data.
+    def _n_features(self, params):
+        return N_FEATURES
 
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds of at least 2 distinct points (3 without normals),
-            normals in columns 3-5 when available.
-        y : None
-            Ignored.
-
-        Returns
-        -------
-        self : VFHTransformer
-            The fitted transformer.
-        """
-        self._check_params()
-        self._check_clouds(X)
-        self.n_features_out_ = N_FEATURES
-        return self
-
-    def transform(self, X):
-        """Compute one VFH row per cloud.
-
-        Parameters
-        ----------
-        X : list of array-like of shape (n_i, 3) or (n_i, 6)
-            Point clouds; normals are estimated for clouds with three
-            columns.
-
-        Returns
-        -------
-        X_new : ndarray of shape (n_objects, 308)
-            PCL-scaled histograms (see Notes).
-        """
-        check_is_fitted(self)
-        *_, n_threads = self._check_params()
-        clouds = self._check_clouds(X, n_threads)
-        return transform_in_chunks(_vfh_chunk, self, clouds, n_features=N_FEATURES)
-
-    def get_feature_names_out(self, input_features=None):
-        """Names of the output columns: ``vfh_f1_<i>`` ... ``vfh_f4_<i>``, ``vfh_view_<i>``.
-
-        Parameters
-        ----------
-        input_features : None
-            Ignored (point clouds have no input feature names).
-
-        Returns
-        -------
-        feature_names_out : ndarray of str
-            In the output's order.
-        """
-        check_is_fitted(self)
+    def _feature_names(self):
+        """``vfh_f1_<i>`` ... ``vfh_f4_<i>``, ``vfh_view_<i>``."""
         names = [f"vfh_{f}_{i}" for f in ("f1", "f2", "f3", "f4") for i in range(N_ANGLE_BINS)]
         names += [f"vfh_view_{i}" for i in range(N_VIEW_BINS)]
-        return np.asarray(names, dtype=object)
+        return names
 
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = True
-        return tags
-
-
-def _vfh_chunk(est, clouds, first_index):
-    """VFH rows of one chunk of validated clouds (a joblib task)."""
-    owner = type(est).__name__
-    vp, flags, k, n_threads = est._check_params()
-    points, normals, offsets = _points_and_normals(clouds, k, est.normal_orientation, n_threads, owner)
-    out = np.zeros((len(clouds), N_FEATURES), dtype=np.float64)
-    n_threads = max(1, min(n_threads, len(clouds)))
-    vfh_batch(points, normals, offsets, vp, *flags, out, n_threads)
-    return out
+    def _describe(self, clouds, params, *, first_index):
+        """VFH rows of one chunk of validated clouds."""
+        vp, flags, k, n_threads = params
+        points, normals, offsets = self._points_and_normals(clouds, k, self.normal_orientation, n_threads)
+        out = np.zeros((len(clouds), N_FEATURES), dtype=np.float64)
+        n_threads = max(1, min(n_threads, len(clouds)))
+        vfh_batch(points, normals, offsets, vp, *flags, out, n_threads)
+        return out

@@ -4,29 +4,14 @@ import numbers
 
 import numpy as np
 
+from ..utils import check_n_jobs
+from ..utils._param_validation import Interval, IntTuple, StrOptions
+from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, RANDOM_STATE, PointCloudDescriptor
 from ._esf_fast import wahl_batch
-from ..utils import check_int as _check_int
-from ..utils import check_n_jobs, pack_point_clouds
-from ._base import PointCloudDescriptor
 
 __all__ = ["WahlTransformer"]
 
 _NAMES = ("alpha", "beta", "gamma", "delta")
-
-
-def _check_n_bins(n_bins, owner):
-    if isinstance(n_bins, numbers.Integral) and not isinstance(n_bins, bool):
-        n_bins = (n_bins,) * 4
-    try:
-        bins = tuple(n_bins)
-    except TypeError:
-        raise TypeError(f"{owner}: n_bins must be an int or a sequence of 4 ints, got {type(n_bins).__name__}") from None
-    if len(bins) != 4:
-        raise ValueError(f"{owner}: n_bins must have 4 entries (alpha, beta, gamma, delta), got {len(bins)}")
-    out = tuple(_check_int(b, "each entry of n_bins", owner, 1, 1024) for b in bins)
-    if np.prod(out, dtype=np.int64) > 2**26:
-        raise ValueError(f"{owner}: n_bins {out} gives more than 2**26 bins")
-    return out
 
 
 class WahlTransformer(PointCloudDescriptor):
@@ -130,19 +115,25 @@ class WahlTransformer(PointCloudDescriptor):
         self.random_state = random_state
         self.n_jobs = n_jobs
 
-    def _check_params(self):
-        owner = type(self).__name__
-        n_bins = _check_n_bins(self.n_bins, owner)
-        n_pairs = _check_int(self.n_pairs, "n_pairs", owner, 1, 2**31 - 1)
-        if self.source not in ("perpendicular", "parallel"):
-            raise ValueError(f"{owner}: source must be 'perpendicular' or 'parallel', got {self.source!r}")
-        n_neighbors = _check_int(self.n_neighbors, "n_neighbors", owner, 3)
-        if self.normal_orientation not in ("centroid", "origin", None):
-            raise ValueError(
-                f"{owner}: normal_orientation must be 'centroid', 'origin' or None, got {self.normal_orientation!r}"
-            )
-        n_threads = check_n_jobs(self.n_jobs, owner=owner)
-        return n_bins, n_pairs, n_neighbors, n_threads
+    _parameter_constraints = {
+        "n_bins": [
+            Interval(numbers.Integral, 1, 1024, closed="both"),
+            IntTuple(4, 1, 1024, max_product=2**26,
+                     description="a tuple of 4 ints in [1, 1024] (alpha, beta, gamma, delta; at most 2**26 bins in all)"),
+        ],
+        "n_pairs": [Interval(numbers.Integral, 1, 2**31 - 1, closed="both")],
+        "source": [StrOptions(["perpendicular", "parallel"])],
+        "n_neighbors": N_NEIGHBORS,
+        "normal_orientation": NORMAL_ORIENTATION,
+        "random_state": RANDOM_STATE,
+        "n_jobs": N_JOBS,
+    }
+
+    def _resolve_params(self):
+        n_bins = self.n_bins
+        n_bins = (int(n_bins),) * 4 if isinstance(n_bins, numbers.Integral) else tuple(int(b) for b in n_bins)
+        n_threads = check_n_jobs(self.n_jobs, owner=type(self).__name__)
+        return n_bins, int(self.n_pairs), int(self.n_neighbors), n_threads
 
     def _learn(self, clouds, params):
         self.n_bins_ = params[0]

@@ -284,6 +284,12 @@ def read_mesh(path, *, format=None):
         rejected, not dropped, since faces refer to them); the message names
         the file and the line or byte.
 
+    See Also
+    --------
+    write_mesh : Write a triangle mesh.
+    read_point_cloud : Read a point cloud.
+    eppf.preprocessing.sample_mesh : Sample points on a mesh's surface.
+
     Notes
     -----
     OFF files of ModelNet often glue the keyword to the counts on the first
@@ -329,6 +335,11 @@ def write_point_cloud(path, cloud, *, format=None, binary=True):
     binary : bool, default=True
         For PCD and PLY, write binary (little endian) rather than ASCII data.
 
+    See Also
+    --------
+    read_point_cloud : Read a point cloud.
+    write_mesh : Write a triangle mesh.
+
     Notes
     -----
     PCD and PLY files store float32, as PCL and most scanners do; text files
@@ -372,6 +383,11 @@ def write_mesh(path, vertices, faces, *, format=None, binary=True):
         Override the format given by the extension.
     binary : bool, default=True
         For PLY and STL, write binary rather than ASCII data.
+
+    See Also
+    --------
+    read_mesh : Read a triangle mesh.
+    write_point_cloud : Write a point cloud.
 
     Examples
     --------

@@ -12,12 +12,17 @@ from ._errors import FileFormatError
 Mesh = namedtuple("Mesh", ["vertices", "faces"])
 Mesh.__doc__ = """A triangle mesh.
 
-Attributes
+Parameters
 ----------
 vertices : ndarray of shape (n_vertices, 3), dtype float64
     Vertex coordinates.
 faces : ndarray of shape (n_faces, 3), dtype int64
     Vertex indices of each triangle.
+
+See Also
+--------
+read_mesh : Read a mesh from a file.
+write_mesh : Write a mesh to a file.
 
 Examples
 --------

@@ -15,6 +15,11 @@ class FileFormatError(ValueError):
     :class:`OSError` (``FileNotFoundError``, ``IsADirectoryError``,
     ``PermissionError``) instead.
 
+    See Also
+    --------
+    read_point_cloud : Read a point cloud.
+    read_mesh : Read a triangle mesh.
+
     Examples
     --------
     >>> import os, tempfile

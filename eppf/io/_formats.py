@@ -96,6 +96,11 @@ def format_of(path):
     ValueError
         If the extension is not one of :func:`supported_extensions`.
 
+    See Also
+    --------
+    supported_extensions : The extensions eppf reads and writes.
+    read_point_cloud : Read a point cloud in the format of its extension.
+
     Examples
     --------
     >>> from eppf.io import format_of

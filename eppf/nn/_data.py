@@ -79,6 +79,11 @@ class AugmentedPointClouds(Dataset):
     scale : bool, default=True
         Scale every object by a factor uniform in [0.8, 1.25].
 
+    See Also
+    --------
+    eppf.classifiers.PointNetClassifier : Trains on these augmented clouds.
+    DescriptorPoolDataset : The descriptor counterpart (several draws per object).
+
     Examples
     --------
     >>> import numpy as np

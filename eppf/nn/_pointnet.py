@@ -23,6 +23,11 @@ class TNet(nn.Module):
         Dimension of the transformed features (3 for the input transform,
         64 for the feature transform).
 
+    See Also
+    --------
+    PointNet : The network that uses two of them.
+    orthogonality_penalty : The regulariser of the predicted transforms.
+
     Examples
     --------
     >>> import torch
@@ -49,6 +54,18 @@ class TNet(nn.Module):
             self.out.bias.copy_(torch.eye(k).flatten())
 
     def forward(self, x):
+        """Predict one transform per sample.
+
+        Parameters
+        ----------
+        x : torch.Tensor of shape (batch, k, n_points)
+            Per-point features.
+
+        Returns
+        -------
+        transform : torch.Tensor of shape (batch, k, k)
+            The predicted transforms.
+        """
         g = self.features(x).max(dim=2).values
         return self.out(self.head(g)).view(-1, self.k, self.k)
 
@@ -66,6 +83,12 @@ class PointNet(nn.Module):
         Number of classes.
     dropout : float, default=0.3
         Dropout probability before the last dense layer.
+
+    See Also
+    --------
+    PointNetLoss : Its training loss.
+    TNet : The transform networks.
+    eppf.classifiers.PointNetClassifier : The scikit-learn classifier that trains it.
 
     Notes
     -----
@@ -109,6 +132,20 @@ class PointNet(nn.Module):
         )
 
     def forward(self, X):
+        """Compute the logits and the feature transform of a batch of clouds.
+
+        Parameters
+        ----------
+        X : torch.Tensor of shape (batch, n_points, 3)
+            Point coordinates.
+
+        Returns
+        -------
+        logits : torch.Tensor of shape (batch, n_classes)
+            Class scores.
+        feature_transform : torch.Tensor of shape (batch, 64, 64)
+            The learned feature transform, for the regulariser.
+        """
         x = X.transpose(1, 2)  # (batch, 3, n_points)
         x = torch.bmm(self.input_tnet(x), x)
         x = self.mlp1(x)
@@ -129,6 +166,11 @@ def orthogonality_penalty(A):
     Returns
     -------
     penalty : torch.Tensor, a scalar
+        Zero when every transform is orthogonal.
+
+    See Also
+    --------
+    PointNetLoss : The loss that adds it to the cross-entropy.
 
     Examples
     --------
@@ -154,6 +196,11 @@ class PointNetLoss(nn.Module):
     reg_weight : float, default=0.001
         Weight of the feature-transform regulariser.
 
+    See Also
+    --------
+    PointNet : The network whose output it takes.
+    orthogonality_penalty : The regulariser.
+
     Examples
     --------
     >>> import torch
@@ -170,5 +217,19 @@ class PointNetLoss(nn.Module):
         self.ce = nn.CrossEntropyLoss()
 
     def forward(self, y_pred, y_true):
+        """Compute the regularised loss of a batch.
+
+        Parameters
+        ----------
+        y_pred : tuple of torch.Tensor
+            The network's ``(logits, feature_transform)``.
+        y_true : torch.Tensor of shape (batch,)
+            Class indices.
+
+        Returns
+        -------
+        loss : torch.Tensor, a scalar
+            Cross-entropy plus the weighted orthogonality penalty.
+        """
         logits, feat = y_pred
         return self.ce(logits, y_true) + self.reg_weight * orthogonality_penalty(feat)

@@ -36,9 +36,13 @@ Constraints
 ``Options(type, values=None, description=None)``
     An instance of ``type`` (``Options(bool)`` also takes ``numpy.bool_``),
     restricted to ``values`` when given.
+``IntTuple(length, left, right, max_product=None)``
+    A sequence (not a str) of ``length`` ints in ``[left, right]``, e.g. the
+    bin counts of a histogram's axes, optionally with at most
+    ``max_product`` cells in all.
 ``Satisfies(predicate, description)``
     Any value for which ``predicate(value)`` is true; for the rare
-    parameter that the others cannot describe (a tuple of 3 positive ints).
+    parameter that the others cannot describe (a non-zero int).
 ``"no_validation"``
     Anything; the parameter is checked elsewhere.
 
@@ -54,6 +58,7 @@ import numbers
 import numpy as np
 
 __all__ = [
+    "IntTuple",
     "InvalidParameterError",
     "Interval",
     "Options",
@@ -273,6 +278,60 @@ class StrOptions(Options):
         if not all(isinstance(o, str) for o in options):
             raise TypeError(f"StrOptions: every option must be a str, got {options!r}")
         super().__init__(str, options, description=description)
+
+
+class IntTuple(_Constraint):
+    """A fixed-length sequence of ints within bounds (bin counts per axis).
+
+    Parameters
+    ----------
+    length : int
+        Number of entries.
+    left, right : int
+        Bounds of every entry, both included.
+    max_product : int, default=None
+        Largest accepted product of the entries (the number of cells).
+    description : str, default=None
+        Replaces the generated description in messages.
+
+    Examples
+    --------
+    >>> from eppf.utils._param_validation import IntTuple
+    >>> c = IntTuple(4, 1, 64)
+    >>> c.is_satisfied_by((20, 4, 5, 3)), c.is_satisfied_by((20, 4, 5)), str(c)
+    (True, False, 'a tuple of 4 ints in [1, 64]')
+    """
+
+    def __init__(self, length, left, right, *, max_product=None, description=None):
+        super().__init__(description)
+        for name, v in (("length", length), ("left", left), ("right", right)):
+            if not _is_int(v):
+                raise TypeError(f"IntTuple: {name} must be an int, got {v!r}")
+        if length < 1 or left > right:
+            raise ValueError(f"IntTuple: need length >= 1 and left <= right, got {length}, {left}, {right}")
+        if max_product is not None and not _is_int(max_product):
+            raise TypeError(f"IntTuple: max_product must be an int or None, got {max_product!r}")
+        self.length = int(length)
+        self.left = int(left)
+        self.right = int(right)
+        self.max_product = max_product
+
+    def is_satisfied_by(self, value):
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+            return False
+        try:
+            values = tuple(value)
+        except TypeError:
+            return False
+        if len(values) != self.length or not all(_is_int(v) and self.left <= v <= self.right for v in values):
+            return False
+        return self.max_product is None or math.prod(int(v) for v in values) <= self.max_product
+
+    def _describe(self):
+        out = f"a tuple of {self.length} ints in [{self.left}, {self.right}]"
+        if self.max_product is not None:
+            out += f" with a product of at most {self.max_product}"
+        return out
 
 
 class Satisfies(_Constraint):

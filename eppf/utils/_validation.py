@@ -385,6 +385,11 @@ def check_int(value, name, owner, low, high=None):
     value : int
         The value as a Python int.
 
+    See Also
+    --------
+    eppf.utils._param_validation.validate_params : The declarative checks estimators use.
+    check_n_jobs : The check of ``n_jobs``.
+
     Examples
     --------
     >>> from eppf.utils import check_int

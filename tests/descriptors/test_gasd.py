@@ -227,20 +227,25 @@ def test_two_points_and_collinear_clouds():
     assert Xn.sum() == 100.0 and np.count_nonzero(Xn) == 1
 
 
+_VIEW_DIRECTION = "view_direction must be an array-like of 3 finite numbers, not all zero, got "
+
+
 @pytest.mark.parametrize(
     "params, err, msg",
     [
-        ({"half_grid_size": 0}, ValueError, "half_grid_size must be in [1, 64], got 0"),
-        ({"half_grid_size": 2.0}, TypeError, "half_grid_size must be an int, got float"),
-        ({"hists_size": 0}, ValueError, "hists_size must be in [1, 1024], got 0"),
-        ({"half_grid_size": 64, "hists_size": 10}, ValueError, "half_grid_size=64 and hists_size=10 give 20971520 values; at most 2**24"),
-        ({"interpolation": "cubic"}, ValueError, "interpolation must be 'trilinear', 'none' or 'quadrilinear'"),
+        ({"half_grid_size": 0}, ValueError, "half_grid_size must be an int in [1, 64], got 0"),
+        ({"half_grid_size": 2.0}, TypeError, "half_grid_size must be an int in [1, 64], got 2.0"),
+        ({"hists_size": 0}, ValueError, "hists_size must be an int in [1, 1024], got 0"),
+        ({"half_grid_size": 64, "hists_size": 10}, ValueError, "half_grid_size=64 and hists_size=10 give 20971520 values; at most 2**24 are allowed"),
+        ({"interpolation": "cubic"}, ValueError, "interpolation must be one of 'trilinear', 'none', 'quadrilinear', "
+                                                 "got 'cubic'"),
         ({"sign_convention": "x"}, ValueError, "sign_convention must be 'pcl' or 'majority', got 'x'"),
-        ({"view_direction": (0, 0, 0)}, ValueError, "view_direction must not be the zero vector"),
-        ({"view_direction": (0, np.nan, 1)}, ValueError, "view_direction contains NaN or infinite values"),
-        ({"view_direction": (0, 1)}, ValueError, "view_direction must have shape (3,), got shape (2,)"),
-        ({"view_direction": "up"}, TypeError, "view_direction must be an array-like of 3 numbers"),
-        ({"n_jobs": 0}, ValueError, "n_jobs == 0 has no meaning"),
+        ({"view_direction": (0, 0, 0)}, ValueError, _VIEW_DIRECTION + "(0, 0, 0)"),
+        ({"view_direction": (0, np.nan, 1)}, ValueError, _VIEW_DIRECTION + "(0, nan, 1)"),
+        ({"view_direction": (0, 1)}, ValueError, _VIEW_DIRECTION + "(0, 1)"),
+        ({"view_direction": "up"}, TypeError, "view_direction must be an array-like of 3 finite numbers, not all zero, "
+                                              "got 'up'"),
+        ({"n_jobs": 0}, ValueError, "n_jobs must be None or a non-zero int (-1: all cores), got 0"),
     ],
 )
 def test_bad_parameters(params, err, msg):
@@ -358,9 +363,10 @@ def test_color_bad_clouds(X, err, msg):
 @pytest.mark.parametrize(
     "params, msg",
     [
-        ({"color_hists_size": 0}, "color_hists_size must be in [1, 1024], got 0"),
-        ({"color_interpolation": "linear"}, "color_interpolation must be 'none', 'trilinear' or 'quadrilinear'"),
-        ({"shape_half_grid_size": 65}, "shape_half_grid_size must be in [1, 64], got 65"),
+        ({"color_hists_size": 0}, "color_hists_size must be an int in [1, 1024], got 0"),
+        ({"color_interpolation": "linear"}, "color_interpolation must be one of 'trilinear', 'none', 'quadrilinear', "
+                                            "got 'linear'"),
+        ({"shape_half_grid_size": 65}, "shape_half_grid_size must be an int in [1, 64], got 65"),
     ],
 )
 def test_color_bad_parameters(params, msg):

@@ -2,6 +2,7 @@
 NumPy model of PCL's pipeline (FLANN tree order included), layout, rotation
 behaviour, determinism, thread/chunk bit-identity and bad input."""
 
+import re
 import doctest
 
 import numpy as np
@@ -393,23 +394,23 @@ def _cloud(n=50, seed=0):
 @pytest.mark.parametrize(
     "params, err, match",
     [
-        ({"radius": 0.0}, ValueError, "radius must be finite and in"),
+        ({"radius": 0.0}, ValueError, "radius must be a float in [1e-15, 1e+15], got 0.0"),
         ({"radius": np.nan}, ValueError, "radius"),
         ({"radius": "a"}, TypeError, "radius must be a float"),
         ({"radius": True}, TypeError, "radius must be a float"),
-        ({"n_subdivisions": 0}, ValueError, "n_subdivisions must be in"),
-        ({"n_subdivisions": 65}, ValueError, "n_subdivisions must be in"),
+        ({"n_subdivisions": 0}, ValueError, "n_subdivisions must be an int in [1, 64], got 0"),
+        ({"n_subdivisions": 65}, ValueError, "n_subdivisions must be an int in [1, 64], got 65"),
         ({"n_subdivisions": 2.5}, TypeError, "n_subdivisions must be an int"),
         ({"plane_radius": -1.0}, ValueError, "plane_radius"),
         ({"scaling": "unit"}, ValueError, "scaling must be"),
-        ({"normalize": 1}, TypeError, "normalize must be a bool"),
-        ({"n_neighbors": 2}, ValueError, "n_neighbors must be >= 3"),
+        ({"normalize": 1}, TypeError, "normalize must be True or False, got 1"),
+        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation"),
         ({"n_jobs": 0}, ValueError, "n_jobs"),
     ],
 )
 def test_bad_parameters(params, err, match):
-    with pytest.raises(err, match=match):
+    with pytest.raises(err, match=re.escape(match)):
         GRSDTransformer(**params).fit([_cloud()])
 
 
@@ -426,7 +427,7 @@ def test_bad_parameters(params, err, match):
     ],
 )
 def test_bad_clouds(X, err, match):
-    with pytest.raises(err, match=match):
+    with pytest.raises(err, match=re.escape(match)):
         GRSDTransformer().fit_transform(X)
 
 
