@@ -282,3 +282,35 @@ def test_preset_is_registered():
     assert isinstance(est, EPPFGASDTransformer)
     assert (est.n_pairs, est.scaling, est.random_state, est.n_jobs) == (900, "object", 4, 1)
     assert est.eppf_weight == EPPFGASDTransformer().eppf_weight
+
+
+# ----------------------------------------------------------------- script
+def _script():
+    import importlib.util
+    import os
+
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "scripts", "combine_descriptors.py")
+    spec = importlib.util.spec_from_file_location("combine_descriptors", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_script_table_and_missing_file(tmp_path, capsys):
+    script = _script()
+    assert script.main(["--data", str(tmp_path / "absent.npz")]) == 2
+    assert "not found" in capsys.readouterr().err
+    clouds = _clouds(24, seed=5)
+    labels = np.array([k % 2 for k in range(24)])
+    path = tmp_path / "tiny.npz"
+    np.savez(path, points=np.concatenate(clouds), offsets=np.cumsum([0] + [len(c) for c in clouds]),
+             labels=labels, class_names=np.array(["flat", "tall"]),
+             split=np.array(["train"] * 16 + ["test"] * 8))
+    assert script.main(["--data", str(path), "--others", "gasd", "--cache", str(tmp_path / "cache")]) == 0
+    out = capsys.readouterr().out
+    assert "| EPPF+GASD w=0.5 |" in out and "| GASD |" in out and "w chosen on train" in out
+    assert len(list((tmp_path / "cache").glob("*.npy"))) == 2  # EPPF draw 0 and GASD, each computed once
+    np.savez(tmp_path / "nosplit.npz", points=np.concatenate(clouds), offsets=np.cumsum([0] + [len(c) for c in clouds]),
+             labels=labels, class_names=np.array(["flat", "tall"]))
+    assert script.main(["--data", str(tmp_path / "nosplit.npz")]) == 2
+    assert "no train/test split" in capsys.readouterr().err
