@@ -110,6 +110,12 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
     pass). Errors a block raises on its parameters are re-raised with the
     union and the block's name first.
 
+    In a pipeline the union feeds :class:`eppf.neighbors.KLNearestNeighbors`
+    or any scikit-learn classifier on a matrix. :class:`eppf.classifiers.EPPF4DClassifier`
+    cannot take it: all its variants (2D, 3D, 4D) reshape the row into
+    EPPF's bin grid (``prod(n_bins)`` columns), and it has no dense variant
+    for an arbitrary width.
+
     **The floor.** Empty bins are raised to a common floor ``f`` before the
     logarithms. In a union row, bin ``i`` of block ``b`` is floored when
     ``w_b p_bi < f``, i.e. block ``b`` sees the floor ``f / w_b`` on its own
