@@ -548,7 +548,7 @@ class EPPFGASDTransformer(DescriptorUnion):
     objects queried against the rest, ``w`` in 0.1, ..., 0.9): ModelNet10
     chose 0.8 and 0.6 in the two draws, DALES 0.9 twice; 0.8 is the first
     ModelNet10 choice, never tuned on test objects. Measured on a 2-vCPU
-    Zen 4 VM shared with other jobs.
+    Zen 4 VM with other jobs running alongside.
 
     Examples
     --------
