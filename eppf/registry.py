@@ -15,7 +15,7 @@ Examples
 --------
 >>> from eppf.registry import DESCRIPTORS, make_descriptor
 >>> [name for name in DESCRIPTORS if name.startswith("eppf")]
-['eppf_short', 'eppf']
+['eppf_short', 'eppf', 'eppf+gasd']
 >>> DESCRIPTORS["gasd"].metric, DESCRIPTORS["ourcvfh"].metric
 ('kl', 'l1')
 >>> make_descriptor("esf", n_samples=5000, random_state=0)
@@ -201,6 +201,8 @@ DESCRIPTORS = {
         DescriptorSpec("gasd", "GASD", f"{_D}:GASDTransformer", None, "kl"),
         DescriptorSpec("cvfh", "CVFH", f"{_D}:CVFHTransformer", None, "l1"),
         DescriptorSpec("grsd", "GRSD", f"{_D}:GRSDTransformer", None, "l1"),
+        # EPPF and GASD weighted into one distribution (EPPFGASDTransformer's docstring: figures, protocol)
+        DescriptorSpec("eppf+gasd", "EPPF+GASD", f"{_D}:EPPFGASDTransformer", "n_pairs", "kl", True),
     )
 }
 

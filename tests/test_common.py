@@ -50,6 +50,7 @@ TINY = {
     "EPPFTransformer": dict(n_pairs=300),
     "ESFTransformer": dict(n_triplets=300),
     "WahlTransformer": dict(n_pairs=300),
+    "EPPFGASDTransformer": dict(n_pairs=300),
     "Resampler": dict(n_points=32),
     "PointNetClassifier": dict(n_points=16, max_epochs=1, batch_size=4, early_stopping=False, n_jobs=1),
     "EPPF4DClassifier": dict(n_bins=(2, 2, 3, 1), max_epochs=1, n_hidden=4, filters=(2, 2, 2), batch_size=4,
@@ -67,6 +68,10 @@ def _tiny(cls, **fixed):
         from eppf.descriptors import ESFTransformer
 
         params["transformer"] = _tiny(ESFTransformer)
+    if cls.__name__ == "DescriptorUnion":  # a composite: give it two small blocks
+        from eppf.descriptors import ESFTransformer, GASDTransformer
+
+        params["transformer_list"] = [("esf", _tiny(ESFTransformer)), ("gasd", GASDTransformer())]
     params.update(fixed)
     return cls(**params)
 

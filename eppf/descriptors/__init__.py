@@ -15,6 +15,8 @@ its own module with its compiled kernel beside it (``_esf.py`` over
 - :class:`GRSDTransformer`: Global Radius-based Surface Descriptor (Marton et al. 2010);
 - :class:`GASDTransformer`, :class:`GASDColorTransformer`: Globally Aligned
   Spatial Distribution (Lima & Teichrieb 2016), shape and shape + colour;
+- :class:`DescriptorUnion`: several descriptors weighted into one row;
+  :class:`EPPFGASDTransformer`, its measured EPPF + GASD preset;
 - :func:`descriptor_pool`: several seeded draws of one descriptor per object.
 """
 
@@ -25,12 +27,15 @@ from ._gasd import GASDColorTransformer, GASDTransformer, gasd_alignment
 from ._grsd import GRSDTransformer
 from ._ourcvfh import OURCVFHTransformer
 from ._pool import descriptor_pool
+from ._union import DescriptorUnion, EPPFGASDTransformer
 from ._vfh import VFHTransformer
 from ._wahl import WahlTransformer
 
 __all__ = [
     "CVFHTransformer",
+    "DescriptorUnion",
     "EPPFTransformer",
+    "EPPFGASDTransformer",
     "ESFTransformer",
     "FUNCTIONS",
     "GASDColorTransformer",
