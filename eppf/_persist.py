@@ -55,6 +55,8 @@ _ALLOWED = {
     "eppf.GASDTransformer": ("eppf.descriptors", "GASDTransformer"),
     "eppf.GASDColorTransformer": ("eppf.descriptors", "GASDColorTransformer"),
     "eppf.GRSDTransformer": ("eppf.descriptors", "GRSDTransformer"),
+    "eppf.DescriptorUnion": ("eppf.descriptors", "DescriptorUnion"),
+    "eppf.EPPFGASDTransformer": ("eppf.descriptors", "EPPFGASDTransformer"),
     "eppf.KLNearestNeighbors": ("eppf.neighbors", "KLNearestNeighbors"),
     "eppf.EPPF4DClassifier": ("eppf.classifiers", "EPPF4DClassifier"),
     "eppf.PointNetClassifier": ("eppf.classifiers", "PointNetClassifier"),
@@ -123,6 +125,11 @@ class _Encoder:
             return [self.encode(v, f"{where}[{i}]") for i, v in enumerate(value)]
         if isinstance(value, tuple) and type(value) is tuple:
             return {"__type__": "tuple", "items": [self.encode(v, f"{where}[{i}]") for i, v in enumerate(value)]}
+        if type(value) is slice:
+            parts = (value.start, value.stop, value.step)
+            if not all(v is None or (isinstance(v, int) and not isinstance(v, bool)) for v in parts):
+                raise TypeError(f"save_model: cannot save {where}: a slice of non-integers")
+            return {"__type__": "slice", "items": list(parts)}
         if type(value) is dict:
             for k in value:
                 if not isinstance(k, str):
@@ -282,6 +289,11 @@ class _Decoder:
             return float(text)
         if kind == "tuple":
             return tuple(self.decode(v, f"{where}[{i}]") for i, v in enumerate(self._list(node, "items", where)))
+        if kind == "slice":
+            parts = self._list(node, "items", where)
+            if len(parts) != 3 or not all(v is None or (type(v) is int) for v in parts):
+                raise self.fail(where, "a slice must hold three ints or nulls")
+            return slice(*parts)
         if kind == "dict":
             items = node.get("items")
             if not isinstance(items, dict):

@@ -30,9 +30,13 @@ _OWN_PARAMS = ("transformer_list", "weights", "normalize", "n_jobs")
 
 def _reraise_named(exc, owner, name):
     """Re-raise a block's ValueError/TypeError with the union and the block named first."""
-    if type(exc) not in (ValueError, TypeError):
+    if not isinstance(exc, (ValueError, TypeError)):
         raise exc
-    raise type(exc)(f"{owner}: block {name!r}: {exc}") from exc
+    try:
+        named = type(exc)(f"{owner}: block {name!r}: {exc}")
+    except Exception:  # an exception class with another constructor
+        named = (ValueError if isinstance(exc, ValueError) else TypeError)(f"{owner}: block {name!r}: {exc}")
+    raise named from exc
 
 
 class DescriptorUnion(TransformerMixin, BaseEstimator):
