@@ -9,7 +9,7 @@ from sklearn.utils.validation import check_is_fitted
 from ._chunks import transform_in_chunks
 from ._core import eppf_counts
 from ._validation import _bounding_sides, _stacked_view, check_n_jobs, check_point_clouds, object_seeds
-from ._validation import pack_point_clouds
+from ._validation import condition_point_clouds, pack_point_clouds
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
 
@@ -234,7 +234,15 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         self.n_features_out_ = int(np.prod(self.histogram_shape_))
         self.scale_ = None
         if self.scaling == "fit":
-            self.scale_ = float(1.0 / _bounding_sides(clouds).max())
+            with np.errstate(over="ignore", divide="ignore"):
+                side = _bounding_sides(clouds).max()
+                self.scale_ = float(1.0 / side)
+            if not (np.isfinite(side) and np.isfinite(self.scale_) and self.scale_ > 0):
+                raise ValueError(
+                    f"{type(self).__name__}: the largest training object's side ({side:.3g}) is out of float64's "
+                    "range for one data-set scale (1 / side must be finite and non-zero); rescale the data or "
+                    "use scaling='object'"
+                )
         return self
 
     def transform(self, X):
@@ -256,12 +264,17 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         name = type(self).__name__
         n_threads = check_n_jobs(self.n_jobs, owner=name)
         clouds = check_point_clouds(X, owner=name, n_threads=n_threads)
+        # Clouds outside the kernels' magnitude window are rescaled by 2**e (exact);
+        # f1's absolute scales get 2**-e back.
+        exps = condition_point_clouds(clouds, owner=name)
         if self.scaling == "fit":
-            scales = np.full(len(clouds), self.scale_)
+            with np.errstate(over="ignore"):  # (an object vastly larger than the training ones: top f1 bin)
+                scales = np.ldexp(np.full(len(clouds), self.scale_), -exps)
         elif self.scaling == "object":
             scales = 1.0 / _bounding_sides(clouds)
         else:
-            scales = np.ones(len(clouds))
+            with np.errstate(over="ignore"):
+                scales = np.ldexp(np.ones(len(clouds)), -exps)
         # Seeds are drawn once for the whole input, so chunking never changes a result.
         seeds = object_seeds(self.random_state, len(clouds))
         return transform_in_chunks(

@@ -8,7 +8,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._baselines import esf_batch
 from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
+from ._validation import check_n_jobs, check_point_clouds, condition_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["ESFTransformer"]
 
@@ -176,6 +176,7 @@ class ESFTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         n_triplets, grid_size, n_bins, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
+        condition_point_clouds(clouds, owner=owner)  # exact 2**e rescaling: ESF is scale-invariant
         seeds = object_seeds(self.random_state, len(clouds))
         return transform_in_chunks(_esf_chunk, self, clouds, (seeds,), n_features=10 * n_bins)
 

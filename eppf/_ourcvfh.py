@@ -12,7 +12,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ._esf import _check_int
 from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_clouds
+from ._validation import check_n_jobs, check_point_clouds, condition_point_clouds
 from ._wahl import _points_and_normals
 
 __all__ = ["OURCVFHTransformer"]
@@ -255,6 +255,11 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         bounding-box side is 1 (``"object"``, as PCL's reference runs), by
         one factor learnt in ``fit`` so the largest training object's side
         is 1 (``"fit"``), or not at all. Distances below are in these units.
+        ``"object"`` takes clouds of any finite magnitude (they are first
+        rescaled by an exact power of two); with ``"fit"`` and ``"none"``, a
+        cloud whose largest side is below ``2**-100`` or whose coordinates
+        exceed ``2**100`` in magnitude gets a ``ValueError``, since ``sigma``
+        and ``cluster_tolerance`` would no longer be in its units.
     curvature_threshold : float, default=0.03
         Points whose surface variation ``lambda_min / sum(lambda)`` over
         ``n_neighbors`` exceeds it are left out of the clusters (PCL's
@@ -408,8 +413,15 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         clouds = check_point_clouds(X, owner=type(self).__name__, min_points=3)
         self.scale_ = 1.0
         if self.scaling == "fit":
-            side = max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
-            self.scale_ = 1.0 / side
+            with np.errstate(over="ignore"):
+                side = max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
+            self.scale_ = 1.0 / side if side > 0 else np.inf
+            if not (np.isfinite(side) and np.isfinite(self.scale_) and self.scale_ > 0):
+                raise ValueError(
+                    f"{type(self).__name__}: the largest training object's side ({side:.3g}) is out of float64's "
+                    "range for one data-set scale (1 / side must be finite and non-zero); rescale the data or "
+                    "use scaling='object'"
+                )
         self.n_features_out_ = N_FEATURES
         return self
 
@@ -449,6 +461,18 @@ class OURCVFHTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         params, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=3, n_threads=n_threads)
+        # Exact 2**e rescaling of clouds outside the safe magnitude window; only
+        # scaling="object" is invariant to it (the others apply sigma and
+        # cluster_tolerance in the input's units).
+        exps = condition_point_clouds(clouds, owner=owner)
+        if self.scaling != "object" and exps.any():
+            k = int(np.flatnonzero(exps)[0])
+            raise ValueError(
+                f"{owner}: point cloud {k} has coordinates out of the magnitude range this estimator computes in "
+                f"without overflow or underflow (largest side >= 2**-100, |coordinates| <= 2**100); with "
+                f"scaling={self.scaling!r} its lengths are taken in the input's units, so rescale the data or "
+                "use scaling='object'"
+            )
         return transform_in_chunks(_ourcvfh_chunk, self, clouds, n_features=308)
 
     def get_feature_names_out(self, input_features=None):

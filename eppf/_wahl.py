@@ -9,7 +9,7 @@ from sklearn.utils.validation import check_is_fitted
 from ._baselines import wahl_batch
 from ._esf import _check_int
 from ._chunks import transform_in_chunks
-from ._validation import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds
+from ._validation import check_n_jobs, check_point_clouds, condition_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = ["WahlTransformer"]
 
@@ -207,6 +207,7 @@ class WahlTransformer(TransformerMixin, BaseEstimator):
         owner = type(self).__name__
         n_bins, n_pairs, n_neighbors, n_threads = self._check_params()
         clouds = check_point_clouds(X, owner=owner, min_points=2, n_threads=n_threads)
+        condition_point_clouds(clouds, owner=owner)  # exact 2**e rescaling: the histogram is scale-invariant
         seeds = object_seeds(self.random_state, len(clouds))
         return transform_in_chunks(_wahl_chunk, self, clouds, (seeds,), n_features=int(np.prod(n_bins)))
 
