@@ -29,7 +29,13 @@ Usage::
 Run it from the repository root (so that the ``eppf`` of the working tree is
 imported). Under the address-sanitizer build (see ``setup.py``) any
 out-of-bounds access aborts the child and shows up as a FAIL with its
-report on stderr.
+report on stderr; there the address-space limit is left to
+``ASAN_OPTIONS=hard_rss_limit_mb=4096`` (ASan's shadow memory needs far more
+address space than 4 GiB)::
+
+    LD_PRELOAD=$(gcc -print-file-name=libasan.so) \\
+    ASAN_OPTIONS=detect_leaks=0:hard_rss_limit_mb=4096 \\
+    UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 python scripts/fuzz_clouds.py --short
 """
 
 import argparse
@@ -209,8 +215,20 @@ def run_one(name, clouds, rng):
 
 
 # ---------------------------------------------------------------- the runner
+def _sanitized():
+    """Whether AddressSanitizer's runtime is loaded (it reserves terabytes of
+    address space for its shadow memory, so RLIMIT_AS cannot be used; set
+    ``hard_rss_limit_mb`` in ASAN_OPTIONS instead)."""
+    try:
+        with open("/proc/self/maps") as fh:
+            return "libasan" in fh.read()
+    except OSError:
+        return "libasan" in os.environ.get("LD_PRELOAD", "")
+
+
 def _child(seed, i, start, wfd):
-    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+    if not _sanitized():
+        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
     clouds, _, rng = make_case(seed, i)
     # every estimator sees the same draws whether or not the earlier ones ran
     rngs = [np.random.default_rng([seed, i, j]) for j in range(len(ESTIMATORS))]
