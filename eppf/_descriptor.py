@@ -54,7 +54,11 @@ class EPPFTransformer(TransformerMixin, BaseEstimator):
         (scale-invariant; use it for data in mixed units such as raw CAD
         files). ``"none"``: coordinates used as given (they should already lie
         in a unit cube). f1 is binned on ``[0, sqrt(3)]``; longer distances
-        fall in the last bin.
+        fall in the last bin. Any finite magnitude is accepted: a cloud whose
+        largest side is below ``2**-100`` or whose coordinates exceed
+        ``2**100`` is first rescaled by an exact power of two (and f1's scale
+        by its inverse); with ``"fit"``, a largest training side whose inverse
+        is not a finite positive float64 is a ``ValueError``.
     n_neighbors : int, default=20
         Neighbours for PCA normal estimation of clouds given without normals
         (see :func:`eppf.estimate_normals`). Clouds of shape (n, 6) carry their

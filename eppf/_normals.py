@@ -141,8 +141,10 @@ default="centroid"
         If ``points`` is not numeric array-like or ``n_neighbors`` is not an int.
     ValueError
         If ``points`` does not have shape (n_points, 3), holds NaN or infinite
-        values, has fewer than 3 points or only identical points, or if
-        ``n_neighbors < 3`` or ``orientation`` is not understood.
+        values, has fewer than 3 points or only identical points, is too
+        small for its distance from the origin (e.g. a 1e-10 object at
+        1e300: centre it), or if ``n_neighbors < 3`` or ``orientation`` is
+        not understood.
 
     See Also
     --------
@@ -158,7 +160,10 @@ default="centroid"
     size adapts to the cloud and to ``n_neighbors``, takes the eigenvalues of
     :math:`C` in closed form and the eigenvector as a cross product of two
     rows of :math:`C - \\lambda_{min} I`, falling back to cyclic Jacobi
-    rotations when the two smallest eigenvalues nearly coincide. About 0.6 ms
+    rotations when the two smallest eigenvalues nearly coincide. A cloud of
+    extreme magnitude (largest side below ``2**-100`` or coordinates above
+    ``2**100``) is first rescaled by an exact power of two, and a viewpoint
+    with it, so any finite coordinates give the normals of a sane scale. About 0.6 ms
     for 1,024 points and ``n_neighbors=10`` on one core (see
     ``benchmarks/bench_normals.py``). The grid's cost grows with the square
     of the number of points that share one cell, so tens of thousands of

@@ -4,7 +4,9 @@ Every estimator that takes point clouds goes through :func:`check_point_clouds`
 so that bad input fails the same way everywhere: a ``TypeError`` for the wrong
 kind of object, a ``ValueError`` naming the estimator, the object index and the
 problem for wrong shapes, non-finite values, too few or identical points and
-zero-length normals.
+zero-length normals. :func:`condition_point_clouds` then brings clouds of
+extreme magnitude into the range the compiled kernels compute in, by an
+exact power of two.
 """
 
 import numbers
