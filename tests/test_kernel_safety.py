@@ -93,8 +93,8 @@ def test_esf_kernel_survives_non_finite_and_overflowing_points(simd, grid):
                          out, status, 1)
     assert status[0] == 0 and np.isclose(out[0].sum(), 1.0)
     assert status[-1] == 1  # two points: no triangle
-    for k in range(len(clouds)):
-        assert status[k] == 1 and not out[k].any() or np.isclose(out[k].sum(), 1.0) or not np.isfinite(out[k]).all()
+    for k in range(len(clouds)):  # a zero row with status 1, or a histogram
+        assert (status[k] == 1 and not out[k].any()) or (status[k] == 0 and np.isclose(out[k].sum(), 1.0))
     with pytest.raises(ValueError, match="one entry"):
         _baselines.esf_batch(points, offsets, np.zeros(2, dtype=np.uint64), 10, grid, 17, 1e-12, out, status, 1)
 
