@@ -9,6 +9,35 @@ builds the extension ``eppf.<pkg>._x_fast`` used by ``eppf/<pkg>/_x.py``. Each
 extension sees only its own folder's C headers (and depends on the headers it
 includes, so editing one rebuilds just the kernels that use it) plus the shared
 ``eppf/utils/_common.pxd``.
+
+Debug build
+-----------
+``EPPF_DEBUG=1`` builds the kernels for hunting memory errors: Cython's
+``boundscheck`` and ``wraparound`` on, and (GCC or Clang) ``-O1 -g
+-fsanitize=address,undefined,float-cast-overflow -fno-omit-frame-pointer``
+at compile and link time. Its C files go to ``build/debug`` so the normal
+build's are left alone; pass ``--force`` when switching between the two
+builds, since the in-place modules have the same names::
+
+    EPPF_DEBUG=1 python setup.py build_ext --inplace --force -j 1
+
+The Python interpreter is not instrumented, so AddressSanitizer's runtime
+must be loaded first, and its leak checker (which would report the
+interpreter's own allocations) turned off; UBSAN_OPTIONS makes undefined
+behaviour (an out-of-range float-to-int conversion, say) abort like a
+memory error instead of printing and going on::
+
+    LD_PRELOAD=$(gcc -print-file-name=libasan.so) \\
+        ASAN_OPTIONS=detect_leaks=0:hard_rss_limit_mb=4096 \\
+        UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 \\
+        python scripts/fuzz_clouds.py --short
+
+A memory error aborts the forked child and is counted as a FAIL, with the
+sanitizer's report on stderr (the fuzz script leaves memory limits to
+``hard_rss_limit_mb`` there: ASan's shadow memory needs more address space
+than its usual RLIMIT_AS). Rebuild normally afterwards::
+
+    python setup.py build_ext --inplace --force -j 1
 """
 import glob
 import os
@@ -50,6 +79,13 @@ def _openmp_flags():
 
 omp_compile, omp_link = _openmp_flags()
 base_args = [] if sys.platform == "win32" else ["-O3", "-ffp-contract=off", "-fno-math-errno"]
+debug = os.environ.get("EPPF_DEBUG", "") not in ("", "0")
+link_args = []
+if debug and sys.platform != "win32":
+    sanitize = ["-fsanitize=address,undefined,float-cast-overflow", "-fno-omit-frame-pointer"]
+    base_args = ["-O1", "-g", "-ffp-contract=off", "-fno-math-errno", *sanitize]
+    link_args = sanitize
+
 
 def _included_headers(pyx):
     """The C headers of the pyx's own folder that it names in ``cdef extern from``."""
@@ -69,7 +105,7 @@ def _extension(pyx):
         include_dirs=([np.get_include()] if uses_numpy else []) + [os.path.dirname(pyx)],
         depends=_included_headers(pyx) + [os.path.join("eppf", "utils", "_common.pxd")],
         extra_compile_args=base_args + omp_compile,
-        extra_link_args=omp_link,
+        extra_link_args=omp_link + link_args,
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],
     )
 
@@ -81,10 +117,11 @@ setup(
         extensions,
         compiler_directives={
             "language_level": "3",
-            "boundscheck": False,
-            "wraparound": False,
+            "boundscheck": debug,
+            "wraparound": debug,
             "cdivision": True,
             "initializedcheck": False,
         },
+        **({"build_dir": os.path.join("build", "debug"), "force": True} if debug else {}),
     )
 )

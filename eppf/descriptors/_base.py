@@ -41,6 +41,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds, transform_in_chunks
+from ..utils._validation import condition_point_clouds
 from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
 
 __all__ = [
@@ -132,11 +133,12 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
     def _learn(self, clouds, params):
         """Learn from the validated training clouds (nothing by default)."""
 
-    def _per_object(self, clouds, params):
+    def _per_object(self, clouds, params, exps):
         """Per-object inputs drawn for the whole input before chunking.
 
         By default one seed per object when the descriptor has a
-        ``random_state``, nothing otherwise.
+        ``random_state``, nothing otherwise. ``exps`` are the exponents of
+        :meth:`_condition` (for descriptors that measure absolute lengths).
         """
         if "random_state" not in self.get_params(deep=False):
             return ()
@@ -221,7 +223,55 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """With ``scaling="fit"``, 1 / the largest bounding-box side of any cloud; else 1."""
         if self.scaling != "fit":
             return 1.0
-        return 1.0 / max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
+        with np.errstate(over="ignore"):
+            side = max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
+        return self._data_set_scale(side)
+
+    def _data_set_scale(self, side):
+        """1 / ``side``, or a ValueError when that is not a finite positive float64."""
+        with np.errstate(over="ignore", divide="ignore"):
+            scale = float(1.0 / side) if side > 0 else np.inf
+        if not (np.isfinite(side) and np.isfinite(scale) and scale > 0):
+            raise ValueError(
+                f"{type(self).__name__}: the largest training object's side ({side:.3g}) is out of float64's "
+                "range for one data-set scale (1 / side must be finite and non-zero); rescale the data or "
+                "use scaling='object'"
+            )
+        return scale
+
+    #: How clouds of extreme magnitude reach the kernels: ``"rescale"`` (an
+    #: exact power-of-two rescaling, see :meth:`_condition`) or ``"none"``
+    #: (the descriptor brings magnitudes into range itself).
+    _conditioning = "rescale"
+
+    def _condition(self, clouds):
+        """Bring clouds of extreme magnitude into the kernels' range; return the exponents.
+
+        A cloud whose largest side is below ``2**-100`` or whose coordinates
+        exceed ``2**100`` is multiplied by an exact power of two ``2**e``
+        (:func:`eppf.utils.condition_point_clouds`); the others are left bit
+        for bit. That changes nothing for descriptors invariant to scale. A
+        descriptor with ``scaling`` other than ``"object"`` measures lengths
+        in the input's units, so such a cloud is refused there with a
+        ValueError; EPPF instead takes ``2**-e`` into its f1 scale.
+        """
+        if self._conditioning == "none":
+            return np.zeros(len(clouds), dtype=np.int64)
+        owner = type(self).__name__
+        exps = condition_point_clouds(clouds, owner=owner)
+        scaling = self.get_params(deep=False).get("scaling", "object")
+        if scaling != "object" and exps.any() and not self._compensates_scale:
+            k = int(np.flatnonzero(exps)[0])
+            raise ValueError(
+                f"{owner}: point cloud {k} has coordinates out of the magnitude range this estimator computes in "
+                f"without overflow or underflow (largest side >= 2**-100, |coordinates| <= 2**100); with "
+                f"scaling={scaling!r} its lengths are taken in the input's units, so rescale the data or "
+                "use scaling='object'"
+            )
+        return exps
+
+    #: True for descriptors that take the conditioning's ``2**-e`` into their own scale.
+    _compensates_scale = False
 
     def _centred_points_and_normals(self, clouds, n_neighbors, n_threads):
         """:meth:`_points_and_normals` (oriented by ``normal_orientation``), each object centred.
@@ -292,7 +342,8 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         check_is_fitted(self, "n_features_out_")
         params = self._check_params()
         clouds, extras = self._validate_clouds(X, self._threads())
-        per_object = self._per_object(clouds, params)
+        exps = self._condition(clouds)
+        per_object = self._per_object(clouds, params, exps)
         if extras is not None:
             holder = np.empty(len(extras), dtype=object)
             holder[:] = extras

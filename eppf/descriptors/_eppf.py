@@ -60,7 +60,11 @@ class EPPFTransformer(PointCloudDescriptor):
         (scale-invariant; use it for data in mixed units such as raw CAD
         files). ``"none"``: coordinates used as given (they should already lie
         in a unit cube). f1 is binned on ``[0, sqrt(3)]``; longer distances
-        fall in the last bin.
+        fall in the last bin. Any finite magnitude is accepted: a cloud whose
+        largest side is below ``2**-100`` or whose coordinates exceed
+        ``2**100`` is first rescaled by an exact power of two (and f1's scale
+        by its inverse); with ``"fit"``, a largest training side whose inverse
+        is not a finite positive float64 is a ``ValueError``.
     n_neighbors : int, default=20
         Neighbours for PCA normal estimation of clouds given without normals
         (see :func:`eppf.preprocessing.estimate_normals`). Clouds of shape (n, 6) carry their
@@ -203,7 +207,8 @@ class EPPFTransformer(PointCloudDescriptor):
         self.histogram_shape_ = tuple(b for b, f in zip(n_bins, FUNCTIONS) if f in functions)
         self.scale_ = None
         if self.scaling == "fit":
-            self.scale_ = float(1.0 / _bounding_sides(clouds).max())
+            with np.errstate(over="ignore"):
+                self.scale_ = self._data_set_scale(float(_bounding_sides(clouds).max()))
 
     def _n_features(self, params):
         return int(np.prod(self.histogram_shape_))
@@ -243,13 +248,18 @@ class EPPFTransformer(PointCloudDescriptor):
         check_is_fitted(self, "n_bins_")
         return super().transform(X)
 
-    def _per_object(self, clouds, params):
+    # clouds rescaled by 2**e get f1's absolute scale times 2**-e
+    _compensates_scale = True
+
+    def _per_object(self, clouds, params, exps):
         if self.scaling == "fit":
-            scales = np.full(len(clouds), self.scale_)
+            with np.errstate(over="ignore"):  # (an object vastly larger than the training ones: top f1 bin)
+                scales = np.ldexp(np.full(len(clouds), self.scale_), -exps)
         elif self.scaling == "object":
             scales = 1.0 / _bounding_sides(clouds)
         else:
-            scales = np.ones(len(clouds))
+            with np.errstate(over="ignore"):
+                scales = np.ldexp(np.ones(len(clouds)), -exps)
         # Seeds are drawn once for the whole input, so chunking never changes a result.
         return scales, object_seeds(self.random_state, len(clouds))
 

@@ -34,7 +34,7 @@ import numpy as np
 
 cimport numpy as cnp
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, cos, llrint, isfinite, M_PI
+from libc.math cimport sqrt, cos, fabs, ldexp, llrint, isfinite, M_PI
 from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memcpy, memset
 
@@ -103,14 +103,15 @@ cdef struct Params:
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
+    """clip(floor((v - lo) * inv), 0, grid - 1), clamped in floating point
+    before the conversion so that NaN (to 0), infinities and huge values give
+    an index inside the grid."""
     cdef double t = (v - lo) * inv
-    cdef int i
-    if t <= 0.0:
+    if not (t > 0.0):
         return 0
-    i = <int>t
-    if i >= grid:
+    if t >= grid:
         return grid - 1
-    return i
+    return <int>t
 
 
 cdef inline int64_t _row_words(int grid) noexcept nogil:
@@ -258,12 +259,13 @@ cdef inline int _bin_f123(const double* pts, int64_t ps, const double* nrm, int6
     cdef int b1 = 0, b2 = 0, b3 = 0, k
     if prm.n1 > 1:
         # Clamped before the conversion, so that huge distances cannot overflow the int.
+        # NaN and +inf land in the top bin, negative values (a negative scale) in bin 0.
         v = dist * scale
         v = v * prm.f1_density
-        if v < prm.n1 - 1:
-            b1 = <int>v
-        else:
+        if not (v < prm.n1 - 1):
             b1 = prm.n1 - 1
+        elif v > 0.0:
+            b1 = <int>v
     if prm.n2 > 1:
         inv = 1.0 / dist
         m1 = (nrm[ns * i] * dx + nrm[ns * i + 1] * dy + nrm[ns * i + 2] * dz) * inv
@@ -323,6 +325,8 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int32_t B[BATCH]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
+    if n < 2:  # no pair of distinct indices (the draw below would read past the object)
+        return 1
     if prm.n4 > 1:
         _fill_grid(pts, ps, n, prm.grid, bits, vox)
     base = 0
@@ -444,6 +448,10 @@ def eppf_counts(points_in, normals_in,
     cdef const double[:, :] normals = _rows_of_doubles(normals_in, "normals")
     if normals.shape[0] != points.shape[0] or offsets.shape[0] < 1 or offsets[offsets.shape[0] - 1] > points.shape[0]:
         raise ValueError("points, normals and offsets do not match")
+    if offsets[0] < 0 or np.any(np.diff(np.asarray(offsets)) < 0):
+        raise ValueError("offsets must be non-decreasing from a non-negative start")
+    if scales.shape[0] < offsets.shape[0] - 1 or seeds.shape[0] < offsets.shape[0] - 1:
+        raise ValueError("scales and seeds need one entry per object")
     cdef int64_t ps = points.strides[0] // 8, ns = normals.strides[0] // 8
     recip_arr, thr_arr = _tables(grid_size, n_bins[3])
     cdef const int64_t[::1] recip = recip_arr
@@ -488,6 +496,8 @@ def eppf_pairs(const double[:, ::1] points, uint64_t seed, int n_pairs):
     cdef int64_t[:, ::1] out = out_arr
     cdef uint64_t state = seed
     cdef int64_t t, i, j
+    if n < 2 and n_pairs > 0:
+        raise ValueError("too few distinct points to draw pairs")
     for t in range(n_pairs):
         if _draw_pair(&points[0, 0], 3, <uint32_t>n, &state, &i, &j) != 0:
             raise ValueError("too few distinct points to draw pairs")
@@ -521,6 +531,8 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
     cdef int parts[6]
     cdef int64_t n
     n = points.shape[0]
+    if n == 0 or normals.shape[0] != n or pairs.shape[1] != 2:
+        raise ValueError("points and normals must have the same (non-zero) number of rows, pairs two columns")
     for t in range(n_p):
         if not (0 <= pairs[t, 0] < n and 0 <= pairs[t, 1] < n):
             raise ValueError("pair indices out of range")

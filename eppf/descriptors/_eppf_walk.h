@@ -106,9 +106,12 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
         dz = _mm256_sub_pd(pjz, piz);
         dist = _mm256_sqrt_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
                                             _mm256_mul_pd(dz, dz)));
-        /* f1: min(v * density, n1 - 1) truncated (a NaN lands in the top bin). */
+        /* f1: max(min(v * density, n1 - 1), 0) truncated: clamped in floating
+           point before the conversion, so a NaN or +inf lands in the top bin
+           (min_pd returns its second operand when one is NaN) and a negative
+           value in bin 0, as in _bin_f123. */
         v = _mm256_mul_pd(_mm256_mul_pd(dist, vscale), vdens);
-        b1 = _mm256_cvttpd_epi32(_mm256_min_pd(v, top1));
+        b1 = _mm256_cvttpd_epi32(_mm256_max_pd(_mm256_min_pd(v, top1), _mm256_setzero_pd()));
         b2 = _mm_setzero_si128();
         b3 = _mm_setzero_si128();
         if (n2 > 1 || n3 > 1) {

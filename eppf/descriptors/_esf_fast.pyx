@@ -102,8 +102,17 @@ cdef enum:
 
 
 cdef inline int _pcl_cell(double v, int half, int grid) noexcept nogil:
-    """PCL's voxel of a coordinate in grid units centred on ``half``."""
+    """PCL's voxel of a coordinate in grid units centred on ``half``.
+
+    Values at or below ``-half`` (and NaN) give 0, values at or above
+    ``grid`` give ``grid - 1``, before any conversion to int, so every
+    double maps into the grid; in between the value is PCL's.
+    """
     cdef int c
+    if not (v > -half):
+        return 0
+    if v >= grid:
+        return grid - 1
     if v < 0.0:
         c = <int>floor(v) + half
     else:
@@ -202,8 +211,15 @@ cdef inline int _angle_bin(double c, const double* edges, const int32_t* lut,
     at most one short (cells are narrower than a bin), fixed by one
     comparison.
     """
-    cdef double u = sqrt((1.0 - c) * 0.5)
-    cdef int lo = lut[<int>(u * lut_scale)]
+    cdef double u
+    cdef int lo
+    # c is clamped to [0, 1] (NaN to 1) first, so the table index stays in range.
+    if not (c <= 1.0):
+        c = 1.0
+    elif not (c >= 0.0):
+        c = 0.0
+    u = sqrt((1.0 - c) * 0.5)
+    lo = lut[<int>(u * lut_scale)]
     lo += edges[lo] >= c
     return lo
 
@@ -215,13 +231,11 @@ cdef inline int _round_bin(double v, int n_bins) noexcept nogil:
     a libm call.
     """
     cdef double x = v * (n_bins - 1) + 0.5
-    cdef int i
-    if x <= 0.0:
+    if not (x > 0.0):  # NaN too, before the conversion
         return 0
-    i = <int>x
-    if i >= n_bins:
+    if x >= n_bins:
         return n_bins - 1
-    return i
+    return <int>x
 
 
 cdef inline double _abs_cos(double ax, double ay, double az,
@@ -440,6 +454,19 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
     return 0
 
 
+def _check_batch(Py_ssize_t n_rows, const int64_t[::1] offsets, const uint64_t[::1] seeds,
+                 double[:, ::1] out, int8_t[::1] status, Py_ssize_t n_out, name):
+    """Shapes a batch kernel relies on: objects are row ranges of the points
+    (non-decreasing offsets from 0 to at most ``n_rows``), one seed, one
+    output row of ``n_out`` values and one status per object."""
+    cdef Py_ssize_t n_objects = offsets.shape[0] - 1
+    if n_objects < 0 or offsets[0] < 0 or offsets[n_objects] > n_rows or np.any(np.diff(np.asarray(offsets)) < 0):
+        raise ValueError(f"{name}: offsets must be non-decreasing within the rows of points")
+    if (seeds.shape[0] < n_objects or status.shape[0] < n_objects or out.shape[0] < n_objects
+            or out.shape[1] != n_out):
+        raise ValueError(f"{name}: seeds, status and out must have one entry (row) per object")
+
+
 def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
               const uint64_t[::1] seeds, int n_triplets, int grid, int n_bins,
               double area_eps, double[:, ::1] out, int8_t[::1] status,
@@ -456,6 +483,12 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     cdef int64_t max_n = 0
     cdef int tid
     cdef bint fast = grid <= 64
+    if points.shape[1] != 3:
+        raise ValueError("esf_batch: points must be (N, 3)")
+    _check_batch(points.shape[0], offsets, seeds, out, status, 10 * n_bins, "esf_batch")
+    if not (4 <= grid <= 1024 and grid % 2 == 0 and 1 <= n_bins <= 4096 and n_triplets >= 1):
+        raise ValueError("esf_batch: grid must be even in [4, 1024], n_bins in [1, 4096], n_triplets positive")
+    num_threads = max(1, num_threads)
     for k in range(n_objects):
         if offsets[k + 1] - offsets[k] > max_n:
             max_n = offsets[k + 1] - offsets[k]
@@ -508,7 +541,9 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     kc.simd = _esf_simd
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
-        if fast:
+        if offsets[k + 1] - offsets[k] < 3:  # no triangle (the draws would read past the object)
+            status[k] = 1
+        elif fast:
             status[k] = <int8_t>_esf_object_fast(
                 &points[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k], n_triplets,
                 &kc, &pts[tid, 0], &cells[tid, 0], &bits[tid, 0], &acc[tid, 0], &d2v[tid, 0],
@@ -572,15 +607,17 @@ def _a3_table_cos(edges_arr, int n_bins, int max_cells=65536):
 # Wahl et al. (2003): surflet-pair-relation histograms.
 
 cdef inline int _lin_bin(double v, double lo, double hi, int n_bins) noexcept nogil:
-    """clip(floor(n_bins * (v - lo) / (hi - lo)), 0, n_bins - 1)."""
+    """clip(floor(n_bins * (v - lo) / (hi - lo)), 0, n_bins - 1); NaN gives 0.
+
+    Clamped in floating point before the conversion to int, so any double
+    gives a bin in range.
+    """
     cdef double t = n_bins * (v - lo) / (hi - lo)
-    cdef int i
-    if t <= 0.0:
+    if not (t > 0.0):
         return 0
-    i = <int>t
-    if i >= n_bins:
+    if t >= n_bins:
         return n_bins - 1
-    return i
+    return <int>t
 
 
 cdef inline int _surflet_frame(const double* p1, const double* n1,
@@ -680,8 +717,12 @@ cdef inline int _alpha_bin(double y, double x, int n_bins, double guard) noexcep
     if y < 0.0:
         a = -a
     t = (a + M_PI) * (n_bins / (2 * M_PI))
+    # out of [0, n_bins) (NaN included, e.g. from inf / inf): atan2 decides,
+    # before any conversion to int
+    if not (t >= 0.0 and t < n_bins):
+        return _lin_bin(atan2(y, x), -M_PI, M_PI, n_bins)
     i = <int>t
-    if t - i < guard or i + 1 - t < guard or i >= n_bins or t < 0.0:
+    if t - i < guard or i + 1 - t < guard:
         return _lin_bin(atan2(y, x), -M_PI, M_PI, n_bins)
     return i
 
@@ -742,15 +783,24 @@ def wahl_batch(const double[:, ::1] points, const double[:, ::1] normals,
     cdef Py_ssize_t n_objects = offsets.shape[0] - 1
     cdef Py_ssize_t k
     cdef int tid
+    if n_bins.shape[0] != 4 or np.min(np.asarray(n_bins)) < 1 or n_pairs < 1:
+        raise ValueError("wahl_batch: n_bins must hold four positive counts, n_pairs must be positive")
     cdef int n_out = n_bins[0] * n_bins[1] * n_bins[2] * n_bins[3]
+    _check_batch(points.shape[0], offsets, seeds, out, status, n_out, "wahl_batch")
+    if normals.shape[0] != points.shape[0] or normals.shape[1] != 3 or points.shape[1] != 3:
+        raise ValueError("wahl_batch: points and normals must both be (N, 3)")
+    num_threads = max(1, num_threads)
     cdef int32_t[:, ::1] cell = np.empty((num_threads, n_pairs), dtype=np.int32)
     cdef double[:, ::1] dist = np.empty((num_threads, n_pairs), dtype=np.float64)
     for k in prange(n_objects, nogil=True, schedule="dynamic", num_threads=num_threads):
         tid = threadid()
-        status[k] = <int8_t>_wahl_object(
-            &points[0, 0], &normals[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k],
-            n_pairs, &n_bins[0], source_parallel, &cell[tid, 0], &dist[tid, 0],
-            &out[k, 0])
+        if offsets[k + 1] - offsets[k] < 2:  # no pair
+            status[k] = 1
+        else:
+            status[k] = <int8_t>_wahl_object(
+                &points[0, 0], &normals[0, 0], offsets[k], offsets[k + 1] - offsets[k], seeds[k],
+                n_pairs, &n_bins[0], source_parallel, &cell[tid, 0], &dist[tid, 0],
+                &out[k, 0])
         if status[k] != 0:
             memset(&out[k, 0], 0, n_out * sizeof(double))
 

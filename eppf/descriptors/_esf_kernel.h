@@ -295,22 +295,27 @@ static void esf_walk_batch(const uint64_t *g3, const uint64_t *pos, const uint64
 static inline int esf_angle_bin(double c, int on_cos, const int32_t *lut, double lut_scale,
                                 const double *edges)
 {
-    double arg = on_cos ? c : sqrt((1.0 - c) * 0.5);
-    int lo = lut[(int)(arg * lut_scale)];
+    double arg;
+    int lo;
+    /* c clamped to [0, 1] (NaN to 1) before it indexes the table */
+    c = c <= 1.0 ? c : 1.0;
+    c = c >= 0.0 ? c : 0.0;
+    arg = on_cos ? c : sqrt((1.0 - c) * 0.5);
+    lo = lut[(int)(arg * lut_scale)];
     lo += edges[lo] >= c;
     return lo;
 }
 
+/* Clamped in floating point before the conversion: NaN gives 0, +inf and
+ * huge values n_bins - 1. */
 static inline int esf_round_bin(double v, int n_bins)
 {
     double x = v * (n_bins - 1) + 0.5;
-    int i;
-    if (x <= 0.0)
+    if (!(x > 0.0))
         return 0;
-    i = (int)x;
-    if (i >= n_bins)
+    if (x >= n_bins)
         return n_bins - 1;
-    return i;
+    return (int)x;
 }
 
 /* esf_round_bin(v / vmax, n_bins) with a multiplication by
@@ -321,13 +326,13 @@ static inline int esf_scaled_bin(double v, double vmax, double scale, int n_bins
 {
     double x = v * scale + 0.5;
     int i;
-    if (x <= 0.0)
+    if (!(x > 0.0))  /* NaN too, before the conversion */
         return 0;
+    if (x >= n_bins) /* (the division would clip to the top bin as well) */
+        return n_bins - 1;
     i = (int)x;
     if (x - i < 1e-9 || i + 1 - x < 1e-9)
         return esf_round_bin(v / vmax, n_bins);
-    if (i >= n_bins)
-        return n_bins - 1;
     return i;
 }
 
@@ -352,12 +357,19 @@ esf_count_scaled_impl(const double *v, const int8_t *cls, int64_t n, double vmax
     enum { BLOCK = 256 };
     int32_t bin[BLOCK];
     int64_t b, i, m;
+    const double top = (double)n_bins;
     for (b = 0; b < n; b += BLOCK) {
         int near = 0;
         m = n - b < BLOCK ? n - b : BLOCK;
         for (i = 0; i < m; i++) {
             double x = v[b + i] * scale + 0.5;
-            int32_t k = (int32_t)x;
+            int32_t k;
+            /* clamped to [0, n_bins] before the conversion (NaN to 0); a value
+             * clamped to an end is an integer, so it counts as near and the
+             * block is redone by esf_scaled_bin, whose clamps decide */
+            x = x > 0.0 ? x : 0.0;
+            x = x < top ? x : top;
+            k = (int32_t)x;
             double f = x - (double)k;
             near |= (f < 1e-9) | (1.0 - f < 1e-9);
             k = k < n_bins - 1 ? k : n_bins - 1;

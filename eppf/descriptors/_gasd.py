@@ -148,6 +148,9 @@ class GASDTransformer(PointCloudDescriptor):
     (20, 512)
     """
 
+    # magnitudes are brought into range by the kernel itself (exact powers of two)
+    _conditioning = "none"
+
     def __init__(self, half_grid_size=4, hists_size=1, interpolation="trilinear", view_direction=(0.0, 0.0, 1.0),
                  sign_convention="pcl", n_jobs=None):
         self.half_grid_size = half_grid_size
@@ -379,6 +382,9 @@ class GASDColorTransformer(PointCloudDescriptor):
     >>> X.shape
     (1, 984)
     """
+
+    # magnitudes are brought into range by the kernel itself (exact powers of two)
+    _conditioning = "none"
 
     def __init__(self, shape_half_grid_size=3, shape_hists_size=1, color_half_grid_size=2, color_hists_size=12,
                  shape_interpolation="none", color_interpolation="none", view_direction=(0.0, 0.0, 1.0),

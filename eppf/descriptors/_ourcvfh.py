@@ -164,6 +164,11 @@ class OURCVFHTransformer(PointCloudDescriptor):
         bounding-box side is 1 (``"object"``, as PCL's reference runs), by
         one factor learnt in ``fit`` so the largest training object's side
         is 1 (``"fit"``), or not at all. Distances below are in these units.
+        ``"object"`` takes clouds of any finite magnitude (they are first
+        rescaled by an exact power of two); with ``"fit"`` and ``"none"``, a
+        cloud whose largest side is below ``2**-100`` or whose coordinates
+        exceed ``2**100`` in magnitude gets a ``ValueError``, since ``sigma``
+        and ``cluster_tolerance`` would no longer be in its units.
     curvature_threshold : float, default=0.03
         Points whose surface variation ``lambda_min / sum(lambda)`` over
         ``n_neighbors`` exceeds it are left out of the clusters (PCL's

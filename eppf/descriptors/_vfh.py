@@ -150,6 +150,9 @@ class VFHTransformer(PointCloudDescriptor):
     100.0
     """
 
+    # magnitudes are brought into range by the kernel itself (exact powers of two)
+    _conditioning = "none"
+
     def __init__(self, viewpoint=(0.0, 0.0, 0.0), normalize_bins=True, normalize_distances=False,
                  size_component=False, pcl_homogeneous=True, pcl_centroid=True, n_neighbors=10,
                  normal_orientation="centroid", n_jobs=None):

@@ -126,12 +126,14 @@ cdef inline double _tr(const Grid* g, double x, int a) noexcept nogil:
 
 
 cdef inline int64_t _cell_coord(double x, double lo, double inv_h, int64_t res) noexcept nogil:
-    cdef int64_t c = <int64_t>((x - lo) * inv_h)
-    if c < 0:
-        c = 0
-    if c >= res:
-        c = res - 1
-    return c
+    """clip(floor((x - lo) * inv_h), 0, res - 1), clamped in floating point
+    before the conversion (NaN gives 0), so any double gives a cell."""
+    cdef double t = (x - lo) * inv_h
+    if not (t > 0.0):
+        return 0
+    if t >= res:
+        return res - 1
+    return <int64_t>t
 
 
 cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap) noexcept nogil:
@@ -392,6 +394,16 @@ cdef void _knn_shells(const Grid* g, const double* spts, const int64_t* cell_sta
         r += 1
 
 
+cdef inline Py_ssize_t _bucket(double x) noexcept nogil:
+    """min(floor(x), _N_BUCKETS - 1) for x >= 0, clamped before the
+    conversion (NaN to the top bucket, negative values to 0)."""
+    if not (x < _N_BUCKETS):
+        return _N_BUCKETS - 1
+    if not (x > 0.0):
+        return 0
+    return <Py_ssize_t>x
+
+
 cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
                      const double* q, const int64_t* c, Py_ssize_t k, double guess,
                      double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
@@ -451,9 +463,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
         counts[i] = 0
     to_bucket = _N_BUCKETS / guess
     for i in range(m):
-        bk = <Py_ssize_t>(cand_d2[i] * to_bucket)
-        if bk >= _N_BUCKETS:
-            bk = _N_BUCKETS - 1
+        bk = _bucket(cand_d2[i] * to_bucket)
         counts[bk] += 1
     below = 0
     bk = 0
@@ -463,9 +473,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
     need = k - below
     n_in = 0
     for i in range(m):
-        b2 = <Py_ssize_t>(cand_d2[i] * to_bucket)
-        if b2 >= _N_BUCKETS:
-            b2 = _N_BUCKETS - 1
+        b2 = _bucket(cand_d2[i] * to_bucket)
         sel[n_in] = i
         n_in += b2 == bk
     kth_i = sel[0]

@@ -11,7 +11,7 @@ import numpy as np
 
 cimport numpy as cnp
 from cython.parallel cimport prange
-from libc.math cimport sqrt, isfinite
+from libc.math cimport sqrt, isfinite, fabs, ldexp
 from libc.stdint cimport int64_t
 from libc.string cimport memcpy
 
@@ -30,6 +30,14 @@ def has_openmp():
     return bool(EPPF_HAVE_OPENMP)
 
 
+# Normals with a component above _NORMAL_BIG = 2**510 are multiplied by
+# _NORMAL_SHRINK = 2**-514 before their length is taken (as in
+# ``eppf.utils._validation.check_point_cloud``): the sum of squares then stays below
+# 3 * 2**1020 and the length above 1/16.
+cdef double _NORMAL_BIG = ldexp(1.0, 510)
+cdef double _NORMAL_SHRINK = ldexp(1.0, -514)
+
+
 cdef signed char _scan_object(const double* src, double* dst, int64_t n, int cols, double* lo,
                               double* hi) noexcept nogil:
     """Validate one cloud of ``n`` rows of ``cols`` (3 or 6) float64 values.
@@ -37,7 +45,8 @@ cdef signed char _scan_object(const double* src, double* dst, int64_t n, int col
     Copies ``src`` to ``dst`` first unless they are the same memory, then
     checks finiteness, takes the bounding box of columns 0-2 into ``lo`` and
     ``hi`` and, with normals, divides each normal by its length
-    ``sqrt((x * x + y * y) + z * z)`` in place. Returns 0 (valid), 1 (a NaN
+    ``sqrt((x * x + y * y) + z * z)`` in place (after an exact 2**-514 for
+    normals with a component above 2**510). Returns 0 (valid), 1 (a NaN
     or infinite value), 2 (all points identical) or 3 (a normal shorter
     than 1e-12). ``dst`` is the caller's own copy, so an invalid cloud may be
     left partly normalised there (the caller then validates the original
@@ -68,6 +77,18 @@ cdef signed char _scan_object(const double* src, double* dst, int64_t n, int col
     if cols == 6:
         for i in range(n):
             row = dst + i * 6
+            # A normal with a component above 2**510 is first multiplied by
+            # 2**-514 (exact), so that its squares cannot overflow (which
+            # made such normals silently zero); others are as they were.
+            v = fabs(row[3])
+            if fabs(row[4]) > v:
+                v = fabs(row[4])
+            if fabs(row[5]) > v:
+                v = fabs(row[5])
+            if v > _NORMAL_BIG:
+                row[3] = row[3] * _NORMAL_SHRINK
+                row[4] = row[4] * _NORMAL_SHRINK
+                row[5] = row[5] * _NORMAL_SHRINK
             d = sqrt((row[3] * row[3] + row[4] * row[4]) + row[5] * row[5])
             if d < 1e-12:
                 return 3

@@ -4,14 +4,19 @@ Every estimator that takes point clouds goes through :func:`check_point_clouds`
 so that bad input fails the same way everywhere: a ``TypeError`` for the wrong
 kind of object, a ``ValueError`` naming the estimator, the object index and the
 problem for wrong shapes, non-finite values, too few or identical points and
-zero-length normals.
+zero-length normals. :func:`condition_point_clouds` then brings clouds of
+extreme magnitude into the range the compiled kernels compute in, by an
+exact power of two.
 """
 
 import numbers
 
 import numpy as np
 
-__all__ = ["check_int", "check_n_jobs", "check_point_cloud", "check_point_clouds", "object_seeds", "pack_point_clouds"]
+__all__ = [
+    "check_int", "check_n_jobs", "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds",
+    "pack_point_clouds",
+]
 
 
 def _prefix(owner):
@@ -83,6 +88,11 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
         raise ValueError(f"{pre}{what} has all {n} points identical; at least two distinct points are needed")
     if arr.shape[1] == 6:
         normals = arr[:, 3:]
+        # Components above 2**510 would overflow the squares: such normals are
+        # first multiplied by 2**-514 (exact), as in the compiled batch path.
+        big = np.abs(normals).max(axis=1) > 2.0**510
+        if big.any():
+            normals[big] *= 2.0**-514
         x, y, z = normals.T
         norms = np.sqrt((x * x + y * y) + z * z)  # as the compiled batch path (_scan_fast._scan_object)
         bad = np.flatnonzero(norms < 1e-12)
@@ -238,6 +248,115 @@ def _check_stacked(items, min_points, allow_normals, n_threads=1):
         return None
     views = [stacked[a:b] for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())]
     return _CloudList(views, stacked, offsets, lo, hi)
+
+
+#: The magnitude window the compiled kernels work in without overflow or
+#: underflow: largest bounding-box side at least ``2**SAFE_MIN_EXP`` and every
+#: |coordinate| at most ``2**SAFE_MAX_EXP``. The kernels square and cube
+#: differences of coordinates (ESF: products of two cross products, i.e.
+#: fourth powers, in its own grid units; Wahl, EPPF, the normals and
+#: OUR-CVFH at most fourth powers in the input's units), and
+#: ``2**(4 * 101)`` and ``2**(-4 * 100)`` stay far inside float64's normal
+#: range, with room for sums of many such terms.
+SAFE_MIN_EXP = -100
+SAFE_MAX_EXP = 100
+
+
+def _scale_exponents(lo, hi, owner=None, first_index=0, single=False):
+    """Power-of-two exponents that bring each cloud into the safe window.
+
+    ``lo`` and ``hi`` are (n_objects, 3) per-axis minima and maxima. Returns
+    an int64 array: 0 for clouds already in the window (left untouched),
+    otherwise the ``e`` for which ``cloud * 2**e`` is in the window, as close
+    as it allows to a largest side in [0.5, 1). Raises a ValueError naming
+    the first cloud that no power of two brings in (its extent is too small
+    for its distance from the origin).
+    """
+    lo = np.asarray(lo, dtype=np.float64).reshape(-1, 3)
+    hi = np.asarray(hi, dtype=np.float64).reshape(-1, 3)
+    with np.errstate(over="ignore"):
+        side = (hi - lo).max(axis=1)
+        # hi - lo overflows past float64's range; the halves do not
+        half = (hi * 0.5 - lo * 0.5).max(axis=1)
+    amax = np.maximum(np.abs(lo), np.abs(hi)).max(axis=1)
+    inside = (side >= 2.0 ** SAFE_MIN_EXP) & (amax <= 2.0 ** SAFE_MAX_EXP)
+    exps = np.zeros(len(side), dtype=np.int64)
+    if inside.all():
+        return exps
+    out = np.flatnonzero(~inside)
+    # side >= 2**(es - 1) and amax < 2**ea (frexp's exponents); for a side that
+    # overflowed, the half's exponent plus one
+    es = np.where(np.isfinite(side[out]), np.frexp(side[out])[1], np.frexp(half[out])[1] + 1).astype(np.int64)
+    ea = np.frexp(amax[out])[1].astype(np.int64)
+    e_lo = SAFE_MIN_EXP + 1 - es  # side * 2**e >= 2**SAFE_MIN_EXP from here up
+    e_lo[side[out] == 0] = -4096  # (a single point, or one repeated: only its magnitude matters)
+    e_hi = SAFE_MAX_EXP - ea      # amax * 2**e <= 2**SAFE_MAX_EXP up to here
+    bad = np.flatnonzero(e_lo > e_hi)
+    if bad.size:
+        k = int(out[bad[0]])
+        raise ValueError(
+            f"{_prefix(owner)}point cloud {'' if single else f'{first_index + k} '}is too small for its distance from the origin: "
+            f"its largest side is {side[k]:.3g} at coordinates up to {amax[k]:.3g}, a ratio float64 cannot "
+            "resolve in the descriptors' computations; centre it first (subtract its mean or its bounding-box "
+            "centre)"
+        )
+    exps[out] = np.clip(-es, e_lo, e_hi)  # -es puts the largest side in [0.5, 1)
+    return exps
+
+
+def _ldexp_inplace(a, e):
+    """``a *= 2**e`` in place, exactly short of underflow (``np.ldexp`` never forms ``2**e``)."""
+    np.ldexp(a, int(e), out=a)
+
+
+def condition_point_clouds(clouds, *, owner=None, single=False):
+    """Bring validated clouds into the kernels' magnitude window, in place.
+
+    A cloud whose largest bounding-box side is below ``2**SAFE_MIN_EXP`` or
+    whose largest |coordinate| is above ``2**SAFE_MAX_EXP`` has its
+    coordinates (columns 0-2; normals are unit vectors already) multiplied
+    by a power of two ``2**e``, exact short of underflow, so that it fits
+    the window; the others are left untouched, bit for bit. Scale-invariant
+    computations then give the result they give at a sane scale; callers
+    that use absolute lengths multiply them by ``2**-e``.
+
+    Parameters
+    ----------
+    clouds : list of ndarray
+        Clouds returned by :func:`check_point_clouds` or
+        :func:`check_point_cloud` (the caller's own copies: they are
+        modified in place). The bounding boxes cached by a batched result
+        are updated with them.
+    owner : str, default=None
+        Name used in error messages.
+    single : bool, default=False
+        The clouds are one cloud given alone: error messages give no index.
+
+    Returns
+    -------
+    exponents : ndarray of shape (n_objects,), int64
+        The ``e`` of each cloud (0 for untouched ones).
+
+    Raises
+    ------
+    ValueError
+        If a cloud's extent is too small for its distance from the origin
+        for any power of two to bring it in (e.g. points at 1e300 +- 1e-10);
+        centring it first fixes that.
+    """
+    packed = _stacked_view(clouds)
+    if packed is not None:
+        stacked, offsets, lo, hi = packed
+    else:
+        lo = np.array([c[:, :3].min(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
+        hi = np.array([c[:, :3].max(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
+    exps = _scale_exponents(lo, hi, owner, single=single)
+    for k in np.flatnonzero(exps):
+        _ldexp_inplace(clouds[k][:, :3], exps[k])
+        if packed is not None:  # min and max commute with the (monotone) scaling
+            _ldexp_inplace(lo[k], exps[k])
+            _ldexp_inplace(hi[k], exps[k])
+    return exps
 
 
 def _bounding_sides(clouds):

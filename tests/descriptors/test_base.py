@@ -91,3 +91,26 @@ def test_extra_columns_reach_describe_with_their_cloud():
     shape = (2 * est.shape_half_grid_size) ** 3 * est.shape_hists_size
     assert np.array_equal(other[[0, 2]], rows[[0, 2]])
     assert np.array_equal(other[1, :shape], rows[1, :shape]) and not np.array_equal(other[1], rows[1])
+
+
+@pytest.mark.parametrize("cls", CLASSES, ids=lambda c: c.__name__)
+@pytest.mark.parametrize("factor", [2.0 ** 300, 2.0 ** -300])
+def test_extreme_power_of_two_scale_gives_the_sane_scale_output(cls, factor):
+    # clouds outside the kernels' magnitude window are rescaled by an exact power of two: a
+    # descriptor invariant to scale gives at 2**+-300 the bits it gives at scale 1
+    from eppf.datasets import make_shapes
+
+    if cls is descriptors.VFHTransformer:
+        pytest.skip("VFH is not scale-invariant: PCL's homogeneous viewpoint adds a unit length (pcl_homogeneous)")
+    clouds = make_shapes(1, n_points=128, classes=["box", "sphere"], return_X_y=True, random_state=0)[0]
+    if cls is descriptors.GASDColorTransformer:
+        rng = np.random.default_rng(0)
+        clouds = [np.hstack([c, rng.uniform(0, 255, size=(len(c), 3))]) for c in clouds]
+    params = {"n_jobs": 1}
+    if "random_state" in cls().get_params():
+        params["random_state"] = 0
+    if "scaling" in cls().get_params():
+        params["scaling"] = "object"
+    scaled = [np.hstack([c[:, :3] * factor, c[:, 3:]]) for c in clouds]
+    est = cls(**params)
+    np.testing.assert_array_equal(est.fit_transform(scaled), est.fit_transform(clouds))

@@ -278,7 +278,7 @@ def test_bad_clouds(X, err, match):
 
 def test_beyond_single_precision():
     est = CVFHTransformer(scaling="none").fit([_cloud() * 1e300])
-    with pytest.raises(ValueError, match="CVFHTransformer: point cloud 0 has coordinates beyond single precision"):
+    with pytest.raises(ValueError, match="CVFHTransformer: point cloud 0 has coordinates (beyond single precision|out of the magnitude range)"):
         est.transform([_cloud() * 1e300])
 
 

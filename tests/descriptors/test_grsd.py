@@ -436,7 +436,7 @@ def test_bad_scale_for_the_grid():
     with pytest.raises(ValueError, match=r"GRSDTransformer: point cloud 0 spans .* voxels"):
         est.transform([_cloud()])
     huge = GRSDTransformer(scaling="none").fit([_cloud() * 1e300])
-    with pytest.raises(ValueError, match="beyond single precision"):
+    with pytest.raises(ValueError, match="GRSDTransformer: point cloud 0 has coordinates (beyond single precision|out of the magnitude range)"):
         huge.transform([_cloud() * 1e300])
 
 
