@@ -138,11 +138,14 @@ cdef double _one_pass(const double* pts, const int64_t* nb, int64_t k, uint64_t*
         nx = e1y * e2z - e1z * e2y
         ny = e1z * e2x - e1x * e2z
         nz = e1x * e2y - e1y * e2x
-        nrm = sqrt(nx * nx + ny * ny + nz * nz)
-        l1 = sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
-        l2 = sqrt(e2x * e2x + e2y * e2y + e2z * e2z)
-        if not (nrm > _COLLINEAR * l1 * l2) or not (nrm > 0.0):
+        nrm = nx * nx + ny * ny + nz * nz
+        l1 = e1x * e1x + e1y * e1y + e1z * e1z
+        l2 = e2x * e2x + e2y * e2y + e2z * e2z
+        # |e1 x e2| = |e1| |e2| sin(angle): compared squared, no sqrt spent on
+        # triplets that do not vote.
+        if not (nrm > (_COLLINEAR * _COLLINEAR) * l1 * l2) or not (nrm > 0.0):
             continue
+        nrm = sqrt(nrm)
         nx /= nrm
         ny /= nrm
         nz /= nrm
