@@ -24,7 +24,7 @@ object only, and no state is shared between points, so the output is
 bit-identical for any thread count or chunking.
 """
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, fabs, acos, atan2, floor, sin, cos
+from libc.math cimport sqrt, fabs, floor, sin, cos
 from libc.stdint cimport int64_t, int32_t, uint64_t, uint32_t
 
 from eppf.utils._common cimport splitmix64, rand_below
@@ -63,41 +63,52 @@ cdef inline void _random_rotation(uint64_t* state, double* r) noexcept nogil:
     r[8] = 1.0 - 2.0 * (x * x + y * y)
 
 
+cdef inline double _pseudo_angle(double x, double y) noexcept nogil:
+    """A cheap increasing function of the azimuth atan2(y, x) on [0, 2 pi),
+    with values in [0, 4) (the "diamond angle"); 0 for x = y = 0. The
+    direction (-x, -y) gets the value plus 2, modulo 4."""
+    cdef double d = fabs(x) + fabs(y)
+    if not (d > 0.0):
+        return 0.0
+    if y >= 0.0:
+        return y / d if x >= 0.0 else 1.0 - x / d
+    return 2.0 - y / d if x < 0.0 else 3.0 + x / d
+
+
 cdef inline int64_t _bin_of(double ux, double uy, double uz, int64_t n_rings,
                             const double* ring_z, const int64_t* ring_start,
-                            const int64_t* ring_bins) noexcept nogil:
+                            const int64_t* ring_bins, const double* edges) noexcept nogil:
     """Bin of the unit direction ``u`` (taken with ``u_z >= 0``: the caller
-    flips it). ``ring_z[j]`` is the cosine of ring ``j``'s lower polar bound.
-    The ring is found by comparisons and the azimuth index is clamped in
-    floating point before the cast, so any float (NaN included) gives a valid
-    bin."""
-    cdef double theta, t, span
-    cdef int64_t j = 0, m, b
+    flips it). ``ring_z[j]`` is the cosine of ring ``j``'s lower polar bound;
+    ``edges[ring_start[j]:ring_start[j] + ring_bins[j] - 1]`` are the pseudo
+    angles of its bins' azimuth boundaries. Only comparisons pick the ring
+    and the bin, so any float (NaN included) gives a valid bin."""
+    cdef double p
+    cdef int64_t j = 0, lo, hi, mid
+    cdef const double* e
     while j < n_rings - 1 and uz <= ring_z[j]:
         j += 1
-    m = ring_bins[j]
-    theta = atan2(uy, ux)
-    if theta < 0.0:
-        theta += 2.0 * _PI
+    p = _pseudo_angle(ux, uy)
     # The last ring touches the equator: there theta and theta + pi are the
-    # same projective direction, so its bins span [0, pi) only.
-    span = _PI if j == n_rings - 1 else 2.0 * _PI
-    if theta >= span:
-        theta -= span
-    t = theta / span * m
-    if not (t > 0.0):
-        b = 0
-    elif t >= <double>(m - 1):
-        b = m - 1
-    else:
-        b = <int64_t>t
-    return ring_start[j] + b
+    # same projective direction, so its bins span half the azimuths.
+    if j == n_rings - 1 and p >= 2.0:
+        p -= 2.0
+    e = edges + ring_start[j]
+    lo = 0
+    hi = ring_bins[j] - 1
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if p >= e[mid]:
+            lo = mid + 1
+        else:
+            hi = mid
+    return ring_start[j] + lo
 
 
 cdef double _one_pass(const double* pts, const int64_t* nb, int64_t k, uint64_t* state,
                       const double* rot, int64_t n_triplets, int64_t n_rings, const double* ring_z,
-                      const int64_t* ring_start, const int64_t* ring_bins, const double* centre,
-                      int64_t n_bins,
+                      const int64_t* ring_start, const int64_t* ring_bins, const double* edges,
+                      const double* centre, int64_t n_bins,
                       int64_t* count, double* acc, double* normal) noexcept nogil:
     """One accumulator pass; writes the winning bin's mean vote to ``normal``
     and returns its share of the votes (0 when no triplet voted)."""
@@ -156,7 +167,7 @@ cdef double _one_pass(const double* pts, const int64_t* nb, int64_t k, uint64_t*
             ux = -ux
             uy = -uy
             uz = -uz
-        b = _bin_of(ux, uy, uz, n_rings, ring_z, ring_start, ring_bins)
+        b = _bin_of(ux, uy, uz, n_rings, ring_z, ring_start, ring_bins, edges)
         # Votes of one bin are summed with one sign (that of the bin's centre).
         # u is the rotated vote after the flip into u_z >= 0; n, unrotated,
         # takes the same flips.
@@ -239,7 +250,8 @@ cdef void _fallback(const double* pts, const int64_t* nb, int64_t k, double* out
 cdef void _point_normal(const double* pts, const int64_t* nb, int64_t k, uint64_t seed,
                         int64_t local, int64_t n_triplets, int64_t n_rot, double cos_tol,
                         int64_t n_rings, const double* ring_z, const int64_t* ring_start,
-                        const int64_t* ring_bins, const double* centre, int64_t n_bins, int64_t* count, double* acc,
+                        const int64_t* ring_bins, const double* edges, const double* centre,
+                        int64_t n_bins, int64_t* count, double* acc,
                         double* nrms, double* conf, int32_t* used, double* out) noexcept nogil:
     cdef uint64_t state
     cdef double rot[9]
@@ -257,7 +269,7 @@ cdef void _point_normal(const double* pts, const int64_t* nb, int64_t k, uint64_
             for i in range(9):
                 rot[i] = 1.0 if i % 4 == 0 else 0.0
         conf[r] = _one_pass(pts, nb, k, &state, rot, n_triplets, n_rings, ring_z, ring_start,
-                            ring_bins, centre, n_bins, count, acc, nrms + 3 * r)
+                            ring_bins, edges, centre, n_bins, count, acc, nrms + 3 * r)
         used[r] = 0
         if conf[r] > 0.0:
             any_vote = True
@@ -310,10 +322,13 @@ cdef void _point_normal(const double* pts, const int64_t* nb, int64_t k, uint64_
 def ring_layout(int64_t n_phi):
     """Rings of the half-sphere accumulator for ``n_phi`` slices of the whole
     sphere (polar step ``pi / n_phi``): ``(ring_start, ring_bins, ring_z,
-    centres)``, the first bin of each ring, its number of bins (about its
-    area over ``(pi / n_phi)^2``), the cosine of its lower polar bound, and
-    the unit centre direction of every bin (on the equator for the last
-    ring, whose bins identify azimuths ``theta`` and ``theta + pi``)."""
+    edges, centres)``, the first bin of each ring, its number of bins (about
+    its area over ``(pi / n_phi)^2``), the cosine of its lower polar bound,
+    the pseudo angles (see ``_pseudo_angle``) of the azimuth boundaries
+    between its bins (equal steps of azimuth, from ``ring_start``, one unused
+    slot per ring), and the unit centre direction of every bin (on the
+    equator for the last ring, whose bins identify azimuths ``theta`` and
+    ``theta + pi``)."""
     cdef double dphi = _PI / n_phi
     cdef double ref = dphi * dphi
     cdef double lo, hi, area
@@ -341,13 +356,17 @@ def ring_layout(int64_t n_phi):
         j += 1
     phis[len(phis) - 1] = 0.5 * _PI
     centres = []
+    edges = np.full(total, 4.0)
     for j in range(len(bins)):
         span = _PI if j == len(bins) - 1 else 2.0 * _PI
         for b in range(bins[j]):
             th = (b + 0.5) * span / bins[j]
             centres.append((np.sin(phis[j]) * np.cos(th), np.sin(phis[j]) * np.sin(th), np.cos(phis[j])))
+            if b > 0:
+                th = b * span / bins[j]
+                edges[starts[j] + b - 1] = _pseudo_angle(cos(th), sin(th))
     return (np.array(starts, dtype=np.int64), np.array(bins, dtype=np.int64),
-            np.array(zs, dtype=np.float64), np.ascontiguousarray(centres, dtype=np.float64))
+            np.array(zs, dtype=np.float64), edges, np.ascontiguousarray(centres, dtype=np.float64))
 
 
 def hough_normals(const double[:, ::1] points, const int64_t[:, ::1] neighbors,
@@ -378,10 +397,11 @@ def hough_normals(const double[:, ::1] points, const int64_t[:, ::1] neighbors,
     mask = np.arange(kmax)[None, :] < nv[:, None]
     if (nbs[mask] < 0).any() or (nbs[mask] >= n_pts).any():
         raise ValueError("hough_normals: neighbour index out of range")
-    rs, rb, rz, rc = ring_layout(n_phi)
+    rs, rb, rz, re, rc = ring_layout(n_phi)
     cdef const int64_t[::1] ring_start = rs
     cdef const int64_t[::1] ring_bins = rb
     cdef const double[::1] ring_z = rz
+    cdef const double[::1] edges = re
     cdef const double[:, ::1] centre = rc
     n_rings = rs.shape[0]
     n_bins = int(rb.sum())
@@ -402,5 +422,5 @@ def hough_normals(const double[:, ::1] points, const int64_t[:, ::1] neighbors,
             tid = threadid()
             _point_normal(&points[0, 0], &neighbors[i, 0], n_valid[i], seeds[i], local[i],
                           n_triplets, n_rotations, cos_tol, n_rings, &ring_z[0], &ring_start[0],
-                          &ring_bins[0], &centre[0, 0], n_bins, &count[tid, 0], &acc[tid, 0], &nrms[tid, 0],
+                          &ring_bins[0], &edges[0], &centre[0, 0], n_bins, &count[tid, 0], &acc[tid, 0], &nrms[tid, 0],
                           &conf[tid, 0], &used[tid, 0], &out[i, 0])

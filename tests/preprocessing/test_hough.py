@@ -205,7 +205,7 @@ def test_matches_slow_reference():
 
 @pytest.mark.parametrize("n_phi", [2, 7, 15, 16, 40])
 def test_accumulator_bins_have_about_equal_area(n_phi):
-    starts, bins, ring_z, centres = ring_layout(n_phi)
+    starts, bins, ring_z, edges, centres = ring_layout(n_phi)
     d = math.pi / n_phi
     _, ref_bins = _ref_rings(n_phi)
     assert list(bins) == ref_bins
@@ -219,6 +219,11 @@ def test_accumulator_bins_have_about_equal_area(n_phi):
     np.testing.assert_allclose(ring_z, np.cos(upper))
     np.testing.assert_allclose(np.linalg.norm(centres, axis=1), 1.0)
     assert centres.shape == (bins.sum(), 3) and np.all(centres[:, 2] >= -1e-15)
+    # Azimuth boundaries: increasing within each ring (equal steps of azimuth
+    # through an increasing pseudo angle), half the circle on the last ring.
+    for j, (s, m) in enumerate(zip(starts, bins)):
+        e = edges[s:s + m - 1]
+        assert np.all(np.diff(e) > 0) and np.all((e > 0) & (e < (2 if j == len(bins) - 1 else 4)))
 
 
 def test_plane_is_exact():
