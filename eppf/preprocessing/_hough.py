@@ -81,9 +81,12 @@ def _check_params(params, owner):
 
 
 def triplets_for(tolerance, confidence):
-    """Triplets per accumulator so that every bin's share of the votes is
-    within ``tolerance`` of its expectation with probability ``confidence``
-    (Hoeffding's inequality, ``P(|p_hat - p| >= t) <= 2 exp(-2 T t^2)``).
+    """Return the triplets needed for a given accuracy of a bin's share of votes.
+
+    The number of triplets per accumulator such that a bin's share of the
+    votes is within ``tolerance`` of its expectation with probability
+    ``confidence``, by Hoeffding's inequality
+    ``P(|p_hat - p| >= t) <= 2 exp(-2 T t^2)``.
 
     Parameters
     ----------
@@ -96,6 +99,10 @@ def triplets_for(tolerance, confidence):
     -------
     n_triplets : int
         ``ceil(ln(2 / (1 - confidence)) / (2 tolerance^2))``.
+
+    See Also
+    --------
+    estimate_normals_hough : Takes it with ``n_triplets="auto"``.
 
     Examples
     --------
@@ -144,22 +151,37 @@ def _hough_packed(pts, off, k, seeds, params, n_threads, owner):
         nvalid = np.empty(hi - lo, dtype=np.int64)
         local = np.empty(hi - lo, dtype=np.int64)
         pseeds = np.empty(hi - lo, dtype=np.uint64)
+        scaled = np.empty((hi - lo, 3), dtype=np.float64)
         for o in range(start, stop):
             a, b = off[o] - lo, off[o + 1] - lo
-            obj = pts[off[o]:off[o + 1]]
+            # Exact rescaling by a power of two (largest |coordinate| in
+            # [0.5, 1)): cross products then neither overflow nor underflow,
+            # and the normals are those of the unscaled object.
+            _, expo = np.frexp(np.abs(pts[off[o]:off[o + 1]]).max())
+            obj = scaled[a:b] = np.ldexp(pts[off[o]:off[o + 1]], -int(expo))
             ko = int(min(k, b - a))
             _, idx = cKDTree(obj).query(obj, k=ko, workers=n_threads)
             nbr[a:b, :ko] = idx + a
             nvalid[a:b] = ko
             local[a:b] = np.arange(b - a)
             pseeds[a:b] = seeds[o]
-        hough_normals(pts[lo:hi], nbr, nvalid, pseeds, local, params["n_triplets"], params["n_phi"],
+        hough_normals(scaled, nbr, nvalid, pseeds, local, params["n_triplets"], params["n_phi"],
                       params["n_rotations"], params["cluster_angle"], out[lo:hi], n_threads)
         start = stop
     return out
 
 
 def _check_random_state_seeds(random_state, n_objects, owner):
+    """One uint64 seed per object: drawn from ``random_state``, or given as
+    an array of ``n_objects`` uint64 seeds (what a descriptor that draws its
+    own per-object seeds passes, so that chunking changes nothing)."""
+    if isinstance(random_state, np.ndarray):
+        if random_state.dtype != np.uint64 or random_state.shape != (n_objects,):
+            raise ValueError(
+                f"{owner}: per-object seeds must be a uint64 array of shape ({n_objects},), "
+                f"got dtype {random_state.dtype} and shape {random_state.shape}"
+            )
+        return random_state
     if isinstance(random_state, np.random.RandomState) or random_state is None:
         return object_seeds(random_state, n_objects)
     if isinstance(random_state, bool) or not isinstance(random_state, numbers.Integral):

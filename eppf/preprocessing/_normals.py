@@ -229,9 +229,14 @@ default="centroid"
     owner : str, default=None
         Name used in error messages (the calling estimator); defaults to
         ``"estimate_normals_batch"``.
-    method, random_state, method_params
-        As in :func:`estimate_normals`; with ``"hough"``, object ``i`` is
-        seeded by the ``i``-th seed drawn from ``random_state``.
+    method : {"pca", "hough"}, default="pca"
+        As in :func:`estimate_normals`.
+    random_state : int, RandomState instance, None or ndarray of uint64, default=0
+        Seeds ``"hough"``: object ``i`` gets the ``i``-th seed drawn from it,
+        or ``random_state[i]`` for an array of ``n_objects`` seeds (which
+        keeps each object's normals independent of how objects are chunked).
+    method_params : dict, default=None
+        As in :func:`estimate_normals`.
 
     Returns
     -------

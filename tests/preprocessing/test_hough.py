@@ -289,12 +289,17 @@ def test_bit_identical_for_any_thread_count_chunking_and_batch(monkeypatch):
         assert np.array_equal(ref, estimate_normals_batch(pts, off, 16, method="hough", random_state=5, n_jobs=n_jobs))
     monkeypatch.setattr(_hough, "_MAX_NEIGHBOR_ENTRIES", 100)
     assert np.array_equal(ref, estimate_normals_batch(pts, off, 16, method="hough", random_state=5, n_jobs=2))
-    # Object i is seeded by the i-th seed; alone it gives the same normals.
+    # Object i is seeded by the i-th seed: given explicitly, per object, the
+    # same normals come back, for the whole batch or for one object alone.
     seeds = object_seeds(5, len(clouds))
+    assert np.array_equal(ref, estimate_normals_batch(pts, off, 16, method="hough", random_state=seeds))
+    alone = estimate_normals_batch(clouds[1], np.array([0, len(clouds[1])]), 16, method="hough",
+                                   random_state=seeds[1:2])
+    assert np.array_equal(alone, ref[off[1]:off[2]])
+    with pytest.raises(ValueError, match="uint64 array of shape"):
+        estimate_normals_batch(pts, off, 16, method="hough", random_state=seeds[:2])
     one = estimate_normals(clouds[1], 16, method="hough", random_state=None)  # runs unseeded too
     assert one.shape == (len(clouds[1]), 3)
-    rs = np.random.RandomState(5)
-    assert np.array_equal(object_seeds(rs, len(clouds)), seeds)
     assert np.allclose(np.linalg.norm(ref, axis=1), 1.0)
 
 
@@ -318,6 +323,15 @@ def test_degenerate_neighbourhoods_and_duplicates():
     # k above the cloud's size is clipped, as for PCA.
     small = _sphere(30)
     assert np.array_equal(estimate_normals(small, 500, method="hough"), estimate_normals(small, 30, method="hough"))
+
+
+@pytest.mark.parametrize("exponent", [-1000, -30, 7, 1000])
+def test_power_of_two_scaling_is_exact(exponent):
+    # Far beyond where cross products of raw coordinates would overflow or
+    # underflow (|p| ~ 2**1000 or 2**-1000).
+    pts = _edge(200, seed=9)
+    ref = estimate_normals(pts, 12, method="hough")
+    assert np.array_equal(estimate_normals(np.ldexp(pts, exponent), 12, method="hough"), ref)
 
 
 def test_auto_triplets_bound():
