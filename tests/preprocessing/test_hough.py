@@ -270,7 +270,7 @@ def test_outliers_barely_move_hough_normals():
 
 
 def test_deterministic_and_seeded():
-    s = _sphere(400)
+    s = _sphere(150)
     a = estimate_normals(s, 15, method="hough", random_state=7)
     b = estimate_normals(s, 15, method="hough", random_state=7)
     c = estimate_normals(s, 15, method="hough", random_state=8)
@@ -281,7 +281,7 @@ def test_deterministic_and_seeded():
 
 
 def test_bit_identical_for_any_thread_count_chunking_and_batch(monkeypatch):
-    clouds = [_sphere(300, seed=10), _edge(150, seed=11), _tilted_plane(200, seed=12)[0], _sphere(2, seed=1)]
+    clouds = [_sphere(150, seed=10), _edge(100, seed=11), _tilted_plane(100, seed=12)[0], _sphere(2, seed=1)]
     pts = np.concatenate(clouds)
     off = np.concatenate([[0], np.cumsum([len(c) for c in clouds])]).astype(np.int64)
     ref = estimate_normals_batch(pts, off, 16, method="hough", random_state=5, n_jobs=1)
