@@ -77,7 +77,7 @@ def _scratch(n_threads, max_n, k):
 
 def estimate_normals(points, n_neighbors=10, *, orientation="centroid", n_jobs=None, method="pca",
                      random_state=0, method_params=None):
-    """Estimate unit surface normals of one point cloud by local PCA.
+    """Estimate unit surface normals of one point cloud by local PCA or a Hough transform.
 
     For each point, the covariance of its ``n_neighbors`` nearest neighbours
     (the point itself included, as its own nearest neighbour) is computed, and
