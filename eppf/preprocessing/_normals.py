@@ -81,6 +81,17 @@ def _orient_towards(points, normals, viewpoint):
     normals[dot < 0.0] *= -1.0
 
 
+def _other_method(method, method_params, owner):
+    """The module of a non-PCA estimator, or a ValueError."""
+    if method == "hough":
+        from . import _hough
+
+        return _hough
+    if method == "pca":
+        raise ValueError(f"{owner}: method_params apply to method='hough' only, got {method_params!r}")
+    raise ValueError(f"{owner}: method must be 'pca' or 'hough', got {method!r}")
+
+
 def _scratch(n_threads, max_n, k):
     f_len, i_len = scratch_sizes(max_n, k)
     return (
@@ -89,8 +100,9 @@ def _scratch(n_threads, max_n, k):
     )
 
 
-def estimate_normals(points, n_neighbors=10, *, orientation="centroid", n_jobs=None):
-    """Estimate unit surface normals of one point cloud by local PCA.
+def estimate_normals(points, n_neighbors=10, *, orientation="centroid", n_jobs=None, method="pca",
+                     random_state=0, method_params=None):
+    """Estimate unit surface normals of one point cloud by local PCA or a Hough transform.
 
     For each point, the covariance of its ``n_neighbors`` nearest neighbours
     (the point itself included, as its own nearest neighbour) is computed, and
@@ -127,6 +139,16 @@ default="centroid"
         Number of OpenMP threads, with joblib's meaning: ``None`` is OpenMP's
         default (honours ``OMP_NUM_THREADS`` and threadpoolctl limits), ``-1``
         all cores. The result is bit-identical for any value.
+    method : {"pca", "hough"}, default="pca"
+        ``"pca"``: local PCA (below). ``"hough"``: Boulch and Marlet's
+        randomized Hough transform, the estimator of the paper, which keeps
+        edges sharp (see :func:`eppf.preprocessing._hough.estimate_normals_hough`).
+    random_state : int, RandomState instance or None, default=0
+        Seeds the ``"hough"`` estimator (unused by ``"pca"``).
+    method_params : dict, default=None
+        Parameters of the ``"hough"`` estimator (``n_triplets``, ``n_phi``,
+        ``n_rotations``, ``cluster_angle``, ``tolerance``, ``confidence``);
+        ``None`` keeps the authors' defaults.
 
     Returns
     -------
@@ -189,6 +211,9 @@ default="centroid"
     True
     """
     owner = "estimate_normals"
+    if method != "pca" or method_params is not None:
+        return _other_method(method, method_params, owner).hough_single(
+            points, n_neighbors, orientation, n_jobs, random_state, method_params, owner)
     cloud = check_point_cloud(points, owner=owner, min_points=3, allow_normals=False)
     k = _check_n_neighbors(n_neighbors, owner)
     mode, viewpoint = _resolve_orientation(orientation, owner)
@@ -208,7 +233,8 @@ default="centroid"
     return out
 
 
-def estimate_normals_batch(points, offsets, n_neighbors=10, orientation="centroid", n_jobs=None, *, owner=None):
+def estimate_normals_batch(points, offsets, n_neighbors=10, orientation="centroid", n_jobs=None, *, owner=None,
+                           method="pca", random_state=0, method_params=None):
     """Estimate normals of many packed point clouds at once.
 
     The packed layout is that of :func:`eppf.utils._validation.pack_point_clouds`:
@@ -237,6 +263,14 @@ default="centroid"
     owner : str, default=None
         Name used in error messages (the calling estimator); defaults to
         ``"estimate_normals_batch"``.
+    method : {"pca", "hough"}, default="pca"
+        As in :func:`estimate_normals`.
+    random_state : int, RandomState instance, None or ndarray of uint64, default=0
+        Seeds ``"hough"``: object ``i`` gets the ``i``-th seed drawn from it,
+        or ``random_state[i]`` for an array of ``n_objects`` seeds (which
+        keeps each object's normals independent of how objects are chunked).
+    method_params : dict, default=None
+        As in :func:`estimate_normals`.
 
     Returns
     -------
@@ -264,6 +298,9 @@ default="centroid"
     k = _check_n_neighbors(n_neighbors, owner)
     mode, viewpoint = _resolve_orientation(orientation, owner)
     n_threads = check_n_jobs(n_jobs, owner=owner)
+    if method != "pca" or method_params is not None:
+        return _other_method(method, method_params, owner).hough_batch(
+            pts, off, k, orientation, n_threads, random_state, method_params, owner)
     sizes = np.diff(off)
     max_n = int(sizes.max())
     k = min(k, max(max_n, 1))
