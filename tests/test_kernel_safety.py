@@ -14,6 +14,7 @@ import pytest
 from eppf import EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer, estimate_normals
 from eppf.descriptors import _eppf_fast as _core
 from eppf.descriptors import _esf_fast as _baselines
+from eppf.descriptors import _wahl_fast
 from eppf.preprocessing._normals import estimate_normals_batch
 from eppf.preprocessing._normals_fast import normals_packed, scratch_sizes
 from eppf.utils._validation import _stacked_view, check_point_cloud, check_point_clouds, condition_point_clouds
@@ -104,14 +105,14 @@ def test_wahl_kernel_bins_of_non_finite_values():
     vals = np.array([np.nan, np.inf, -np.inf, 1e308, -1e308, 0.0, -0.0, 1.0, -1.0])
     y, x = np.meshgrid(vals, vals)
     for exact in (False, True):
-        b = _baselines.wahl_alpha_bins(y.ravel(), x.ravel(), 7, exact)
+        b = _wahl_fast.wahl_alpha_bins(y.ravel(), x.ravel(), 7, exact)
         assert b.min() >= 0 and b.max() < 7
     rng = np.random.default_rng(4)
     p = np.ascontiguousarray(np.concatenate([_huge_pair_cloud()[:100], np.full((50, 3), np.nan)]))
     nrm = np.ascontiguousarray(np.concatenate([_sphere(100), _sphere(50, 2)]))
     out = np.zeros((2, 4 ** 4))
     status = np.zeros(2, dtype=np.int8)
-    _baselines.wahl_batch(p, nrm, np.array([0, 100, 150], dtype=np.int64), np.arange(2, dtype=np.uint64), 400,
+    _wahl_fast.wahl_batch(p, nrm, np.array([0, 100, 150], dtype=np.int64), np.arange(2, dtype=np.uint64), 400,
                           np.full(4, 4, dtype=np.int32), False, out, status, 1)
     for k in range(2):
         assert (status[k] == 1 and not out[k].any()) or np.isclose(out[k].sum(), 1.0)

@@ -11,7 +11,7 @@ from sklearn.pipeline import make_pipeline
 
 from eppf import KLNearestNeighbors, WahlTransformer
 from eppf.preprocessing._normals import estimate_normals
-from eppf.descriptors._esf_fast import surflet_pair_features
+from eppf.descriptors._wahl_fast import surflet_pair_features
 
 A = 1 / np.sqrt(2)
 
@@ -182,7 +182,7 @@ def test_alpha_bins_without_atan2_match_atan2(n_bins):
     # The kernel bins alpha from a polynomial atan and falls back on atan2
     # near bin boundaries: every bin must be atan2's, including at the
     # boundaries themselves, on the axes and for signed zeros.
-    from eppf.descriptors._esf_fast import wahl_alpha_bins
+    from eppf.descriptors._wahl_fast import wahl_alpha_bins
 
     rng = np.random.default_rng(n_bins)
     edges = -np.pi + 2 * np.pi * np.arange(n_bins + 1) / n_bins

@@ -15,6 +15,9 @@ from libc.stdint cimport int32_t, int64_t
 import numpy as np
 from libc.string cimport memset
 
+from ..utils._common cimport clamp_floor
+
+
 cdef enum:
     NB = 45       # bins of f1, f2, f3, f4
     NV = 128      # viewpoint bins
@@ -30,11 +33,7 @@ cdef inline float _dot4(float a0, float a1, float a2, float b0, float b1, float 
 
 
 cdef inline int _clamp_bin(double t, int n) noexcept nogil:
-    if not (t > 0):
-        return 0
-    if t >= n:
-        return n - 1
-    return <int>t
+    return clamp_floor(t, n)
 
 
 cdef void _vfh_one(const float* p, const float* nrm, int64_t n, const float* c, const float* nc,

@@ -39,6 +39,7 @@ from libc.stdint cimport int32_t, int64_t, uint32_t, uint64_t
 from libc.string cimport memcpy, memset
 
 from ..utils._common cimport splitmix64, rand_below
+from ..utils._common cimport clamp_floor
 
 cnp.import_array()
 
@@ -106,12 +107,7 @@ cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil
     """clip(floor((v - lo) * inv), 0, grid - 1), clamped in floating point
     before the conversion so that NaN (to 0), infinities and huge values give
     an index inside the grid."""
-    cdef double t = (v - lo) * inv
-    if not (t > 0.0):
-        return 0
-    if t >= grid:
-        return grid - 1
-    return <int>t
+    return clamp_floor((v - lo) * inv, grid)
 
 
 cdef inline int64_t _row_words(int grid) noexcept nogil:

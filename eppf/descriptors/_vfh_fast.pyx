@@ -10,17 +10,15 @@ from cython.parallel cimport prange
 from libc.math cimport sqrt, floor, fabs, atan2, frexp, ldexp, M_PI
 from libc.stdint cimport int64_t
 
+from ..utils._common cimport clamp_floor64
+
 DEF N_ANGLE = 45
 DEF N_VIEW = 128
 
 
 cdef inline int64_t _bin(double t, int64_t n) noexcept nogil:
     """``floor(t)`` clamped to ``[0, n - 1]`` in floating point first (NaN -> 0)."""
-    if not (t > 0.0):
-        return 0
-    if t >= <double>n:
-        return n - 1
-    return <int64_t>floor(t)
+    return clamp_floor64(t, n)
 
 
 cdef inline int64_t _round_bin(double t, int64_t n) noexcept nogil:

@@ -7,7 +7,7 @@ import numpy as np
 from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, IntTuple, StrOptions
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, RANDOM_STATE, PointCloudDescriptor
-from ._esf_fast import wahl_batch
+from ._wahl_fast import wahl_batch
 
 __all__ = ["WahlTransformer"]
 

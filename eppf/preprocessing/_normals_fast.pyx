@@ -26,6 +26,8 @@ from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, lo
 from libc.float cimport DBL_EPSILON
 from libc.stdint cimport int64_t
 
+from ..utils._common cimport clamp_floor64
+
 import numpy as np
 
 # Buckets of the fast path's histogram selection.
@@ -128,12 +130,7 @@ cdef inline double _tr(const Grid* g, double x, int a) noexcept nogil:
 cdef inline int64_t _cell_coord(double x, double lo, double inv_h, int64_t res) noexcept nogil:
     """clip(floor((x - lo) * inv_h), 0, res - 1), clamped in floating point
     before the conversion (NaN gives 0), so any double gives a cell."""
-    cdef double t = (x - lo) * inv_h
-    if not (t > 0.0):
-        return 0
-    if t >= res:
-        return res - 1
-    return <int64_t>t
+    return clamp_floor64((x - lo) * inv_h, res)
 
 
 cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap) noexcept nogil:

@@ -6,8 +6,12 @@
   from one 64-bit seed per object so results do not depend on thread count.
 - ``rand_below``: an unbiased-enough bounded draw (Lemire's multiply-shift on
   the high 32 bits), fine for clouds below 2**32 points.
+- ``clamp_floor`` / ``clamp_floor64``: the one way a kernel turns a float into
+  an index: ``floor(t)`` clipped to ``[0, n - 1]``, clamped in floating point
+  before the conversion so that NaN (to 0), infinities and huge values give an
+  index in range for every double.
 """
-from libc.stdint cimport uint64_t, uint32_t
+from libc.stdint cimport int64_t, uint64_t, uint32_t
 
 cdef extern from *:
     """
@@ -36,3 +40,21 @@ cdef inline uint32_t rand_below(uint64_t* state, uint32_t n) noexcept nogil:
     """Uniform integer in [0, n) from the next draw's high 32 bits."""
     cdef uint64_t r = splitmix64(state) >> 32
     return <uint32_t>((r * <uint64_t>n) >> 32)
+
+
+cdef inline int clamp_floor(double t, int n) noexcept nogil:
+    """floor(t) clipped to [0, n - 1]; NaN gives 0 (every double gives an index in range)."""
+    if not (t > 0.0):
+        return 0
+    if t >= n:
+        return n - 1
+    return <int>t
+
+
+cdef inline int64_t clamp_floor64(double t, int64_t n) noexcept nogil:
+    """:func:`clamp_floor` for 64-bit index ranges."""
+    if not (t > 0.0):
+        return 0
+    if t >= <double>n:
+        return n - 1
+    return <int64_t>t

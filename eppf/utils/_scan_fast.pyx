@@ -12,7 +12,7 @@ import numpy as np
 cimport numpy as cnp
 from cython.parallel cimport prange
 from libc.math cimport sqrt, isfinite, fabs, ldexp
-from libc.stdint cimport int64_t
+from libc.stdint cimport int8_t, int64_t, uint64_t
 from libc.string cimport memcpy
 
 from ._common cimport omp_get_max_threads, EPPF_HAVE_OPENMP
@@ -174,3 +174,16 @@ def split_columns(const double[:, ::1] data):
             normals[i, 1] = data[i, 4]
             normals[i, 2] = data[i, 5]
     return points_arr, normals_arr
+
+
+def check_batch(Py_ssize_t n_rows, const int64_t[::1] offsets, const uint64_t[::1] seeds,
+                 double[:, ::1] out, int8_t[::1] status, Py_ssize_t n_out, name):
+    """Shapes a batch kernel relies on: objects are row ranges of the points
+    (non-decreasing offsets from 0 to at most ``n_rows``), one seed, one
+    output row of ``n_out`` values and one status per object."""
+    cdef Py_ssize_t n_objects = offsets.shape[0] - 1
+    if n_objects < 0 or offsets[0] < 0 or offsets[n_objects] > n_rows or np.any(np.diff(np.asarray(offsets)) < 0):
+        raise ValueError(f"{name}: offsets must be non-decreasing within the rows of points")
+    if (seeds.shape[0] < n_objects or status.shape[0] < n_objects or out.shape[0] < n_objects
+            or out.shape[1] != n_out):
+        raise ValueError(f"{name}: seeds, status and out must have one entry (row) per object")
