@@ -44,6 +44,15 @@ from ..utils._common cimport clamp_floor
 cnp.import_array()
 
 cdef extern from "_eppf_walk.h":
+    # the packed walk's layout and the batch size, defined once in the header
+    enum:
+        EPPF_PK_S
+        EPPF_PK_ZSHIFT
+        EPPF_PK_YSHIFT
+        EPPF_PK_XSHIFT
+        EPPF_WALK_BATCH
+    int64_t EPPF_PK_X
+    int64_t EPPF_PK_Y
     int eppf_walk_has_avx2() noexcept nogil
     void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
@@ -62,16 +71,15 @@ cdef enum:
     MAX_BINS = 64
     FIX_SHIFT = 32
     MAX_GRID = 1023
-    BATCH = 64
-    # packed line walk for grids up to 64: lanes of 21 bits, 14 fraction bits
-    PK_FRAC = 14
-    PK_S = 1 << 14
-    PK_ZSHIFT = 14
-    PK_YSHIFT = 35
-    PK_XSHIFT = 56
+    BATCH = EPPF_WALK_BATCH
+    # packed line walk for grids up to 64 (layout in _eppf_walk.h)
+    PK_S = EPPF_PK_S
+    PK_ZSHIFT = EPPF_PK_ZSHIFT
+    PK_YSHIFT = EPPF_PK_YSHIFT
+    PK_XSHIFT = EPPF_PK_XSHIFT
 
-cdef int64_t PK_Y = (<int64_t>1) << 21
-cdef int64_t PK_X = (<int64_t>1) << 42
+cdef int64_t PK_Y = EPPF_PK_Y
+cdef int64_t PK_X = EPPF_PK_X
 
 cdef uint64_t LOW32 = 0xFFFFFFFF
 

@@ -39,9 +39,19 @@
 #define EPPF_WALK_SIMD 0
 #endif
 
-#define EPPF_PK_S (1 << 14)
-#define EPPF_PK_X ((int64_t)1 << 42)
-#define EPPF_PK_Y ((int64_t)1 << 21)
+/* The packed line walk's layout, defined here once and read by _eppf_fast.pyx:
+ * three lanes of 21 bits (x from bit 42, y from bit 21, z from bit 0), each a
+ * voxel coordinate with EPPF_PK_FRAC fraction bits; the integer part of a
+ * lane is found at EPPF_PK_{X,Y,Z}SHIFT. */
+#define EPPF_PK_FRAC 14
+#define EPPF_PK_YLANE 21
+#define EPPF_PK_XLANE 42
+#define EPPF_PK_ZSHIFT EPPF_PK_FRAC
+#define EPPF_PK_YSHIFT (EPPF_PK_YLANE + EPPF_PK_FRAC)
+#define EPPF_PK_XSHIFT (EPPF_PK_XLANE + EPPF_PK_FRAC)
+#define EPPF_PK_S (1 << EPPF_PK_FRAC)
+#define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
+#define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
 #define EPPF_WALK_BATCH 64
 
 static int eppf_walk_has_avx2(void)
@@ -208,9 +218,9 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
                                                             _mm256_slli_epi64(_mm256_cvtepi32_epi64(iy), 21)),
                                            _mm256_cvtepi32_epi64(iz));
             __m256i p0 = _mm256_add_epi64(
-                _mm256_add_epi64(_mm256_slli_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ax), 14), off), 42),
-                                 _mm256_slli_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ay), 14), off), 21)),
-                _mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(az), 14), off));
+                _mm256_add_epi64(_mm256_slli_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ax), EPPF_PK_FRAC), off), EPPF_PK_XLANE),
+                                 _mm256_slli_epi64(_mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(ay), EPPF_PK_FRAC), off), EPPF_PK_YLANE)),
+                _mm256_add_epi64(_mm256_slli_epi64(_mm256_cvtepi32_epi64(az), EPPF_PK_FRAC), off));
             _mm256_store_si256((__m256i *)(P + t), _mm256_add_epi64(p0, inc));
             _mm256_store_si256((__m256i *)(INC + t), inc);
             _mm_store_si128((__m128i *)(Ls + t), L);
@@ -282,29 +292,29 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
                    past their steps drop the word and stand still. */
                 if (g == 64) {
                     for (s = 0; s < nmin; s++) {
-                        __m256i row = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p, 56), 6),
-                                                       _mm256_and_si256(_mm256_srli_epi64(p, 35), m63));
+                        __m256i row = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p, EPPF_PK_XSHIFT), 6),
+                                                       _mm256_and_si256(_mm256_srli_epi64(p, EPPF_PK_YSHIFT), m63));
                         __m256i w = _mm256_i64gather_epi64(base, row, 8);
-                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, 14), m63);
+                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, EPPF_PK_ZSHIFT), m63);
                         occ = _mm256_add_epi64(occ, _mm256_and_si256(_mm256_srlv_epi64(w, z), one));
                         p = _mm256_add_epi64(p, inc);
                     }
                     for (; s < nmax; s++) {
                         __m256i on = _mm256_cmpgt_epi64(steps, _mm256_set1_epi64x(s));
-                        __m256i row = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p, 56), 6),
-                                                       _mm256_and_si256(_mm256_srli_epi64(p, 35), m63));
+                        __m256i row = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p, EPPF_PK_XSHIFT), 6),
+                                                       _mm256_and_si256(_mm256_srli_epi64(p, EPPF_PK_YSHIFT), m63));
                         __m256i w = _mm256_and_si256(_mm256_i64gather_epi64(base, row, 8), on);
-                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, 14), m63);
+                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, EPPF_PK_ZSHIFT), m63);
                         occ = _mm256_add_epi64(occ, _mm256_and_si256(_mm256_srlv_epi64(w, z), one));
                         p = _mm256_add_epi64(p, _mm256_and_si256(inc, on));
                     }
                 } else {
                     for (s = 0; s < nmax; s++) {
                         __m256i on = _mm256_cmpgt_epi64(steps, _mm256_set1_epi64x(s));
-                        __m256i row = _mm256_add_epi64(_mm256_mul_epu32(_mm256_srli_epi64(p, 56), vg),
-                                                       _mm256_and_si256(_mm256_srli_epi64(p, 35), m63));
+                        __m256i row = _mm256_add_epi64(_mm256_mul_epu32(_mm256_srli_epi64(p, EPPF_PK_XSHIFT), vg),
+                                                       _mm256_and_si256(_mm256_srli_epi64(p, EPPF_PK_YSHIFT), m63));
                         __m256i w = _mm256_and_si256(_mm256_i64gather_epi64(base, row, 8), on);
-                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, 14), m63);
+                        __m256i z = _mm256_and_si256(_mm256_srli_epi64(p, EPPF_PK_ZSHIFT), m63);
                         occ = _mm256_add_epi64(occ, _mm256_and_si256(_mm256_srlv_epi64(w, z), one));
                         p = _mm256_add_epi64(p, _mm256_and_si256(inc, on));
                     }
