@@ -142,7 +142,7 @@ def test_failed_write_leaves_the_old_file(tmp_path, monkeypatch):
 def _script(name="make_modelnet_npz"):
     import importlib.util
 
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     spec = importlib.util.spec_from_file_location(name, os.path.join(root, "scripts", f"{name}.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -194,7 +194,7 @@ def test_make_modelnet_npz_as_a_program_exits_2_without_traceback(tmp_path):
     import subprocess
     import sys
 
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     res = subprocess.run([sys.executable, os.path.join(root, "scripts", "make_modelnet_npz.py"),
                           "--root", str(tmp_path / "nowhere"), "-o", str(tmp_path / "x.npz")],
                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": root})

@@ -11,7 +11,7 @@ import pytest
 
 from eppf.utils._chunks import CHUNK, CHUNK_POINTS, _chunk_bounds
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a child process is POSIX")

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-SCRIPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scripts", "fuzz_files.py")
+SCRIPT = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "scripts", "fuzz_files.py")
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="the harness forks a child per file")

@@ -121,7 +121,7 @@ def test_module_entry_point():
     import subprocess
     import sys
 
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-m", "eppf.experiments", "nope"], capture_output=True, text=True, env=env,
                           cwd=root, timeout=120)
