@@ -19,9 +19,9 @@ Descriptors are cached on disk (``--cache-dir``), so a rerun skips them.
 """
 
 from ._ablation import run_ablation
-from ._classification import run_classification
+from ._classification import TrainingOptions, run_classification
 from ._cli import main
-from ._common import Dataset, ExperimentError, load_data
+from ._common import Dataset, ExperimentError, ExperimentSettings, load_data
 from ._noise import run_noise
 from ._retrieval import run_retrieval
 from ._runtime import run_runtime
@@ -29,6 +29,8 @@ from ._runtime import run_runtime
 __all__ = [
     "Dataset",
     "ExperimentError",
+    "ExperimentSettings",
+    "TrainingOptions",
     "load_data",
     "main",
     "run_ablation",

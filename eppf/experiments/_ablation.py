@@ -5,6 +5,7 @@ import numpy as np
 from .. import FUNCTIONS
 from ..metrics import METRICS
 from ._common import (
+    ExperimentSettings,
     DescriptorCache,
     Logger,
     check_positive_int,
@@ -35,13 +36,7 @@ def run_ablation(
     *,
     out=None,
     draws=10,
-    scaling="auto",
-    random_state=0,
-    n_jobs=-1,
-    quick=False,
-    cache_dir=None,
-    verbose=True,
-    command=None,
+    **settings,
 ):
     """Leave-one-out KL retrieval of EPPF with each point-pair function removed in turn.
 
@@ -59,20 +54,10 @@ def run_ablation(
         Folder for ``ablation.md``, ``ablation.csv`` and ``ablation.png``.
     draws : int, default=10
         Descriptor draws per configuration.
-    scaling : {"auto", "fit", "object", "none"}, default="auto"
-        EPPF scaling (see :func:`run_retrieval`).
-    random_state : int, default=0
-        Seed of the data (built-in) and of the draws.
-    n_jobs : int, default=-1
-        Threads.
-    quick : bool, default=False
-        Tiny settings.
-    cache_dir : str, default=None
-        Descriptor cache; None means ``out/cache``.
-    verbose : bool, default=True
-        Print progress.
-    command : str, default=None
-        The command line recorded in the report.
+    **settings
+        The shared settings of :class:`ExperimentSettings` (``scaling``,
+        ``random_state``, ``n_jobs``, ``quick``, ``cache_dir``, ``verbose``,
+        ``command``).
 
     Returns
     -------
@@ -93,6 +78,8 @@ def run_ablation(
     >>> [row["removed"] for row in result["rows"]]
     ['', 'distance', 'angle', 'normal', 'occupancy']
     """
+    scaling, random_state, n_jobs, quick, cache_dir, verbose, command = ExperimentSettings.from_kwargs(
+        "run_ablation", settings).astuple()
     log = Logger("ablation", verbose)
     draws = check_positive_int(draws, "--draws")
     ds = load_or_pass(data, quick=quick, random_state=random_state)

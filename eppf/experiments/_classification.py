@@ -1,14 +1,13 @@
 """Table III: PointNet and the EPPF 2D/3D/4D networks on a train/test split."""
 
 import time
-from dataclasses import dataclass
-
-import numpy as np
+from dataclasses import dataclass, fields
 
 from ..metrics import METRICS, retrieval_scores
 from ._common import (
     DescriptorCache,
     ExperimentError,
+    ExperimentSettings,
     Logger,
     check_positive_int,
     command_text,
@@ -24,11 +23,97 @@ from ._common import (
 )
 from ._retrieval import METRIC_TITLES
 
-__all__ = ["run_classification"]
+__all__ = ["TrainingOptions", "run_classification"]
 
 #: Model keys and their names in the tables.
 MODELS = {"pointnet": "PointNet", "2d": "EPPF 2D", "3d": "EPPF 3D", "4d": "EPPF 4D", "kl": "EPPF KL 1-NN"}
 DEFAULT_MODELS = ("pointnet", "2d", "3d", "4d", "kl")
+
+
+@dataclass(frozen=True)
+class TrainingOptions:
+    """The options the classification and noise experiments share, written once.
+
+    :func:`run_classification` and :func:`run_noise` accept these as keyword
+    arguments besides those of :class:`ExperimentSettings`.
+
+    Parameters
+    ----------
+    models : list of str, default=None
+        Keys of :data:`MODELS`; None runs each experiment's default list.
+    epochs : int, default=None
+        Max epochs of the EPPF networks (30, or 2 with ``quick``).
+    pointnet_epochs : int, default=None
+        Max epochs of PointNet (default ``epochs``).
+    pointnet_points : int, default=None
+        Points per object fed to PointNet (1024, or 128 with ``quick``).
+    validation_fraction : float, default=0.1
+        Share of the training objects held out for early stopping.
+    patience : int, default=None
+        Early-stopping patience (5, or 2 with ``quick``).
+    precision : {"float32", "bfloat16"}, default="float32"
+        Arithmetic of the EPPF networks (see :class:`eppf.classifiers.EPPF4DClassifier`).
+    train_per_class : int, default=None
+        Train on at most this many objects per class (seeded), to fit a CPU
+        budget; None uses the whole training split.
+    test_per_class : int, default=None
+        Score on at most this many test objects per class (seeded); None uses
+        the whole test split.
+
+    See Also
+    --------
+    ExperimentSettings : The settings every experiment shares.
+
+    Examples
+    --------
+    >>> from eppf.experiments import TrainingOptions
+    >>> options, rest = TrainingOptions.split("run_noise", {"epochs": 3, "quick": True})
+    >>> options.epochs, rest
+    (3, {'quick': True})
+    """
+
+    models: tuple = None
+    epochs: int = None
+    pointnet_epochs: int = None
+    pointnet_points: int = None
+    validation_fraction: float = 0.1
+    patience: int = None
+    precision: str = "float32"
+    train_per_class: int = None
+    test_per_class: int = None
+
+    @classmethod
+    def split(cls, owner, kwargs):
+        """The training options among ``kwargs``, and the other keyword arguments.
+
+        Parameters
+        ----------
+        owner : str
+            The calling function's name (the rest is checked by
+            :meth:`ExperimentSettings.from_kwargs`).
+        kwargs : dict
+            Keyword arguments.
+
+        Returns
+        -------
+        options : TrainingOptions
+            The training options given, the others at their defaults.
+        rest : dict
+            The other keyword arguments.
+        """
+        names = {f.name for f in fields(cls)}
+        options = cls(**{k: v for k, v in kwargs.items() if k in names})
+        return options, {k: v for k, v in kwargs.items() if k not in names}
+
+    def astuple(self):
+        """The options in field order.
+
+        Returns
+        -------
+        values : tuple
+            ``(models, epochs, ..., test_per_class)``.
+        """
+        return tuple(getattr(self, f.name) for f in fields(self))
 
 
 @dataclass
@@ -158,26 +243,33 @@ def check_models(models, default):
     return models
 
 
+def prepare_training(data, options, scaling, quick, n_jobs, random_state):
+    """What the classification and noise experiments set up alike before training.
+
+    Returns the resolved :class:`TrainingSettings`, the loaded data set, and
+    the indices of the (optionally subsampled) training and test objects.
+    """
+    settings = TrainingSettings.resolve(
+        epochs=options.epochs, pointnet_epochs=options.pointnet_epochs, pointnet_points=options.pointnet_points,
+        validation_fraction=options.validation_fraction, patience=options.patience, scaling=None,
+        quick=quick, n_jobs=n_jobs, random_state=random_state, precision=options.precision)
+    train_per_class, test_per_class = options.train_per_class, options.test_per_class
+    if train_per_class is not None:
+        train_per_class = check_positive_int(train_per_class, "--train-per-class")
+    if test_per_class is not None:
+        test_per_class = check_positive_int(test_per_class, "--test-per-class")
+    ds = load_or_pass(data, quick=quick, random_state=random_state)
+    settings.scaling = resolve_scaling(scaling, ds)
+    train = subsample_train(ds, train_per_class, random_state)
+    test = subsample_train(ds, test_per_class, random_state, part="test")
+    return settings, ds, train, test
+
+
 def run_classification(
     data="builtin",
     *,
     out=None,
-    models=None,
-    epochs=None,
-    pointnet_epochs=None,
-    pointnet_points=None,
-    validation_fraction=0.1,
-    patience=None,
-    precision="float32",
-    train_per_class=None,
-    test_per_class=None,
-    scaling="auto",
-    random_state=0,
-    n_jobs=-1,
-    quick=False,
-    cache_dir=None,
-    verbose=True,
-    command=None,
+    **settings,
 ):
     """Object classification on the test split (Table III).
 
@@ -193,40 +285,13 @@ def run_classification(
         ``"builtin"``, a ``.npz`` path, or a loaded :class:`Dataset`.
     out : str, default=None
         Folder for ``classification.md``/``.csv``/``.png``.
-    models : list of str, default=None
-        Keys of :data:`MODELS`; None runs ``pointnet 2d 3d 4d kl``.
-    epochs : int, default=None
-        Max epochs of the EPPF networks (30, or 2 with ``quick``).
-    pointnet_epochs : int, default=None
-        Max epochs of PointNet (default ``epochs``).
-    pointnet_points : int, default=None
-        Points per object fed to PointNet (1024, or 128 with ``quick``).
-    validation_fraction : float, default=0.1
-        Share of the training objects held out for early stopping.
-    patience : int, default=None
-        Early-stopping patience (5, or 2 with ``quick``).
-    precision : {"float32", "bfloat16"}, default="float32"
-        Arithmetic of the EPPF networks (see :class:`eppf.classifiers.EPPF4DClassifier`).
-    train_per_class : int, default=None
-        Train on at most this many objects per class (seeded), to fit a CPU
-        budget; None uses the whole training split.
-    test_per_class : int, default=None
-        Score on at most this many test objects per class (seeded); None uses
-        the whole test split.
-    scaling : {"auto", "fit", "object", "none"}, default="auto"
-        EPPF scaling (see :func:`run_retrieval`).
-    random_state : int, default=0
-        Seed of everything.
-    n_jobs : int, default=-1
-        Threads of the descriptors and of torch.
-    quick : bool, default=False
-        Tiny settings.
-    cache_dir : str, default=None
-        Descriptor cache; None means ``out/cache``.
-    verbose : bool, default=True
-        Print progress.
-    command : str, default=None
-        The command line recorded in the report.
+    **settings
+        The options of :class:`TrainingOptions` (``models``, ``epochs``,
+        ``pointnet_epochs``, ``pointnet_points``, ``validation_fraction``,
+        ``patience``, ``precision``, ``train_per_class``, ``test_per_class``)
+        and the shared settings of :class:`ExperimentSettings` (``scaling``,
+        ``random_state``, ``n_jobs``, ``quick``, ``cache_dir``, ``verbose``,
+        ``command``).
 
     Returns
     -------
@@ -249,20 +314,14 @@ def run_classification(
     >>> [(row["model"], row["n_test"]) for row in result["rows"]]
     [('EPPF 4D', 20), ('EPPF KL 1-NN', 20)]
     """
+    options, settings = TrainingOptions.split("run_classification", settings)
+    (models, epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, precision, train_per_class,
+     test_per_class) = options.astuple()
+    scaling, random_state, n_jobs, quick, cache_dir, verbose, command = ExperimentSettings.from_kwargs(
+        "run_classification", settings).astuple()
     log = Logger("classification", verbose)
     models = check_models(models, DEFAULT_MODELS)
-    settings = TrainingSettings.resolve(
-        epochs=epochs, pointnet_epochs=pointnet_epochs, pointnet_points=pointnet_points,
-        validation_fraction=validation_fraction, patience=patience, scaling=None,
-        quick=quick, n_jobs=n_jobs, random_state=random_state, precision=precision)
-    if train_per_class is not None:
-        train_per_class = check_positive_int(train_per_class, "--train-per-class")
-    if test_per_class is not None:
-        test_per_class = check_positive_int(test_per_class, "--test-per-class")
-    ds = load_or_pass(data, quick=quick, random_state=random_state)
-    settings.scaling = resolve_scaling(scaling, ds)
-    train = subsample_train(ds, train_per_class, random_state)
-    test = subsample_train(ds, test_per_class, random_state, part="test")
+    settings, ds, train, test = prepare_training(data, options, scaling, quick, n_jobs, random_state)
     if train.size < 2 or test.size < 1:
         raise ExperimentError(f"--data: need training and test objects, got {train.size} and {test.size}")
     cache = DescriptorCache(cache_dir if cache_dir is not None else (out and f"{out}/cache"), log)

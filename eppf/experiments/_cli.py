@@ -149,7 +149,6 @@ def main(argv=None):
             else:
                 run_classification(**kw)
         else:
-            common.pop("cache_dir")
             run_runtime(n_objects=args.n_objects, repeats=args.repeats, **common)
     except (ExperimentError, FileNotFoundError) as exc:
         print(f"{PROG} {args.experiment}: error: {exc}", file=sys.stderr)

@@ -1,14 +1,13 @@
 """Shared pieces of the experiments: data, descriptor cache, seeds, reports."""
 
 import csv
-import hashlib
 import io
 import os
 import platform
 import shlex
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from sklearn.utils import check_random_state
@@ -18,6 +17,7 @@ from ..utils._cache import NEUTRAL_PARAMS, DescriptorCache
 
 __all__ = [
     "Dataset",
+    "ExperimentSettings",
     "DescriptorCache",
     "ExperimentError",
     "Logger",
@@ -52,6 +52,89 @@ class ExperimentError(ValueError):
 
 
 # ------------------------------------------------------------------ logging
+@dataclass(frozen=True)
+class ExperimentSettings:
+    """The settings every experiment takes, written once.
+
+    Every ``run_*`` function accepts these as keyword arguments (``**settings``)
+    besides its own, and the command line fills them from its shared options.
+
+    Parameters
+    ----------
+    scaling : {"auto", "fit", "object", "none"}, default="auto"
+        EPPF scaling; ``"auto"`` is ``"fit"`` for the built-in set and
+        ``"object"`` for files.
+    random_state : int, default=0
+        Seed of the data (built-in), the draws, the training and everything else.
+    n_jobs : int, default=-1
+        Threads of the descriptors, the distance computations and training.
+    quick : bool, default=False
+        Tiny settings (smaller built-in set, 5,000 pairs per object, one epoch).
+    cache_dir : str, default=None
+        Descriptor cache; None means ``out/cache`` (or no cache without
+        ``out``). The runtime experiment computes everything afresh and
+        ignores it.
+    verbose : bool, default=True
+        Print progress.
+    command : str, default=None
+        The command line recorded in the report.
+
+    See Also
+    --------
+    TrainingOptions : The options the classification and noise experiments share.
+
+    Examples
+    --------
+    >>> from eppf.experiments import ExperimentSettings
+    >>> ExperimentSettings.from_kwargs("run_retrieval", {"quick": True}).quick
+    True
+    """
+
+    scaling: str = "auto"
+    random_state: int = 0
+    n_jobs: int = -1
+    quick: bool = False
+    cache_dir: str = None
+    verbose: bool = True
+    command: str = None
+
+    @classmethod
+    def from_kwargs(cls, owner, settings):
+        """The settings given as keyword arguments to ``owner``, the others at their defaults.
+
+        Parameters
+        ----------
+        owner : str
+            The function's name, for the error message.
+        settings : dict
+            Keyword arguments; every key must be a field.
+
+        Returns
+        -------
+        settings : ExperimentSettings
+
+        Raises
+        ------
+        TypeError
+            If a key is not a setting.
+        """
+        names = [f.name for f in fields(cls)]
+        unknown = sorted(set(settings) - set(names))
+        if unknown:
+            raise TypeError(f"{owner}() got unexpected keyword argument(s) {unknown}; the shared settings are {names}")
+        return cls(**settings)
+
+    def astuple(self):
+        """The settings in field order.
+
+        Returns
+        -------
+        values : tuple
+            ``(scaling, random_state, n_jobs, quick, cache_dir, verbose, command)``.
+        """
+        return tuple(getattr(self, f.name) for f in fields(self))
+
+
 class Logger:
     """Print progress lines with the time since the experiment started.
 

@@ -5,18 +5,15 @@ import math
 import numpy as np
 
 from ..metrics import METRICS
-from ._classification import MODELS, TrainingSettings, _Descriptors, check_models, train_and_score
+from ._classification import MODELS, TrainingOptions, _Descriptors, check_models, prepare_training, train_and_score
 from ._common import (
     DescriptorCache,
     ExperimentError,
+    ExperimentSettings,
     Logger,
-    check_positive_int,
     command_text,
     draw_seeds,
-    load_or_pass,
     markdown_table,
-    resolve_scaling,
-    subsample_train,
     write_report,
 )
 
@@ -50,22 +47,7 @@ def run_noise(
     *,
     out=None,
     levels=None,
-    models=None,
-    epochs=None,
-    pointnet_epochs=None,
-    pointnet_points=None,
-    validation_fraction=0.1,
-    patience=None,
-    precision="float32",
-    train_per_class=None,
-    test_per_class=None,
-    scaling="auto",
-    random_state=0,
-    n_jobs=-1,
-    quick=False,
-    cache_dir=None,
-    verbose=True,
-    command=None,
+    **settings,
 ):
     """Test accuracy as Gaussian noise grows, retraining at every level.
 
@@ -88,38 +70,13 @@ def run_noise(
         Noise sigmas as fractions of the unit cube, in [0, 1];
         ``(0, 0.02, 0.04, 0.06, 0.08, 0.1)`` (``(0, 0.06)`` with
         ``quick``) when None.
-    models : list of str, default=None
-        Keys of the classification models; None runs ``4d pointnet kl``.
-    epochs : int, default=None
-        As in :func:`run_classification`.
-    pointnet_epochs : int, default=None
-        As in :func:`run_classification`.
-    pointnet_points : int, default=None
-        As in :func:`run_classification`.
-    validation_fraction : float, default=0.1
-        As in :func:`run_classification`.
-    patience : int, default=None
-        As in :func:`run_classification`.
-    precision : {"float32", "bfloat16"}, default="float32"
-        As in :func:`run_classification`.
-    train_per_class : int, default=None
-        As in :func:`run_classification`.
-    test_per_class : int, default=None
-        As in :func:`run_classification`.
-    scaling : {"auto", "fit", "object", "none"}, default="auto"
-        EPPF scaling.
-    random_state : int, default=0
-        Seed of everything (the noise of level ``k`` uses a seed drawn from it).
-    n_jobs : int, default=-1
-        Threads.
-    quick : bool, default=False
-        Tiny settings.
-    cache_dir : str, default=None
-        Descriptor cache; None means ``out/cache``.
-    verbose : bool, default=True
-        Print progress.
-    command : str, default=None
-        The command line recorded in the report.
+    **settings
+        The options of :class:`TrainingOptions` (``models``, ``epochs``,
+        ``pointnet_epochs``, ``pointnet_points``, ``validation_fraction``,
+        ``patience``, ``precision``, ``train_per_class``, ``test_per_class``)
+        and the shared settings of :class:`ExperimentSettings` (``scaling``,
+        ``random_state``, ``n_jobs``, ``quick``, ``cache_dir``, ``verbose``,
+        ``command``).
 
     Returns
     -------
@@ -144,23 +101,17 @@ def run_noise(
     >>> [(row["sigma"], row["model"]) for row in result["rows"]]
     [(0.0, 'EPPF KL 1-NN'), (0.05, 'EPPF KL 1-NN')]
     """
+    options, settings = TrainingOptions.split("run_noise", settings)
+    (models, epochs, pointnet_epochs, pointnet_points, validation_fraction, patience, precision, train_per_class,
+     test_per_class) = options.astuple()
+    scaling, random_state, n_jobs, quick, cache_dir, verbose, command = ExperimentSettings.from_kwargs(
+        "run_noise", settings).astuple()
     from ..preprocessing import GaussianNoise
 
     log = Logger("noise", verbose)
     models = check_models(models, DEFAULT_NOISE_MODELS)
     levels = check_levels(levels if levels is not None else (QUICK_LEVELS if quick else DEFAULT_LEVELS))
-    settings = TrainingSettings.resolve(
-        epochs=epochs, pointnet_epochs=pointnet_epochs, pointnet_points=pointnet_points,
-        validation_fraction=validation_fraction, patience=patience, scaling=None,
-        quick=quick, n_jobs=n_jobs, random_state=random_state, precision=precision)
-    if train_per_class is not None:
-        train_per_class = check_positive_int(train_per_class, "--train-per-class")
-    if test_per_class is not None:
-        test_per_class = check_positive_int(test_per_class, "--test-per-class")
-    ds = load_or_pass(data, quick=quick, random_state=random_state)
-    settings.scaling = resolve_scaling(scaling, ds)
-    train = subsample_train(ds, train_per_class, random_state)
-    test = subsample_train(ds, test_per_class, random_state, part="test")
+    settings, ds, train, test = prepare_training(data, options, scaling, quick, n_jobs, random_state)
     used = np.concatenate([train, test])
     cache = DescriptorCache(cache_dir if cache_dir is not None else (out and f"{out}/cache"), log)
     noise_seeds = draw_seeds(random_state + 1, len(levels))

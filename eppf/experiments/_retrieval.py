@@ -4,6 +4,7 @@ import numpy as np
 
 from ..metrics import METRICS, leave_one_out_retrieval, retrieval_scores
 from ._common import (
+    ExperimentSettings,
     DESCRIPTORS,
     DETERMINISTIC,
     DescriptorCache,
@@ -58,13 +59,7 @@ def run_retrieval(
     out=None,
     descriptors=tuple(DESCRIPTORS),
     draws=10,
-    scaling="auto",
-    random_state=0,
-    n_jobs=-1,
-    quick=False,
-    cache_dir=None,
-    verbose=True,
-    command=None,
+    **settings,
 ):
     """Leave-one-out KL 1-NN retrieval of the paper's descriptors (Table II).
 
@@ -86,21 +81,10 @@ def run_retrieval(
         ``eppf_short``, ``eppf``).
     draws : int, default=10
         Descriptor draws of the random descriptors.
-    scaling : {"auto", "fit", "object", "none"}, default="auto"
-        EPPF scaling; ``"auto"`` is ``"fit"`` for the built-in set and
-        ``"object"`` for files.
-    random_state : int, default=0
-        Seed of the data (built-in), the draws and everything else.
-    n_jobs : int, default=-1
-        Threads of the descriptors and of the distance computations.
-    quick : bool, default=False
-        Tiny settings (smaller built-in set, 5,000 pairs per object).
-    cache_dir : str, default=None
-        Descriptor cache; None means ``out/cache`` (or no cache without ``out``).
-    verbose : bool, default=True
-        Print progress.
-    command : str, default=None
-        The command line recorded in the report.
+    **settings
+        The shared settings of :class:`ExperimentSettings` (``scaling``,
+        ``random_state``, ``n_jobs``, ``quick``, ``cache_dir``, ``verbose``,
+        ``command``).
 
     Returns
     -------
@@ -125,6 +109,8 @@ def run_retrieval(
     >>> row["descriptor"], 0.0 <= row["total_accuracy_mean"] <= 1.0
     ('EPPF', True)
     """
+    scaling, random_state, n_jobs, quick, cache_dir, verbose, command = ExperimentSettings.from_kwargs(
+        "run_retrieval", settings).astuple()
     log = Logger("retrieval", verbose)
     draws = check_positive_int(draws, "--draws")
     descriptors = list(descriptors)

@@ -6,6 +6,7 @@ import time
 import numpy as np
 
 from ._common import (
+    ExperimentSettings,
     DESCRIPTORS,
     ExperimentError,
     Logger,
@@ -53,12 +54,7 @@ def run_runtime(
     out=None,
     n_objects=None,
     repeats=None,
-    scaling="auto",
-    random_state=0,
-    n_jobs=-1,
-    quick=False,
-    verbose=True,
-    command=None,
+    **settings,
 ):
     """Time every descriptor and normal estimation, in milliseconds per object.
 
@@ -80,18 +76,10 @@ def run_runtime(
         Objects timed (200, or 20 with ``quick``; at most all of them).
     repeats : int, default=None
         Timing repeats, the fastest kept (3, or 1 with ``quick``).
-    scaling : {"auto", "fit", "object", "none"}, default="auto"
-        EPPF scaling.
-    random_state : int, default=0
-        Seed of the data (built-in) and of the descriptors.
-    n_jobs : int, default=-1
-        Threads of the multi-threaded rows.
-    quick : bool, default=False
-        Tiny settings.
-    verbose : bool, default=True
-        Print progress.
-    command : str, default=None
-        The command line recorded in the report.
+    **settings
+        The shared settings of :class:`ExperimentSettings` (``scaling``,
+        ``random_state``, ``n_jobs``, ``quick``, ``cache_dir``, ``verbose``,
+        ``command``).
 
     Returns
     -------
@@ -113,6 +101,8 @@ def run_runtime(
     >>> items[0], items[1:] == [spec.title for spec in DESCRIPTORS.values()]
     ('normals (PCA, 20 neighbours)', True)
     """
+    scaling, random_state, n_jobs, quick, cache_dir, verbose, command = ExperimentSettings.from_kwargs(
+        "run_runtime", settings).astuple()
     from .. import estimate_normals
 
     log = Logger("runtime", verbose)
