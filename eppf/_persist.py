@@ -584,6 +584,47 @@ def _newer(a, b):
         return False
 
 
+#: Where the classes of an eppf 0.1 pickle live now (the flat modules became subpackages).
+_MODULES_0_1 = {
+    "eppf._descriptor": "eppf.descriptors._eppf",
+    "eppf._esf": "eppf.descriptors._esf",
+    "eppf._wahl": "eppf.descriptors._wahl",
+    "eppf._ourcvfh": "eppf.descriptors._ourcvfh",
+    "eppf._pool": "eppf.descriptors._pool",
+    "eppf._neighbors": "eppf.neighbors._kl",
+    "eppf._cnn": "eppf.classifiers._eppf_cnn",
+    "eppf._pointnet": "eppf.classifiers._pointnet",
+    "eppf._normals": "eppf.preprocessing._normals",
+    "eppf._perturb": "eppf.preprocessing._perturb",
+    "eppf._sampling": "eppf.utils._sampling",
+    "eppf._validation": "eppf.utils._validation",
+    "eppf._chunks": "eppf.utils._chunks",
+    "eppf.preprocessing": "eppf.preprocessing",
+}
+
+
+class _modules_of_0_1:
+    """While a trusted 0.1 pickle loads, its module names resolve to today's modules."""
+
+    def __enter__(self):
+        import importlib
+        import sys
+
+        self.added = []
+        for old, new in _MODULES_0_1.items():
+            if old not in sys.modules:
+                sys.modules[old] = importlib.import_module(new)
+                self.added.append(old)
+        return self
+
+    def __exit__(self, *exc):
+        import sys
+
+        for old in self.added:
+            sys.modules.pop(old, None)
+        return False
+
+
 def _load_untrusted_or_refuse(path, trust):
     with open(path, "rb") as fh:
         head = fh.read(4)
@@ -602,7 +643,8 @@ def _load_untrusted_or_refuse(path, trust):
     import joblib
 
     try:
-        return joblib.load(path)
+        with _modules_of_0_1():
+            return joblib.load(path)
     except Exception as exc:  # a corrupt or foreign file raises all sorts of errors
         first = str(exc).splitlines()[0] if str(exc) else "no details"
         raise ValueError(f"cannot load model {path}: not a readable joblib file ({type(exc).__name__}: {first})") from None

@@ -416,3 +416,19 @@ def test_every_registered_descriptor_round_trips(tmp_path):
         back = load_model(path)
         assert type(back) is type(est), name
         np.testing.assert_array_equal(back.transform(X), est.transform(X), err_msg=name)
+
+
+def test_trusted_eppf_0_1_pickle_still_loads_and_predicts():
+    # tests/data/model_0_1.joblib: a Pipeline(EPPFTransformer, KLNearestNeighbors) pickled by eppf 0.1.0,
+    # whose classes lived in the flat modules (eppf._descriptor, eppf._neighbors) of that layout
+    from eppf.datasets import make_shapes
+
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "model_0_1.joblib")
+    with pytest.raises(ValueError, match="trust=True"):
+        load_model(path)
+    model = load_model(path, trust=True)
+    Q, _ = make_shapes(1, n_points=96, classes=["box", "sphere"], return_X_y=True, random_state=1)
+    np.testing.assert_array_equal(model.predict(Q), [0, 1])
+    import sys
+
+    assert "eppf._descriptor" not in sys.modules  # the old names were only aliases while loading

@@ -1,7 +1,7 @@
 """Neural classifiers: the paper's EPPF networks on descriptors, and PointNet on raw points.
 
 Both wrap skorch (they do not subclass it) through one base class
-(``_base._SkorchClassifierBase``): labels encoded to int64 with ``classes_``
+(``_base.SkorchClassifierBase``): labels encoded to int64 with ``classes_``
 kept, a seeded stratified validation split for early stopping, a time budget,
 a one-line-per-epoch log with ``verbose=1``, torch seeded from
 ``random_state`` and its thread count restored after ``fit`` and ``predict``,

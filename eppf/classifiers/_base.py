@@ -1,6 +1,6 @@
 """The scaffolding shared by eppf's skorch classifiers, written once.
 
-:class:`_SkorchClassifierBase` holds what :class:`EPPF4DClassifier` and
+:class:`SkorchClassifierBase` holds what :class:`EPPF4DClassifier` and
 :class:`PointNetClassifier` have in common: parameter validation (through
 ``_parameter_constraints``), label encoding and ``classes_``, the seeded and
 stratified validation split, early stopping, the learning-rate schedule and
@@ -57,7 +57,7 @@ def _nonzero_int(value):
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value != 0
 
 
-def _positive_int_tuple(length):
+def positive_int_tuple(length):
     """Predicate: an iterable of ``length`` ints >= 1 (bool excluded)."""
 
     def check(value):
@@ -70,7 +70,7 @@ def _positive_int_tuple(length):
 
 
 #: Constraints of the parameters every subclass has.
-_COMMON_CONSTRAINTS = {
+COMMON_CONSTRAINTS = {
     "max_epochs": [Interval(numbers.Integral, 1, None, closed="left")],
     "lr": [Interval(numbers.Real, 0, None, closed="neither")],
     "lr_schedule": [StrOptions(["constant", "plateau"])],
@@ -135,15 +135,15 @@ def _validation_split(y_enc, n_classes, fraction, seed, owner):
     return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)
 
 
-class _SkorchClassifierBase(ClassifierMixin, BaseEstimator):
+class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
     """Base of the skorch-backed classifiers (see the module docstring for the hooks).
 
     Subclasses define ``__init__`` with their parameters (which must include
-    every key of ``_COMMON_CONSTRAINTS``), ``_parameter_constraints`` and the
+    every key of ``COMMON_CONSTRAINTS``), ``_parameter_constraints`` and the
     hooks.
     """
 
-    _parameter_constraints = dict(_COMMON_CONSTRAINTS)
+    _parameter_constraints = dict(COMMON_CONSTRAINTS)
     _seed_names = ("torch", "split")
 
     # ------------------------------------------------------------------ hooks

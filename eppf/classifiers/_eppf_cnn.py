@@ -6,13 +6,12 @@ import numbers
 import numpy as np
 
 from ..utils._param_validation import Interval, Satisfies, StrOptions
-from ._base import _COMMON_CONSTRAINTS, _SkorchClassifierBase, _positive_int_tuple
-from ._base import _silent, _torch_threads, _validation_split  # noqa: F401  (names older code and pickles use)
+from ._base import COMMON_CONSTRAINTS, SkorchClassifierBase, positive_int_tuple
 
 __all__ = ["EPPF4DClassifier"]
 
 
-class EPPF4DClassifier(_SkorchClassifierBase):
+class EPPF4DClassifier(SkorchClassifierBase):
     """The paper's convolutional classifier on EPPF descriptors.
 
     Trains the 4D network of Bobkov et al. (two 4D convolutions, a 2D
@@ -214,12 +213,12 @@ class EPPF4DClassifier(_SkorchClassifierBase):
 
 
     _parameter_constraints = {
-        **_COMMON_CONSTRAINTS,
-        "n_bins": [Satisfies(_positive_int_tuple(4), "a tuple of 4 positive ints")],
+        **COMMON_CONSTRAINTS,
+        "n_bins": [Satisfies(positive_int_tuple(4), "a tuple of 4 positive ints")],
         "conv": [StrOptions(["4d", "3d", "2d"])],
         "weight_decay": [Interval(numbers.Real, 0, None, closed="left")],
         "n_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
-        "filters": [Satisfies(_positive_int_tuple(3), "a tuple of 3 positive ints")],
+        "filters": [Satisfies(positive_int_tuple(3), "a tuple of 3 positive ints")],
         "input_scaling": [StrOptions(["global", "bin", "none"])],
         "precision": [StrOptions(["float32", "bfloat16"])],
     }
@@ -383,4 +382,8 @@ def __getattr__(name):
         from ._callbacks import TimeBudget
 
         return TimeBudget
+    if name in ("_silent", "_torch_threads", "_validation_split"):  # names 0.1 code and pickles use
+        from . import _base
+
+        return getattr(_base, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

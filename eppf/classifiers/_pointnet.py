@@ -6,7 +6,7 @@ import numpy as np
 
 from ..utils._param_validation import Interval, Options, StrOptions
 from ..utils._validation import check_point_clouds, object_seeds
-from ._base import _COMMON_CONSTRAINTS, _SkorchClassifierBase
+from ._base import COMMON_CONSTRAINTS, SkorchClassifierBase
 
 __all__ = ["PointNetClassifier"]
 
@@ -50,7 +50,7 @@ def _make_dataset(X, y, *, seed, rotation, jitter, scale):
 
 
 # ------------------------------------------------------------------- estimator
-class PointNetClassifier(_SkorchClassifierBase):
+class PointNetClassifier(SkorchClassifierBase):
     """PointNet classifier on raw point clouds.
 
     The classification network of Qi et al. [1]_: a learned 3 x 3 input
@@ -219,7 +219,7 @@ class PointNetClassifier(_SkorchClassifierBase):
         self.verbose = verbose
 
     _parameter_constraints = {
-        **_COMMON_CONSTRAINTS,
+        **COMMON_CONSTRAINTS,
         "n_points": [Interval(numbers.Integral, 1, None, closed="left")],
         # Batch norm needs two objects per batch.
         "batch_size": [Interval(numbers.Integral, 2, None, closed="left")],

@@ -261,12 +261,12 @@ def sampling_from_args(args):
 def file_seeds(random_state, root, files):
     """Per-file sampling seeds, exactly those of :func:`eppf.datasets.load_folder`.
 
-    A public helper for this rule belongs in :mod:`eppf.datasets`; until it
-    is there the command line calls the loader's own function.
+    The rule is the folder loaders' (``eppf.datasets``), so the command line
+    and :func:`eppf.datasets.load_folder` seed every file alike.
     """
-    from ..datasets._loaders import _file_seeds
+    from ..datasets._loaders import file_seeds as loader_seeds
 
-    return _file_seeds(random_state, root, files)
+    return loader_seeds(random_state, root, files)
 
 
 def _is_hidden(name):

@@ -8,7 +8,7 @@ import numpy as np
 from sklearn.utils import Bunch
 
 from ..io import read_point_cloud, supported_extensions
-from ._loaders import _check_choice, _check_dir, _check_n_points, _file_seeds, _load_all
+from ._loaders import check_choice, check_dir, check_n_points, file_seeds, load_all
 
 __all__ = ["load_folder"]
 
@@ -109,11 +109,11 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     (['ball', 'crate'], [0, 0, 1, 1], (300, 3))
     """
     owner = "load_folder"
-    root = _check_dir(path, owner)
-    _check_choice(subset, "subset", ("all", "train", "test"), owner)
-    _check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    _check_choice(normals, "normals", ("auto", True, False), owner)
-    n_points = _check_n_points(n_points, owner)
+    root = check_dir(path, owner)
+    check_choice(subset, "subset", ("all", "train", "test"), owner)
+    check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    check_choice(normals, "normals", ("auto", True, False), owner)
+    n_points = check_n_points(n_points, owner)
     if classes is not None and (isinstance(classes, str) or len(classes) == 0):
         raise ValueError(f"{owner}: classes must be None or a non-empty sequence of class names, got {classes!r}")
 
@@ -153,9 +153,9 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
         raise ValueError(f"{owner}: {root!r} holds no object files for subset={subset!r}")
 
     files = [e[0] for e in entries]
-    seeds = _file_seeds(random_state, root, files)
+    seeds = file_seeds(random_state, root, files)
     jobs = [(f, _read_object, (f, n_points, normals, seed)) for f, seed in zip(files, seeds)]
-    clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
+    clouds, skipped = load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
     keep = [k for k, c in enumerate(clouds) if c is not None]
     if not keep:
         raise ValueError(f"{owner}: no object could be loaded ({len(skipped)} files skipped)")

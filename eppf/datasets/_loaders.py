@@ -45,20 +45,20 @@ S3DIS_CLASSES = ("beam", "board", "bookcase", "chair", "column", "door", "sofa",
 # --------------------------------------------------------------------------- shared checks
 
 
-def _check_dir(path, owner):
+def check_dir(path, owner):
     path = os.fspath(path)
     if not os.path.isdir(path):
         raise FileNotFoundError(f"{owner}: no such folder: {path!r}")
     return path
 
 
-def _check_choice(value, name, choices, owner):
+def check_choice(value, name, choices, owner):
     if value not in choices:
         raise ValueError(f"{owner}: {name} must be one of {list(choices)}, got {value!r}")
     return value
 
 
-def _check_n_points(n_points, owner, allow_none=True):
+def check_n_points(n_points, owner, allow_none=True):
     if n_points is None and allow_none:
         return None
     if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
@@ -78,7 +78,7 @@ def _check_resolution(resolution, owner):
     return float(resolution)
 
 
-def _file_seeds(random_state, folder, files):
+def file_seeds(random_state, folder, files):
     """One 64-bit seed per file from ``random_state`` and the file's relative path.
 
     A file's seed does not depend on which other files are loaded (subset,
@@ -107,7 +107,7 @@ def _guarded(func, args):
         return None, str(exc)
 
 
-def _load_all(jobs, *, owner, on_error, n_jobs):
+def load_all(jobs, *, owner, on_error, n_jobs):
     """Run ``jobs`` (list of (filename, func, args)); apply the error policy.
 
     Returns the list of results (None for skipped) and the skipped list.
@@ -329,16 +329,16 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     ((64, 6), ['chair'], 'official')
     """
     owner = "load_modelnet"
-    root = _check_dir(path, owner)
+    root = check_dir(path, owner)
     if version not in (10, 40) or isinstance(version, bool):
         raise ValueError(f"{owner}: version must be 40 or 10, got {version!r}")
-    _check_choice(subset, "subset", ("all", "train", "test"), owner)
-    _check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    _check_choice(normals, "normals", ("auto", True, False), owner)
+    check_choice(subset, "subset", ("all", "train", "test"), owner)
+    check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    check_choice(normals, "normals", ("auto", True, False), owner)
     resolution = _check_resolution(resolution, owner)
     if resolution is not None and n_points is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both (set n_points=None to use resolution)")
-    n_points = _check_n_points(n_points, owner)
+    n_points = check_n_points(n_points, owner)
     layout, folder = _find_modelnet(root, version)
     splits = _subset_splits(subset)
     if layout == "official":
@@ -358,10 +358,10 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
                 split_of += [s] * len(found)
         if not files:
             raise ValueError(f"{owner}: {folder!r} holds no .off files for subset={subset!r}")
-        seeds = _file_seeds(random_state, folder, files)
+        seeds = file_seeds(random_state, folder, files)
         use_normals = normals is not False
         jobs = [(f, _from_mesh, (f, n_points, resolution, use_normals, seed)) for f, seed in zip(files, seeds)]
-        clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
+        clouds, skipped = load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
         ids = [os.path.splitext(os.path.basename(f))[0] for f in files]
         return _finish(owner, clouds, labels, names, split_of, ids, files, skipped, return_X_y, layout=layout)
     if resolution is not None:
@@ -391,7 +391,7 @@ def _load_resampled(folder, version, splits, n_points, normals, on_error, n_jobs
             split_of.append(s)
             ids.append(obj_id)
     jobs = [(f, _from_cloud_file, (f, n_points, normals, 0, True)) for f in files]
-    clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
+    clouds, skipped = load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
     return _finish(owner, clouds, labels, names, split_of, ids, files, skipped, return_X_y, layout="resampled")
 
 
@@ -406,7 +406,7 @@ def _load_hdf5(folder, version, splits, n_points, normals, on_error, return_X_y,
     for s in splits:
         files += [(f, s) for f in sorted(glob.glob(os.path.join(folder, f"ply_data_{s}*.h5")), key=_h5_file_index)]
     jobs = [(f, _read_h5, (f, n_points, normals)) for f, _ in files]
-    blocks, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=None)
+    blocks, skipped = load_all(jobs, owner=owner, on_error=on_error, n_jobs=None)
     clouds, labels, split_of, ids, filenames = [], [], [], [], []
     for (f, s), block in zip(files, blocks):
         if block is None:
@@ -507,11 +507,11 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     (2, (200, 3), {'train'})
     """
     owner = "load_scannet_objects"
-    root = _check_dir(path, owner)
-    _check_choice(subset, "subset", ("all", "train", "test"), owner)
-    _check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    _check_choice(normals, "normals", ("auto", True, False), owner)
-    n_points = _check_n_points(n_points, owner)
+    root = check_dir(path, owner)
+    check_choice(subset, "subset", ("all", "train", "test"), owner)
+    check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    check_choice(normals, "normals", ("auto", True, False), owner)
+    n_points = check_n_points(n_points, owner)
     resolution = _check_resolution(resolution, owner)
     if n_points is None and resolution is None:
         raise ValueError(f"{owner}: give n_points or resolution (meshes must be sampled)")
@@ -556,9 +556,9 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     if not entries:
         raise ValueError(f"{owner}: {root!r} holds no object files of the classes {names} for subset={subset!r}")
     files = [e[0] for e in entries]
-    seeds = _file_seeds(random_state, root, files)
+    seeds = file_seeds(random_state, root, files)
     jobs = [(f, _from_any, (f, n_points, resolution, normals, seed)) for f, seed in zip(files, seeds)]
-    clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
+    clouds, skipped = load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
     labels = [index[e[1]] for e in entries]
     ids = [os.path.splitext(os.path.basename(f))[0] for f in files]
     return _finish(owner, clouds, labels, names, [e[2] for e in entries], ids, files, skipped, return_X_y)
@@ -630,10 +630,10 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     (4, ['test', 'train'], 'Area_1/office_1/chair_0')
     """
     owner = "load_s3dis_objects"
-    root = _check_dir(path, owner)
-    _check_choice(subset, "subset", ("all", "train", "test"), owner)
-    _check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    n_points = _check_n_points(n_points, owner)
+    root = check_dir(path, owner)
+    check_choice(subset, "subset", ("all", "train", "test"), owner)
+    check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    n_points = check_n_points(n_points, owner)
     if isinstance(train_size, bool) or not isinstance(train_size, numbers.Real) or not 0 < train_size < 1:
         raise ValueError(f"{owner}: train_size must be a number in (0, 1), got {train_size!r}")
     if isinstance(classes, str) or len(classes) == 0:
@@ -662,10 +662,10 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
         n_train = int(np.floor(train_size * len(members) + 0.5))
         for rank, j in enumerate(order):
             split_of[members[j]] = "train" if rank < n_train else "test"
-    seeds = _file_seeds(rng, root, [f for f, _ in entries])
+    seeds = file_seeds(rng, root, [f for f, _ in entries])
     keep = [k for k in range(len(entries)) if split_of[k] in _subset_splits(subset)]
     jobs = [(entries[k][0], _from_cloud_file, (entries[k][0], n_points, False, seeds[k])) for k in keep]
-    clouds, skipped = _load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
+    clouds, skipped = load_all(jobs, owner=owner, on_error=on_error, n_jobs=n_jobs)
     kept = [entries[k] for k in keep]
     ids = ["/".join(f.split(os.sep)[-4:-2] + [os.path.basename(f)[:-4]]) for f, _ in kept]
     return _finish(owner, clouds, [index[c] for _, c in kept], names, [split_of[k] for k in keep], ids,

@@ -190,7 +190,7 @@ class TrainingSettings:
         return lines
 
 
-class _Descriptors:
+class TrainingDescriptors:
     """EPPF descriptors of one set of clouds, computed (or read) once."""
 
     def __init__(self, settings, cache, clouds, train, test):
@@ -325,7 +325,7 @@ def run_classification(
     if train.size < 2 or test.size < 1:
         raise ExperimentError(f"--data: need training and test objects, got {train.size} and {test.size}")
     cache = DescriptorCache(cache_dir if cache_dir is not None else (out and f"{out}/cache"), log)
-    descriptors = _Descriptors(settings, cache, ds.clouds, train, test)
+    descriptors = TrainingDescriptors(settings, cache, ds.clouds, train, test)
     rows, preds = [], {}
     for key in models:
         r = train_and_score(key, settings, ds.clouds, ds.y, train, test, descriptors, log)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from ..metrics import METRICS
-from ._classification import MODELS, TrainingOptions, _Descriptors, check_models, prepare_training, train_and_score
+from ._classification import MODELS, TrainingOptions, TrainingDescriptors, check_models, prepare_training, train_and_score
 from ._common import (
     DescriptorCache,
     ExperimentError,
@@ -123,7 +123,7 @@ def run_noise(
             noisy = GaussianNoise(sigma, relative_to="unit_cube", random_state=seed).fit_transform([clouds[i] for i in used])
             for i, c in zip(used, noisy):
                 clouds[i] = c
-        descriptors = _Descriptors(settings, cache, clouds, train, test)
+        descriptors = TrainingDescriptors(settings, cache, clouds, train, test)
         for key in models:
             r = train_and_score(key, settings, clouds, ds.y, train, test, descriptors, log)
             r.pop("y_pred")

@@ -115,13 +115,13 @@ def triplets_for(tolerance, confidence):
 
 def _orient_packed(pts, off, normals, orientation, owner):
     """Flip normals in place as :func:`estimate_normals` orients PCA normals."""
-    from ._normals import _ORIENT_CENTROID, _ORIENT_NONE, _resolve_orientation
+    from ._normals import ORIENT_CENTROID, ORIENT_NONE, resolve_orientation
 
-    mode, viewpoint = _resolve_orientation(orientation, owner)
-    if mode == _ORIENT_NONE or pts.shape[0] == 0:
+    mode, viewpoint = resolve_orientation(orientation, owner)
+    if mode == ORIENT_NONE or pts.shape[0] == 0:
         return
     sizes = np.diff(off)
-    if mode == _ORIENT_CENTROID:
+    if mode == ORIENT_CENTROID:
         nonempty = sizes > 0
         sums = np.add.reduceat(pts, off[:-1][nonempty], axis=0)
         centroids = np.zeros((sizes.shape[0], 3))
@@ -346,11 +346,11 @@ default="centroid"
 
 def hough_single(points, n_neighbors, orientation, n_jobs, random_state, method_params, owner):
     """One cloud, validated as :func:`estimate_normals` validates it."""
-    from ._normals import _check_n_neighbors, _resolve_orientation
+    from ._normals import check_n_neighbors, resolve_orientation
 
     cloud = check_point_cloud(points, owner=owner, min_points=3, allow_normals=False)
-    k = _check_n_neighbors(n_neighbors, owner)
-    _resolve_orientation(orientation, owner)
+    k = check_n_neighbors(n_neighbors, owner)
+    resolve_orientation(orientation, owner)
     n_threads = check_n_jobs(n_jobs, owner=owner)
     off = np.array([0, cloud.shape[0]], dtype=np.int64)
     return hough_batch(cloud, off, k, orientation, n_threads, random_state, method_params, owner)

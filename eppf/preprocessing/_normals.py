@@ -14,10 +14,10 @@ from ..utils._validation import _scale_exponents, check_n_jobs, check_point_clou
 
 __all__ = ["estimate_normals", "estimate_normals_batch"]
 
-_ORIENT_NONE, _ORIENT_CENTROID, _ORIENT_VIEWPOINT = 0, 1, 2
+ORIENT_NONE, ORIENT_CENTROID, _ORIENT_VIEWPOINT = 0, 1, 2
 
 
-def _check_n_neighbors(n_neighbors, owner):
+def check_n_neighbors(n_neighbors, owner):
     if isinstance(n_neighbors, bool) or not isinstance(n_neighbors, numbers.Integral):
         raise TypeError(f"{owner}: n_neighbors must be an int, got {type(n_neighbors).__name__}")
     if n_neighbors < 3:
@@ -25,14 +25,14 @@ def _check_n_neighbors(n_neighbors, owner):
     return int(n_neighbors)
 
 
-def _resolve_orientation(orientation, owner):
+def resolve_orientation(orientation, owner):
     """Return (kernel mode, viewpoint as float64 (3,))."""
     viewpoint = np.zeros(3, dtype=np.float64)
     if orientation is None:
-        return _ORIENT_NONE, viewpoint
+        return ORIENT_NONE, viewpoint
     if isinstance(orientation, str):
         if orientation == "centroid":
-            return _ORIENT_CENTROID, viewpoint
+            return ORIENT_CENTROID, viewpoint
         if orientation in ("origin", "viewpoint"):
             return _ORIENT_VIEWPOINT, viewpoint
         raise ValueError(
@@ -215,8 +215,8 @@ default="centroid"
         return _other_method(method, method_params, owner).hough_single(
             points, n_neighbors, orientation, n_jobs, random_state, method_params, owner)
     cloud = check_point_cloud(points, owner=owner, min_points=3, allow_normals=False)
-    k = _check_n_neighbors(n_neighbors, owner)
-    mode, viewpoint = _resolve_orientation(orientation, owner)
+    k = check_n_neighbors(n_neighbors, owner)
+    mode, viewpoint = resolve_orientation(orientation, owner)
     # Our own copy: brought into the kernel's magnitude window by an exact 2**e
     # (PCA normals are scale-invariant), the viewpoint with it.
     e = int(condition_point_clouds([cloud], owner=owner, single=True)[0])
@@ -295,8 +295,8 @@ default="centroid"
             f"{owner}: offsets must be non-decreasing from 0 to len(points) = {pts.shape[0]}, "
             f"got offsets[0] = {off[0]} and offsets[-1] = {off[-1]}"
         )
-    k = _check_n_neighbors(n_neighbors, owner)
-    mode, viewpoint = _resolve_orientation(orientation, owner)
+    k = check_n_neighbors(n_neighbors, owner)
+    mode, viewpoint = resolve_orientation(orientation, owner)
     n_threads = check_n_jobs(n_jobs, owner=owner)
     if method != "pca" or method_params is not None:
         return _other_method(method, method_params, owner).hough_batch(
@@ -322,7 +322,7 @@ default="centroid"
             np.ldexp(pts[off[j]:off[j + 1]], int(exps[j]), out=pts[off[j]:off[j + 1]])
         # a viewpoint off the origin moves with each object's own 2**e: oriented below
         orient_here = mode == _ORIENT_VIEWPOINT and viewpoint.any()
-    kmode = _ORIENT_NONE if orient_here else mode
+    kmode = ORIENT_NONE if orient_here else mode
     n_objects = off.shape[0] - 1
     if n_objects == 1:
         n_threads = max(1, min(n_threads, max_n // 512))

@@ -12,7 +12,7 @@ from skorch import NeuralNetClassifier
 from skorch.callbacks import Callback
 
 from eppf import EPPF4DClassifier, PointNetClassifier
-from eppf.classifiers._base import _SkorchClassifierBase, _torch_threads, _validation_split
+from eppf.classifiers._base import SkorchClassifierBase, _torch_threads, _validation_split
 from eppf.classifiers._callbacks import EpochLog, TimeBudget
 
 N_BINS = (4, 2, 3, 2)
@@ -56,7 +56,7 @@ KINDS = ["eppf", "pointnet"]
 
 def test_both_classifiers_share_the_base():
     for cls in (EPPF4DClassifier, PointNetClassifier):
-        assert issubclass(cls, _SkorchClassifierBase)
+        assert issubclass(cls, SkorchClassifierBase)
         assert not issubclass(cls, NeuralNetClassifier)  # wrapped, not subclassed
 
 

@@ -112,7 +112,7 @@ def test_empty_or_missing_folder(tmp_path):
 
 def test_every_supported_format_in_any_case_is_loaded_like_read_point_cloud(tmp_path):
     """load_folder reads each file with read_point_cloud and the file's own seed, for every format."""
-    from eppf.datasets._loaders import _file_seeds
+    from eppf.datasets._loaders import file_seeds
     from eppf.io import supported_extensions
 
     rng = np.random.RandomState(1)
@@ -131,7 +131,7 @@ def test_every_supported_format_in_any_case_is_loaded_like_read_point_cloud(tmp_
     for n_points in (None, 64):
         data = load_folder(tmp_path, n_points=n_points, random_state=5)
         assert len(data.data) == len(supported_extensions())
-        seeds = _file_seeds(5, str(tmp_path), list(data.filenames))
+        seeds = file_seeds(5, str(tmp_path), list(data.filenames))
         for got, name, seed in zip(data.data, data.filenames, seeds):
             assert_array_equal(got, read_point_cloud(name, n_points=n_points, random_state=seed))
             assert got.shape[0] == (n_points or (2048 if name.lower().endswith((".off", ".obj", ".stl")) else 40))
