@@ -30,6 +30,7 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
+from ..utils._validation import check_n_points, check_resolution
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
 
@@ -56,26 +57,6 @@ def check_choice(value, name, choices, owner):
     if value not in choices:
         raise ValueError(f"{owner}: {name} must be one of {list(choices)}, got {value!r}")
     return value
-
-
-def check_n_points(n_points, owner, allow_none=True):
-    if n_points is None and allow_none:
-        return None
-    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
-        raise TypeError(f"{owner}: n_points must be an int{' or None' if allow_none else ''}, got {type(n_points).__name__}")
-    if n_points < 2:
-        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
-    return int(n_points)
-
-
-def _check_resolution(resolution, owner):
-    if resolution is None:
-        return None
-    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
-        raise TypeError(f"{owner}: resolution must be a number or None, got {type(resolution).__name__}")
-    if not (resolution > 0 and np.isfinite(resolution)):
-        raise ValueError(f"{owner}: resolution must be positive, got {resolution}")
-    return float(resolution)
 
 
 def file_seeds(random_state, folder, files):
@@ -335,7 +316,7 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
-    resolution = _check_resolution(resolution, owner)
+    resolution = check_resolution(resolution, owner)
     if resolution is not None and n_points is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both (set n_points=None to use resolution)")
     n_points = check_n_points(n_points, owner)
@@ -512,7 +493,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
     n_points = check_n_points(n_points, owner)
-    resolution = _check_resolution(resolution, owner)
+    resolution = check_resolution(resolution, owner)
     if n_points is None and resolution is None:
         raise ValueError(f"{owner}: give n_points or resolution (meshes must be sampled)")
     if isinstance(classes, str) or len(classes) == 0:

@@ -7,6 +7,7 @@ import numpy as np
 from sklearn.utils import check_random_state
 
 from ..utils._sampling import resample
+from ..utils._validation import check_n_points, check_resolution
 from ..utils._sampling import object_rng, sample_mesh
 from . import _ply
 from ._common import Cloud, Mesh, read_bytes
@@ -25,26 +26,6 @@ MESH_POINTS = 2048
 def _check_normals_arg(normals, owner):
     if normals not in ("auto", True, False):
         raise ValueError(f"{owner}: normals must be 'auto', True or False, got {normals!r}")
-
-
-def _check_n_points(n_points, owner):
-    if n_points is None:
-        return None
-    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
-        raise TypeError(f"{owner}: n_points must be an int or None, got {type(n_points).__name__}")
-    if n_points < 2:
-        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
-    return int(n_points)
-
-
-def _check_resolution(resolution, owner):
-    if resolution is None:
-        return None
-    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
-        raise TypeError(f"{owner}: resolution must be a number or None, got {type(resolution).__name__}")
-    if not (resolution > 0 and np.isfinite(resolution)):
-        raise ValueError(f"{owner}: resolution must be positive and finite, got {resolution}")
-    return float(resolution)
 
 
 def _rng(random_state, owner):
@@ -225,8 +206,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     _check_normals_arg(normals, owner)
     if mesh not in ("sample", "vertices"):
         raise ValueError(f"{owner}: mesh must be 'sample' or 'vertices', got {mesh!r}")
-    n_points = _check_n_points(n_points, owner)
-    resolution = _check_resolution(resolution, owner)
+    n_points = check_n_points(n_points, owner)
+    resolution = check_resolution(resolution, owner)
     if n_points is not None and resolution is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both")
     rng = _rng(random_state, owner)

@@ -521,3 +521,25 @@ def check_int(value, name, owner, low, high=None):
         bound = f">= {low}" if high is None else f"in [{low}, {high}]"
         raise ValueError(f"{owner}: {name} must be {bound}, got {value}")
     return int(value)
+
+
+def check_n_points(n_points, owner, allow_none=True):
+    """A point count parameter: an int >= 2 (or None when ``allow_none``), else a TypeError/ValueError naming ``owner``."""
+    if n_points is None and allow_none:
+        return None
+    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
+        raise TypeError(f"{owner}: n_points must be an int{' or None' if allow_none else ''}, got {type(n_points).__name__}")
+    if n_points < 2:
+        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
+    return int(n_points)
+
+
+def check_resolution(resolution, owner):
+    """A sampling resolution: a positive finite number or None, else a TypeError/ValueError naming ``owner``."""
+    if resolution is None:
+        return None
+    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
+        raise TypeError(f"{owner}: resolution must be a number or None, got {type(resolution).__name__}")
+    if not (resolution > 0 and np.isfinite(resolution)):
+        raise ValueError(f"{owner}: resolution must be positive and finite, got {resolution}")
+    return float(resolution)

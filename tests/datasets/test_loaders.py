@@ -196,7 +196,7 @@ def test_modelnet_hdf5_layout(tmp_path):
         ({"on_error": "ignore"}, ValueError, "on_error must be one of ['raise', 'skip'], got 'ignore'"),
         ({"n_points": 1}, ValueError, "load_modelnet: n_points must be >= 2, got 1"),
         ({"n_points": 2.0}, TypeError, "load_modelnet: n_points must be an int or None, got float"),
-        ({"resolution": 0.0, "n_points": None}, ValueError, "resolution must be positive, got 0.0"),
+        ({"resolution": 0.0, "n_points": None}, ValueError, "resolution must be positive and finite, got 0.0"),
         ({"resolution": 0.1}, ValueError, "give n_points or resolution, not both"),
         ({"n_points": None}, ValueError, "meshes need n_points or resolution"),
         ({"normals": "yes"}, ValueError, "normals must be one of ['auto', True, False]"),
