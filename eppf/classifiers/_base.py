@@ -150,6 +150,25 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
     def _check_params(self):
         """Validate the parameters; subclasses may return derived values."""
         validate_params(self)
+        self._check_device()
+
+    def _check_device(self):
+        """A ValueError naming the estimator when ``device`` names hardware torch cannot use here."""
+        import torch
+
+        try:
+            device = torch.device(self.device)
+        except (RuntimeError, TypeError, ValueError) as exc:
+            raise ValueError(f"{self._owner}: device={self.device!r} is not a torch device ({exc})") from None
+        if device.type == "cuda" and not torch.cuda.is_available():
+            raise ValueError(
+                f"{self._owner}: device={self.device!r} but torch sees no CUDA GPU on this machine "
+                f"(torch {torch.__version__}, CUDA build: {torch.version.cuda or 'no'}); use device='cpu'"
+            )
+        if device.type == "cuda" and device.index is not None and device.index >= torch.cuda.device_count():
+            raise ValueError(
+                f"{self._owner}: device={self.device!r} but only {torch.cuda.device_count()} CUDA device(s) exist"
+            )
 
     def _fit_inputs(self, X, seeds):  # pragma: no cover - abstract
         raise NotImplementedError

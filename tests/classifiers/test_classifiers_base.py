@@ -293,3 +293,17 @@ def test_tags(kind):
     assert clf.__sklearn_tags__().estimator_type == "classifier"
     assert not clf.__sklearn_tags__().non_deterministic
     assert clf.set_params(device="cuda").__sklearn_tags__().non_deterministic
+
+
+@pytest.mark.parametrize("cls", [EPPF4DClassifier, PointNetClassifier])
+def test_unusable_device_is_a_clear_error(cls):
+    import torch
+
+    X = np.random.default_rng(0).dirichlet(np.ones(1200), size=8) if cls is EPPF4DClassifier else \
+        [np.random.default_rng(k).normal(size=(64, 3)) for k in range(8)]
+    y = np.arange(8) % 2
+    with pytest.raises(ValueError, match=re.escape(f"{cls.__name__}: device='tpu9' is not a torch device")):
+        cls(device="tpu9", max_epochs=1).fit(X, y)
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match=re.escape(f"{cls.__name__}: device='cuda' but torch sees no CUDA GPU")):
+            cls(device="cuda", max_epochs=1).fit(X, y)
