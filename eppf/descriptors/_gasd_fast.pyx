@@ -12,6 +12,8 @@ from libc.math cimport sqrt, floor, fabs, cos, sin, atan2, frexp, ldexp
 from libc.stdint cimport int8_t, int64_t
 from libc.string cimport memset
 
+from ..utils._common cimport pow2_scale
+
 # PCL runs its eigen solver in single precision: its branch thresholds are
 # float's (Eigen::NumTraits<float>::epsilon() and dummy_precision()).
 cdef double _F_EPS = 1.1920928955078125e-07
@@ -214,29 +216,6 @@ cdef inline int64_t _clamp_index(double t, int64_t lo, int64_t hi) noexcept nogi
     if t >= <double>hi:
         return hi
     return <int64_t>floor(t)
-
-
-cdef double pow2_scale(const double* pts, Py_ssize_t n) noexcept nogil:
-    """A power of two that brings the largest coordinate to [0.5, 1): exact to apply.
-
-    Every kernel works on ``scale * p``, so coordinates near 1e308 or in the
-    subnormal range neither overflow nor underflow (squares, sums), and any
-    other cloud gives bit for bit the result it would give unscaled.
-    """
-    cdef double m = 0.0
-    cdef Py_ssize_t i
-    cdef int e
-    for i in range(3 * n):
-        if fabs(pts[i]) > m:
-            m = fabs(pts[i])
-    if not (m > 0.0):
-        return 1.0
-    frexp(m, &e)
-    if e < -1000:
-        e = -1000
-    elif e > 1000:
-        e = 1000
-    return ldexp(1.0, -e)
 
 
 cdef inline void _flip_majority(const double* pts, Py_ssize_t n, double sc, const double* c, double* axis) noexcept nogil:

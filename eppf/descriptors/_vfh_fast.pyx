@@ -10,7 +10,7 @@ from cython.parallel cimport prange
 from libc.math cimport sqrt, floor, fabs, atan2, frexp, ldexp, M_PI
 from libc.stdint cimport int64_t
 
-from ..utils._common cimport clamp_floor64
+from ..utils._common cimport clamp_floor64, pow2_scale
 
 DEF N_ANGLE = 45
 DEF N_VIEW = 128
@@ -28,28 +28,10 @@ cdef inline int64_t _round_bin(double t, int64_t n) noexcept nogil:
     return _bin(t + 0.5, n)
 
 
-cdef double _pow2_scale(const double* pts, Py_ssize_t n) noexcept nogil:
-    """A power of two that brings the largest coordinate to [0.5, 1) (exact to apply)."""
-    cdef double m = 0.0
-    cdef Py_ssize_t i
-    cdef int e
-    for i in range(3 * n):
-        if fabs(pts[i]) > m:
-            m = fabs(pts[i])
-    if not (m > 0.0):
-        return 1.0
-    frexp(m, &e)
-    if e < -1000:
-        e = -1000
-    elif e > 1000:
-        e = 1000
-    return ldexp(1.0, -e)
-
-
 cdef void _vfh_object(const double* pts, const double* nrm, Py_ssize_t n, const double* vp,
                       bint normalize_bins, bint normalize_distances, bint size_component,
                       bint homogeneous, bint pcl_centroid, double* out) noexcept nogil:
-    cdef double sc = _pow2_scale(pts, n)
+    cdef double sc = pow2_scale(pts, n)
     cdef float cf[3]
     cdef float fv
     cdef bint single = pcl_centroid

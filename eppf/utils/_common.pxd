@@ -6,11 +6,14 @@
   from one 64-bit seed per object so results do not depend on thread count.
 - ``rand_below``: an unbiased-enough bounded draw (Lemire's multiply-shift on
   the high 32 bits), fine for clouds below 2**32 points.
+- ``pow2_scale``: the exact power of two that brings a cloud's largest
+  coordinate to [0.5, 1), for kernels that work on scaled coordinates.
 - ``clamp_floor`` / ``clamp_floor64``: the one way a kernel turns a float into
   an index: ``floor(t)`` clipped to ``[0, n - 1]``, clamped in floating point
   before the conversion so that NaN (to 0), infinities and huge values give an
   index in range for every double.
 """
+from libc.math cimport fabs, frexp, ldexp
 from libc.stdint cimport int64_t, uint64_t, uint32_t
 
 cdef extern from *:
@@ -58,3 +61,27 @@ cdef inline int64_t clamp_floor64(double t, int64_t n) noexcept nogil:
     if t >= <double>n:
         return n - 1
     return <int64_t>t
+
+
+cdef inline double pow2_scale(const double* pts, Py_ssize_t n) noexcept nogil:
+    """A power of two that brings the largest |coordinate| of ``n`` xyz rows to [0.5, 1): exact to apply.
+
+    A kernel working on ``scale * p`` then neither overflows nor underflows
+    (squares, sums) near 1e308 or in the subnormal range, and any other cloud
+    gives bit for bit the result it gives unscaled. The exponent is bounded to
+    [-1000, 1000]; an all-zero cloud gives 1.
+    """
+    cdef double m = 0.0
+    cdef Py_ssize_t i
+    cdef int e
+    for i in range(3 * n):
+        if fabs(pts[i]) > m:
+            m = fabs(pts[i])
+    if not (m > 0.0):
+        return 1.0
+    frexp(m, &e)
+    if e < -1000:
+        e = -1000
+    elif e > 1000:
+        e = 1000
+    return ldexp(1.0, -e)
