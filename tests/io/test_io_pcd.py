@@ -162,38 +162,16 @@ def test_pcd_malformed_header(tmp_path, header, msg):
 
 
 def _lzf_compress(data):
-    """A small greedy LZF encoder (hash of 3 bytes, references up to 8 KiB back), for test streams."""
-    out, lit, table, i, n = bytearray(), bytearray(), {}, 0, len(data)
+    """The fuzz script's greedy LZF encoder (3-byte hash, references up to 8 KiB back): one encoder for both."""
+    import os
+    import sys
 
-    def flush():
-        for k in range(0, len(lit), 32):
-            chunk = lit[k:k + 32]
-            out.append(len(chunk) - 1)
-            out.extend(chunk)
-        lit.clear()
-
-    while i < n:
-        key = bytes(data[i:i + 3])
-        ref = table.get(key)
-        table[key] = i
-        if ref is not None and len(key) == 3 and i - ref - 1 < 8192:
-            length = 3
-            while i + length < n and length < 264 and data[ref + length] == data[i + length]:
-                length += 1
-            flush()
-            off = i - ref - 1
-            if length - 2 < 7:
-                out.append(((length - 2) << 5) | (off >> 8))
-            else:
-                out.append((7 << 5) | (off >> 8))
-                out.append(length - 2 - 7)
-            out.append(off & 0xFF)
-            i += length
-        else:
-            lit.append(data[i])
-            i += 1
-    flush()
-    return bytes(out)
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "scripts"))
+    try:
+        import fuzz_files
+    finally:
+        sys.path.pop(0)
+    return fuzz_files._lzf_compress(data)
 
 
 def _compressed_pcd(path, xyz, csize=None, usize=None, points=None):
