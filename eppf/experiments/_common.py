@@ -543,7 +543,7 @@ def portable_command(command):
     Examples
     --------
     >>> from eppf.experiments._common import portable_command
-    >>> portable_command("eppf-experiments retrieval --data /home/me/sets/modelnet10_1024.npz --cache-dir /tmp/c")
+    >>> portable_command("eppf-experiments retrieval --data my_sets/modelnet10_1024.npz --cache-dir my_cache")
     'eppf-experiments retrieval --data modelnet10_1024.npz'
     """
     try:
