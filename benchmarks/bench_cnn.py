@@ -116,8 +116,8 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
   above with ``--precision bfloat16``: 14 epochs (best 8), validation 88.7%,
   test 81.06% total / 79.58% mean class (float32: 80.73% / 79.33%).
 * Descriptor-pool augmentation with the faster training (``descriptors
-  --draws 4 --n-neighbors 20 --cache /tmp/mn10_4draws.npz`` then
-  ``modelnet --cache /tmp/mn10_4draws.npz --variants 4d --threads 2
+  --draws 4 --n-neighbors 20 --cache mn10_4draws.npz`` then
+  ``modelnet --cache mn10_4draws.npz --variants 4d --threads 2
   --max-epochs 40 --patience 8 --lr-schedule plateau --precision bfloat16
   --augment``): every epoch sees a fresh one of 4 descriptor draws per
   object; 22 epochs (best 14), 17.2 s per epoch, validation 90.5%, test
@@ -130,8 +130,8 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
   more: 24 epochs (best 14), validation 90.7%, test 83.26% / 82.21% (TTA
   83.15% / 82.13%).
 * Stretched pools (``descriptors --draws 8 --n-neighbors 30 --stretch 0.8
-  1.25 --cache /tmp/mn10_stretch8.npz`` then ``modelnet --cache
-  /tmp/mn10_stretch8.npz --variants 4d --threads 1 --max-epochs 60
+  1.25 --cache mn10_stretch8.npz`` then ``modelnet --cache
+  mn10_stretch8.npz --variants 4d --threads 1 --max-epochs 60
   --patience 10 --lr-schedule plateau --precision bfloat16 --augment``):
   training draws 1 to 7 describe copies of the clouds stretched per axis by
   log-uniform factors in [0.8, 1.25] (``eppf.descriptor_pool`` with
@@ -177,6 +177,7 @@ import argparse
 import os
 import sys
 import time
+import tempfile
 
 import numpy as np
 
@@ -184,7 +185,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _data import default_dir, require  # noqa: E402
 
 DATA = os.path.join(default_dir(), "modelnet10_1024.npz") if default_dir() else None
-CACHE = "/tmp/eppf_bench_cnn_modelnet10.npz"
+CACHE = os.path.join(tempfile.gettempdir(), "eppf_bench_cnn_modelnet10.npz")
 
 
 def throughput(args):
