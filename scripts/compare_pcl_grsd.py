@@ -24,7 +24,9 @@ import sys
 import time
 
 import numpy as np
-from sklearn.metrics import pairwise_distances_chunked
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _pcl_compare import loo_l1  # noqa: E402
 
 DATASETS = ("modelnet10_1024", "dales_objects")
 
@@ -47,18 +49,6 @@ def load(data_dir, name, n=None):
     P, _, O = pack_point_clouds(clouds)
     N = estimate_normals_batch(P, O, 10, "centroid", n_jobs=1)
     return [np.hstack([P[a:b], N[a:b]]) for a, b in zip(O[:-1], O[1:])], labels[rows], rows
-
-
-def loo_l1(X, y):
-    """Leave-one-out 1-NN total accuracy with the L1 distance (ties to the lowest index)."""
-    pred = np.empty(len(X), dtype=y.dtype)
-    start = 0
-    for block in pairwise_distances_chunked(X, metric="manhattan", working_memory=256):
-        r = np.arange(start, start + len(block))
-        block[np.arange(len(block)), r] = np.inf
-        pred[r] = y[np.argmin(block, axis=1)]
-        start += len(block)
-    return float(np.mean(pred == y))
 
 
 def loo_kl(X, y):
