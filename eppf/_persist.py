@@ -599,7 +599,6 @@ _MODULES_0_1 = {
     "eppf._sampling": "eppf.utils._sampling",
     "eppf._validation": "eppf.utils._validation",
     "eppf._chunks": "eppf.utils._chunks",
-    "eppf.preprocessing": "eppf.preprocessing",
 }
 
 
