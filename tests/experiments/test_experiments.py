@@ -2,6 +2,7 @@
 
 import csv
 import os
+import re
 
 import numpy as np
 import pytest
@@ -324,3 +325,16 @@ def test_retrieval_runs_every_registered_descriptor(tiny, tmp_path):
     for r in rows:
         assert 0.0 <= float(r["total_accuracy_mean"]) <= 1.0
         assert f"| {r['descriptor']} |" in md
+
+
+def test_shared_settings_reject_unknown_keywords_and_split_training_options():
+    from eppf.experiments import ExperimentSettings, TrainingOptions
+
+    with pytest.raises(TypeError, match=re.escape("run_retrieval() got unexpected keyword argument(s) ['quik']")):
+        run_retrieval("builtin", quik=True)
+    with pytest.raises(TypeError, match=re.escape("run_noise() got unexpected keyword argument(s) ['epoch']")):
+        run_noise("builtin", epoch=2)
+    s = ExperimentSettings.from_kwargs("f", {"quick": True, "n_jobs": 1})
+    assert s.astuple() == ("auto", 0, 1, True, None, True, None)
+    options, rest = TrainingOptions.split("f", {"epochs": 3, "patience": 1, "quick": True})
+    assert (options.epochs, options.patience, options.validation_fraction) == (3, 1, 0.1) and rest == {"quick": True}
