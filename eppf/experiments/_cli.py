@@ -4,8 +4,10 @@ import argparse
 import os
 import shlex
 import sys
+import textwrap
 
-from ._common import DESCRIPTORS, SCALINGS, ExperimentError, data_name
+from ._common import DESCRIPTORS, SCALINGS, ExperimentError, data_name, load_data
+from ._presets import PRESETS, apply_preset
 
 __all__ = ["main"]
 
@@ -60,6 +62,26 @@ def _add_training(p, models, default_models):
                    help="score on at most this many test objects per class (seeded; default: all)")
 
 
+def _presets_epilog(experiment):
+    width = 100
+    text = textwrap.fill("presets (--preset NAME): the paper's ModelNet40 protocol, on any data set with its own "
+                         "train/test split and at least 1024 points per object:", width) + "\n"
+    for p in PRESETS.values():
+        text += textwrap.fill(p.summary, width, initial_indent=f"  {p.name:<23}", subsequent_indent=" " * 25) + "\n"
+    if experiment == "noise":
+        text += textwrap.fill(
+            "The noise experiment sweeps a noise preset's sigma from 0 (levels 0 and sigma) instead of adding it "
+            "once; the clean and occluded presets sweep the levels "
+            + ", ".join(f"{s:g}" for s in PRESETS["modelnet40-clean"].noise_levels)
+            + "; --levels replaces the preset's levels.", width)
+    return text.rstrip("\n")
+
+
+def _add_preset(p):
+    p.add_argument("--preset", choices=list(PRESETS), default=None, metavar="NAME",
+                   help="resample and perturb every object as a preset of the paper's protocol says (listed below)")
+
+
 def build_parser():
     """The argument parser of ``python -m eppf.experiments``."""
     from ._classification import DEFAULT_MODELS, MODELS
@@ -73,14 +95,19 @@ def build_parser():
     p.add_argument("--descriptors", nargs="+", choices=list(DESCRIPTORS), default=list(DESCRIPTORS))
     p = sub.add_parser("ablation", help="EPPF retrieval with each point-pair function removed")
     _add_common(p, draws=True)
-    p = sub.add_parser("classification", help="Table III: PointNet and the EPPF 2D/3D/4D CNNs on the test split")
+    p = sub.add_parser("classification", help="Table III: PointNet and the EPPF 2D/3D/4D CNNs on the test split",
+                       epilog=_presets_epilog("classification"), formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_common(p)
     _add_training(p, MODELS, DEFAULT_MODELS)
-    p = sub.add_parser("noise", help="accuracy against Gaussian noise, retraining at every level")
+    _add_preset(p)
+    p = sub.add_parser("noise", help="accuracy against Gaussian noise, retraining at every level",
+                       epilog=_presets_epilog("noise"), formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_common(p)
     _add_training(p, MODELS, DEFAULT_NOISE_MODELS)
+    _add_preset(p)
     p.add_argument("--levels", type=_levels, default=None,
-                   help=f"noise sigmas as fractions of the unit cube, e.g. '0,0.02,0.06' (default {DEFAULT_LEVELS})")
+                   help=f"noise sigmas as fractions of the unit cube, e.g. '0,0.02,0.06' (default {DEFAULT_LEVELS}, "
+                        "or the preset's levels)")
     p = sub.add_parser("runtime", help="milliseconds per object of every descriptor and of normal estimation")
     _add_common(p)
     p.add_argument("--n-objects", type=int, default=None, help="objects timed (default 200, 20 with --quick)")
@@ -127,7 +154,8 @@ def main(argv=None):
     except SystemExit as exc:
         return int(exc.code or 0)
     command = f"{PROG} {shlex.join(argv)}"
-    out = args.out or os.path.join("results", args.experiment, data_name(args.data))
+    preset = getattr(args, "preset", None)
+    out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
     common = dict(data=args.data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
                   cache_dir=args.cache_dir, verbose=not args.quiet, command=command, scaling=args.scaling)
     from . import run_ablation, run_classification, run_noise, run_retrieval, run_runtime
@@ -145,8 +173,11 @@ def main(argv=None):
                       patience=args.patience, precision=args.precision, train_per_class=args.train_per_class,
                       test_per_class=args.test_per_class, **common)
             if args.experiment == "noise":
-                run_noise(levels=args.levels, **kw)
+                run_noise(levels=args.levels, preset=preset, **kw)
             else:
+                if preset is not None:
+                    kw["data"] = apply_preset(load_data(args.data, quick=args.quick, random_state=args.random_state),
+                                              preset, random_state=args.random_state)
                 run_classification(**kw)
         else:
             run_runtime(n_objects=args.n_objects, repeats=args.repeats, **common)

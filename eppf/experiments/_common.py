@@ -27,7 +27,8 @@ __all__ = [
     "write_report",
 ]
 
-#: Parameters that change speed or chattiness, never the descriptor.
+#: How :func:`load_data` describes the split it makes up for data without one.
+GENERATED_SPLIT = "seeded per-class 70/30 split"
 
 
 class ExperimentError(ValueError):
@@ -350,7 +351,7 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
         split_source = "the folder's split" if os.path.isdir(spec) else "the file's split"
     else:
         split = _stratified_split(y, 0.3, random_state)
-        split_source = f"seeded per-class 70/30 split (random_state={random_state})"
+        split_source = f"{GENERATED_SPLIT} (random_state={random_state})"
     clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
     return Dataset(
         name=data_name(spec),

@@ -1,6 +1,7 @@
 """Accuracy against Gaussian noise, retraining at every noise level (the paper's noise figure)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -8,6 +9,7 @@ from ..metrics import METRICS
 from ._classification import MODELS, TrainingOptions, TrainingDescriptors, check_models, prepare_training, train_and_score
 from ._common import (
     DescriptorCache,
+    load_or_pass,
     ExperimentError,
     ExperimentSettings,
     Logger,
@@ -16,6 +18,7 @@ from ._common import (
     markdown_table,
     write_report,
 )
+from ._presets import apply_preset, get_preset
 
 __all__ = ["run_noise"]
 
@@ -47,6 +50,7 @@ def run_noise(
     *,
     out=None,
     levels=None,
+    preset=None,
     **settings,
 ):
     """Test accuracy as Gaussian noise grows, retraining at every level.
@@ -67,9 +71,15 @@ def run_noise(
     out : str, default=None
         Folder for ``noise.md``/``.csv``/``.png``.
     levels : sequence of float, default=None
-        Noise sigmas as fractions of the unit cube, in [0, 1];
-        ``(0, 0.02, 0.04, 0.06, 0.08, 0.1)`` (``(0, 0.06)`` with
-        ``quick``) when None.
+        Noise sigmas as fractions of the unit cube, in [0, 1]. None: the
+        preset's ``noise_levels`` when a preset is given, else
+        ``(0, 0.02, 0.04, 0.06, 0.08, 0.1)`` (``(0, 0.06)`` with ``quick``).
+    preset : str or Preset, default=None
+        A key of :data:`PRESETS`: every object is first resampled (and, for
+        ``"modelnet40-occluded"``, occluded) as the preset says, by
+        :func:`apply_preset`; the preset's own noise is not added, its sigma
+        is swept instead (``"modelnet40-noise-0.10"`` runs the levels 0 and
+        0.1, the clean and occluded presets 0, 0.07, 0.1 and 0.15).
     **settings
         The options of :class:`TrainingOptions` (``models``, ``epochs``,
         ``pointnet_epochs``, ``pointnet_points``, ``validation_fraction``,
@@ -88,6 +98,7 @@ def run_noise(
     See Also
     --------
     run_classification : The same models without noise.
+    apply_preset : What ``preset`` does to the clouds.
     eppf.preprocessing.GaussianNoise : The noise added.
 
     Examples
@@ -110,7 +121,16 @@ def run_noise(
 
     log = Logger("noise", verbose)
     models = check_models(models, DEFAULT_NOISE_MODELS)
-    levels = check_levels(levels if levels is not None else (QUICK_LEVELS if quick else DEFAULT_LEVELS))
+    if preset is not None:
+        preset = get_preset(preset)
+        default_levels = preset.noise_levels
+    else:
+        default_levels = QUICK_LEVELS if quick else DEFAULT_LEVELS
+    levels = check_levels(levels if levels is not None else default_levels)
+    if preset is not None:
+        data = apply_preset(load_or_pass(data, quick=quick, random_state=random_state), preset,
+                            random_state=random_state, noise=False)
+        log(f"preset {preset.name}: {replace(preset, noise=0.0).describe()}")
     settings, ds, train, test = prepare_training(data, options, scaling, quick, n_jobs, random_state)
     used = np.concatenate([train, test])
     cache = DescriptorCache(cache_dir if cache_dir is not None else (out and f"{out}/cache"), log)
@@ -153,12 +173,19 @@ def run_noise(
                      + ", ".join(f"{name} {100 * d:.2f}" for name, d in drops.items()) + ".")
     else:
         notes.append(f"σ={REPORTED_LEVEL:g} was not among the levels, so no drop at it is reported.")
+        if len(levels) > 1:
+            notes.append(f"Total-accuracy drop from σ={base_level:g} to σ={levels[-1]:g} (percentage points): "
+                         + ", ".join(f"{name} {100 * (v[0] - v[-1]):.2f}" for name, v in acc.items()) + ".")
     protocol = {
         "task": "total accuracy (%) on the test split, retraining every model at every noise level",
         "noise": "zero-mean Gaussian on x, y, z with standard deviation σ times the largest bounding-box side of "
                  "each object (GaussianNoise(relative_to='unit_cube')), added to training and test objects; "
                  f"noise seeds {noise_seeds}",
         "normals": "re-estimated from the noisy points (PCA, 20 neighbours); clean normals are never used",
+        **({"preset": f"`{preset.name}` ({preset.summary}); applied before the noise: "
+                      f"{replace(preset, noise=0.0).describe()}"
+                      + ("; its σ is swept from 0 here instead of being added once" if preset.noise else "")}
+           if preset is not None else {}),
         "data used": f"{train.size} training objects"
                      + (f" (at most {train_per_class} per class)" if train_per_class else "")
                      + f", {test.size} test objects"
@@ -167,15 +194,17 @@ def run_noise(
         "descriptor sets computed / read from cache": f"{cache.n_computed} / {cache.n_loaded}",
     }
 
+    on_preset = f", preset {preset.name}" if preset is not None else ""
+
     def plot(plotting, plt):
         fig, ax = plt.subplots(figsize=(6, 4))
         plotting.plot_noise_curve(np.array(levels), {k: 100 * np.array(v) for k, v in acc.items()}, ax=ax,
                                   ylabel="Total accuracy (%)", xlabel="Noise σ (fraction of the unit cube)")
-        ax.set_title(f"Accuracy against noise, {ds.name}")
+        ax.set_title(f"Accuracy against noise, {ds.name}{on_preset}")
         return fig
 
     result["paths"] = write_report(
-        out, "noise", title=f"Accuracy against Gaussian noise on {ds.name}", command=command or command_text("noise"),
+        out, "noise", title=f"Accuracy against Gaussian noise on {ds.name}{on_preset}", command=command or command_text("noise"),
         data=ds, protocol=protocol, table=table, csv_rows=rows, plot=plot, notes=notes, log=log, elapsed=log.elapsed(),
     )
     return result
