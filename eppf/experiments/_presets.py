@@ -185,7 +185,7 @@ def _check_applicable(preset, data):
         raise ExperimentError(
             f"{where}: needs at least {preset.n_points} points per object, but {short.size} of the "
             f"{sizes.size} objects of {data.name!r} have fewer (object {k}, class "
-            f"{data.target_names[data.y[k]]!r}, has {sizes[k]}); sample the meshes more densely")
+            f"{str(data.target_names[data.y[k]])!r}, has {int(sizes[k])}); sample the meshes more densely")
 
 
 def _comparison(data):
