@@ -1,6 +1,8 @@
 """``eppf experiment``: the paper's experiments, forwarded to :mod:`eppf.experiments`.
 
-The experiments have their own parser and ``--help``. ``--no-progress``
+The experiments have their own parser and ``--help``; ``eppf experiment
+classification --help`` and ``eppf experiment noise --help`` list the presets
+of the paper's ModelNet40 protocol (``--preset``). ``--no-progress``
 (the flag of every other subcommand) is translated to the experiments'
 ``--quiet``, which stays accepted as a deprecated alias.
 """
@@ -43,7 +45,8 @@ def run_experiment(argv):
 
 register(Command(
     "experiment", "the paper's experiments (retrieval, classification, ablation, noise, runtime): table, CSV and "
-    "plot; 'eppf experiment --help' for their options",
+    "plot; classification and noise take --preset (the paper's ModelNet40 protocol: clean, noisy, occluded); "
+    "'eppf experiment NAME --help' for their options",
     "Forwarded to python -m eppf.experiments.",
     add_arguments, run_experiment, {"add_help": False},
 ))

@@ -155,6 +155,10 @@ def get_preset(preset):
     ExperimentError
         If the name is not a preset.
 
+    See Also
+    --------
+    apply_preset : Apply the preset to a data set.
+
     Examples
     --------
     >>> from eppf.experiments import get_preset
