@@ -2,6 +2,7 @@
 
 import csv
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -40,6 +41,12 @@ def synthetic(tmp_path_factory):
 @pytest.fixture(scope="module")
 def raw(synthetic):
     return load_data(synthetic)
+
+
+@pytest.fixture
+def no_plots(monkeypatch):
+    """The reports without their PNG (the plots are tested elsewhere and cost seconds here)."""
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
 
 
 def rows_of(path):
@@ -164,7 +171,19 @@ def test_data_the_presets_cannot_apply_to(raw, tmp_path):
         apply_preset(raw, "modelnet40-clean", random_state=0.5)
 
 
-def test_classification_command_with_a_noise_preset(synthetic, raw, tmp_path):
+def test_a_folder_of_objects_takes_a_preset(raw, tmp_path):
+    for k, cloud in enumerate(raw.clouds[:12]):
+        folder = tmp_path / "objs" / raw.split[k] / str(raw.target_names[raw.y[k]])
+        folder.mkdir(parents=True, exist_ok=True)
+        np.savetxt(folder / f"{k}.xyz", cloud)
+    data = load_data(tmp_path / "objs")
+    out = apply_preset(data, "modelnet40-occluded", random_state=0)
+    assert "the folder's split" in out.split_source and "preset `modelnet40-occluded`" in out.source
+    assert all(c.shape == (N // 2, 3) for c in out.clouds)
+    assert_array_equal(out.split, data.split)
+
+
+def test_classification_command_with_a_noise_preset(synthetic, raw, tmp_path, no_plots):
     out = tmp_path / "out"
     argv = ["classification", "--data", synthetic, "--preset", "modelnet40-noise-0.10", "--models", "kl", "--quick",
             "--n-jobs", "1", "--random-state", "3", "--out", str(out)]
@@ -187,7 +206,7 @@ def test_classification_command_with_a_noise_preset(synthetic, raw, tmp_path):
     assert_allclose(res["rows"][0]["total_accuracy"], float(row["total_accuracy"]), atol=1e-6)
 
 
-def test_noise_command_sweeps_the_preset_levels(synthetic, raw, tmp_path):
+def test_noise_command_sweeps_the_preset_levels(synthetic, raw, tmp_path, no_plots):
     out = tmp_path / "noise"
     argv = ["noise", "--data", synthetic, "--preset", "modelnet40-noise-0.15", "--models", "kl", "--quick",
             "--n-jobs", "1", "--quiet", "--out", str(out)]
