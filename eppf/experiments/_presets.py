@@ -17,8 +17,8 @@ takes from it:
   1,024 points of each object without replacement (objects with fewer points
   are refused rather than padded with repeated points);
 - noise: zero-mean Gaussian noise added to the 3D coordinates of every point
-  independently, its standard deviation a fraction of the unit cube ("0.06,
-  i.e. 6 % of the unit cube size"); here ``sigma`` times the largest side of
+  independently, its standard deviation a share of the unit cube's side
+  (σ = 0.06 being 6 % of it); here ``sigma`` times the largest side of
   each object's bounding box (:class:`eppf.preprocessing.GaussianNoise` with
   ``relative_to="unit_cube"``), so every object is measured in the cube it
   fits in. The paper retrains on the noisy examples, so training and test
