@@ -9,12 +9,12 @@ from ..metrics import METRICS
 from ._classification import MODELS, TrainingOptions, TrainingDescriptors, check_models, prepare_training, train_and_score
 from ._common import (
     DescriptorCache,
-    load_or_pass,
     ExperimentError,
     ExperimentSettings,
     Logger,
     command_text,
     draw_seeds,
+    load_or_pass,
     markdown_table,
     write_report,
 )
@@ -93,7 +93,8 @@ def run_noise(
     result : dict
         ``"rows"`` (one per level and model, as in the CSV), ``"drops"``
         (model -> total-accuracy drop from the lowest level to
-        ``REPORTED_LEVEL`` when both were run), ``"paths"``, ``"cache"``.
+        ``REPORTED_LEVEL`` when both were run), ``"paths"``, ``"cache"``,
+        ``"preset"`` (its name, or None).
 
     See Also
     --------
@@ -155,7 +156,8 @@ def run_noise(
     if REPORTED_LEVEL in levels and len(levels) > 1:
         j = levels.index(REPORTED_LEVEL)
         drops = {name: v[0] - v[j] for name, v in acc.items()}
-    result = {"rows": rows, "accuracy": acc, "levels": levels, "drops": drops, "paths": {}, "cache": cache}
+    result = {"rows": rows, "accuracy": acc, "levels": levels, "drops": drops, "paths": {}, "cache": cache,
+              "preset": preset.name if preset is not None else None}
     for name, d in drops.items():
         log(f"{name}: total accuracy drops {100 * d:.2f} pp from sigma {base_level:g} to {REPORTED_LEVEL:g}")
     if out is None:

@@ -231,6 +231,7 @@ def test_noise_command_sweeps_the_preset_levels(synthetic, raw, tmp_path, no_plo
 def test_noise_with_the_occluded_preset_and_given_levels(raw):
     res = run_noise(raw, preset="modelnet40-occluded", models=["kl"], quick=True, n_jobs=1, verbose=False)
     assert res["levels"] == [0.0, 0.07, 0.1, 0.15]
+    assert res["preset"] == "modelnet40-occluded"
     res = run_noise(raw, preset="modelnet40-occluded", levels=[0.0], models=["kl"], quick=True, n_jobs=1,
                     verbose=False)
     occluded = run_classification(apply_preset(raw, "modelnet40-occluded", random_state=0), models=["kl"],
