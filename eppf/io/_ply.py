@@ -40,8 +40,36 @@ class _Prop:
         self.name, self.code, self.count_code = name, code, count_code
 
 
+#: Parsed headers by their bytes: a folder of files written by one program repeats one header, parsed once.
+_HEADERS = {}
+_HEADERS_MAX, _HEADER_BYTES_MAX = 64, 4096
+
+
 def _header(data, path, owner):
-    """(format, elements, body offset); elements are [name, count, [props], line]."""
+    """(format, elements, body offset); elements are [name, count, [props], line].
+
+    A header parsed before (the same bytes up to and including its
+    ``end_header`` line) is taken from a small cache: parsing reads nothing
+    past that line, so equal bytes give an equal result. Only headers that
+    parsed without error are kept, so every error is raised as before.
+    """
+    i = data.find(b"end_header", 0, _HEADER_BYTES_MAX)
+    if i >= 0:
+        j = data.find(b"\n", i)
+        hit = _HEADERS.get(data[:j + 1]) if j >= 0 else None
+        if hit is not None:
+            return hit
+    parsed = _parse_header(data, path, owner)
+    pos = parsed[2]
+    if pos <= _HEADER_BYTES_MAX:
+        if len(_HEADERS) >= _HEADERS_MAX:
+            _HEADERS.clear()
+        _HEADERS[data[:pos]] = parsed
+    return parsed
+
+
+def _parse_header(data, path, owner):
+    """:func:`_header` without the cache."""
     if not data.startswith(b"ply"):
         raise FileFormatError(f"{owner}: {path!r} line 1: malformed PLY header (expected the magic 'ply')")
     pos, lineno, fmt, elements = 0, 0, None, []
@@ -284,6 +312,10 @@ def _is_number(token):
 def _column(values, code):
     """Values of one scalar property as float64, rounded through its declared type."""
     arr = np.asarray(values)
+    if arr.dtype == np.float64 and code == "f8":
+        return arr
+    if arr.dtype == np.float32 and code == "f4":  # binary float columns: the exact widening, nothing to round
+        return arr.astype(np.float64)
     with np.errstate(over="ignore", invalid="ignore"):  # out-of-range values become inf, as in C
         if code in ("f4",) and arr.dtype != np.float32:
             arr = arr.astype(np.float32)
