@@ -458,14 +458,22 @@ def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None):
             class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
     # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
     # however it is named on the command line (the folder itself, a subfolder, the file alone).
+    # A file's seed depends on its root and path alone, so the files of one root are seeded in one call.
     seed_root = sampling.get("root")
-    seeds = []
-    for f, r, _ in entries:
-        real = os.path.realpath(f)
+    by_root = {}  # seed folder -> (entry indices, paths)
+    for k, (f, r, _) in enumerate(entries):
+        real = os.path.realpath(f) if seed_root else None
         if seed_root and real.startswith(os.path.join(seed_root, "")):
-            seeds.append(file_seeds(sampling["random_state"], seed_root, [real])[0])
+            key, path = seed_root, real
         else:
-            seeds.append(file_seeds(sampling["random_state"], r, [f])[0])
+            key, path = r, f
+        idx, paths = by_root.setdefault(key, ([], []))
+        idx.append(k)
+        paths.append(path)
+    seeds = [None] * len(entries)
+    for key, (idx, paths) in by_root.items():
+        for k, seed in zip(idx, file_seeds(sampling["random_state"], key, paths)):
+            seeds[k] = seed
     return InputPlan(entries, seeds, sampling, class_names, labelled, " ".join(inputs), cmd)
 
 

@@ -264,16 +264,20 @@ def _stream(args, est, sampling, output, progress, cmd):
                 return
             with tempfile.TemporaryFile(prefix="eppf-describe-") as spill:
                 records, best = [], (-np.inf, None, None)  # records: (file, offset, shape) per kept cloud
+                offset = 0
                 for results in ordered_map(lambda c: _read_chunk(plan, c), chunks, workers=workers,
                                            depth=workers + 1):
                     clouds, files = accept(results)
-                    for cloud, file in zip(clouds, files):
-                        with np.errstate(over="ignore", invalid="ignore"):
-                            side = float(np.ptp(cloud[:, :3], axis=0).max())
-                        if side > best[0] or best[1] is None:
-                            best = (side, cloud, file)
-                        records.append((file, spill.tell(), cloud.shape))
-                        spill.write(np.ascontiguousarray(cloud, dtype=np.float64).tobytes())
+                    with np.errstate(over="ignore", invalid="ignore"):  # (sides beyond float64: inf, refused by fit)
+                        for cloud, file in zip(clouds, files):
+                            xyz = cloud[:, :3]
+                            side = float((xyz.max(axis=0) - xyz.min(axis=0)).max())
+                            if side > best[0] or best[1] is None:
+                                best = (side, cloud, file)
+                            records.append((file, offset, cloud.shape))
+                            data = np.ascontiguousarray(cloud, dtype=np.float64)
+                            spill.write(data)
+                            offset += data.nbytes
                     bar.update(len(results))
                 bar.close()
                 if not records:
