@@ -268,17 +268,19 @@ def _stream(args, est, sampling, output, progress, cmd):
                 for results in ordered_map(lambda c: _read_chunk(plan, c), chunks, workers=workers,
                                            depth=workers + 1):
                     clouds, files = accept(results)
-                    with np.errstate(over="ignore", invalid="ignore"):  # (sides beyond float64: inf, refused by fit)
-                        for cloud, file in zip(clouds, files):
-                            xyz = cloud[:, :3]
-                            side = float((xyz.max(axis=0) - xyz.min(axis=0)).max())
-                            if side > best[0] or best[1] is None:
-                                best = (side, cloud, file)
-                            records.append((file, offset, cloud.shape))
-                            data = np.ascontiguousarray(cloud, dtype=np.float64)
-                            spill.write(data)
-                            offset += data.nbytes
                     bar.update(len(results))
+                    if not clouds:
+                        continue
+                    clouds = [np.ascontiguousarray(c, dtype=np.float64) for c in clouds]
+                    sides = _largest_sides(clouds)
+                    j = int(np.argmax(sides))
+                    if sides[j] > best[0] or best[1] is None:
+                        best = (sides[j], clouds[j], files[j])
+                    for cloud, file in zip(clouds, files):
+                        records.append((file, offset, cloud.shape))
+                        offset += cloud.nbytes
+                    # (one write per chunk; rows of different widths are simply laid end to end)
+                    spill.write(b"".join(c.data for c in clouds))
                 bar.close()
                 if not records:
                     return
@@ -339,6 +341,19 @@ def _stream(args, est, sampling, output, progress, cmd):
     if not isinstance(meta, _Meta):
         meta = _Meta(meta.ids, meta.labels, meta.class_names, meta.split, None, params)
     return len(state["kept"]), n_features, meta
+
+
+def _largest_sides(clouds):
+    """Largest bounding-box side of each non-empty cloud, as ``np.ptp(c[:, :3], axis=0).max()`` gives it.
+
+    One reduction over the chunk's stacked coordinates instead of three per
+    cloud; maxima, minima and their difference are the same floats either
+    way. Sides beyond float64 are inf (the descriptor's fit refuses them).
+    """
+    starts = np.cumsum([0] + [len(c) for c in clouds[:-1]])
+    xyz = np.concatenate([c[:, :3] for c in clouds])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (np.maximum.reduceat(xyz, starts, axis=0) - np.minimum.reduceat(xyz, starts, axis=0)).max(axis=1)
 
 
 def _read_spilled(fd, group):
