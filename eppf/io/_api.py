@@ -70,7 +70,11 @@ def _finish_cloud(cloud, path, normals, owner, remove_nan):
         raise FileFormatError(f"{owner}: {path!r} has no normals, but normals=True")
     if normals is False:
         nrm = None
-    out = xyz if nrm is None else np.hstack([xyz, nrm])
+    base = xyz.base
+    if nrm is not None and base is not None and nrm.base is base and _is_block(base, xyz, nrm):
+        out = base  # a reader's (n, 6) block already (PLY): no copy
+    else:
+        out = xyz if nrm is None else np.hstack([xyz, nrm])
     out = np.ascontiguousarray(out, dtype=np.float64)
     if remove_nan:
         keep = np.isfinite(out).all(axis=1)
@@ -79,6 +83,16 @@ def _finish_cloud(cloud, path, normals, owner, remove_nan):
     if out.shape[0] == 0:
         raise FileFormatError(f"{owner}: {path!r} holds no points")
     return out
+
+
+def _is_block(base, xyz, nrm):
+    """True when ``xyz`` and ``nrm`` are columns 0-2 and 3-5 of the C-ordered float64 (n, 6) ``base``."""
+    if not (isinstance(base, np.ndarray) and base.dtype == np.float64 and base.ndim == 2 and base.shape[1] == 6
+            and base.flags.c_contiguous and xyz.shape == nrm.shape == (base.shape[0], 3)):
+        return False
+    start = base.__array_interface__["data"][0]
+    return (xyz.__array_interface__["data"][0] == start and nrm.__array_interface__["data"][0] == start + 24
+            and xyz.strides == nrm.strides == base.strides)
 
 
 def _check_vertices(mesh, path, owner):

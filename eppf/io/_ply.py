@@ -309,13 +309,17 @@ def _is_number(token):
         return False
 
 
-def _column(values, code):
-    """Values of one scalar property as float64, rounded through its declared type."""
+def _column(values, code, copy=True):
+    """Values of one scalar property as float64, rounded through its declared type.
+
+    With ``copy=False`` a binary float column comes back as it is (float32 or
+    float64), for the caller to widen while copying it into place.
+    """
     arr = np.asarray(values)
     if arr.dtype == np.float64 and code == "f8":
         return arr
     if arr.dtype == np.float32 and code == "f4":  # binary float columns: the exact widening, nothing to round
-        return arr.astype(np.float64)
+        return arr if not copy else arr.astype(np.float64)
     with np.errstate(over="ignore", invalid="ignore"):  # out-of-range values become inf, as in C
         if code in ("f4",) and arr.dtype != np.float32:
             arr = arr.astype(np.float32)
@@ -338,16 +342,17 @@ def read_ply(path, data, owner, want_faces=True):
     if missing:
         raise FileFormatError(f"{owner}: {path!r}: PLY 'vertex' element lacks {missing}; it has {list(vprops)}")
     v = out["vertex"]
-    if n_v == 0:
-        xyz = np.empty((0, 3))
-    else:
-        xyz = np.column_stack([_column(v[f], vprops[f].code) for f in "xyz"])
-    nrm = None
+    normal_names = ()
     for names in (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z")):
         if n_v and all(f in vprops and vprops[f].count_code is None for f in names):
-            nrm = np.column_stack([_column(v[f], vprops[f].code) for f in names])
+            normal_names = names
             break
-    cloud = Cloud(xyz, nrm)
+    # one float64 block: xyz in columns 0-2, normals (when there are) in 3-5, each column copied once
+    full = np.empty((n_v, 3 + len(normal_names)))
+    for j, f in enumerate(("x", "y", "z") + normal_names):
+        if n_v:
+            full[:, j] = _column(v[f], vprops[f].code, copy=False)
+    cloud = Cloud(full[:, :3], full[:, 3:] if normal_names else None)
     if not want_faces or "face" not in spec:
         return cloud, None
     n_f, fprops = spec["face"]
@@ -367,11 +372,11 @@ def read_ply(path, data, owner, want_faces=True):
             raise FileFormatError(f"{owner}: {path!r}: PLY face {short[0]} has fewer than 3 vertices")
         rows = np.repeat(np.arange(n_f), [len(p) - 2 for p in polys])
         tri = np.array([(p[0], p[k], p[k + 1]) for p in polys for k in range(1, len(p) - 1)], dtype=np.float64)
-    ok = (tri >= 0) & (tri < xyz.shape[0]) & (tri == np.floor(tri))
+    ok = (tri >= 0) & (tri < n_v) & (tri == np.floor(tri))
     bad = np.flatnonzero(~ok.all(axis=1))
     if bad.size:
         raise FileFormatError(
-            f"{owner}: {path!r}: PLY face {int(rows[bad[0]])} has a vertex index outside 0..{xyz.shape[0] - 1}"
+            f"{owner}: {path!r}: PLY face {int(rows[bad[0]])} has a vertex index outside 0..{n_v - 1}"
         )
     return cloud, tri.astype(np.int64)
 
