@@ -167,14 +167,21 @@ def _chunks(plan):
 
 
 def _read_chunk(plan, chunk):
-    """``[(k, cloud, None) or (k, None, exception)]`` of one chunk of entries (on a reader thread)."""
+    """``[(k, cloud, None, seconds) or (k, None, exception, seconds)]`` of one chunk of entries (on a reader
+    thread); ``seconds`` is the thread's CPU time spent reading the file (waiting for a busy core not counted)."""
     out = []
     for k in chunk:
+        t0 = time.thread_time()
         try:
-            out.append((k, plan.read(k), None))
+            out.append((k, plan.read(k), None, time.thread_time() - t0))
         except (ValueError, OSError, KeyError) as exc:
-            out.append((k, None, exc))
+            out.append((k, None, exc, time.thread_time() - t0))
     return out
+
+
+#: Bytes per second at which the first pass is taken to write clouds to its temporary file: a cloud that
+#: was read faster than it could be written (a binary point file) is read again in the second pass instead.
+SPILL_BYTES_PER_SECOND = 250e6
 
 
 def _name_files(exc, files):
@@ -221,18 +228,20 @@ def _stream(args, est, sampling, output, progress, cmd):
 
     def accept(results):
         """Clouds and file names of one chunk's results; skipped or raised files handled in order."""
-        clouds, files = [], []
-        for k, cloud, exc in results:
+        clouds, files, kept, seconds = [], [], [], []
+        for k, cloud, exc, secs in results:
             if exc is not None:
                 state["skipped"].append((plan.entries[k][0], plan.error(k, exc, args.on_error)))
                 continue
             state["kept"].append(k)
             clouds.append(cloud)
             files.append(plan.entries[k][0])
+            kept.append(k)
+            seconds.append(secs)
             if len(cloud) < need:
                 state["tiny_clouds"].append(cloud)
                 state["tiny_ids"].append(plan.entries[k][0])
-        return clouds, files
+        return clouds, files, kept, seconds
 
     def fit(cloud, file):
         try:
@@ -258,16 +267,17 @@ def _stream(args, est, sampling, output, progress, cmd):
             if not _learns_scale(est):
                 for results in ordered_map(lambda c: _read_chunk(plan, c), chunks, workers=workers,
                                            depth=workers + 1):
-                    clouds, files = accept(results)
+                    clouds, files, _, _ = accept(results)
                     describe(clouds, files, sink)
                     bar.update(len(results))
                 return
             with tempfile.TemporaryFile(prefix="eppf-describe-") as spill:
-                records, best = [], (-np.inf, None, None)  # records: (file, offset, shape) per kept cloud
+                # records: (file, entry, offset in the spill or -1 to read the file again, shape) per kept cloud
+                records, best = [], (-np.inf, None, None)
                 offset = 0
                 for results in ordered_map(lambda c: _read_chunk(plan, c), chunks, workers=workers,
                                            depth=workers + 1):
-                    clouds, files = accept(results)
+                    clouds, files, kept, seconds = accept(results)
                     bar.update(len(results))
                     if not clouds:
                         continue
@@ -276,11 +286,17 @@ def _stream(args, est, sampling, output, progress, cmd):
                     j = int(np.argmax(sides))
                     if sides[j] > best[0] or best[1] is None:
                         best = (sides[j], clouds[j], files[j])
-                    for cloud, file in zip(clouds, files):
-                        records.append((file, offset, cloud.shape))
-                        offset += cloud.nbytes
-                    # (one write per chunk; rows of different widths are simply laid end to end)
-                    spill.write(b"".join(c.data for c in clouds))
+                    spilled = []
+                    for cloud, file, k, secs in zip(clouds, files, kept, seconds):
+                        # which clouds are spilled changes the time only: a file read again gives the same cloud
+                        if secs * SPILL_BYTES_PER_SECOND > cloud.nbytes:
+                            records.append((file, k, offset, cloud.shape))
+                            offset += cloud.nbytes
+                            spilled.append(cloud)
+                        else:
+                            records.append((file, k, -1, cloud.shape))
+                    if spilled:  # one write per chunk; clouds of different widths are laid end to end
+                        spill.write(b"".join(c.data for c in spilled))
                 bar.close()
                 if not records:
                     return
@@ -291,7 +307,7 @@ def _stream(args, est, sampling, output, progress, cmd):
                 fd = spill.fileno()
                 groups = [records[i:i + CHUNK_FILES] for i in range(0, len(records), CHUNK_FILES)]
                 bar = _Bar(len(records), progress, "describing")
-                for clouds, files in ordered_map(lambda g: _read_spilled(fd, g), groups, workers=1, depth=2):
+                for clouds, files in ordered_map(lambda g: _read_back(plan, fd, g), groups, workers=1, depth=2):
                     describe(clouds, files, sink)
                     bar.update(len(clouds))
         finally:
@@ -356,20 +372,42 @@ def _largest_sides(clouds):
         return (np.maximum.reduceat(xyz, starts, axis=0) - np.minimum.reduceat(xyz, starts, axis=0)).max(axis=1)
 
 
-def _read_spilled(fd, group):
-    """Clouds and file names of spilled records ``(file, offset, shape)`` (one contiguous read)."""
-    start = group[0][1]
-    end = group[-1][1] + 8 * int(np.prod(group[-1][2]))
-    buf = bytearray(end - start)
-    view, got = memoryview(buf), 0
-    while got < len(buf):  # pread may return fewer bytes than asked
-        n = os.preadv(fd, [view[got:]], start + got)
-        if n <= 0:
-            raise OSError(f"eppf describe: the temporary file of the read clouds ended early ({got} of {len(buf)} bytes)")
-        got += n
-    clouds = [np.frombuffer(buf, dtype=np.float64, count=int(np.prod(shape)), offset=off - start).reshape(shape)
-              for _, off, shape in group]
-    return clouds, [f for f, _, _ in group]
+def _read_back(plan, fd, group):
+    """Clouds and file names of the first pass's records ``(file, entry, offset, shape)``.
+
+    Spilled clouds come from the temporary file (one read for the group's
+    span); the others are read from their files again, as in the first pass,
+    and a file that cannot be read again or gives another shape stops the
+    command, naming it.
+    """
+    spilled = [r for r in group if r[2] >= 0]
+    buf, start = None, 0
+    if spilled:
+        start = spilled[0][2]
+        end = spilled[-1][2] + 8 * int(np.prod(spilled[-1][3]))
+        buf = bytearray(end - start)
+        view, got = memoryview(buf), 0
+        while got < len(buf):  # pread may return fewer bytes than asked
+            n = os.preadv(fd, [view[got:]], start + got)
+            if n <= 0:
+                raise OSError(f"eppf describe: the temporary file of the read clouds ended early "
+                              f"({got} of {len(buf)} bytes)")
+            got += n
+    clouds = []
+    for file, k, off, shape in group:
+        if off >= 0:
+            cloud = np.frombuffer(buf, dtype=np.float64, count=int(np.prod(shape)), offset=off - start).reshape(shape)
+        else:
+            try:
+                cloud = plan.read(k)
+            except (ValueError, OSError, KeyError) as exc:
+                raise ValueError(f"{file} could not be read again for its descriptor (it changed while eppf "
+                                 f"describe ran?): {exc}") from None
+            if cloud.shape != shape:
+                raise ValueError(f"{file} changed while eppf describe ran: {shape[0]} points in the first pass, "
+                                 f"{cloud.shape[0]} now")
+        clouds.append(cloud)
+    return clouds, [r[0] for r in group]
 
 
 register(Command(

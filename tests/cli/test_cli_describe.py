@@ -187,25 +187,50 @@ def test_a_cloud_the_descriptor_refuses_is_named_by_its_file(tmp_path, capsys, m
     assert not (tmp_path / "d.npy").exists()
 
 
-def test_meshes_are_sampled_once_with_their_seed(tmp_path, capsys, monkeypatch):
-    # the data-set scale needs a first pass; the mesh's points of the second pass are those of the first
+def test_second_pass_rows_are_the_same_whether_clouds_are_spilled_or_read_again(tmp_path, capsys, monkeypatch):
+    # the data-set scale needs a first pass; its clouds are spilled to a temporary file when reading them took
+    # longer than writing them would (meshes: sampled once), else read again: the rows never change
+    from eppf.cli._common import InputPlan
+
     paths = _class_folder(tmp_path / "data")
     expected, _ = _reference(paths, tmp_path / "data", "eppf", 9, n_points=64)
-    calls = []
-    real = describe_module._read_chunk
+    reads = []
+    real = InputPlan.read
 
-    def counting(plan, chunk):
-        calls.extend(chunk)
-        return real(plan, chunk)
+    def counting(self, k):
+        reads.append(self.entries[k][0])
+        return real(self, k)
 
-    monkeypatch.setattr(describe_module, "_read_chunk", counting)
-    assert main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npy"), "--n-pairs", "500",
-                 "--n-points", "64", "--random-state", "9", "--no-progress"]) == 0
-    np.testing.assert_array_equal(np.load(tmp_path / "d.npy"), expected)
-    assert sorted(calls) == list(range(len(paths)))  # every file read exactly once
-    mesh = read_point_cloud(paths[4], n_points=64)
-    assert mesh.shape == (64, 6)
+    monkeypatch.setattr(InputPlan, "read", counting)
+    monkeypatch.setattr(describe_module, "CHUNK_FILES", 3)
+    for rate, times in ((float("inf"), 1), (0.0, 2), (describe_module.SPILL_BYTES_PER_SECOND, None)):
+        reads.clear()
+        monkeypatch.setattr(describe_module, "SPILL_BYTES_PER_SECOND", rate)
+        assert main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npy"), "--n-pairs", "500",
+                     "--n-points", "64", "--random-state", "9", "--no-progress"]) == 0
+        np.testing.assert_array_equal(np.load(tmp_path / "d.npy"), expected)
+        if times is not None:  # always spilled: every file read once; never: every file read twice
+            assert sorted(reads) == sorted([str(p) for p in paths] * times)
+        else:  # the default rule: a sampled mesh is slower to make than to spill, so it is read once
+            assert all(reads.count(str(p)) == 1 for p in paths if p.suffix == ".off")
     capsys.readouterr()
+
+
+def test_a_file_that_changes_between_the_passes_stops_describe_naming_it(tmp_path, capsys, monkeypatch):
+    paths = _class_folder(tmp_path / "data")
+    monkeypatch.setattr(describe_module, "SPILL_BYTES_PER_SECOND", 0.0)  # every file read again
+    real = describe_module._read_back
+
+    def change_then_read(plan, fd, group):
+        write_point_cloud(paths[2], np.random.default_rng(0).normal(size=(11, 3)))
+        return real(plan, fd, group)
+
+    monkeypatch.setattr(describe_module, "_read_back", change_then_read)
+    status = main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npy"), "--n-pairs", "500",
+                   "--no-progress"])
+    err = capsys.readouterr().err
+    assert status == 2 and str(paths[2]) in err and "changed while eppf describe ran" in err
+    assert not (tmp_path / "d.npy").exists()
 
 
 def test_largest_sides_of_a_chunk_are_those_of_np_ptp():
