@@ -13,11 +13,13 @@ few chunks whatever the number of files. The rows are bit for bit those of
   seeds of its rows, those that follow the previous chunk's;
 - a descriptor whose scale is learnt from the data set (``scaling="fit"``,
   EPPF's default: one over the largest bounding-box side of any object)
-  needs every object before the first row: a first pass reads every file,
-  keeps the largest object and spills the clouds, as read, to an unnamed
-  temporary file; the descriptor is fitted on that largest object (the
-  same scale as fitting on all of them) and the second pass describes the
-  spilled clouds, which are not read or sampled again;
+  needs every object before the first row: a first pass reads every file
+  and keeps the largest object; the descriptor is fitted on it (the same
+  scale as fitting on all of them) and the second pass describes the
+  clouds. A cloud that took longer to read than to write (a sampled mesh, a
+  text file) is spilled, as read, to an unnamed temporary file in the first
+  pass and taken from there; the others (binary point files) are read again,
+  on the reader thread, and must come back with the same shape;
 - other descriptors are fitted on the first cloud (they learn nothing from
   the data) and describe while the files are read.
 
