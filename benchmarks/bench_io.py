@@ -28,12 +28,32 @@ Flat RSS across the sizes is the check that memory does not grow with the
 number of files (the output rows go to disk as they come).
 
 EPPF's default ``scaling="fit"`` needs the data set's scale before the first
-row, so ``describe`` reads every file in a first pass (the clouds are kept in
-a temporary file, not read twice) and describes in a second: reading is not
-hidden behind the descriptor there, as it is with ``--scaling object``
-(``--extra "--scaling object"`` to measure that).
+row, so ``describe`` reads every file in a first pass and describes in a
+second (sampled meshes and text files are kept in a temporary file, binary
+point files read again beside the descriptor): the first pass is not hidden
+behind the descriptor, as reading is with ``--scaling object`` (``--extra
+"--scaling object"`` to measure that).
 
-Figures of one run are in ``docs/performance.rst`` ("Files").
+One run (2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs, load
+average 6 to 8; ``--n-jobs 2``)::
+
+    kind          read ms/file  +normals ms/file
+    ply                  0.209             4.281
+    ply_normals          0.259             0.240
+    ply_ascii            0.646             4.610
+    pcd                  0.282             4.151
+    xyz                  1.202             5.182
+    off                  1.465             1.473
+
+    kind          files  files/s  wall s  CPU ms/file  peak RSS MiB
+    ply_normals    1000      251     8.3         3.17           150
+    ply_normals    5000      366    18.0         1.66           156
+    ply_normals   10000      365    31.1         1.49           159
+    ply            1000      146    10.6         5.08           148
+    ply           10000      128    82.1         3.36           155
+
+The process got about 40% of the machine; what two free cores would give is
+worked out from the CPU times in ``docs/performance.rst`` ("Files").
 """
 
 import argparse
