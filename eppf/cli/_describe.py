@@ -219,8 +219,9 @@ class _Bar:
 def _stream(args, est, sampling, output, progress, cmd):
     plan = plan_inputs(args.inputs, sampling, cmd=cmd)
     params = _saved_params(est)
-    if "random_state" in est.get_params(deep=False):
+    if "random_state" in est.get_params(deep=False) and 0 <= args.random_state < 2 ** 32:
         # consecutive draws of one generator: chunk after chunk, the seeds of one fit_transform
+        # (a seed out of range stays as it is, for the descriptor's own message)
         est.set_params(random_state=np.random.RandomState(args.random_state))
     n_threads = check_n_jobs(args.n_jobs)
     workers = max(1, min(2, n_threads))

@@ -1,10 +1,16 @@
-"""``eppf describe --descriptor NAME`` for every registered descriptor, on the built-in shapes."""
+"""``eppf describe``: every registered descriptor on the built-in shapes, and files and folders streamed
+chunk by chunk into the rows of one ``fit_transform``."""
+
+import json
+import os
 
 import numpy as np
 import pytest
 
+import eppf.cli._describe as describe_module
 from eppf.cli import main
 from eppf.datasets import make_shapes
+from eppf.io import write_mesh, write_point_cloud
 from eppf.registry import DESCRIPTORS
 
 
@@ -48,11 +54,6 @@ def test_every_registered_descriptor_runs_through_describe(tmp_path, capsys, sha
 # ---------------------------------------------------------------------------
 # Streaming files and folders: the rows of one fit_transform, chunk after chunk
 # ---------------------------------------------------------------------------
-
-import os  # noqa: E402
-
-import eppf.cli._describe as describe_module  # noqa: E402
-from eppf.io import read_point_cloud, write_mesh, write_point_cloud  # noqa: E402
 
 
 def _class_folder(root):
@@ -131,7 +132,7 @@ def test_streamed_npz_keeps_the_data_set_scale_and_parameters_of_the_in_memory_p
                  "--no-progress"]) == 0
     with np.load(tmp_path / "d.npz") as f:
         assert float(f["scale"]) == est.scale_
-        params = __import__("json").loads(str(f["params"]))
+        params = json.loads(str(f["params"]))
     assert params["random_state"] == 0 and params["n_pairs"] == 500 and params["scaling"] == "fit"
     capsys.readouterr()
 
