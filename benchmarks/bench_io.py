@@ -1,93 +1,204 @@
-"""Reading and sampling ModelNet-style OFF meshes versus computing their EPPF descriptors.
+"""Files to descriptors: reading, reading with normals, and ``eppf describe`` end to end.
 
 Usage::
 
-    nice -n 10 python benchmarks/bench_io.py                 # 200 meshes of ~400 faces, 20 of ~4,000
-    python benchmarks/bench_io.py --n-meshes 500 --n-jobs 2
+    nice -n 10 python benchmarks/bench_io.py                      # 10,000 files of each kind (minutes)
+    nice -n 10 python benchmarks/bench_io.py --n-files 2000 --sizes 1000,2000 --kinds ply,ply_normals
+    python benchmarks/bench_io.py --cache-dir /tmp/eppf-io        # keep the folders for the next run
 
-Meshes are random convex hulls written in ModelNet's official layout
-(``<class>/train/<class>_<k>.off``) with ModelNet's glued first line
-(``OFF<n_v> <n_f> 0``) and six significant digits per coordinate, as in the
-published files. Per object the table reports, in milliseconds:
+Folders of ``--n-files`` files of 1,024 points (anisotropic Gaussian blobs)
+are written once per kind: ``ply`` (binary, xyz), ``ply_normals`` (binary,
+xyz and normals), ``ply_ascii``, ``pcd`` (binary), ``xyz`` (text) and ``off``
+(a 512-face closed mesh per file, sampled to 1,024 points with face normals).
+The report, per kind:
 
-- ``read``: :func:`eppf.io.read_mesh` alone;
-- ``read+sample``: :func:`eppf.datasets.load_modelnet` with ``n_points=2048``
-  (reading, area-weighted sampling with face normals, bookkeeping);
-- ``EPPF``: :class:`eppf.EPPFTransformer` ``fit_transform`` on those clouds
-  (normals given, so no normal estimation), with the same ``n_jobs``.
+- ``read ms/file``: :func:`eppf.io.read_point_cloud` on ``--read-files``
+  files of the folder (the way ``eppf describe`` reads them: the file's own
+  seed, meshes sampled with ``n_points=1024``), one thread;
+- ``+normals ms/file``: the same files, then PCA normals
+  (:func:`eppf.preprocessing.estimate_normals`, 20 neighbours) where the file
+  has none, one thread (``--normals-files`` files);
 
-The target: ``read+sample`` below ``EPPF``.
+and for ``--describe-kinds``, ``python -m eppf describe FOLDER -o out.npy
+--n-jobs N`` in a fresh process on the first 1k/5k/10k files (``--sizes``):
+the files per second of its summary line (planning, reading, normals, EPPF,
+writing; the interpreter's start and imports excluded), the wall time of the
+whole process, its CPU seconds per file and its peak RSS (``ru_maxrss``).
+Flat RSS across the sizes is the check that memory does not grow with the
+number of files (the output rows go to disk as they come).
+
+EPPF's default ``scaling="fit"`` needs the data set's scale before the first
+row, so ``describe`` reads every file in a first pass and describes in a
+second (sampled meshes and text files are kept in a temporary file, binary
+point files read again beside the descriptor): the first pass is not hidden
+behind the descriptor, as reading is with ``--scaling object`` (``--extra
+"--scaling object"`` to measure that).
+
+One run (2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs, load
+average 6 to 8; ``--n-jobs 2``)::
+
+    kind          read ms/file  +normals ms/file
+    ply                  0.209             4.281
+    ply_normals          0.259             0.240
+    ply_ascii            0.646             4.610
+    pcd                  0.282             4.151
+    xyz                  1.202             5.182
+    off                  1.465             1.473
+
+    kind          files  files/s  wall s  CPU ms/file  peak RSS MiB
+    ply_normals    1000      251     8.3         3.17           150
+    ply_normals    5000      366    18.0         1.66           156
+    ply_normals   10000      365    31.1         1.49           159
+    ply            1000      146    10.6         5.08           148
+    ply           10000      128    82.1         3.36           155
+
+The process got about 40% of the machine; what two free cores would give is
+worked out from the CPU times in ``docs/performance.rst`` ("Files").
 """
 
 import argparse
 import os
+import re
+import shlex
+import subprocess
+import sys
 import tempfile
 import time
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
-from eppf import EPPFTransformer
-from eppf.datasets import load_modelnet
-from eppf.io import read_mesh
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from eppf.io import read_point_cloud, write_mesh, write_point_cloud  # noqa: E402
+
+KINDS = ("ply", "ply_normals", "ply_ascii", "pcd", "xyz", "off")
+EXT = {"ply": "ply", "ply_normals": "ply", "ply_ascii": "ply", "pcd": "pcd", "xyz": "xyz", "off": "off"}
+N_POINTS = 1024
 
 
-def write_meshes(root, n_meshes, n_vertices, seed=0):
+def _sphere_mesh():
+    """A closed 512-face mesh of the unit sphere (a convex hull of 258 points)."""
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.RandomState(0)
+    v = rng.normal(size=(258, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    return v, ConvexHull(v).simplices
+
+
+def write_folder(folder, kind, n_files, seed=0):
+    """``n_files`` files of one kind in ``folder`` (kept when it already holds them)."""
+    done = os.path.join(folder, ".complete")
+    if os.path.exists(done) and int(open(done).read()) >= n_files:
+        return
+    os.makedirs(folder, exist_ok=True)
     rng = np.random.RandomState(seed)
-    files = []
-    for k in range(n_meshes):
-        cls = ("chair", "table", "lamp", "sofa")[k % 4]
-        folder = os.path.join(root, cls, "train")
-        os.makedirs(folder, exist_ok=True)
-        # points on an ellipsoid all lie on the hull: about 2 * n_vertices faces
-        pts = rng.normal(size=(n_vertices, 3))
-        pts /= np.linalg.norm(pts, axis=1, keepdims=True)
-        pts *= rng.uniform(5, 50, size=3)
-        hull = ConvexHull(pts)
-        used = np.unique(hull.simplices)
-        remap = np.full(n_vertices, -1)
-        remap[used] = np.arange(used.size)
-        v, f = pts[used], remap[hull.simplices]
-        path = os.path.join(folder, f"{cls}_{k:04d}.off")
-        with open(path, "w") as fh:
-            fh.write(f"OFF{len(v)} {len(f)} 0\n")
-            fh.write("".join(f"{a:.6g} {b:.6g} {c:.6g}\n" for a, b, c in v))
-            fh.write("".join(f"3 {a} {b} {c}\n" for a, b, c in f))
-        files.append(path)
-    return files
+    mesh = _sphere_mesh() if kind == "off" else None
+    for k in range(n_files):
+        path = os.path.join(folder, f"obj_{k:05d}.{EXT[kind]}")
+        stretch = rng.uniform(0.5, 2.0, size=3)
+        if kind == "off":
+            write_mesh(path, mesh[0] * stretch * rng.uniform(0.9, 1.1, size=(len(mesh[0]), 1)), mesh[1])
+            continue
+        p = rng.normal(size=(N_POINTS, 3)) * stretch
+        if kind == "ply_normals":
+            p = np.hstack([p, p / np.linalg.norm(p, axis=1, keepdims=True)])
+        write_point_cloud(path, p, binary=kind != "ply_ascii")
+    with open(done, "w") as fh:
+        fh.write(str(n_files))
 
 
-def run(n_meshes, n_vertices, n_jobs):
-    with tempfile.TemporaryDirectory() as root:
-        files = write_meshes(root, n_meshes, n_vertices)
-        n_faces = np.mean([read_mesh(f).faces.shape[0] for f in files])
+def _files(folder):
+    return sorted(os.path.join(folder, f) for f in os.listdir(folder) if not f.startswith("."))
+
+
+def time_reading(files, kind, with_normals):
+    """Milliseconds per file of reading (and normals where the file has none), one thread."""
+    from eppf.datasets._loaders import file_seeds
+    from eppf.preprocessing import estimate_normals
+
+    seeds = file_seeds(0, os.path.dirname(files[0]), files)
+    n_points = N_POINTS if kind == "off" else None
+    read_point_cloud(files[0], n_points=n_points, random_state=seeds[0])  # warm caches and imports
+    t0 = time.perf_counter()
+    for f, s in zip(files, seeds):
+        c = read_point_cloud(f, n_points=n_points, random_state=s)
+        if with_normals and c.shape[1] == 3:
+            estimate_normals(c, n_neighbors=20, n_jobs=1)
+    return 1e3 * (time.perf_counter() - t0) / len(files)
+
+
+def run_describe(folder, n_files, n_jobs, extra, work):
+    """(files/s of the summary line, wall s, CPU s per file, peak RSS MiB) of one describe process."""
+    sub = os.path.join(work, f"describe_{os.path.basename(folder)}_{n_files}")
+    if not os.path.isdir(sub):  # the first n files, as links
+        os.makedirs(sub)
+        for f in _files(folder)[:n_files]:
+            os.symlink(f, os.path.join(sub, os.path.basename(f)))
+    out = os.path.join(work, "out.npy")
+    cmd = [sys.executable, "-m", "eppf", "describe", sub, "-o", out, "--n-jobs", str(n_jobs), "--no-progress"]
+    cmd += shlex.split(extra)
+    if os.path.basename(folder) == "off":
+        cmd += ["--n-points", str(N_POINTS)]
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    with tempfile.TemporaryFile("w+") as so, tempfile.TemporaryFile("w+") as se:
         t0 = time.perf_counter()
-        for f in files:
-            read_mesh(f)
-        t_read = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        data = load_modelnet(root, n_points=2048, n_jobs=n_jobs)
-        t_load = time.perf_counter() - t0
-        est = EPPFTransformer(random_state=0, n_jobs=n_jobs)
-        est.fit_transform(data.data[:4])  # warm-up
-        t0 = time.perf_counter()
-        est.fit_transform(data.data)
-        t_eppf = time.perf_counter() - t0
-    per = 1e3 / n_meshes
-    return n_faces, t_read * per, t_load * per, t_eppf * per
+        proc = subprocess.Popen(cmd, stdout=so, stderr=se, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)  # this child's own CPU time and peak RSS
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        so.seek(0)
+        se.seek(0)
+        stdout, stderr = so.read(), se.read()
+    if proc.returncode:
+        raise RuntimeError(f"describe failed: {stderr.strip()}")
+    m = re.search(r"([\d.]+) files per second", stdout)
+    rate = float(m.group(1)) if m else float("nan")
+    return rate, wall, usage, stdout.strip()
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n-meshes", type=int, default=200)
-    parser.add_argument("--n-jobs", type=int, default=1)
-    args = parser.parse_args()
-    cases = [(args.n_meshes, 220), (max(2, args.n_meshes // 10), 2100)]
-    print(f"n_jobs={args.n_jobs}; milliseconds per object")
-    print(f"{'meshes':>7} {'faces':>7} {'read':>8} {'read+sample':>12} {'EPPF':>8}")
-    for n_meshes, n_vertices in cases:
-        n_faces, t_read, t_load, t_eppf = run(n_meshes, n_vertices, args.n_jobs)
-        print(f"{n_meshes:>7} {n_faces:>7.0f} {t_read:>8.2f} {t_load:>12.2f} {t_eppf:>8.2f}")
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--n-files", type=int, default=10000, help="files per kind's folder (default 10,000)")
+    p.add_argument("--kinds", default=",".join(KINDS), help="kinds to read (default: all)")
+    p.add_argument("--read-files", type=int, default=2000, help="files timed for reading per kind")
+    p.add_argument("--normals-files", type=int, default=300, help="files timed for reading + normals per kind")
+    p.add_argument("--describe-kinds", default="ply_normals,ply", help="kinds run through eppf describe")
+    p.add_argument("--sizes", default="1000,5000,10000", help="numbers of files given to eppf describe")
+    p.add_argument("--n-jobs", type=int, default=2, help="--n-jobs of eppf describe (default 2)")
+    p.add_argument("--extra", default="", help="more eppf describe options, e.g. \"--scaling object\"")
+    p.add_argument("--cache-dir", default=None, help="keep the folders here (default: a temporary folder)")
+    args = p.parse_args()
+    os.environ.setdefault("OMP_NUM_THREADS", str(args.n_jobs))
+    base = args.cache_dir or tempfile.mkdtemp(prefix="eppf-bench-io-")
+    kinds = [k for k in args.kinds.split(",") if k]
+    describe_kinds = [k for k in args.describe_kinds.split(",") if k]
+    sizes = [int(s) for s in args.sizes.split(",") if s]
+    n_files = max([args.n_files] + sizes)
+    for kind in dict.fromkeys(kinds + describe_kinds):
+        t0 = time.perf_counter()
+        write_folder(os.path.join(base, kind), kind, n_files)
+        print(f"# {kind}: {n_files} files ready in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+
+    print(f"{'kind':12s} {'read ms/file':>13s} {'+normals ms/file':>17s}")
+    for kind in kinds:
+        files = _files(os.path.join(base, kind))
+        read = time_reading(files[:args.read_files], kind, False)
+        normals = time_reading(files[:args.normals_files], kind, True)
+        print(f"{kind:12s} {read:13.3f} {normals:17.3f}", flush=True)
+
+    if not describe_kinds:
+        return
+    with tempfile.TemporaryDirectory(prefix="eppf-bench-describe-") as work:
+        print(f"\neppf describe --n-jobs {args.n_jobs} {args.extra}".rstrip())
+        print(f"{'kind':12s} {'files':>6s} {'files/s':>8s} {'wall s':>7s} {'CPU ms/file':>12s} {'peak RSS MiB':>13s}")
+        for kind in describe_kinds:
+            for n in sizes:
+                rate, wall, usage, line = run_describe(os.path.join(base, kind), n, args.n_jobs, args.extra, work)
+                cpu = 1e3 * (usage.ru_utime + usage.ru_stime) / n
+                print(f"{kind:12s} {n:6d} {rate:8.0f} {wall:7.1f} {cpu:12.2f} {usage.ru_maxrss / 1024:13.0f}",
+                      flush=True)
 
 
 if __name__ == "__main__":

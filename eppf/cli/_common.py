@@ -351,6 +351,132 @@ def _is_npz_data_set(path):
         raise ValueError(f"cannot read {path} as .npz: {type(exc).__name__}: {exc}") from None
 
 
+@dataclass
+class InputPlan:
+    """The files of the command line's inputs, before any is read.
+
+    ``entries`` are ``(file, root, class)`` triples (``class`` a ``(name,
+    split)`` pair or None), ``seeds`` their sampling seeds, ``class_names``
+    the sorted class names of a folder of class subfolders (else None).
+    """
+
+    entries: list
+    seeds: list
+    sampling: dict
+    class_names: np.ndarray = None
+    labelled: bool = None
+    name: str = ""
+    cmd: str = "eppf"
+
+    def read(self, k):
+        """The cloud of entry ``k`` as float64; ValueError/OSError/KeyError when it cannot be read."""
+        from ..io import read_point_cloud
+
+        f = self.entries[k][0]
+        s = self.sampling
+        cloud = read_point_cloud(f, normals=s.get("normals", "auto"), n_points=s.get("n_points"),
+                                 resolution=s.get("resolution"), random_state=self.seeds[k])
+        return np.asarray(cloud, dtype=np.float64)
+
+    def error(self, k, exc, on_error):
+        """The message of a file that could not be read; raised as a ValueError when ``on_error="raise"``."""
+        f = self.entries[k][0]
+        msg = str(exc)
+        msg = msg if f in msg else f"{f}: {msg}"
+        if on_error == "raise":
+            raise ValueError(f"{msg} (--on-error skip reads the other files)") from None
+        return msg
+
+    def report_skipped(self, skipped, n_read):
+        """Warn about skipped files (``(file, message)`` pairs), or raise when no file could be read."""
+        if not skipped:
+            return
+        first = "; ".join(f"{m}" for _, m in skipped[:3])
+        more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
+        if not n_read:
+            raise ValueError(f"no file could be read ({len(skipped)} of {len(self.entries)}): {first}{more}")
+        warn(self.cmd, f"skipped {len(skipped)} of {len(self.entries)} files that could not be read: {first}{more}")
+
+    def objects(self, kept, clouds, skipped):
+        """:class:`Objects` of the entries ``kept`` (indices, in order), with their ``clouds`` (or None)."""
+        kept_entries = [self.entries[k] for k in kept]
+        ids = np.asarray([f for f, _, _ in kept_entries], dtype=str)
+        keys = [os.path.realpath(f) for f, _, _ in kept_entries]
+        labels = split = None
+        if self.class_names is not None:
+            index = {c: k for k, c in enumerate(self.class_names)}
+            labels = np.asarray([index[c[0]] for _, _, c in kept_entries], dtype=np.int64)
+            split = np.asarray([c[1] for _, _, c in kept_entries], dtype=str)
+            split = split if (split != "").all() else None
+            present = set(labels.tolist())
+            lost = [self.class_names[k] for k in range(len(self.class_names)) if k not in present]
+            if lost and self.labelled:
+                raise ValueError(f"no file of the class {lost[0]!r} could be read")
+        return Objects(clouds, ids, keys, labels, self.class_names, split, skipped, self.name)
+
+
+def is_data_set_input(inputs):
+    """True when the inputs are one ``.npz`` data set (read whole by :func:`read_inputs`)."""
+    inputs = [str(i) for i in inputs]
+    return len(inputs) == 1 and inputs[0].lower().endswith(".npz") and os.path.isfile(inputs[0]) \
+        and _is_npz_data_set(inputs[0])
+
+
+def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None):
+    """The :class:`InputPlan` of files and folders (see :func:`read_inputs`); nothing is read yet."""
+    inputs = [str(i) for i in inputs]
+    if labelled and (len(inputs) != 1 or not os.path.isdir(inputs[0])):
+        if len(inputs) == 1 and not os.path.exists(inputs[0]):
+            raise FileNotFoundError(f"--data {inputs[0]}: no such file or folder")
+        raise ValueError(f"--data must be a .npz data set or a folder of class subfolders, got {' '.join(inputs)}")
+    groups = [find_files(item) for item in inputs]
+    folder_input = len(inputs) == 1 and os.path.isdir(inputs[0])
+    root = groups[0][0] if folder_input else None
+    entries = []  # (file, root, class)
+    for r, files in groups:
+        for f in files:
+            cls = _class_of(os.path.relpath(f, r).replace(os.sep, "/")) if folder_input and labelled is not False \
+                else None
+            entries.append((f, r, cls))
+    class_names = None
+    if folder_input and labelled is not False:
+        with_class = [e for e in entries if e[2] is not None]
+        if labelled and not with_class:
+            raise ValueError(f"{root} holds no class subfolders with object files; expected <class>/<file>, "
+                             "train|test/<class>/<file> or <class>/train|test/<file>")
+        if with_class and (labelled or len(with_class) == len(entries)):
+            loose = len(entries) - len(with_class)
+            if loose:
+                warn(cmd, f"{loose} files directly in {root} (outside the class subfolders) are left out")
+            has_split = any(e[2][1] for e in with_class)
+            if has_split:
+                dropped = sum(1 for e in with_class if not e[2][1])
+                if dropped:
+                    warn(cmd, f"{dropped} files of {root} are outside its train/test folders and are left out")
+                with_class = [e for e in with_class if e[2][1]]
+            entries = with_class
+            class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
+    # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
+    # however it is named on the command line (the folder itself, a subfolder, the file alone).
+    # A file's seed depends on its root and path alone, so the files of one root are seeded in one call.
+    seed_root = sampling.get("root")
+    by_root = {}  # seed folder -> (entry indices, paths)
+    for k, (f, r, _) in enumerate(entries):
+        real = os.path.realpath(f) if seed_root else None
+        if seed_root and real.startswith(os.path.join(seed_root, "")):
+            key, path = seed_root, real
+        else:
+            key, path = r, f
+        idx, paths = by_root.setdefault(key, ([], []))
+        idx.append(k)
+        paths.append(path)
+    seeds = [None] * len(entries)
+    for key, (idx, paths) in by_root.items():
+        for k, seed in zip(idx, file_seeds(sampling["random_state"], key, paths)):
+            seeds[k] = seed
+    return InputPlan(entries, seeds, sampling, class_names, labelled, " ".join(inputs), cmd)
+
+
 def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf", labelled=None):
     """Read files, folders or one ``.npz`` data set the one way (see the module docstring).
 
@@ -372,85 +498,20 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
         a data set); None: labels when the input has them; False: none.
     """
     inputs = [str(i) for i in inputs]
-    if len(inputs) == 1 and inputs[0].lower().endswith(".npz") and os.path.isfile(inputs[0]) \
-            and _is_npz_data_set(inputs[0]):
+    if is_data_set_input(inputs):
         return _read_npz_data_set(inputs[0])
-    if labelled and (len(inputs) != 1 or not os.path.isdir(inputs[0])):
-        if len(inputs) == 1 and not os.path.exists(inputs[0]):
-            raise FileNotFoundError(f"--data {inputs[0]}: no such file or folder")
-        raise ValueError(f"--data must be a .npz data set or a folder of class subfolders, got {' '.join(inputs)}")
-    groups = [find_files(item) for item in inputs]
-    folder_input = len(inputs) == 1 and os.path.isdir(inputs[0])
-    root = groups[0][0] if folder_input else None
-    entries = []  # (file, root, class, split)
-    for r, files in groups:
-        for f in files:
-            cls = _class_of(os.path.relpath(f, r).replace(os.sep, "/")) if folder_input and labelled is not False \
-                else None
-            entries.append((f, r, cls))
-    class_names = labels = split = None
-    if folder_input and labelled is not False:
-        with_class = [e for e in entries if e[2] is not None]
-        if labelled and not with_class:
-            raise ValueError(f"{root} holds no class subfolders with object files; expected <class>/<file>, "
-                             "train|test/<class>/<file> or <class>/train|test/<file>")
-        if with_class and (labelled or len(with_class) == len(entries)):
-            loose = len(entries) - len(with_class)
-            if loose:
-                warn(cmd, f"{loose} files directly in {root} (outside the class subfolders) are left out")
-            has_split = any(e[2][1] for e in with_class)
-            if has_split:
-                dropped = sum(1 for e in with_class if not e[2][1])
-                if dropped:
-                    warn(cmd, f"{dropped} files of {root} are outside its train/test folders and are left out")
-                with_class = [e for e in with_class if e[2][1]]
-            entries = with_class
-            class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
-    # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
-    # however it is named on the command line (the folder itself, a subfolder, the file alone).
-    seed_root = sampling.get("root")
-    seed_of = {}
-    for f, r, _ in entries:
-        real = os.path.realpath(f)
-        if seed_root and real.startswith(os.path.join(seed_root, "")):
-            seed_of[(r, f)] = file_seeds(sampling["random_state"], seed_root, [real])[0]
-        else:
-            seed_of[(r, f)] = file_seeds(sampling["random_state"], r, [f])[0]
-    from ..io import read_point_cloud
-
+    plan = plan_inputs(inputs, sampling, cmd=cmd, labelled=labelled)
     clouds, kept, skipped = [], [], []
-    for e in Progress(entries, progress, "reading"):
-        f, r, _ = e
+    for k in Progress(range(len(plan.entries)), progress, "reading"):
         try:
-            cloud = read_point_cloud(f, normals=sampling.get("normals", "auto"), n_points=sampling.get("n_points"),
-                                     resolution=sampling.get("resolution"), random_state=seed_of[(r, f)])
+            cloud = plan.read(k)
         except (ValueError, OSError, KeyError) as exc:
-            msg = str(exc)
-            msg = msg if f in msg else f"{f}: {msg}"
-            if on_error == "raise":
-                raise ValueError(f"{msg} (--on-error skip reads the other files)") from None
-            skipped.append((f, msg))
+            skipped.append((plan.entries[k][0], plan.error(k, exc, on_error)))
             continue
-        clouds.append(np.asarray(cloud, dtype=np.float64))
-        kept.append(e)
-    if skipped:
-        first = "; ".join(f"{m}" for _, m in skipped[:3])
-        more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
-        if not clouds:
-            raise ValueError(f"no file could be read ({len(skipped)} of {len(entries)}): {first}{more}")
-        warn(cmd, f"skipped {len(skipped)} of {len(entries)} files that could not be read: {first}{more}")
-    ids = np.asarray([f for f, _, _ in kept], dtype=str)
-    keys = [os.path.realpath(f) for f, _, _ in kept]
-    if class_names is not None:
-        index = {c: k for k, c in enumerate(class_names)}
-        labels = np.asarray([index[c[0]] for _, _, c in kept], dtype=np.int64)
-        split = np.asarray([c[1] for _, _, c in kept], dtype=str)
-        split = split if (split != "").all() else None
-        present = set(labels.tolist())
-        lost = [class_names[k] for k in range(len(class_names)) if k not in present]
-        if lost and labelled:
-            raise ValueError(f"no file of the class {lost[0]!r} could be read")
-    return Objects(clouds, ids, keys, labels, class_names, split, skipped, " ".join(inputs))
+        clouds.append(cloud)
+        kept.append(k)
+    plan.report_skipped(skipped, len(clouds))
+    return plan.objects(kept, clouds, skipped)
 
 
 def load_labelled(args, sampling, cmd):

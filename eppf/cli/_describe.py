@@ -1,16 +1,55 @@
-"""``eppf describe``: descriptors of files, folders or a ``.npz`` data set."""
+"""``eppf describe``: descriptors of files, folders or a ``.npz`` data set.
+
+Files and folders are streamed: chunks of files are read on reader threads
+(:func:`eppf.utils._stream.ordered_map`) while the descriptor, whose compiled
+kernels release the GIL, describes the chunk before; rows go to the output
+file as they come (:class:`eppf.utils._stream.RowWriter`), so memory holds a
+few chunks whatever the number of files. The rows are bit for bit those of
+``fit_transform`` on all the clouds read the one way (:func:`read_inputs`):
+
+- per-object seeds are consecutive draws of one ``RandomState(random_state)``
+  (:func:`eppf.utils.object_seeds`), so the descriptor is given such a
+  generator before it is fitted, and each chunk's ``transform`` draws the
+  seeds of its rows, those that follow the previous chunk's;
+- a descriptor whose scale is learnt from the data set (``scaling="fit"``,
+  EPPF's default: one over the largest bounding-box side of any object)
+  needs every object before the first row: a first pass reads every file
+  and keeps the largest object; the descriptor is fitted on it (the same
+  scale as fitting on all of them) and the second pass describes the
+  clouds. A cloud that took longer to read than to write (a sampled mesh, a
+  text file) is spilled, as read, to an unnamed temporary file in the first
+  pass and taken from there; the others (binary point files) are read again,
+  on the reader thread, and must come back with the same shape;
+- other descriptors are fitted on the first cloud (they learn nothing from
+  the data) and describe while the files are read.
+
+A ``.npz`` data set is read whole and described in one ``fit_transform``.
+"""
 
 import json
+import os
+import re
+import shutil
 import sys
+import tempfile
 import time
+import zipfile
 
 import numpy as np
 
+from ..utils import check_n_jobs
 from ..utils._atomic import atomic_write
-from ._common import (Command, add_descriptor, add_runtime, add_sampling, check_output, make_descriptor,
-                      descriptor_settings, progress_of, read_inputs, register, sampling_from_args, warn_tiny)
+from ..utils._stream import RowWriter, ordered_map
+from ._common import (Command, add_descriptor, add_runtime, add_sampling, check_output, descriptor_settings,
+                      is_data_set_input, make_descriptor, min_points_needed, plan_inputs, progress_of, read_inputs,
+                      register, sampling_from_args, warn_tiny)
 
 __all__ = ["run_describe"]
+
+#: Files per chunk of the stream (reading, describing and writing go chunk by chunk).
+CHUNK_FILES = 128
+#: Bytes of files per chunk (file sizes on disk): bounds a chunk's memory for large files.
+CHUNK_BYTES = 32 << 20
 
 
 def add_arguments(p):
@@ -38,44 +77,346 @@ def run_describe(args, out=None):
 
     Returns
     -------
-    X : ndarray of shape (n_objects, n_features)
-        The descriptors that were saved.
+    shape : tuple of int
+        ``(n_objects, n_features)`` of the descriptors that were saved.
     """
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf describe")
     output = check_output(args.output, (".npy", ".npz"))
     progress = progress_of(args)
-    est = make_descriptor(args.descriptor, descriptor_settings(args, progress))
-    sampling = sampling_from_args(args)
-    objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd)
-    warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
     t0 = time.perf_counter()
-    X = est.fit_transform(objects.clouds)
+    sampling = sampling_from_args(args)
+    if is_data_set_input(args.inputs):
+        est = make_descriptor(args.descriptor, descriptor_settings(args, progress))
+        params = _saved_params(est)
+        objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd)
+        warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
+        X = est.fit_transform(objects.clouds)
+        meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
+                     getattr(est, "scale_", None), params)
+        _save(output, X, meta, args, sampling)
+        n, n_features = X.shape
+    else:
+        est = make_descriptor(args.descriptor, descriptor_settings(args, False))
+        n, n_features, meta = _stream(args, est, sampling, output, progress, cmd)
     seconds = time.perf_counter() - t0
+    labelled = "" if meta.labels is None else f", {len(meta.class_names)} classes"
+    print(f"eppf: {n} {args.descriptor} descriptors of {n_features} bins{labelled} -> {output} "
+          f"({1e3 * seconds / n:.2f} ms per object, {n / seconds:.0f} files per second, {seconds:.1f} s)", file=out)
+    return n, n_features
+
+
+class _Meta:
+    """What the .npz output keeps beside the descriptors."""
+
+    def __init__(self, ids, labels, class_names, split, scale, params):
+        self.ids, self.labels, self.class_names, self.split = ids, labels, class_names, split
+        self.scale, self.params = scale, params
+
+
+def _saved_params(est):
+    return {k: v for k, v in est.get_params().items() if k not in ("verbose", "n_jobs")}
+
+
+def _npz_extras(meta, args, sampling):
+    arrays = dict(ids=meta.ids, descriptor=np.array(args.descriptor),
+                  params=np.array(json.dumps(meta.params, default=list)),
+                  sampling=np.array(json.dumps(sampling)),
+                  scale=np.array(np.nan if meta.scale is None else meta.scale))
+    if meta.labels is not None:
+        arrays.update(labels=meta.labels, class_names=meta.class_names)
+    if meta.split is not None:
+        arrays.update(split=meta.split)
+    return arrays
+
+
+def _save(output, X, meta, args, sampling):
+    """The in-memory path: save ``X`` (and, for .npz, ``meta``) atomically."""
     if output.lower().endswith(".npy"):
         with atomic_write(output) as fh:
             np.save(fh, X)
-    else:
-        params = {k: v for k, v in est.get_params().items() if k not in ("verbose", "n_jobs")}
-        arrays = dict(descriptors=X, ids=objects.ids, descriptor=np.array(args.descriptor),
-                      params=np.array(json.dumps(params, default=list)),
-                      sampling=np.array(json.dumps(sampling)),
-                      scale=np.array(np.nan if getattr(est, "scale_", None) is None else est.scale_))
-        if objects.labels is not None:
-            arrays.update(labels=objects.labels, class_names=objects.class_names)
-        if objects.split is not None:
-            arrays.update(split=objects.split)
+        return
+    with atomic_write(output) as fh:
+        np.savez(fh, descriptors=X, **_npz_extras(meta, args, sampling))
+
+
+# ---------------------------------------------------------------------------
+# The stream
+# ---------------------------------------------------------------------------
+
+
+def _learns_scale(est):
+    """True when the descriptor (or a block of it) learns its scale from the data set."""
+    return any(v == "fit" for k, v in est.get_params().items() if k == "scaling" or k.endswith("__scaling"))
+
+
+def _chunks(plan):
+    """Entry indices in chunks of at most CHUNK_FILES files and (but for one large file) CHUNK_BYTES bytes."""
+    chunks, current, size = [], [], 0
+    for k, (f, _, _) in enumerate(plan.entries):
+        try:
+            n_bytes = os.stat(f).st_size
+        except OSError:
+            n_bytes = 0  # (the reader names the problem)
+        if current and (len(current) >= CHUNK_FILES or size + n_bytes > CHUNK_BYTES):
+            chunks.append(current)
+            current, size = [], 0
+        current.append(k)
+        size += n_bytes
+    if current:
+        chunks.append(current)
+    return chunks
+
+
+def _read_chunk(plan, chunk):
+    """``[(k, cloud, None, seconds) or (k, None, exception, seconds)]`` of one chunk of entries (on a reader
+    thread); ``seconds`` is the thread's CPU time spent reading the file (waiting for a busy core not counted)."""
+    out = []
+    for k in chunk:
+        t0 = time.thread_time()
+        try:
+            out.append((k, plan.read(k), None, time.thread_time() - t0))
+        except (ValueError, OSError, KeyError) as exc:
+            out.append((k, None, exc, time.thread_time() - t0))
+    return out
+
+
+#: Bytes per second at which the first pass is taken to write clouds to its temporary file: a cloud that
+#: was read faster than it could be written (a binary point file) is read again in the second pass instead.
+SPILL_BYTES_PER_SECOND = 250e6
+
+
+def _name_files(exc, files):
+    """The descriptor's message with "point cloud <i>" (its index in the chunk) replaced by the file's name."""
+    def repl(m):
+        i = int(m.group(1))
+        return f"point cloud {files[i]}" if 0 <= i < len(files) else m.group(0)
+
+    return ValueError(re.sub(r"point cloud (\d+)", repl, str(exc), count=1))
+
+
+class _Bar:
+    """A tqdm bar over files, or nothing."""
+
+    def __init__(self, total, enabled, desc):
+        self.bar = None
+        if enabled:
+            try:
+                from tqdm.auto import tqdm
+            except ImportError:  # pragma: no cover
+                return
+            self.bar = tqdm(total=total, desc=desc, unit="file", file=sys.stderr, leave=False)
+
+    def update(self, n):
+        if self.bar is not None:
+            self.bar.update(n)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _stream(args, est, sampling, output, progress, cmd):
+    plan = plan_inputs(args.inputs, sampling, cmd=cmd)
+    params = _saved_params(est)
+    if "random_state" in est.get_params(deep=False) and 0 <= args.random_state < 2 ** 32:
+        # consecutive draws of one generator: chunk after chunk, the seeds of one fit_transform
+        # (a seed out of range stays as it is, for the descriptor's own message)
+        est.set_params(random_state=np.random.RandomState(args.random_state))
+    n_threads = check_n_jobs(args.n_jobs)
+    workers = max(1, min(2, n_threads))
+    chunks = _chunks(plan)
+    state = dict(kept=[], skipped=[], tiny_clouds=[], tiny_ids=[], fitted=False)
+    need, _ = min_points_needed(est)
+
+    def accept(results):
+        """Clouds and file names of one chunk's results; skipped or raised files handled in order."""
+        clouds, files, kept, seconds = [], [], [], []
+        for k, cloud, exc, secs in results:
+            if exc is not None:
+                state["skipped"].append((plan.entries[k][0], plan.error(k, exc, args.on_error)))
+                continue
+            state["kept"].append(k)
+            clouds.append(cloud)
+            files.append(plan.entries[k][0])
+            kept.append(k)
+            seconds.append(secs)
+            if len(cloud) < need:
+                state["tiny_clouds"].append(cloud)
+                state["tiny_ids"].append(plan.entries[k][0])
+        return clouds, files, kept, seconds
+
+    def fit(cloud, file):
+        try:
+            est.fit([cloud])
+        except ValueError as exc:
+            raise _name_files(exc, [file]) from None
+        state["fitted"] = True
+
+    def describe(clouds, files, sink):
+        if not clouds:
+            return
+        if not state["fitted"]:
+            fit(clouds[0], files[0])
+        try:
+            rows = est.transform(clouds)
+        except ValueError as exc:
+            raise _name_files(exc, files) from None
+        sink(rows)
+
+    def run(sink):
+        bar = _Bar(len(plan.entries), progress, "reading" if _learns_scale(est) else "describing")
+        try:
+            if not _learns_scale(est):
+                for results in ordered_map(lambda c: _read_chunk(plan, c), chunks, workers=workers,
+                                           depth=workers + 1):
+                    clouds, files, _, _ = accept(results)
+                    describe(clouds, files, sink)
+                    bar.update(len(results))
+                return
+            with tempfile.TemporaryFile(prefix="eppf-describe-") as spill:
+                # records: (file, entry, offset in the spill or -1 to read the file again, shape) per kept cloud
+                records, best = [], (-np.inf, None, None)
+                offset = 0
+                for results in ordered_map(lambda c: _read_chunk(plan, c), chunks, workers=workers,
+                                           depth=workers + 1):
+                    clouds, files, kept, seconds = accept(results)
+                    bar.update(len(results))
+                    if not clouds:
+                        continue
+                    clouds = [np.ascontiguousarray(c, dtype=np.float64) for c in clouds]
+                    sides = _largest_sides(clouds)
+                    j = int(np.argmax(sides))
+                    if sides[j] > best[0] or best[1] is None:
+                        best = (sides[j], clouds[j], files[j])
+                    spilled = []
+                    for cloud, file, k, secs in zip(clouds, files, kept, seconds):
+                        # which clouds are spilled changes the time only: a file read again gives the same cloud
+                        if secs * SPILL_BYTES_PER_SECOND > cloud.nbytes:
+                            records.append((file, k, offset, cloud.shape))
+                            offset += cloud.nbytes
+                            spilled.append(cloud)
+                        else:
+                            records.append((file, k, -1, cloud.shape))
+                    if spilled:  # one write per chunk; clouds of different widths are laid end to end
+                        spill.write(b"".join(c.data for c in spilled))
+                bar.close()
+                if not records:
+                    return
+                # the data set's scale: fitting on the largest object gives the scale of fitting on all of them
+                fit(best[1], best[2])
+                best = None
+                spill.flush()
+                fd = spill.fileno()
+                groups = [records[i:i + CHUNK_FILES] for i in range(0, len(records), CHUNK_FILES)]
+                bar = _Bar(len(records), progress, "describing")
+                for clouds, files in ordered_map(lambda g: _read_back(plan, fd, g), groups, workers=1, depth=2):
+                    describe(clouds, files, sink)
+                    bar.update(len(clouds))
+        finally:
+            bar.close()
+
+    n_features = None
+    if output.lower().endswith(".npy"):
         with atomic_write(output) as fh:
-            np.savez(fh, **arrays)
-    labelled = "" if objects.labels is None else f", {len(objects.class_names)} classes"
-    print(f"eppf: {len(X)} {args.descriptor} descriptors of {X.shape[1]} bins{labelled} -> {output} "
-          f"({1e3 * seconds / len(X):.2f} ms per object)", file=out)
-    return X
+            writer = []
+
+            def sink(rows):
+                if not writer:
+                    writer.append(RowWriter(fh, rows.shape[1]))
+                writer[0].write(rows)
+
+            run(sink)
+            plan.report_skipped(state["skipped"], len(state["kept"]))
+            writer[0].close()
+            n_features = writer[0].n_cols
+        meta = plan.objects(state["kept"], None, state["skipped"])
+    else:
+        with tempfile.TemporaryFile(prefix="eppf-describe-rows-") as rows_file:
+            writer = []
+
+            def sink(rows):
+                if not writer:
+                    writer.append(RowWriter(rows_file, rows.shape[1]))
+                writer[0].write(rows)
+
+            run(sink)
+            plan.report_skipped(state["skipped"], len(state["kept"]))
+            writer[0].close()
+            n_features = writer[0].n_cols
+            objects = plan.objects(state["kept"], None, state["skipped"])
+            meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
+                         getattr(est, "scale_", None), params)
+            rows_file.seek(0)
+            with atomic_write(output) as fh:
+                # np.savez's layout (stored, one .npy per array); the descriptors are copied from the rows file
+                with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                    with zf.open("descriptors.npy", "w", force_zip64=True) as entry:
+                        shutil.copyfileobj(rows_file, entry, 1 << 20)
+                    for name, value in _npz_extras(meta, args, sampling).items():
+                        with zf.open(name + ".npy", "w", force_zip64=True) as entry:
+                            np.lib.format.write_array(entry, np.asanyarray(value), allow_pickle=False)
+    warn_tiny(state["tiny_clouds"], state["tiny_ids"], est, cmd, args.descriptor)
+    if not isinstance(meta, _Meta):
+        meta = _Meta(meta.ids, meta.labels, meta.class_names, meta.split, None, params)
+    return len(state["kept"]), n_features, meta
+
+
+def _largest_sides(clouds):
+    """Largest bounding-box side of each non-empty cloud, as ``np.ptp(c[:, :3], axis=0).max()`` gives it.
+
+    One reduction over the chunk's stacked coordinates instead of three per
+    cloud; maxima, minima and their difference are the same floats either
+    way. Sides beyond float64 are inf (the descriptor's fit refuses them).
+    """
+    starts = np.cumsum([0] + [len(c) for c in clouds[:-1]])
+    xyz = np.concatenate([c[:, :3] for c in clouds])
+    with np.errstate(over="ignore", invalid="ignore"):
+        return (np.maximum.reduceat(xyz, starts, axis=0) - np.minimum.reduceat(xyz, starts, axis=0)).max(axis=1)
+
+
+def _read_back(plan, fd, group):
+    """Clouds and file names of the first pass's records ``(file, entry, offset, shape)``.
+
+    Spilled clouds come from the temporary file (one read for the group's
+    span); the others are read from their files again, as in the first pass,
+    and a file that cannot be read again or gives another shape stops the
+    command, naming it.
+    """
+    spilled = [r for r in group if r[2] >= 0]
+    buf, start = None, 0
+    if spilled:
+        start = spilled[0][2]
+        end = spilled[-1][2] + 8 * int(np.prod(spilled[-1][3]))
+        buf = bytearray(end - start)
+        view, got = memoryview(buf), 0
+        while got < len(buf):  # pread may return fewer bytes than asked
+            n = os.preadv(fd, [view[got:]], start + got)
+            if n <= 0:
+                raise OSError(f"eppf describe: the temporary file of the read clouds ended early "
+                              f"({got} of {len(buf)} bytes)")
+            got += n
+    clouds = []
+    for file, k, off, shape in group:
+        if off >= 0:
+            cloud = np.frombuffer(buf, dtype=np.float64, count=int(np.prod(shape)), offset=off - start).reshape(shape)
+        else:
+            try:
+                cloud = plan.read(k)
+            except (ValueError, OSError, KeyError) as exc:
+                raise ValueError(f"{file} could not be read again for its descriptor (it changed while eppf "
+                                 f"describe ran?): {exc}") from None
+            if cloud.shape != shape:
+                raise ValueError(f"{file} changed while eppf describe ran: {shape[0]} points in the first pass, "
+                                 f"{cloud.shape[0]} now")
+        clouds.append(cloud)
+    return clouds, [r[0] for r in group]
 
 
 register(Command(
     "describe", "compute descriptors of point cloud or mesh files, a folder or a .npz data set",
     "Compute descriptors of point clouds and save them to .npy (the matrix) or .npz (with object ids, labels and "
-    "class names when the input has them, and the descriptor's parameters).",
+    "class names when the input has them, and the descriptor's parameters). Files and folders are streamed: "
+    "read, described and written chunk by chunk, in memory that does not grow with the number of files.",
     add_arguments, run_describe,
 ))

@@ -28,15 +28,23 @@ def _check_normals_arg(normals, owner):
         raise ValueError(f"{owner}: normals must be 'auto', True or False, got {normals!r}")
 
 
-def _rng(random_state, owner):
-    """An int seeds a PCG64 generator from all its 64 bits (as the folder loaders' per-file seeds do)."""
+def _check_random_state_arg(random_state, owner):
+    """Refuse a ``random_state`` that :func:`_rng` cannot use (before any file is read)."""
     if isinstance(random_state, numbers.Integral) and not isinstance(random_state, bool):
         if not 0 <= random_state < 2 ** 64:
             raise ValueError(f"{owner}: an int random_state must lie in 0..2**64-1, got {random_state}")
-        return object_rng(int(random_state))
+        return
     if random_state is None or isinstance(random_state, np.random.RandomState):
-        return check_random_state(random_state)
+        return
     raise TypeError(f"{owner}: random_state must be None, an int or a RandomState, got {type(random_state).__name__}")
+
+
+def _rng(random_state, owner):
+    """An int seeds a PCG64 generator from all its 64 bits (as the folder loaders' per-file seeds do)."""
+    _check_random_state_arg(random_state, owner)
+    if isinstance(random_state, numbers.Integral):
+        return object_rng(int(random_state))
+    return check_random_state(random_state)
 
 
 def _check_cloud_arg(cloud, owner):
@@ -62,7 +70,11 @@ def _finish_cloud(cloud, path, normals, owner, remove_nan):
         raise FileFormatError(f"{owner}: {path!r} has no normals, but normals=True")
     if normals is False:
         nrm = None
-    out = xyz if nrm is None else np.hstack([xyz, nrm])
+    base = xyz.base
+    if nrm is not None and base is not None and nrm.base is base and _is_block(base, xyz, nrm):
+        out = base  # a reader's (n, 6) block already (PLY): no copy
+    else:
+        out = xyz if nrm is None else np.hstack([xyz, nrm])
     out = np.ascontiguousarray(out, dtype=np.float64)
     if remove_nan:
         keep = np.isfinite(out).all(axis=1)
@@ -71,6 +83,16 @@ def _finish_cloud(cloud, path, normals, owner, remove_nan):
     if out.shape[0] == 0:
         raise FileFormatError(f"{owner}: {path!r} holds no points")
     return out
+
+
+def _is_block(base, xyz, nrm):
+    """True when ``xyz`` and ``nrm`` are columns 0-2 and 3-5 of the C-ordered float64 (n, 6) ``base``."""
+    if not (isinstance(base, np.ndarray) and base.dtype == np.float64 and base.ndim == 2 and base.shape[1] == 6
+            and base.flags.c_contiguous and xyz.shape == nrm.shape == (base.shape[0], 3)):
+        return False
+    start = base.__array_interface__["data"][0]
+    return (xyz.__array_interface__["data"][0] == start and nrm.__array_interface__["data"][0] == start + 24
+            and xyz.strides == nrm.strides == base.strides)
 
 
 def _check_vertices(mesh, path, owner):
@@ -210,7 +232,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     resolution = check_resolution(resolution, owner)
     if n_points is not None and resolution is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both")
-    rng = _rng(random_state, owner)
+    # the generator is made only for a file that is sampled (a mesh, or resampling to n_points)
+    _check_random_state_arg(random_state, owner)
     path = os.fspath(path)
     fmt = lookup(path, format, owner)
     cloud, shape = _guard(owner, path, fmt, _read_any, path, fmt, owner, normals, mesh == "sample")
@@ -223,7 +246,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         count = n_points if n_points is not None or resolution is not None else MESH_POINTS
         with np.errstate(over="ignore", invalid="ignore"):
             out = _guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
-                         resolution=resolution, return_normals=normals is not False, random_state=rng)
+                         resolution=resolution, return_normals=normals is not False,
+                         random_state=_rng(random_state, owner))
         if not np.isfinite(out).all():
             raise FileFormatError(
                 f"{owner}: {path!r}: the mesh's coordinates are too large to sample (its areas overflow float64)"
@@ -231,7 +255,7 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         return out
     out = _finish_cloud(cloud, path, normals, owner, remove_nan)
     if n_points is not None:
-        out = _guard(owner, path, fmt, resample, out, n_points, random_state=rng)
+        out = _guard(owner, path, fmt, resample, out, n_points, random_state=_rng(random_state, owner))
     return out
 
 

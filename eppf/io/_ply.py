@@ -40,8 +40,36 @@ class _Prop:
         self.name, self.code, self.count_code = name, code, count_code
 
 
+#: Parsed headers by their bytes: a folder of files written by one program repeats one header, parsed once.
+_HEADERS = {}
+_HEADERS_MAX, _HEADER_BYTES_MAX = 64, 4096
+
+
 def _header(data, path, owner):
-    """(format, elements, body offset); elements are [name, count, [props], line]."""
+    """(format, elements, body offset); elements are [name, count, [props], line].
+
+    A header parsed before (the same bytes up to and including its
+    ``end_header`` line) is taken from a small cache: parsing reads nothing
+    past that line, so equal bytes give an equal result. Only headers that
+    parsed without error are kept, so every error is raised as before.
+    """
+    i = data.find(b"end_header", 0, _HEADER_BYTES_MAX)
+    if i >= 0:
+        j = data.find(b"\n", i)
+        hit = _HEADERS.get(data[:j + 1]) if j >= 0 else None
+        if hit is not None:
+            return hit
+    parsed = _parse_header(data, path, owner)
+    pos = parsed[2]
+    if pos <= _HEADER_BYTES_MAX:
+        if len(_HEADERS) >= _HEADERS_MAX:
+            _HEADERS.clear()
+        _HEADERS[data[:pos]] = parsed
+    return parsed
+
+
+def _parse_header(data, path, owner):
+    """:func:`_header` without the cache."""
     if not data.startswith(b"ply"):
         raise FileFormatError(f"{owner}: {path!r} line 1: malformed PLY header (expected the magic 'ply')")
     pos, lineno, fmt, elements = 0, 0, None, []
@@ -281,9 +309,17 @@ def _is_number(token):
         return False
 
 
-def _column(values, code):
-    """Values of one scalar property as float64, rounded through its declared type."""
+def _column(values, code, copy=True):
+    """Values of one scalar property as float64, rounded through its declared type.
+
+    With ``copy=False`` a binary float column comes back as it is (float32 or
+    float64), for the caller to widen while copying it into place.
+    """
     arr = np.asarray(values)
+    if arr.dtype == np.float64 and code == "f8":
+        return arr
+    if arr.dtype == np.float32 and code == "f4":  # binary float columns: the exact widening, nothing to round
+        return arr if not copy else arr.astype(np.float64)
     with np.errstate(over="ignore", invalid="ignore"):  # out-of-range values become inf, as in C
         if code in ("f4",) and arr.dtype != np.float32:
             arr = arr.astype(np.float32)
@@ -306,16 +342,17 @@ def read_ply(path, data, owner, want_faces=True):
     if missing:
         raise FileFormatError(f"{owner}: {path!r}: PLY 'vertex' element lacks {missing}; it has {list(vprops)}")
     v = out["vertex"]
-    if n_v == 0:
-        xyz = np.empty((0, 3))
-    else:
-        xyz = np.column_stack([_column(v[f], vprops[f].code) for f in "xyz"])
-    nrm = None
+    normal_names = ()
     for names in (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z")):
         if n_v and all(f in vprops and vprops[f].count_code is None for f in names):
-            nrm = np.column_stack([_column(v[f], vprops[f].code) for f in names])
+            normal_names = names
             break
-    cloud = Cloud(xyz, nrm)
+    # one float64 block: xyz in columns 0-2, normals (when there are) in 3-5, each column copied once
+    full = np.empty((n_v, 3 + len(normal_names)))
+    for j, f in enumerate(("x", "y", "z") + normal_names):
+        if n_v:
+            full[:, j] = _column(v[f], vprops[f].code, copy=False)
+    cloud = Cloud(full[:, :3], full[:, 3:] if normal_names else None)
     if not want_faces or "face" not in spec:
         return cloud, None
     n_f, fprops = spec["face"]
@@ -335,11 +372,11 @@ def read_ply(path, data, owner, want_faces=True):
             raise FileFormatError(f"{owner}: {path!r}: PLY face {short[0]} has fewer than 3 vertices")
         rows = np.repeat(np.arange(n_f), [len(p) - 2 for p in polys])
         tri = np.array([(p[0], p[k], p[k + 1]) for p in polys for k in range(1, len(p) - 1)], dtype=np.float64)
-    ok = (tri >= 0) & (tri < xyz.shape[0]) & (tri == np.floor(tri))
+    ok = (tri >= 0) & (tri < n_v) & (tri == np.floor(tri))
     bad = np.flatnonzero(~ok.all(axis=1))
     if bad.size:
         raise FileFormatError(
-            f"{owner}: {path!r}: PLY face {int(rows[bad[0]])} has a vertex index outside 0..{xyz.shape[0] - 1}"
+            f"{owner}: {path!r}: PLY face {int(rows[bad[0]])} has a vertex index outside 0..{n_v - 1}"
         )
     return cloud, tri.astype(np.int64)
 

@@ -11,6 +11,79 @@ import numpy as np
 from libc.stdlib cimport strtod
 
 
+# Exact powers of ten: 10**k is a float64 without rounding up to k = 22.
+cdef double[23] _POW10 = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                          1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22]
+
+
+cdef inline bint _ends_token(const char* p, const char* lim) noexcept nogil:
+    # the end of the buffer, white space or a table separator
+    return p == lim or p[0] == b' ' or p[0] == b'\t' or p[0] == b'\r' or p[0] == b'\n' or p[0] == b',' \
+        or p[0] == b';' or p[0] == b'\v' or p[0] == b'\f'
+
+
+cdef inline double _strtod(const char* p, const char* lim, char** endp) noexcept nogil:
+    """``strtod(p, endp)``, with a shortcut that gives the same double for short plain decimals.
+
+    A token ``[sign]digits[.digits][(e|E)[sign]digits]`` followed by white
+    space, a separator or the end, with at most 19 digits whose integer M is
+    at most 2**53 and a decimal exponent E with |E| <= 22, is M * 10**E (or
+    M / 10**-E): both operands are float64 without rounding, so the one
+    IEEE operation rounds the exact value once, to the nearest double, as a
+    correctly rounding strtod does (Clinger's fast path). Anything else
+    (more digits, larger exponents, inf, nan, hexadecimal, a token that goes
+    on) is handed to strtod itself, so the result and the end pointer are
+    always strtod's.
+    """
+    cdef const char* q = p
+    cdef bint neg = False, eneg = False
+    cdef unsigned long long m = 0
+    cdef int digits = 0, frac = 0, ex = 0, expdigits = 0
+    cdef double v
+    if q < lim and (q[0] == b'-' or q[0] == b'+'):
+        neg = q[0] == b'-'
+        q += 1
+    while q < lim and q[0] >= b'0' and q[0] <= b'9':
+        if digits < 19:
+            m = m * 10 + <unsigned long long>(q[0] - 48)
+        digits += 1
+        q += 1
+    if q < lim and q[0] == b'.':
+        q += 1
+        while q < lim and q[0] >= b'0' and q[0] <= b'9':
+            if digits < 19:
+                m = m * 10 + <unsigned long long>(q[0] - 48)
+            digits += 1
+            frac += 1
+            q += 1
+    if digits == 0 or digits > 19:
+        return strtod(p, endp)
+    if q < lim and (q[0] == b'e' or q[0] == b'E'):
+        q += 1
+        if q < lim and (q[0] == b'-' or q[0] == b'+'):
+            eneg = q[0] == b'-'
+            q += 1
+        while q < lim and q[0] >= b'0' and q[0] <= b'9':
+            if ex < 10000:
+                ex = ex * 10 + (q[0] - 48)
+            expdigits += 1
+            q += 1
+        if expdigits == 0:
+            return strtod(p, endp)  # "1e" or "1e+": strtod stops before the e
+    if not _ends_token(q, lim) or m > (1ULL << 53):
+        return strtod(p, endp)
+    ex = (-ex if eneg else ex) - frac
+    if ex < -22 or ex > 22:
+        return strtod(p, endp)
+    v = <double>m
+    if ex >= 0:
+        v = v * _POW10[ex]
+    else:
+        v = v / _POW10[-ex]
+    endp[0] = <char*>q
+    return -v if neg else v
+
+
 cdef inline Py_ssize_t _skip_blank(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
     # skip spaces, tabs, carriage returns and whole blank lines
     while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r' or s[i] == b'\n'):
@@ -61,7 +134,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
             j += 1
         if j >= n or s[j] == b'\n':
             break
-        strtod(s + j, &end)
+        _strtod(s + j, s + n, &end)
         if end == s + j:
             return None
         j = end - s
@@ -85,7 +158,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
                 if cols == n_cols or not _number_start(s[i]):
                     ok = False
                     break
-                o[k] = strtod(s + i, &end)
+                o[k] = _strtod(s + i, s + n, &end)
                 if end == s + i:
                     ok = False
                     break
@@ -148,7 +221,7 @@ def parse_tokens(bytes data, Py_ssize_t start):
                 i += 1
             if bad >= 0:
                 break
-            o[k] = strtod(s + tok, &end)
+            o[k] = _strtod(s + tok, s + n, &end)
             if end != s + i:  # strtod stopped inside the token
                 bad = tok
                 break

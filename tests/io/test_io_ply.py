@@ -223,3 +223,43 @@ def test_ply_polygon_longer_than_a_uchar_count(tmp_path, binary):
     assert b"property list int int vertex_indices" in path.read_bytes()[:400]
     mesh = read_mesh(path)
     assert_array_equal(mesh.faces, [[0, k, k + 1] for k in range(1, 299)])
+
+
+def test_ply_cached_header_still_checks_every_file_against_its_own_size(tmp_path):
+    # many files of one folder share a header, parsed once: the checks of each file's body stay its own
+    from eppf.io import _ply
+
+    _ply._HEADERS.clear()
+    cloud = _cloud(30)
+    write_point_cloud(tmp_path / "a.ply", cloud)
+    data = (tmp_path / "a.ply").read_bytes()
+    assert_array_equal(read_point_cloud(tmp_path / "a.ply"), cloud.astype(np.float32).astype(np.float64))
+    assert len(_ply._HEADERS) == 1
+    body = data.index(b"end_header\n") + len(b"end_header\n")
+    (tmp_path / "b.ply").write_bytes(data[:body + 24 * 10])  # the same header, 10 of 30 rows
+    with pytest.raises(FileFormatError, match=r"b\.ply.*declares 30 rows.*truncated"):
+        read_point_cloud(tmp_path / "b.ply")
+    # a different header (one more comment) is parsed anew; a header that fails is never cached
+    other = data.replace(b"comment written by eppf\n", b"comment written by eppf\ncomment end_header\n")
+    (tmp_path / "c.ply").write_bytes(other)
+    assert_array_equal(read_point_cloud(tmp_path / "c.ply"), read_point_cloud(tmp_path / "a.ply"))
+    bad = data.replace(b"property float nz", b"property floatt nz")
+    (tmp_path / "d.ply").write_bytes(bad)
+    for _ in range(2):
+        with pytest.raises(FileFormatError, match=r"d\.ply.*unsupported property line"):
+            read_point_cloud(tmp_path / "d.ply")
+    assert all(b"floatt" not in key for key in _ply._HEADERS)
+
+
+def test_ply_header_cache_is_bounded(tmp_path):
+    from eppf.io import _ply
+
+    _ply._HEADERS.clear()
+    cloud = _cloud(5, normals=False)
+    for i in range(_ply._HEADERS_MAX + 10):
+        path = tmp_path / f"{i}.ply"
+        write_point_cloud(path, cloud)
+        data = path.read_bytes().replace(b"comment written by eppf", b"comment file %d" % i)
+        path.write_bytes(data)
+        read_point_cloud(path)
+        assert len(_ply._HEADERS) <= _ply._HEADERS_MAX

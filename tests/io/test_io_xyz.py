@@ -168,3 +168,33 @@ def test_text_not_utf8(tmp_path):
     path.write_bytes(b"1 2 3\n\xff\xfe 1 2\n")
     with pytest.raises(FileFormatError, match=re.escape("is not a text file (undecodable byte at offset 6)")):
         read_point_cloud(path)
+
+
+def test_compiled_number_parser_gives_python_floats_bit_for_bit():
+    # the short-decimal shortcut of the compiled parsers must round exactly as float() (strtod) does
+    from eppf.io._xyz_fast import parse_float_table, parse_tokens
+
+    rng = np.random.default_rng(0)
+    values = np.concatenate([rng.normal(size=3000) * 10.0 ** rng.integers(-30, 30, size=3000),
+                             rng.uniform(-1, 1, size=3000), rng.integers(-10 ** 6, 10 ** 6, size=3000)])
+    tokens = []
+    for k, v in enumerate(values):
+        fmt = ("%.9g", "%.17g", "%.6e", "%.3f", "%.15g", "%.1E", "%+.7g", "%.0f")[k % 8]
+        tokens.append(fmt % v)
+    tokens += ["0", "-0", "+.5", "5.", "1e22", "1e23", "9007199254740993", "9007199254740992", "123456789012345678901",
+               "0.1", "1e-22", "4.9e-324", "1.7976931348623157e308", "2.2250738585072014e-308", "000000.0001",
+               "1E+5", "3.14159265358979323846", "7e-23", "-1.5e-3", "12345678901234567e5"]
+    while len(tokens) % 3:
+        tokens.append("1")
+    text = "\n".join(" ".join(tokens[i:i + 3]) for i in range(0, len(tokens), 3)).encode()
+    expected = np.array([float(t) for t in tokens])
+    table = parse_float_table(text, 0)
+    assert table.shape == (len(tokens) // 3, 3)
+    assert table.ravel().tobytes() == expected.tobytes()
+    flat, bad = parse_tokens(text, 0)
+    assert bad == -1 and flat.tobytes() == expected.tobytes()
+    # tokens that merely start like a number are still refused as before
+    for row in (b"1 2 3\n1e 2 3\n", b"1 2 3\n1.5x 2 3\n", b"1 2 3\n1.5.5 2 3\n"):
+        assert parse_float_table(row, 0) is None
+    assert parse_tokens(b"1 2 0x10", 0) == (None, 4)
+    assert parse_tokens(b"1 2 1.5.5", 0) == (None, 4)
