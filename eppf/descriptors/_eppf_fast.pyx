@@ -52,8 +52,10 @@ cdef extern from "_eppf_walk.h":
         EPPF_PK_XSHIFT
         EPPF_WALK_BATCH
     int64_t EPPF_PK_X
+    uint64_t EPPF_SM_GAMMA
     int64_t EPPF_PK_Y
     int eppf_walk_has_avx2() noexcept nogil
+    int eppf_walk_has_avx512() noexcept nogil
     void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                               double f1_density, const double* cos2, const double* cos3,
@@ -61,9 +63,24 @@ cdef extern from "_eppf_walk.h":
     void eppf_f4_batch_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
                             const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                             const double* recip_packed, int32_t* B) noexcept nogil
+    void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
+    int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
+                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
+                               double f1_density, const double* cos2, const double* cos3,
+                               int32_t* B) noexcept nogil
+    void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
+                              const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
+                              const double* recip_packed, int32_t* B) noexcept nogil
 
-# The AVX2 kernels (``_walk.h``) where the CPU has them; ``_set_simd`` turns them off for tests.
-cdef bint _simd = eppf_walk_has_avx2() != 0
+# The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (f4
+# walk; f1-f3 use AVX2 at levels 1 and 2). ``_set_simd`` / ``_set_simd_level``
+# choose a lower level for tests.
+cdef int _max_level():
+    if eppf_walk_has_avx2() == 0:
+        return 0
+    return 2 if eppf_walk_has_avx512() != 0 else 1
+
+cdef int _simd = _max_level()
 
 # Consecutive zero-length pairs after which an object is declared degenerate.
 cdef enum:
@@ -85,15 +102,30 @@ cdef uint64_t LOW32 = 0xFFFFFFFF
 
 
 def _simd_enabled():
-    """Whether the AVX2 kernels of ``_walk.h`` are in use."""
-    return bool(_simd)
+    """Whether the SIMD kernels of ``_eppf_walk.h`` are in use."""
+    return _simd > 0
 
 
 def _set_simd(enabled):
-    """Use the AVX2 kernels when ``enabled`` and available; return the previous setting."""
+    """Use the best SIMD kernels the CPU has when ``enabled``, the scalar code
+    otherwise; return the previous setting (True or False)."""
     global _simd
-    old = bool(_simd)
-    _simd = bool(enabled) and eppf_walk_has_avx2() != 0
+    old = _simd > 0
+    _simd = _max_level() if enabled else 0
+    return old
+
+
+def _simd_levels():
+    """The kernel levels this CPU can run: 0 scalar, 1 AVX2, 2 AVX-512."""
+    return tuple(range(_max_level() + 1))
+
+
+def _set_simd_level(int level):
+    """Use kernel level ``level`` (0 scalar, 1 AVX2, 2 AVX-512; capped at what the
+    CPU has); return the previous level."""
+    global _simd
+    old = _simd
+    _simd = max(0, min(level, _max_level()))
     return old
 
 
@@ -107,8 +139,8 @@ cdef struct Params:
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
-    bint simd               # walk f4 in AVX2 lanes (grids up to 64)
-    bint simd123            # f1-f3 bins in AVX2 lanes
+    int simd                # walk f4 in AVX2 (1) or AVX-512 (2) lanes (grids up to 64), 0: scalar
+    int simd123             # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -329,6 +361,11 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int32_t B[BATCH]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
+    # AVX-512: draw a batch's candidate pairs eight at a time; the f1-f3 pass
+    # then finds the first pair whose points coincide, if any, and from there
+    # on the scalar draw (with its redraws) takes over for the rest of the object.
+    cdef bint vec_draw = prm.simd123 == 2
+    cdef int good
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
     if prm.n4 > 1:
@@ -338,21 +375,38 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         m = n_pairs - base
         if m > BATCH:
             m = BATCH
-        base += m
-        for t in range(m):
-            if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
-                return 1
-            I[t] = <int32_t>i
-            J[t] = <int32_t>j
-        if prm.simd123:
-            eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                 prm.f1_density, prm.cos2, prm.cos3, B)
+        if vec_draw:
+            eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
+            good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                          prm.f1_density, prm.cos2, prm.cos3, B)
+            if good < m:
+                vec_draw = False
+                m = good
+            state += <uint64_t>m * EPPF_SM_GAMMA
+            base += m
+            if m == 0:
+                continue
         else:
+            base += m
             for t in range(m):
-                B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
+                if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
+                    return 1
+                I[t] = <int32_t>i
+                J[t] = <int32_t>j
+            if prm.simd123 == 2:
+                eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                       prm.f1_density, prm.cos2, prm.cos3, B)
+            elif prm.simd123:
+                eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                     prm.f1_density, prm.cos2, prm.cos3, B)
+            else:
+                for t in range(m):
+                    B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
-            if prm.simd:
+            if prm.simd == 2:
+                eppf_f4_batch_avx512(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
+            elif prm.simd:
                 eppf_f4_batch_avx2(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
             elif prm.grid == 64:
                 for t in range(m):
@@ -382,7 +436,7 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.n3 = n3
     prm.n4 = n4
     prm.grid = grid
-    prm.simd = _simd and grid <= 64
+    prm.simd = _simd if grid <= 64 else 0
     prm.simd123 = _simd
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max

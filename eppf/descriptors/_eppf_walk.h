@@ -53,6 +53,24 @@
 #define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
 #define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
 #define EPPF_WALK_BATCH 64
+/* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
+#define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
+
+#define EPPF_AVX512_TARGET "avx2,avx512f,avx512bw,avx512vl,avx512dq,avx512vbmi"
+
+/* AVX-512 F, BW, VL, DQ and VBMI (with the OS saving the zmm state: libgcc's
+   cpu check reads XCR0). */
+static int eppf_walk_has_avx512(void)
+{
+#if EPPF_WALK_SIMD
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw")
+           && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq")
+           && __builtin_cpu_supports("avx512vbmi");
+#else
+    return 0;
+#endif
+}
 
 static int eppf_walk_has_avx2(void)
 {
@@ -168,21 +186,13 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
  * similar numbers of steps.
  */
 __attribute__((target("avx2")))
-static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
-                               const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
-                               const double *recip_packed, int32_t *B)
+static void eppf_f4_setup_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
+                               const int32_t *thr, int n4, int64_t *P, int64_t *INC, int32_t *Ls, int32_t *LO,
+                               int32_t *HI)
 {
-    int64_t P[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
-    int64_t INC[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
-    int32_t Ls[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
-    int32_t LO[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
-    int32_t HI[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
     int32_t ri[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
     int32_t rj[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
-    int order[EPPF_WALK_BATCH + 4];
-    int count[65], start[65];
-    int t, k, n_walk;
-    (void)recip_packed;
+    int t;
 
     /* Row offsets of the two points of each pair, padded to a multiple of 4
        with the first pair (its lanes are computed and ignored). */
@@ -228,7 +238,14 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
             _mm_store_si128((__m128i *)(HI + t), _mm_i32gather_epi32(thr, _mm_add_epi32(row, n4m1), 4));
         }
     }
-    /* Walk order: L descending; L <= 1 (no inner voxel, occ = L + 1) last, unwalked. */
+}
+
+/* The pairs with inner voxels (L > 1) in walk order, longest line first, into
+   ``order``; returns their number. */
+static int eppf_f4_order(int m, const int32_t *Ls, int *order)
+{
+    int count[65], start[65];
+    int t, k, n_walk;
     for (k = 0; k < 65; k++)
         count[k] = 0;
     for (t = 0; t < m; t++)
@@ -246,6 +263,42 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
         if (L > 1)
             order[start[L]++] = t;
     }
+    return n_walk;
+}
+
+/* f4 bins of the lines without inner voxels (L <= 1): occ = T = L + 1, all voxels occupied. */
+static void eppf_f4_short_lines(int m, const int32_t *Ls, const int32_t *thr, int n4, int32_t *B)
+{
+    int t;
+    for (t = 0; t < m; t++) {
+        int64_t L = Ls[t];
+        if (L <= 1) {
+            const int32_t *th = thr + (L + 1) * n4;
+            int b = 0, j;
+            for (j = 1; j < n4; j++)
+                b += (L + 1) >= th[j];
+            B[t] += b;
+        }
+    }
+}
+
+__attribute__((target("avx2")))
+static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
+                               const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
+                               const double *recip_packed, int32_t *B)
+{
+    int64_t P[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
+    int64_t INC[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
+    int32_t Ls[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t LO[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t HI[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int order[EPPF_WALK_BATCH + 4];
+    int k, n_walk;
+    (void)recip_packed;
+
+    eppf_f4_setup_avx2(m, ii, jj, vox, g, thr, n4, P, INC, Ls, LO, HI);
+    /* Walk order: L descending; L <= 1 (no inner voxel, occ = L + 1) last, unwalked. */
+    n_walk = eppf_f4_order(m, Ls, order);
     for (k = n_walk; k < n_walk + 4; k++)
         order[k] = -1;
 
@@ -348,18 +401,261 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
         }
     }
     /* Lines without inner voxels: occ = T = L + 1, all voxels occupied. */
-    if (n_walk < m) {
-        for (t = 0; t < m; t++) {
-            int64_t L = Ls[t];
-            if (L <= 1) {
-                const int32_t *th = thr + (L + 1) * n4;
-                int b = 0, j;
+    if (n_walk < m)
+        eppf_f4_short_lines(m, Ls, thr, n4, B);
+}
+
+
+/* The candidate pairs of the next m draws of splitmix64 from ``state``, eight
+ * draws at a time, exactly as _eppf_fast.pyx's ``_draw_pair`` draws them but
+ * without its check for coinciding points (``eppf_f123_batch_avx512`` does
+ * that check): i = (r_hi n) >> 32, j = (r_lo (n - 1)) >> 32, plus one where
+ * j >= i. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *out_i, int32_t *out_j)
+{
+    const __m512i step = _mm512_set1_epi64((long long)(8 * EPPF_SM_GAMMA));
+    const __m512i c1 = _mm512_set1_epi64((long long)0xBF58476D1CE4E5B9ULL);
+    const __m512i c2 = _mm512_set1_epi64((long long)0x94D049BB133111EBULL);
+    const __m512i vn = _mm512_set1_epi64(n), vn1 = _mm512_set1_epi64(n - 1), one = _mm512_set1_epi64(1);
+    __m512i st = _mm512_add_epi64(
+        _mm512_set1_epi64((long long)state),
+        _mm512_mullo_epi64(_mm512_set_epi64(8, 7, 6, 5, 4, 3, 2, 1), _mm512_set1_epi64((long long)EPPF_SM_GAMMA)));
+    int t;
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        __m512i z = st, i, j;
+        z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64(z, 30)), c1);
+        z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64(z, 27)), c2);
+        z = _mm512_xor_si512(z, _mm512_srli_epi64(z, 31));
+        i = _mm512_srli_epi64(_mm512_mul_epu32(_mm512_srli_epi64(z, 32), vn), 32);
+        j = _mm512_srli_epi64(_mm512_mul_epu32(z, vn1), 32);
+        j = _mm512_mask_add_epi64(j, _mm512_cmpge_epu64_mask(j, i), j, one);
+        _mm256_mask_storeu_epi32(out_i + t, keep, _mm512_cvtepi64_epi32(i));
+        _mm256_mask_storeu_epi32(out_j + t, keep, _mm512_cvtepi64_epi32(j));
+        st = _mm512_add_epi64(st, step);
+    }
+}
+
+/* 8 rows r[0..7] (offsets in doubles) of an array: columns 0, 1, 2 as vectors. */
+#define EPPF_GATHER3(A, R, K, X, Y, Z)                                              \
+    do {                                                                            \
+        (X) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A), 8);     \
+        (Y) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 1, 8); \
+        (Z) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 2, 8); \
+    } while (0)
+
+/* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
+ * the same order, so the same bins), which also checks the pairs as
+ * ``_draw_pair`` does: returns the first t whose two points coincide (all
+ * three coordinates equal), or m when none does. B[t] is written for every t. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                                  const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+{
+    const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
+    const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
+    const __m512i vps = _mm512_set1_epi64(ps), vns = _mm512_set1_epi64(ns);
+    const __m256i one32 = _mm256_set1_epi32(1);
+    int t, k, bad = m;
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        const __m512i vi = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, ii + t));
+        const __m512i vj = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, jj + t));
+        __m512d pix, piy, piz, pjx, pjy, pjz, dx, dy, dz, dist, v;
+        __m256i b1, b2 = _mm256_setzero_si256(), b3 = _mm256_setzero_si256(), b;
+        __mmask8 same;
+        EPPF_GATHER3(pts, _mm512_mul_epu32(vi, vps), keep, pix, piy, piz);
+        EPPF_GATHER3(pts, _mm512_mul_epu32(vj, vps), keep, pjx, pjy, pjz);
+        same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
+               & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
+        if (same && bad == m)
+            bad = t + __builtin_ctz(same);
+        dx = _mm512_sub_pd(pjx, pix);
+        dy = _mm512_sub_pd(pjy, piy);
+        dz = _mm512_sub_pd(pjz, piz);
+        dist = _mm512_sqrt_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
+                                            _mm512_mul_pd(dz, dz)));
+        v = _mm512_mul_pd(_mm512_mul_pd(dist, vscale), vdens);
+        b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
+        if (n2 > 1 || n3 > 1) {
+            __m512d nix, niy, niz, njx, njy, njz;
+            EPPF_GATHER3(nrm, _mm512_mul_epu32(vi, vns), keep, nix, niy, niz);
+            EPPF_GATHER3(nrm, _mm512_mul_epu32(vj, vns), keep, njx, njy, njz);
+            if (n2 > 1) {
+                __m512d inv = _mm512_div_pd(one, dist), m1, m2;
+                m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
+                                                 _mm512_mul_pd(niz, dz)), inv);
+                m2 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(njx, dx), _mm512_mul_pd(njy, dy)),
+                                                 _mm512_mul_pd(njz, dz)), inv);
+                m1 = _mm512_min_pd(m2, m1);  /* m2 < m1 ? m2 : m1 */
+                for (k = 0; k < n2 - 1; k++)
+                    b2 = _mm256_mask_add_epi32(b2, _mm512_cmp_pd_mask(m1, _mm512_set1_pd(cos2[k]), _CMP_LE_OQ),
+                                               b2, one32);
+            }
+            if (n3 > 1) {
+                v = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, njx), _mm512_mul_pd(niy, njy)),
+                                  _mm512_mul_pd(niz, njz));
+                v = _mm512_abs_pd(v);
+                for (k = 0; k < n3 - 1; k++)
+                    b3 = _mm256_mask_add_epi32(b3, _mm512_cmp_pd_mask(v, _mm512_set1_pd(cos3[k]), _CMP_LE_OQ),
+                                               b3, one32);
+            }
+        }
+        b = _mm256_add_epi32(_mm256_mullo_epi32(b1, _mm256_set1_epi32(n2)), b2);
+        b = _mm256_add_epi32(_mm256_mullo_epi32(b, _mm256_set1_epi32(n3)), b3);
+        b = _mm256_mullo_epi32(b, _mm256_set1_epi32(n4));
+        _mm256_mask_storeu_epi32(B + t, keep, b);
+    }
+    return bad;
+}
+#undef EPPF_GATHER3
+
+/* The AVX-512 walk: eight lanes, the same stopping rule and bins as
+ * ``eppf_f4_batch_avx2`` (same arguments). One step of a lane is a few
+ * byte operations on the packed position: VBMI's multishift copies the integer
+ * parts of y, x, z to bytes 0, 1, 2 of the lane, a multiply-add of bytes 0
+ * and 1 by (1, g) gives the row x g + y, byte 2 the bit; lanes past their steps
+ * are masked out of the gather and stand still. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
+                                 const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
+                                 const double *recip_packed, int32_t *B)
+{
+    int64_t P[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t INC[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int32_t Ls[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int32_t LO[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int32_t HI[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    /* the same in walk order, as 64-bit lanes */
+    int64_t sp[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t sinc[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t slo[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t shi[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t srem[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int order[EPPF_WALK_BATCH + 8];
+    int k, n_walk, n_pad, grp;
+    const __m512i one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2), zero = _mm512_setzero_si512();
+    const __m512i three = _mm512_set1_epi64(3), four = _mm512_set1_epi64(4);
+    /* multishift control: byte 0 <- bits 35.. (y), byte 1 <- bits 56.. (x), byte 2 <- bits 14.. (z) */
+    const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_ZSHIFT << 16) | ((int64_t)EPPF_PK_XSHIFT << 8)
+                                           | EPPF_PK_YSHIFT);
+    const __m512i m6 = _mm512_set1_epi64(0x3f3f3f);
+    const __m512i mul = _mm512_set1_epi64((g << 8) | 1);  /* bytes (1, g): y + g x, at most 4095 */
+    const long long *base = (const long long *)bits;
+    (void)recip_packed;
+
+    eppf_f4_setup_avx2(m, ii, jj, vox, g, thr, n4, P, INC, Ls, LO, HI);
+    n_walk = eppf_f4_order(m, Ls, order);
+    for (k = 0; k < n_walk; k++) {
+        int o = order[k];
+        sp[k] = P[o];
+        sinc[k] = INC[o];
+        slo[k] = LO[o];
+        shi[k] = HI[o];
+        srem[k] = Ls[o] - 1;
+    }
+    /* Padding lanes of the last group: nothing to walk (rem = 0, occ = lo = hi = 0), at a valid position. */
+    n_pad = (n_walk + 7) & ~7;
+    for (; k < n_pad; k++) {
+        order[k] = -1;
+        sp[k] = sp[0];
+        sinc[k] = 0;
+        slo[k] = shi[k] = srem[k] = 0;
+    }
+
+#define EPPF_STEP512(MASKED)                                                                      \
+    do {                                                                                          \
+        __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p), m6);                \
+        __m512i row_ = _mm512_maddubs_epi16(t_, mul);                                             \
+        __m512i bit_ = _mm512_sllv_epi64(one, _mm512_srli_epi64(t_, 16));                        \
+        __m512i w_;                                                                               \
+        __mmask8 hit_;                                                                            \
+        if (MASKED) {                                                                             \
+            w_ = _mm512_mask_i64gather_epi64(zero, on, row_, base, 8);                            \
+            p = _mm512_mask_add_epi64(p, on, p, inc);                                             \
+        } else {                                                                                  \
+            w_ = _mm512_i64gather_epi64(row_, base, 8);                                           \
+            p = _mm512_add_epi64(p, inc);                                                         \
+        }                                                                                         \
+        hit_ = _mm512_test_epi64_mask(w_, bit_);                                                  \
+        occ = _mm512_mask_add_epi64(occ, hit_, occ, one);                                         \
+    } while (0)
+
+    for (grp = 0; grp < n_walk; grp += 8) {
+        __m512i p = _mm512_load_si512(sp + grp), inc = _mm512_load_si512(sinc + grp);
+        __m512i lo = _mm512_load_si512(slo + grp), hi = _mm512_load_si512(shi + grp);
+        __m512i rem = _mm512_load_si512(srem + grp);
+        const __mmask8 valid = n_walk - grp >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (n_walk - grp)) - 1);
+        __m512i occ = _mm512_maskz_mov_epi64(valid, two);
+        int64_t res[8] __attribute__((aligned(64)));
+        int l;
+        {
+            /* A quiet stretch: every lane is still undecided for its first
+               clamp(occ + rem - lo + 1, 0, rem) steps (0 once occ >= hi), so the
+               smallest of these is walked in all lanes without a test. */
+            __m512i need = _mm512_add_epi64(_mm512_sub_epi64(_mm512_add_epi64(occ, rem), lo), one);
+            __m512i steps = _mm512_min_epi64(rem, need);
+            const __mmask8 live = _mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(steps, zero);
+            int64_t nmin = live == 0xff ? _mm512_reduce_min_epi64(steps) : 0, s;
+            rem = _mm512_sub_epi64(rem, _mm512_set1_epi64(nmin));
+            for (s = 0; s < nmin; s++) {
+                const __mmask8 on = 0xff;  /* (unused: all lanes step) */
+                (void)on;
+                EPPF_STEP512(0);
+            }
+        }
+        /* Then four steps at a time in the lanes still undecided (occ < hi,
+           occ + rem >= lo, rem > 0), never past a line's last inner voxel. A
+           lane decided within the four walks on: counting more voxels of
+           its own line cannot change a certain bin (occ only grows, and
+           stays below lo when even all the rest could not lift it there). */
+        for (;;) {
+            const __mmask8 live = _mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(rem, zero)
+                                  & _mm512_cmpge_epi64_mask(_mm512_add_epi64(occ, rem), lo);
+            __mmask8 on;
+            if (!live)
+                break;
+            on = live;
+            EPPF_STEP512(1);
+            on = live & _mm512_cmpgt_epi64_mask(rem, one);
+            EPPF_STEP512(1);
+            on = live & _mm512_cmpgt_epi64_mask(rem, two);
+            EPPF_STEP512(1);
+            on = live & _mm512_cmpgt_epi64_mask(rem, three);
+            EPPF_STEP512(1);
+            rem = _mm512_mask_sub_epi64(rem, live, rem, _mm512_min_epi64(rem, four));
+        }
+        if (n4 <= 3) {
+            /* lo and hi are all the thresholds (one and the same for n4 = 2) */
+            __m512i b = _mm512_maskz_mov_epi64(_mm512_cmpge_epi64_mask(occ, lo), one);
+            if (n4 == 3)
+                b = _mm512_mask_add_epi64(b, _mm512_cmpge_epi64_mask(occ, hi), b, one);
+            _mm512_store_si512(res, b);
+            for (l = 0; l < 8; l++) {
+                int o = order[grp + l];
+                if (o < 0)
+                    break;
+                B[o] += (int32_t)res[l];
+            }
+        } else {
+            _mm512_store_si512(res, occ);
+            for (l = 0; l < 8; l++) {
+                int o = order[grp + l], b = 0, j;
+                const int32_t *th;
+                if (o < 0)
+                    break;
+                th = thr + (int64_t)(Ls[o] + 1) * n4;
                 for (j = 1; j < n4; j++)
-                    b += (L + 1) >= th[j];
-                B[t] += b;
+                    b += res[l] >= th[j];
+                B[o] += b;
             }
         }
     }
+#undef EPPF_STEP512
+    if (n_walk < m)
+        eppf_f4_short_lines(m, Ls, thr, n4, B);
 }
 
 #else
@@ -378,6 +674,28 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
 {
     (void)m; (void)ii; (void)jj; (void)vox; (void)bits; (void)g; (void)thr; (void)n4;
     (void)recip_packed; (void)B;
+}
+
+static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
+                                 const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
+                                 const double *recip_packed, int32_t *B)
+{
+    (void)m; (void)ii; (void)jj; (void)vox; (void)bits; (void)g; (void)thr; (void)n4;
+    (void)recip_packed; (void)B;
+}
+
+static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *out_i, int32_t *out_j)
+{
+    (void)m; (void)state; (void)n; (void)out_i; (void)out_j;
+}
+
+static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                                  const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+{
+    (void)m; (void)ii; (void)jj; (void)pts; (void)ps; (void)nrm; (void)ns; (void)scale; (void)n1; (void)n2; (void)n3;
+    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
+    return 0;
 }
 
 #endif
