@@ -52,7 +52,7 @@
 #define EPPF_PK_S (1 << EPPF_PK_FRAC)
 #define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
 #define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
-#define EPPF_WALK_BATCH 64
+#define EPPF_WALK_BATCH 256
 /* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
 #define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
 
@@ -512,6 +512,54 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
 }
 #undef EPPF_GATHER3
 
+/* ``eppf_f4_setup_avx2`` eight pairs at a time (the same integer results: the
+ * increments' scale 2**14 / L is read from ``recip_packed``, the same correctly
+ * rounded quotient as the division there). */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
+                                 const int32_t *thr, int n4, const double *recip_packed, int64_t *P, int64_t *INC,
+                                 int32_t *Ls, int32_t *LO, int32_t *HI)
+{
+    const __m256i n4v = _mm256_set1_epi32(n4), onev = _mm256_set1_epi32(1), n4m1 = _mm256_set1_epi32(n4 - 1);
+    const __m256i three = _mm256_set1_epi32(3), z256 = _mm256_setzero_si256();
+    const __m512i off = _mm512_set1_epi64(EPPF_PK_S / 2 + g);
+    int t;
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        const __m256i ra = _mm256_mullo_epi32(_mm256_maskz_loadu_epi32(keep, ii + t), three);
+        const __m256i rb = _mm256_mullo_epi32(_mm256_maskz_loadu_epi32(keep, jj + t), three);
+        const __m256i ax = _mm256_mmask_i32gather_epi32(z256, keep, ra, vox, 4);
+        const __m256i ay = _mm256_mmask_i32gather_epi32(z256, keep, ra, vox + 1, 4);
+        const __m256i az = _mm256_mmask_i32gather_epi32(z256, keep, ra, vox + 2, 4);
+        const __m256i dx = _mm256_sub_epi32(_mm256_mmask_i32gather_epi32(z256, keep, rb, vox, 4), ax);
+        const __m256i dy = _mm256_sub_epi32(_mm256_mmask_i32gather_epi32(z256, keep, rb, vox + 1, 4), ay);
+        const __m256i dz = _mm256_sub_epi32(_mm256_mmask_i32gather_epi32(z256, keep, rb, vox + 2, 4), az);
+        const __m256i L = _mm256_max_epi32(_mm256_max_epi32(_mm256_abs_epi32(dx), _mm256_abs_epi32(dy)),
+                                           _mm256_abs_epi32(dz));
+        const __m256i row = _mm256_mullo_epi32(_mm256_add_epi32(L, onev), n4v);
+        /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
+        const __m512d q = _mm512_i32gather_pd(_mm256_max_epi32(L, onev), recip_packed, 8);
+        const __m512i ix = _mm512_cvtepi32_epi64(_mm512_cvtpd_epi32(_mm512_mul_pd(_mm512_cvtepi32_pd(dx), q)));
+        const __m512i iy = _mm512_cvtepi32_epi64(_mm512_cvtpd_epi32(_mm512_mul_pd(_mm512_cvtepi32_pd(dy), q)));
+        const __m512i iz = _mm512_cvtepi32_epi64(_mm512_cvtpd_epi32(_mm512_mul_pd(_mm512_cvtepi32_pd(dz), q)));
+        const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
+                                                              _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
+        const __m512i p0 = _mm512_add_epi64(
+            _mm512_add_epi64(
+                _mm512_slli_epi64(_mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(ax), EPPF_PK_FRAC), off),
+                                  EPPF_PK_XLANE),
+                _mm512_slli_epi64(_mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(ay), EPPF_PK_FRAC), off),
+                                  EPPF_PK_YLANE)),
+            _mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(az), EPPF_PK_FRAC), off));
+        _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(p0, inc));
+        _mm512_mask_storeu_epi64(INC + t, keep, inc);
+        _mm256_mask_storeu_epi32(Ls + t, keep, L);
+        _mm256_mask_storeu_epi32(LO + t, keep, _mm256_mmask_i32gather_epi32(z256, keep, row, thr + 1, 4));
+        _mm256_mask_storeu_epi32(HI + t, keep, _mm256_mmask_i32gather_epi32(z256, keep, _mm256_add_epi32(row, n4m1),
+                                                                             thr, 4));
+    }
+}
+
 /* The AVX-512 walk: eight lanes, the same stopping rule and bins as
  * ``eppf_f4_batch_avx2`` (same arguments). One step of a lane is a few
  * byte operations on the packed position: VBMI's multishift copies the integer
@@ -528,12 +576,6 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     int32_t Ls[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int32_t LO[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int32_t HI[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    /* the same in walk order, as 64-bit lanes */
-    int64_t sp[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t sinc[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t slo[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t shi[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t srem[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int order[EPPF_WALK_BATCH + 8];
     int k, n_walk, n_pad, grp;
     const __m512i one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2), zero = _mm512_setzero_si512();
@@ -546,24 +588,12 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     const long long *base = (const long long *)bits;
     (void)recip_packed;
 
-    eppf_f4_setup_avx2(m, ii, jj, vox, g, thr, n4, P, INC, Ls, LO, HI);
+    eppf_f4_setup_avx512(m, ii, jj, vox, g, thr, n4, recip_packed, P, INC, Ls, LO, HI);
     n_walk = eppf_f4_order(m, Ls, order);
-    for (k = 0; k < n_walk; k++) {
-        int o = order[k];
-        sp[k] = P[o];
-        sinc[k] = INC[o];
-        slo[k] = LO[o];
-        shi[k] = HI[o];
-        srem[k] = Ls[o] - 1;
-    }
-    /* Padding lanes of the last group: nothing to walk (rem = 0, occ = lo = hi = 0), at a valid position. */
+    /* Padding lanes of the last group: a valid pair's position, masked out. */
     n_pad = (n_walk + 7) & ~7;
-    for (; k < n_pad; k++) {
-        order[k] = -1;
-        sp[k] = sp[0];
-        sinc[k] = 0;
-        slo[k] = shi[k] = srem[k] = 0;
-    }
+    for (k = n_walk; k < n_pad; k++)
+        order[k] = order[0];
 
 #define EPPF_STEP512(MASKED)                                                                      \
     do {                                                                                          \
@@ -584,10 +614,15 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     } while (0)
 
     for (grp = 0; grp < n_walk; grp += 8) {
-        __m512i p = _mm512_load_si512(sp + grp), inc = _mm512_load_si512(sinc + grp);
-        __m512i lo = _mm512_load_si512(slo + grp), hi = _mm512_load_si512(shi + grp);
-        __m512i rem = _mm512_load_si512(srem + grp);
+        /* The group's lanes: nothing to walk in padding lanes (rem = 0, occ = lo = hi = 0). */
         const __mmask8 valid = n_walk - grp >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (n_walk - grp)) - 1);
+        const __m256i oi = _mm256_loadu_si256((const __m256i *)(order + grp));
+        __m512i p = _mm512_i32gather_epi64(oi, P, 8);
+        __m512i inc = _mm512_mask_i32gather_epi64(zero, valid, oi, INC, 8);
+        __m512i lo = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi, LO, 4));
+        __m512i hi = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi, HI, 4));
+        __m512i rem = _mm512_maskz_sub_epi64(
+            valid, _mm512_cvtepi32_epi64(_mm256_i32gather_epi32(Ls, oi, 4)), one);
         __m512i occ = _mm512_maskz_mov_epi64(valid, two);
         int64_t res[8] __attribute__((aligned(64)));
         int l;
@@ -633,20 +668,13 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
             if (n4 == 3)
                 b = _mm512_mask_add_epi64(b, _mm512_cmpge_epi64_mask(occ, hi), b, one);
             _mm512_store_si512(res, b);
-            for (l = 0; l < 8; l++) {
-                int o = order[grp + l];
-                if (o < 0)
-                    break;
-                B[o] += (int32_t)res[l];
-            }
+            for (l = 0; l < 8 && grp + l < n_walk; l++)
+                B[order[grp + l]] += (int32_t)res[l];
         } else {
             _mm512_store_si512(res, occ);
-            for (l = 0; l < 8; l++) {
+            for (l = 0; l < 8 && grp + l < n_walk; l++) {
                 int o = order[grp + l], b = 0, j;
-                const int32_t *th;
-                if (o < 0)
-                    break;
-                th = thr + (int64_t)(Ls[o] + 1) * n4;
+                const int32_t *th = thr + (int64_t)(Ls[o] + 1) * n4;
                 for (j = 1; j < n4; j++)
                     b += res[l] >= th[j];
                 B[o] += b;
