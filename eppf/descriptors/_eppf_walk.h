@@ -576,7 +576,7 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     int32_t Ls[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int32_t LO[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int32_t HI[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int order[EPPF_WALK_BATCH + 8];
+    int order[EPPF_WALK_BATCH + 16];
     int k, n_walk, n_pad, grp;
     const __m512i one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2), zero = _mm512_setzero_si512();
     const __m512i three = _mm512_set1_epi64(3), four = _mm512_set1_epi64(4);
@@ -591,11 +591,11 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     eppf_f4_setup_avx512(m, ii, jj, vox, g, thr, n4, recip_packed, P, INC, Ls, LO, HI);
     n_walk = eppf_f4_order(m, Ls, order);
     /* Padding lanes of the last group: a valid pair's position, masked out. */
-    n_pad = (n_walk + 7) & ~7;
+    n_pad = (n_walk + 15) & ~15;
     for (k = n_walk; k < n_pad; k++)
         order[k] = order[0];
 
-#define EPPF_STEP512(MASKED)                                                                      \
+#define EPPF_STEP512(MASKED, p, inc, occ, on)                                                     \
     do {                                                                                          \
         __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p), m6);                \
         __m512i row_ = _mm512_maddubs_epi16(t_, mul);                                             \
@@ -613,75 +613,111 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
         occ = _mm512_mask_add_epi64(occ, hit_, occ, one);                                         \
     } while (0)
 
-    for (grp = 0; grp < n_walk; grp += 8) {
-        /* The group's lanes: nothing to walk in padding lanes (rem = 0, occ = lo = hi = 0). */
-        const __mmask8 valid = n_walk - grp >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (n_walk - grp)) - 1);
-        const __m256i oi = _mm256_loadu_si256((const __m256i *)(order + grp));
-        __m512i p = _mm512_i32gather_epi64(oi, P, 8);
-        __m512i inc = _mm512_mask_i32gather_epi64(zero, valid, oi, INC, 8);
-        __m512i lo = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi, LO, 4));
-        __m512i hi = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi, HI, 4));
-        __m512i rem = _mm512_maskz_sub_epi64(
-            valid, _mm512_cvtepi32_epi64(_mm256_i32gather_epi32(Ls, oi, 4)), one);
-        __m512i occ = _mm512_maskz_mov_epi64(valid, two);
-        int64_t res[8] __attribute__((aligned(64)));
-        int l;
-        {
-            /* A quiet stretch: every lane is still undecided for its first
-               clamp(occ + rem - lo + 1, 0, rem) steps (0 once occ >= hi), so the
-               smallest of these is walked in all lanes without a test. */
-            __m512i need = _mm512_add_epi64(_mm512_sub_epi64(_mm512_add_epi64(occ, rem), lo), one);
-            __m512i steps = _mm512_min_epi64(rem, need);
-            const __mmask8 live = _mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(steps, zero);
-            int64_t nmin = live == 0xff ? _mm512_reduce_min_epi64(steps) : 0, s;
-            rem = _mm512_sub_epi64(rem, _mm512_set1_epi64(nmin));
-            for (s = 0; s < nmin; s++) {
-                const __mmask8 on = 0xff;  /* (unused: all lanes step) */
-                (void)on;
-                EPPF_STEP512(0);
-            }
+/* The lanes of the group at walk position G: nothing to walk in padding lanes
+   (rem = 0, occ = lo = hi = 0); then the shortest quiet stretch of the
+   group: every lane is still undecided for its first
+   clamp(occ + rem - lo + 1, 0, rem) steps (0 once occ >= hi). */
+#define EPPF_GROUP512(G, valid, p, inc, lo, hi, rem, occ, quiet)                                  \
+    do {                                                                                          \
+        const __m256i oi_ = _mm256_loadu_si256((const __m256i *)(order + (G)));                   \
+        __m512i need_, steps_;                                                                    \
+        __mmask8 live_;                                                                           \
+        valid = n_walk - (G) >= 8 ? (__mmask8)0xff                                                \
+                : n_walk <= (G) ? (__mmask8)0 : (__mmask8)((1u << (n_walk - (G))) - 1);           \
+        p = _mm512_i32gather_epi64(oi_, P, 8);                                                    \
+        inc = _mm512_mask_i32gather_epi64(zero, valid, oi_, INC, 8);                              \
+        lo = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi_, LO, 4)); \
+        hi = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi_, HI, 4)); \
+        rem = _mm512_maskz_sub_epi64(valid, _mm512_cvtepi32_epi64(_mm256_i32gather_epi32(Ls, oi_, 4)), one); \
+        occ = _mm512_maskz_mov_epi64(valid, two);                                                 \
+        need_ = _mm512_add_epi64(_mm512_sub_epi64(_mm512_add_epi64(occ, rem), lo), one);          \
+        steps_ = _mm512_min_epi64(rem, need_);                                                    \
+        live_ = _mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(steps_, zero);         \
+        quiet = live_ == 0xff ? _mm512_reduce_min_epi64(steps_) : 0;                              \
+        rem = _mm512_sub_epi64(rem, _mm512_set1_epi64(quiet));                                    \
+    } while (0)
+
+/* Four steps in the lanes ``live`` (still undecided: occ < hi,
+   occ + rem >= lo, rem > 0), never past a line's last inner voxel. A lane
+   decided within the four walks on: counting more voxels of its own line
+   cannot change a certain bin (occ only grows, and stays below lo when
+   even all the rest could not lift it there). */
+#define EPPF_LIVE512(occ, rem, lo, hi)                                                            \
+    (_mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(rem, zero)                        \
+     & _mm512_cmpge_epi64_mask(_mm512_add_epi64(occ, rem), lo))
+#define EPPF_FOUR512(live, p, inc, occ, rem)                                                      \
+    do {                                                                                          \
+        __mmask8 on_ = live;                                                                      \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        on_ = live & _mm512_cmpgt_epi64_mask(rem, one);                                           \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        on_ = live & _mm512_cmpgt_epi64_mask(rem, two);                                           \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        on_ = live & _mm512_cmpgt_epi64_mask(rem, three);                                         \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        rem = _mm512_mask_sub_epi64(rem, live, rem, _mm512_min_epi64(rem, four));                 \
+    } while (0)
+
+/* Add the bins of the group at walk position G to B. */
+#define EPPF_BINS512(G, occ, lo, hi)                                                              \
+    do {                                                                                          \
+        int64_t res_[8] __attribute__((aligned(64)));                                             \
+        int l_;                                                                                   \
+        if (n4 <= 3) {                                                                            \
+            /* lo and hi are all the thresholds (one and the same for n4 = 2) */                  \
+            __m512i b_ = _mm512_maskz_mov_epi64(_mm512_cmpge_epi64_mask(occ, lo), one);           \
+            if (n4 == 3)                                                                          \
+                b_ = _mm512_mask_add_epi64(b_, _mm512_cmpge_epi64_mask(occ, hi), b_, one);        \
+            _mm512_store_si512(res_, b_);                                                         \
+            for (l_ = 0; l_ < 8 && (G) + l_ < n_walk; l_++)                                       \
+                B[order[(G) + l_]] += (int32_t)res_[l_];                                          \
+        } else {                                                                                  \
+            _mm512_store_si512(res_, occ);                                                        \
+            for (l_ = 0; l_ < 8 && (G) + l_ < n_walk; l_++) {                                     \
+                int o_ = order[(G) + l_], b_ = 0, j_;                                             \
+                const int32_t *th_ = thr + (int64_t)(Ls[o_] + 1) * n4;                           \
+                for (j_ = 1; j_ < n4; j_++)                                                       \
+                    b_ += res_[l_] >= th_[j_];                                                    \
+                B[o_] += b_;                                                                      \
+            }                                                                                     \
+        }                                                                                         \
+    } while (0)
+
+    /* Two groups at a time, so that the latency of one group's gathers
+       before its next test hides behind the other group's steps. */
+    for (grp = 0; grp < n_walk; grp += 16) {
+        __m512i pa, inca, loa, hia, rema, occa, pb, incb, lob, hib, remb, occb;
+        __mmask8 va, vb;
+        int64_t qa, qb, s, q;
+        EPPF_GROUP512(grp, va, pa, inca, loa, hia, rema, occa, qa);
+        EPPF_GROUP512(grp + 8, vb, pb, incb, lob, hib, remb, occb, qb);
+        q = qa < qb ? qa : qb;
+        for (s = 0; s < q; s++) {
+            EPPF_STEP512(0, pa, inca, occa, va);
+            EPPF_STEP512(0, pb, incb, occb, vb);
         }
-        /* Then four steps at a time in the lanes still undecided (occ < hi,
-           occ + rem >= lo, rem > 0), never past a line's last inner voxel. A
-           lane decided within the four walks on: counting more voxels of
-           its own line cannot change a certain bin (occ only grows, and
-           stays below lo when even all the rest could not lift it there). */
+        for (; s < qa; s++)
+            EPPF_STEP512(0, pa, inca, occa, va);
+        for (; s < qb; s++)
+            EPPF_STEP512(0, pb, incb, occb, vb);
         for (;;) {
-            const __mmask8 live = _mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(rem, zero)
-                                  & _mm512_cmpge_epi64_mask(_mm512_add_epi64(occ, rem), lo);
-            __mmask8 on;
-            if (!live)
+            const __mmask8 la = EPPF_LIVE512(occa, rema, loa, hia), lb = EPPF_LIVE512(occb, remb, lob, hib);
+            if (!(la | lb))
                 break;
-            on = live;
-            EPPF_STEP512(1);
-            on = live & _mm512_cmpgt_epi64_mask(rem, one);
-            EPPF_STEP512(1);
-            on = live & _mm512_cmpgt_epi64_mask(rem, two);
-            EPPF_STEP512(1);
-            on = live & _mm512_cmpgt_epi64_mask(rem, three);
-            EPPF_STEP512(1);
-            rem = _mm512_mask_sub_epi64(rem, live, rem, _mm512_min_epi64(rem, four));
+            if (la)
+                EPPF_FOUR512(la, pa, inca, occa, rema);
+            if (lb)
+                EPPF_FOUR512(lb, pb, incb, occb, remb);
         }
-        if (n4 <= 3) {
-            /* lo and hi are all the thresholds (one and the same for n4 = 2) */
-            __m512i b = _mm512_maskz_mov_epi64(_mm512_cmpge_epi64_mask(occ, lo), one);
-            if (n4 == 3)
-                b = _mm512_mask_add_epi64(b, _mm512_cmpge_epi64_mask(occ, hi), b, one);
-            _mm512_store_si512(res, b);
-            for (l = 0; l < 8 && grp + l < n_walk; l++)
-                B[order[grp + l]] += (int32_t)res[l];
-        } else {
-            _mm512_store_si512(res, occ);
-            for (l = 0; l < 8 && grp + l < n_walk; l++) {
-                int o = order[grp + l], b = 0, j;
-                const int32_t *th = thr + (int64_t)(Ls[o] + 1) * n4;
-                for (j = 1; j < n4; j++)
-                    b += res[l] >= th[j];
-                B[o] += b;
-            }
-        }
+        EPPF_BINS512(grp, occa, loa, hia);
+        if (grp + 8 < n_walk)
+            EPPF_BINS512(grp + 8, occb, lob, hib);
     }
 #undef EPPF_STEP512
+#undef EPPF_GROUP512
+#undef EPPF_LIVE512
+#undef EPPF_FOUR512
+#undef EPPF_BINS512
     if (n_walk < m)
         eppf_f4_short_lines(m, Ls, thr, n4, B);
 }
