@@ -68,7 +68,7 @@ cdef extern from "_eppf_walk.h":
                                const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                                double f1_density, const double* cos2, const double* cos3,
                                int32_t* B) noexcept nogil
-    void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
+    void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
                               const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                               const double* recip_packed, int32_t* B) noexcept nogil
 
@@ -159,12 +159,14 @@ cdef inline int64_t _grid_words(int grid) noexcept nogil:
 
 
 cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, uint64_t* bits,
-                            int32_t* vox) noexcept nogil:
+                            int32_t* vox, int64_t* pv) noexcept nogil:
     """Voxelise ``n`` points on a grid over their bounding cube.
 
     Writes each point's voxel coordinates to ``vox`` (n, 3) and sets the
     occupied voxels in the bit grid ``bits``: row (x, y) is ``_row_words``
     64-bit words of z bits, so a 64^3 grid is one word per row (32 KiB).
+    Unless ``pv`` is NULL (grids up to 64 only), each voxel also goes to
+    ``pv`` (n,) as the packed walk's start word: lanes v * S + S/2 + g.
     """
     cdef int64_t i, idx
     cdef double mnx = pts[0], mny = pts[1], mnz = pts[2]
@@ -188,6 +190,9 @@ cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, 
         vox[3 * i + 2] = _voxel(pts[ps * i + 2], mnz, inv, grid)
         idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * _row_words(grid) + (vox[3 * i + 2] >> 6)
         bits[idx] |= (<uint64_t>1) << (vox[3 * i + 2] & 63)
+        if pv != NULL:
+            pv[i] = ((vox[3 * i] * PK_S + PK_S // 2 + grid) * PK_X + (vox[3 * i + 1] * PK_S + PK_S // 2 + grid) * PK_Y
+                     + vox[3 * i + 2] * PK_S + PK_S // 2 + grid)
 
 
 cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* prm,
@@ -347,7 +352,7 @@ cdef inline int _draw_pair(const double* pts, int64_t ps, uint32_t n, uint64_t* 
 
 cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
-                        int32_t* vox, int32_t* counts) noexcept nogil:
+                        int32_t* vox, int64_t* pv, int32_t* counts) noexcept nogil:
     """Histogram counts of one object; returns 1 if pairs could not be drawn.
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
@@ -369,7 +374,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
     if prm.n4 > 1:
-        _fill_grid(pts, ps, n, prm.grid, bits, vox)
+        _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd == 2 else NULL)
     base = 0
     while base < n_pairs:
         m = n_pairs - base
@@ -405,7 +410,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
             if prm.simd == 2:
-                eppf_f4_batch_avx512(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
+                eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
             elif prm.simd:
                 eppf_f4_batch_avx2(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
             elif prm.grid == 64:
@@ -528,10 +533,12 @@ def eppf_counts(points_in, normals_in,
     cdef int64_t max_n = np.max(np.diff(offsets))
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
+    pv_arr = np.zeros((num_threads, max_n if prm.simd == 2 else 1), dtype=np.int64)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
     cdef uint64_t[:, ::1] grids = grids_arr
     cdef int32_t[:, ::1] vox = vox_arr
+    cdef int64_t[:, ::1] pv = pv_arr
     cdef Py_ssize_t k, tid
     cdef int64_t start
     with nogil:
@@ -540,7 +547,7 @@ def eppf_counts(points_in, normals_in,
             tid = threadid()
             status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
-                                       &prm, &grids[tid, 0], &vox[tid, 0], &counts[k, 0])
+                                       &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &counts[k, 0])
     return counts_arr, status_arr
 
 
@@ -594,7 +601,7 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
     for t in range(n_p):
         if not (0 <= pairs[t, 0] < n and 0 <= pairs[t, 1] < n):
             raise ValueError("pair indices out of range")
-    _fill_grid(&points[0, 0], 3, n, grid_size, &bits[0], &vox[0, 0])
+    _fill_grid(&points[0, 0], 3, n, grid_size, &bits[0], &vox[0, 0], NULL)
     for t in range(n_p):
         _bin_f123(&points[0, 0], 3, &normals[0, 0], 3, pairs[t, 0], pairs[t, 1], scale, &prm, parts)
         parts[3] = parts[4] = parts[5] = 0

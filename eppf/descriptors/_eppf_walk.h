@@ -512,48 +512,48 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
 }
 #undef EPPF_GATHER3
 
-/* ``eppf_f4_setup_avx2`` eight pairs at a time (the same integer results: the
- * increments' scale 2**14 / L is read from ``recip_packed``, the same correctly
- * rounded quotient as the division there). */
+/* ``eppf_f4_setup_avx2`` eight pairs at a time, from ``pv``: each point's
+ * voxel already in the packed walk's start form (lanes v S + S/2 + g, see
+ * _eppf_fast.pyx's ``_fill_grid``), so a pair needs two gathers. The packed
+ * difference of two such words holds the three lane differences d S exactly
+ * (each below 2**20 in size), recovered by sign-extending 21-bit fields. The
+ * same integer results as the AVX2 setup: the increments' scale 2**14 / L is
+ * read from ``recip_packed``, the same correctly rounded quotient as the
+ * division there. */
 __attribute__((target(EPPF_AVX512_TARGET)))
-static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
+static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const int32_t *thr, int n4, const double *recip_packed, int64_t *P, int64_t *INC,
                                  int32_t *Ls, int32_t *LO, int32_t *HI)
 {
     const __m256i n4v = _mm256_set1_epi32(n4), onev = _mm256_set1_epi32(1), n4m1 = _mm256_set1_epi32(n4 - 1);
-    const __m256i three = _mm256_set1_epi32(3), z256 = _mm256_setzero_si256();
-    const __m512i off = _mm512_set1_epi64(EPPF_PK_S / 2 + g);
+    const __m256i z256 = _mm256_setzero_si256();
+    const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1);
     int t;
     for (t = 0; t < m; t += 8) {
         const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const __m256i ra = _mm256_mullo_epi32(_mm256_maskz_loadu_epi32(keep, ii + t), three);
-        const __m256i rb = _mm256_mullo_epi32(_mm256_maskz_loadu_epi32(keep, jj + t), three);
-        const __m256i ax = _mm256_mmask_i32gather_epi32(z256, keep, ra, vox, 4);
-        const __m256i ay = _mm256_mmask_i32gather_epi32(z256, keep, ra, vox + 1, 4);
-        const __m256i az = _mm256_mmask_i32gather_epi32(z256, keep, ra, vox + 2, 4);
-        const __m256i dx = _mm256_sub_epi32(_mm256_mmask_i32gather_epi32(z256, keep, rb, vox, 4), ax);
-        const __m256i dy = _mm256_sub_epi32(_mm256_mmask_i32gather_epi32(z256, keep, rb, vox + 1, 4), ay);
-        const __m256i dz = _mm256_sub_epi32(_mm256_mmask_i32gather_epi32(z256, keep, rb, vox + 2, 4), az);
-        const __m256i L = _mm256_max_epi32(_mm256_max_epi32(_mm256_abs_epi32(dx), _mm256_abs_epi32(dy)),
-                                           _mm256_abs_epi32(dz));
-        const __m256i row = _mm256_mullo_epi32(_mm256_add_epi32(L, onev), n4v);
+        const __m512i a = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, ii + t), pv, 8);
+        const __m512i b = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, jj + t), pv, 8);
+        const __m512i d = _mm512_sub_epi64(b, a);
+        const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
+        const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
+        const __m512i dys = _mm512_srai_epi64(_mm512_slli_epi64(d1, 43), 43);
+        const __m512i dxs = _mm512_srai_epi64(_mm512_sub_epi64(d1, dys), EPPF_PK_YLANE);
+        const __m512i dx = _mm512_srai_epi64(dxs, EPPF_PK_FRAC), dy = _mm512_srai_epi64(dys, EPPF_PK_FRAC);
+        const __m512i dz = _mm512_srai_epi64(dzs, EPPF_PK_FRAC);
+        const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
+                                           _mm512_abs_epi64(dz));
+        const __m256i L32 = _mm512_cvtepi64_epi32(L);
+        const __m256i row = _mm256_mullo_epi32(_mm256_add_epi32(L32, onev), n4v);
         /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
-        const __m512d q = _mm512_i32gather_pd(_mm256_max_epi32(L, onev), recip_packed, 8);
-        const __m512i ix = _mm512_cvtepi32_epi64(_mm512_cvtpd_epi32(_mm512_mul_pd(_mm512_cvtepi32_pd(dx), q)));
-        const __m512i iy = _mm512_cvtepi32_epi64(_mm512_cvtpd_epi32(_mm512_mul_pd(_mm512_cvtepi32_pd(dy), q)));
-        const __m512i iz = _mm512_cvtepi32_epi64(_mm512_cvtpd_epi32(_mm512_mul_pd(_mm512_cvtepi32_pd(dz), q)));
+        const __m512d q = _mm512_i64gather_pd(_mm512_max_epi64(L, one), recip_packed, 8);
+        const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
+        const __m512i iy = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dy), q));
+        const __m512i iz = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dz), q));
         const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
                                                               _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
-        const __m512i p0 = _mm512_add_epi64(
-            _mm512_add_epi64(
-                _mm512_slli_epi64(_mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(ax), EPPF_PK_FRAC), off),
-                                  EPPF_PK_XLANE),
-                _mm512_slli_epi64(_mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(ay), EPPF_PK_FRAC), off),
-                                  EPPF_PK_YLANE)),
-            _mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(az), EPPF_PK_FRAC), off));
-        _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(p0, inc));
+        _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(a, inc));
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
-        _mm256_mask_storeu_epi32(Ls + t, keep, L);
+        _mm256_mask_storeu_epi32(Ls + t, keep, L32);
         _mm256_mask_storeu_epi32(LO + t, keep, _mm256_mmask_i32gather_epi32(z256, keep, row, thr + 1, 4));
         _mm256_mask_storeu_epi32(HI + t, keep, _mm256_mmask_i32gather_epi32(z256, keep, _mm256_add_epi32(row, n4m1),
                                                                              thr, 4));
@@ -567,7 +567,7 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
  * and 1 by (1, g) gives the row x g + y, byte 2 the bit; lanes past their steps
  * are masked out of the gather and stand still. */
 __attribute__((target(EPPF_AVX512_TARGET)))
-static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
+static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
                                  const double *recip_packed, int32_t *B)
 {
@@ -588,7 +588,7 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     const long long *base = (const long long *)bits;
     (void)recip_packed;
 
-    eppf_f4_setup_avx512(m, ii, jj, vox, g, thr, n4, recip_packed, P, INC, Ls, LO, HI);
+    eppf_f4_setup_avx512(m, ii, jj, pv, thr, n4, recip_packed, P, INC, Ls, LO, HI);
     n_walk = eppf_f4_order(m, Ls, order);
     /* Padding lanes of the last group: a valid pair's position, masked out. */
     n_pad = (n_walk + 15) & ~15;
@@ -740,7 +740,7 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
     (void)recip_packed; (void)B;
 }
 
-static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
+static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
                                  const double *recip_packed, int32_t *B)
 {
