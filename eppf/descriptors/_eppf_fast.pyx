@@ -23,12 +23,15 @@ Conventions (the user guide's reading of the paper):
   bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
 - A bin count of 1 switches a function off (its value is never computed).
 
-Where the CPU has AVX2 (checked at import), batches of 64 pairs go through
-the kernels of ``_eppf_walk.h`` instead: f1-f3 four pairs at a time with the same
-IEEE operations in the same order, and the f4 walks of grids up to 64 in
-four lanes, pairs grouped by line length. Their bins are bit-identical to the
-scalar code here, which every other case uses and ``_set_simd(False)``
-forces (tests compare both with the NumPy reference).
+Where the CPU has them (checked at import), batches of 256 pairs go through
+the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F, BW, VL, DQ, VBMI) the
+draws, the f1-f3 bins and the f4 walks of grids up to 64 run eight pairs at
+a time; with AVX2 only, f1-f3 and the walks run four at a time. f1-f3 use
+the same IEEE operations in the same order, the walks visit the same voxels
+and pairs are grouped by line length. Their bins and draws are bit-identical
+to the scalar code here, which every other case uses; ``_set_simd(False)``
+forces it and ``_set_simd_level`` picks a level (tests compare all levels
+with each other and with the NumPy reference).
 """
 import numpy as np
 

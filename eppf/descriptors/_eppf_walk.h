@@ -1,17 +1,25 @@
-/* AVX2 kernels of a batch of pairs, four pairs at a time: the f1-f3 bins
- * (``eppf_f123_batch_avx2``) and the f4 line walks (``eppf_f4_batch_avx2``).
+/* SIMD kernels of a batch of pairs for _eppf_fast.pyx, chosen at run time:
  *
- * f1-f3: the same IEEE operations in the same order as _core.pyx's
- * ``_bin_f123`` (no FMA: the target is plain "avx2" and the build passes
- * -ffp-contract=off), so the bins are bit-identical.
+ * - AVX2, four pairs at a time: the f1-f3 bins (``eppf_f123_batch_avx2``)
+ *   and the f4 line walks (``eppf_f4_batch_avx2``);
+ * - AVX-512 (F, BW, VL, DQ and VBMI), eight pairs at a time: the pair draws
+ *   (``eppf_draw_batch_avx512``), the f1-f3 bins with the check for
+ *   coinciding points (``eppf_f123_batch_avx512``) and the f4 walks
+ *   (``eppf_f4_batch_avx512``).
  *
- * Used by _core.pyx for grids of at most 64 voxels a side, where a voxel
- * position fits the packed fixed-point form of _core.pyx's ``_line_bin``:
+ * f1-f3: the same IEEE operations in the same order as _eppf_fast.pyx's
+ * ``_bin_f123`` (no FMA: the targets are plain "avx2" / AVX-512 and the build
+ * passes -ffp-contract=off), so the bins are bit-identical. The draws are
+ * splitmix64's, state seed + k gamma for the k-th draw, so eight lanes draw
+ * exactly the pairs of eight successive scalar draws.
+ *
+ * The walks serve grids of at most 64 voxels a side, where a voxel
+ * position fits the packed fixed-point form of _eppf_fast.pyx's ``_line_bin``:
  * x, y, z in three 21-bit lanes of one int64, 14 fraction bits each, so one
- * addition advances all three axes by a step. The walk here visits exactly
+ * addition advances all three axes by a step. A walk here visits exactly
  * the voxels ``_line_bin`` visits, and stops only once the f4 bin is certain,
  * so the bins are identical; only the order in which pairs are walked
- * changes (pairs are grouped by line length so that the four lanes of a group
+ * changes (pairs are grouped by line length so that the lanes of a group
  * need similar numbers of steps).
  *
  * Stopping rule, per pair: with ``occ`` the occupied voxels counted so far
@@ -20,11 +28,14 @@
  * or when rem == 0. Every empty voxel lowers occ + rem by one, so the next
  * ``occ + rem - lo + 1`` steps can be walked without a test: a phase walks
  * that many steps (at most rem) in every lane, then the rule is applied again.
+ * Walking on past the point where a bin became certain (but never past the
+ * line's end) cannot change that bin, which the AVX-512 walk uses to test
+ * only every fourth step.
  *
- * The AVX2 code is compiled with a target attribute and chosen at run time
- * (``eppf_walk_has_avx2``); other compilers and CPUs use the scalar walk of
- * _core.pyx. No floating point is involved beyond the setup, which uses the
- * same expressions as _core.pyx.
+ * The SIMD code is compiled with target attributes and chosen at run time
+ * (``eppf_walk_has_avx2`` / ``eppf_walk_has_avx512``); other compilers and
+ * CPUs use the scalar code of _eppf_fast.pyx. No floating point is involved in
+ * the walks beyond the setup, which uses the same expressions as _eppf_fast.pyx.
  */
 #ifndef EPPF_WALK_H
 #define EPPF_WALK_H
@@ -52,6 +63,8 @@
 #define EPPF_PK_S (1 << EPPF_PK_FRAC)
 #define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
 #define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
+/* Pairs per batch (the walks sort a batch by line length: a longer batch
+   groups the lanes better, up to about this size). */
 #define EPPF_WALK_BATCH 256
 /* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
 #define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
@@ -176,15 +189,11 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
     }
 }
 
-/* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m (m <= 64).
- *
- * vox: (n, 3) voxel coordinates; bits: the grid, one 64-bit word per (x, y)
- * row (g <= 64); thr[T * n4 + b] = ceil(b T / n4). The setup of every pair
- * (line length L, the packed start and increment, the thresholds lo and hi)
- * runs four pairs at a time in original order; the walks then take the pairs
- * longest line first, in groups of four, so that the lanes of a group need
- * similar numbers of steps.
- */
+/* The setup of the walks of pairs (ii[t], jj[t]), t < m <= EPPF_WALK_BATCH,
+ * four pairs at a time in original order: line length L, the packed start P
+ * (first inner voxel) and increment INC, the thresholds LO = thr[1] and
+ * HI = thr[n4 - 1] of T = L + 1 voxels. vox: (n, 3) voxel coordinates;
+ * thr[T * n4 + b] = ceil(b T / n4). */
 __attribute__((target("avx2")))
 static void eppf_f4_setup_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
                                const int32_t *thr, int n4, int64_t *P, int64_t *INC, int32_t *Ls, int32_t *LO,
@@ -282,6 +291,12 @@ static void eppf_f4_short_lines(int m, const int32_t *Ls, const int32_t *thr, in
     }
 }
 
+/* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m <= EPPF_WALK_BATCH.
+ *
+ * bits: the grid, one 64-bit word per (x, y) row (g <= 64). After the setup,
+ * the walks take the pairs longest line first, in groups of four, so that
+ * the lanes of a group need similar numbers of steps.
+ */
 __attribute__((target("avx2")))
 static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
                                const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
