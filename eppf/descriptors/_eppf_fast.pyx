@@ -54,6 +54,8 @@ cdef extern from "_eppf_walk.h":
         EPPF_PK_YSHIFT
         EPPF_PK_XSHIFT
         EPPF_WALK_BATCH
+        EPPF_META_LO
+        EPPF_META_HI
     int64_t EPPF_PK_X
     uint64_t EPPF_SM_GAMMA
     int64_t EPPF_PK_Y
@@ -73,7 +75,7 @@ cdef extern from "_eppf_walk.h":
                                int32_t* B) noexcept nogil
     void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
                               const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
-                              const double* recip_packed, int32_t* B) noexcept nogil
+                              const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
 
 # The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (f4
 # walk; f1-f3 use AVX2 at levels 1 and 2). ``_set_simd`` / ``_set_simd_level``
@@ -142,6 +144,7 @@ cdef struct Params:
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
+    int64_t lohi[66]        # thr[T * n4 + 1] and thr[T * n4 + n4 - 1] packed as the AVX-512 walk reads them
     int simd                # walk f4 in AVX2 (1) or AVX-512 (2) lanes (grids up to 64), 0: scalar
     int simd123             # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
 
@@ -413,7 +416,8 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
             if prm.simd == 2:
-                eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
+                eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi, prm.recip_packed,
+                                     B)
             elif prm.simd:
                 eppf_f4_batch_avx2(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
             elif prm.grid == 64:
@@ -445,6 +449,10 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.n4 = n4
     prm.grid = grid
     prm.simd = _simd if grid <= 64 else 0
+    for k in range(66):
+        prm.lohi[k] = 0
+        if n4 > 1 and k <= grid + 1:
+            prm.lohi[k] = ((<int64_t>thr[k * n4 + 1]) << EPPF_META_LO) | ((<int64_t>thr[k * n4 + n4 - 1]) << EPPF_META_HI)
     prm.simd123 = _simd
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max

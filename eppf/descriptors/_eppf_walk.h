@@ -66,6 +66,12 @@
 /* Pairs per batch (the walks sort a batch by line length: a longer batch
    groups the lanes better, up to about this size). */
 #define EPPF_WALK_BATCH 256
+/* A walk's counters in one int64 for the AVX-512 walk: rem (inner voxels) in
+   bits 0-20, the f4 thresholds lo from bit 21 and hi from bit 42 (all below
+   2**21); ``lohi[T]`` holds lo and hi of T voxels in place (_eppf_fast.pyx). */
+#define EPPF_META_LO 21
+#define EPPF_META_HI 42
+#define EPPF_META_MASK 0x1FFFFF
 /* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
 #define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
 
@@ -537,11 +543,9 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * division there. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
-                                 const int32_t *thr, int n4, const double *recip_packed, int64_t *P, int64_t *INC,
-                                 int32_t *Ls, int32_t *LO, int32_t *HI)
+                                 const int64_t *lohi, const double *recip_packed, int64_t *P, int64_t *INC,
+                                 int32_t *Ls, int64_t *META)
 {
-    const __m256i n4v = _mm256_set1_epi32(n4), onev = _mm256_set1_epi32(1), n4m1 = _mm256_set1_epi32(n4 - 1);
-    const __m256i z256 = _mm256_setzero_si256();
     const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1);
     int t;
     for (t = 0; t < m; t += 8) {
@@ -558,7 +562,6 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
         const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
                                            _mm512_abs_epi64(dz));
         const __m256i L32 = _mm512_cvtepi64_epi32(L);
-        const __m256i row = _mm256_mullo_epi32(_mm256_add_epi32(L32, onev), n4v);
         /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
         const __m512d q = _mm512_i64gather_pd(_mm512_max_epi64(L, one), recip_packed, 8);
         const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
@@ -569,9 +572,10 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
         _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(a, inc));
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
         _mm256_mask_storeu_epi32(Ls + t, keep, L32);
-        _mm256_mask_storeu_epi32(LO + t, keep, _mm256_mmask_i32gather_epi32(z256, keep, row, thr + 1, 4));
-        _mm256_mask_storeu_epi32(HI + t, keep, _mm256_mmask_i32gather_epi32(z256, keep, _mm256_add_epi32(row, n4m1),
-                                                                             thr, 4));
+        /* rem = L - 1 (a wrapped field for lines of L <= 1, which are never walked) | lo | hi */
+        _mm512_mask_storeu_epi64(META + t, keep, _mm512_add_epi64(
+            _mm512_mask_i64gather_epi64(zero, keep, _mm512_add_epi64(L, one), lohi, 8),
+            _mm512_and_si512(_mm512_sub_epi64(L, one), _mm512_set1_epi64(EPPF_META_MASK))));
     }
 }
 
@@ -584,13 +588,12 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
 __attribute__((target(EPPF_AVX512_TARGET)))
 static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
-                                 const double *recip_packed, int32_t *B)
+                                 const int64_t *lohi, const double *recip_packed, int32_t *B)
 {
     int64_t P[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int64_t INC[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int32_t Ls[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int32_t LO[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int32_t HI[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t META[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
     int order[EPPF_WALK_BATCH + 16];
     int k, n_walk, n_pad, grp;
     const __m512i one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2), zero = _mm512_setzero_si512();
@@ -603,7 +606,7 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     const long long *base = (const long long *)bits;
     (void)recip_packed;
 
-    eppf_f4_setup_avx512(m, ii, jj, pv, thr, n4, recip_packed, P, INC, Ls, LO, HI);
+    eppf_f4_setup_avx512(m, ii, jj, pv, lohi, recip_packed, P, INC, Ls, META);
     n_walk = eppf_f4_order(m, Ls, order);
     /* Padding lanes of the last group: a valid pair's position, masked out. */
     n_pad = (n_walk + 15) & ~15;
@@ -641,9 +644,10 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
                 : n_walk <= (G) ? (__mmask8)0 : (__mmask8)((1u << (n_walk - (G))) - 1);           \
         p = _mm512_i32gather_epi64(oi_, P, 8);                                                    \
         inc = _mm512_mask_i32gather_epi64(zero, valid, oi_, INC, 8);                              \
-        lo = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi_, LO, 4)); \
-        hi = _mm512_cvtepi32_epi64(_mm256_mmask_i32gather_epi32(_mm256_setzero_si256(), valid, oi_, HI, 4)); \
-        rem = _mm512_maskz_sub_epi64(valid, _mm512_cvtepi32_epi64(_mm256_i32gather_epi32(Ls, oi_, 4)), one); \
+        rem = _mm512_mask_i32gather_epi64(zero, valid, oi_, META, 8);                             \
+        lo = _mm512_and_si512(_mm512_srli_epi64(rem, EPPF_META_LO), _mm512_set1_epi64(EPPF_META_MASK)); \
+        hi = _mm512_srli_epi64(rem, EPPF_META_HI);                                                \
+        rem = _mm512_and_si512(rem, _mm512_set1_epi64(EPPF_META_MASK));                           \
         occ = _mm512_maskz_mov_epi64(valid, two);                                                 \
         need_ = _mm512_add_epi64(_mm512_sub_epi64(_mm512_add_epi64(occ, rem), lo), one);          \
         steps_ = _mm512_min_epi64(rem, need_);                                                    \
@@ -757,9 +761,9 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
 
 static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
-                                 const double *recip_packed, int32_t *B)
+                                 const int64_t *lohi, const double *recip_packed, int32_t *B)
 {
-    (void)m; (void)ii; (void)jj; (void)vox; (void)bits; (void)g; (void)thr; (void)n4;
+    (void)m; (void)ii; (void)jj; (void)pv; (void)bits; (void)g; (void)thr; (void)n4; (void)lohi;
     (void)recip_packed; (void)B;
 }
 
