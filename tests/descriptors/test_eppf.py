@@ -169,31 +169,49 @@ def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
     assert (slow.reshape(len(clouds), 4, n4)[:, :, 1:].sum() > 0)  # not every pair in the bottom f4 bin
 
 
-def _with_duplicates(rng, n, copies):
-    """A cloud of ``n`` points of which the last ``copies`` repeat the first ones (normals too)."""
-    c = _sphere(n, rng)
-    c[n - copies:] = c[:copies]
-    return c
+def _first_coinciding_draw(points, seed, n_draws):
+    """Index of the first of ``n_draws`` splitmix64 candidate pairs whose points coincide, or None.
+
+    Written from the generator's definition (Python integers), independently of the kernel."""
+    mask, n, state = (1 << 64) - 1, len(points), int(seed)
+    for k in range(n_draws):
+        state = (state + 0x9E3779B97F4A7C15) & mask
+        z = ((state ^ (state >> 30)) * 0xBF58476D1CE4E5B9) & mask
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+        z ^= z >> 31
+        i, j = ((z >> 32) * n) >> 32, ((z & 0xFFFFFFFF) * (n - 1)) >> 32
+        j += j >= i
+        if (points[i] == points[j]).all():
+            return k
+    return None
 
 
 @pytest.mark.parametrize("n_pairs", [1, 9, 300, 2001])
 def test_draws_past_coinciding_points_match_reference_at_every_level(n_pairs):
     # The AVX-512 draws skip the check for coinciding points and leave the rest
-    # of the object to the scalar draw (with its redraws) at the first such
-    # pair: early in a batch (half the points repeated), late in the object
-    # (one repeated point among 60), or never; the pairs must be the ones
-    # eppf_pairs draws one at a time.
+    # of the object to the scalar draw (with its redraws) from the first such
+    # candidate on; the pairs must be the ones eppf_pairs draws one at a time.
     rng = np.random.default_rng(n_pairs)
-    clouds = [_with_duplicates(rng, 40, 20), _with_duplicates(rng, 60, 1), _sphere(2, rng), _sphere(500, rng),
-              _with_duplicates(rng, 30, 29)]
-    points, normals, offsets = _packed(clouds)
+    early = _sphere(40, rng)
+    early[20:] = early[:20]  # half the points repeated: a coinciding candidate in the first batch
+    late = _sphere(60, rng)
+    late[59] = late[0]  # one repeated point: for 2001 pairs, the first coinciding candidate comes after batch one
+    heavy = _sphere(30, rng)
+    heavy[2:] = heavy[0]  # 29 of 30 points equal: most draws are redrawn
+    clouds = [early, late, _sphere(2, rng), _sphere(500, rng), heavy]
     seeds = object_seeds(n_pairs, len(clouds))
+    if n_pairs == 2001:
+        assert _first_coinciding_draw(early[:, :3], seeds[0], n_pairs) < 256
+        assert 256 < _first_coinciding_draw(late[:, :3], seeds[1], n_pairs) < n_pairs
+        assert _first_coinciding_draw(clouds[3][:, :3], seeds[3], n_pairs) is None
+    points, normals, offsets = _packed(clouds)
     args = (points, normals, offsets, np.full(len(clouds), 0.4), seeds, n_pairs, (6, 3, 2, 3), 64, ref.F1_MAX, 2)
+    want = [_reference_counts(c, seeds[k], n_pairs, 0.4, (6, 3, 2, 3), 64) for k, c in enumerate(clouds)]
     for level in LEVELS:
         got, status = _counts_at(level, *args)
         assert not status.any()
-        for k, cloud in enumerate(clouds):
-            assert_array_equal(got[k], _reference_counts(cloud, seeds[k], n_pairs, 0.4, (6, 3, 2, 3), 64))
+        for k in range(len(clouds)):
+            assert_array_equal(got[k], want[k])
 
 
 def test_coinciding_cloud_is_reported_at_every_level():
