@@ -23,12 +23,15 @@ Conventions (the user guide's reading of the paper):
   bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
 - A bin count of 1 switches a function off (its value is never computed).
 
-Where the CPU has AVX2 (checked at import), batches of 64 pairs go through
-the kernels of ``_eppf_walk.h`` instead: f1-f3 four pairs at a time with the same
-IEEE operations in the same order, and the f4 walks of grids up to 64 in
-four lanes, pairs grouped by line length. Their bins are bit-identical to the
-scalar code here, which every other case uses and ``_set_simd(False)``
-forces (tests compare both with the NumPy reference).
+Where the CPU has them (checked at import), batches of 256 pairs go through
+the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F, BW, VL, DQ, VBMI) the
+draws, the f1-f3 bins and the f4 walks of grids up to 64 run eight pairs at
+a time; with AVX2 only, f1-f3 and the walks run four at a time. f1-f3 use
+the same IEEE operations in the same order, the walks visit the same voxels
+and pairs are grouped by line length. Their bins and draws are bit-identical
+to the scalar code here, which every other case uses; ``_set_simd(False)``
+forces it and ``_set_simd_level`` picks a level (tests compare all levels
+with each other and with the NumPy reference).
 """
 import numpy as np
 
@@ -51,9 +54,13 @@ cdef extern from "_eppf_walk.h":
         EPPF_PK_YSHIFT
         EPPF_PK_XSHIFT
         EPPF_WALK_BATCH
+        EPPF_META_LO
+        EPPF_META_HI
     int64_t EPPF_PK_X
+    uint64_t EPPF_SM_GAMMA
     int64_t EPPF_PK_Y
     int eppf_walk_has_avx2() noexcept nogil
+    int eppf_walk_has_avx512() noexcept nogil
     void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                               double f1_density, const double* cos2, const double* cos3,
@@ -61,9 +68,24 @@ cdef extern from "_eppf_walk.h":
     void eppf_f4_batch_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
                             const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                             const double* recip_packed, int32_t* B) noexcept nogil
+    void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
+    int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
+                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
+                               double f1_density, const double* cos2, const double* cos3,
+                               int32_t* B) noexcept nogil
+    void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
+                              const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
+                              const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
 
-# The AVX2 kernels (``_walk.h``) where the CPU has them; ``_set_simd`` turns them off for tests.
-cdef bint _simd = eppf_walk_has_avx2() != 0
+# The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (f4
+# walk; f1-f3 use AVX2 at levels 1 and 2). ``_set_simd`` / ``_set_simd_level``
+# choose a lower level for tests.
+cdef int _max_level():
+    if eppf_walk_has_avx2() == 0:
+        return 0
+    return 2 if eppf_walk_has_avx512() != 0 else 1
+
+cdef int _simd = _max_level()
 
 # Consecutive zero-length pairs after which an object is declared degenerate.
 cdef enum:
@@ -85,15 +107,30 @@ cdef uint64_t LOW32 = 0xFFFFFFFF
 
 
 def _simd_enabled():
-    """Whether the AVX2 kernels of ``_walk.h`` are in use."""
-    return bool(_simd)
+    """Whether the SIMD kernels of ``_eppf_walk.h`` are in use."""
+    return _simd > 0
 
 
 def _set_simd(enabled):
-    """Use the AVX2 kernels when ``enabled`` and available; return the previous setting."""
+    """Use the best SIMD kernels the CPU has when ``enabled``, the scalar code
+    otherwise; return the previous setting (True or False)."""
     global _simd
-    old = bool(_simd)
-    _simd = bool(enabled) and eppf_walk_has_avx2() != 0
+    old = _simd > 0
+    _simd = _max_level() if enabled else 0
+    return old
+
+
+def _simd_levels():
+    """The kernel levels this CPU can run: 0 scalar, 1 AVX2, 2 AVX-512."""
+    return tuple(range(_max_level() + 1))
+
+
+def _set_simd_level(int level):
+    """Use kernel level ``level`` (0 scalar, 1 AVX2, 2 AVX-512; capped at what the
+    CPU has); return the previous level."""
+    global _simd
+    old = _simd
+    _simd = max(0, min(level, _max_level()))
     return old
 
 
@@ -107,8 +144,9 @@ cdef struct Params:
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
-    bint simd               # walk f4 in AVX2 lanes (grids up to 64)
-    bint simd123            # f1-f3 bins in AVX2 lanes
+    int64_t lohi[66]        # thr[T * n4 + 1] and thr[T * n4 + n4 - 1] packed as the AVX-512 walk reads them
+    int simd                # walk f4 in AVX2 (1) or AVX-512 (2) lanes (grids up to 64), 0: scalar
+    int simd123             # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -127,12 +165,14 @@ cdef inline int64_t _grid_words(int grid) noexcept nogil:
 
 
 cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, uint64_t* bits,
-                            int32_t* vox) noexcept nogil:
+                            int32_t* vox, int64_t* pv) noexcept nogil:
     """Voxelise ``n`` points on a grid over their bounding cube.
 
     Writes each point's voxel coordinates to ``vox`` (n, 3) and sets the
     occupied voxels in the bit grid ``bits``: row (x, y) is ``_row_words``
     64-bit words of z bits, so a 64^3 grid is one word per row (32 KiB).
+    Unless ``pv`` is NULL (grids up to 64 only), each voxel also goes to
+    ``pv`` (n,) as the packed walk's start word: lanes v * S + S/2 + g.
     """
     cdef int64_t i, idx
     cdef double mnx = pts[0], mny = pts[1], mnz = pts[2]
@@ -156,6 +196,9 @@ cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, 
         vox[3 * i + 2] = _voxel(pts[ps * i + 2], mnz, inv, grid)
         idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * _row_words(grid) + (vox[3 * i + 2] >> 6)
         bits[idx] |= (<uint64_t>1) << (vox[3 * i + 2] & 63)
+        if pv != NULL:
+            pv[i] = ((vox[3 * i] * PK_S + PK_S // 2 + grid) * PK_X + (vox[3 * i + 1] * PK_S + PK_S // 2 + grid) * PK_Y
+                     + vox[3 * i + 2] * PK_S + PK_S // 2 + grid)
 
 
 cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* prm,
@@ -315,7 +358,7 @@ cdef inline int _draw_pair(const double* pts, int64_t ps, uint32_t n, uint64_t* 
 
 cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
-                        int32_t* vox, int32_t* counts) noexcept nogil:
+                        int32_t* vox, int64_t* pv, int32_t* counts) noexcept nogil:
     """Histogram counts of one object; returns 1 if pairs could not be drawn.
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
@@ -329,30 +372,53 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int32_t B[BATCH]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
+    # AVX-512: draw a batch's candidate pairs eight at a time; the f1-f3 pass
+    # then finds the first pair whose points coincide, if any, and from there
+    # on the scalar draw (with its redraws) takes over for the rest of the object.
+    cdef bint vec_draw = prm.simd123 == 2
+    cdef int good
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
     if prm.n4 > 1:
-        _fill_grid(pts, ps, n, prm.grid, bits, vox)
+        _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd == 2 else NULL)
     base = 0
     while base < n_pairs:
         m = n_pairs - base
         if m > BATCH:
             m = BATCH
-        base += m
-        for t in range(m):
-            if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
-                return 1
-            I[t] = <int32_t>i
-            J[t] = <int32_t>j
-        if prm.simd123:
-            eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                 prm.f1_density, prm.cos2, prm.cos3, B)
+        if vec_draw:
+            eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
+            good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                          prm.f1_density, prm.cos2, prm.cos3, B)
+            if good < m:
+                vec_draw = False
+                m = good
+            state += <uint64_t>m * EPPF_SM_GAMMA
+            base += m
+            if m == 0:
+                continue
         else:
+            base += m
             for t in range(m):
-                B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
+                if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
+                    return 1
+                I[t] = <int32_t>i
+                J[t] = <int32_t>j
+            if prm.simd123 == 2:
+                eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                       prm.f1_density, prm.cos2, prm.cos3, B)
+            elif prm.simd123:
+                eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                     prm.f1_density, prm.cos2, prm.cos3, B)
+            else:
+                for t in range(m):
+                    B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if prm.n4 > 1:
-            if prm.simd:
+            if prm.simd == 2:
+                eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi, prm.recip_packed,
+                                     B)
+            elif prm.simd:
                 eppf_f4_batch_avx2(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
             elif prm.grid == 64:
                 for t in range(m):
@@ -382,7 +448,11 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.n3 = n3
     prm.n4 = n4
     prm.grid = grid
-    prm.simd = _simd and grid <= 64
+    prm.simd = _simd if grid <= 64 else 0
+    for k in range(66):
+        prm.lohi[k] = 0
+        if n4 > 1 and k <= grid + 1:
+            prm.lohi[k] = ((<int64_t>thr[k * n4 + 1]) << EPPF_META_LO) | ((<int64_t>thr[k * n4 + n4 - 1]) << EPPF_META_HI)
     prm.simd123 = _simd
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max
@@ -474,10 +544,12 @@ def eppf_counts(points_in, normals_in,
     cdef int64_t max_n = np.max(np.diff(offsets))
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
+    pv_arr = np.zeros((num_threads, max_n if prm.simd == 2 else 1), dtype=np.int64)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
     cdef uint64_t[:, ::1] grids = grids_arr
     cdef int32_t[:, ::1] vox = vox_arr
+    cdef int64_t[:, ::1] pv = pv_arr
     cdef Py_ssize_t k, tid
     cdef int64_t start
     with nogil:
@@ -486,7 +558,7 @@ def eppf_counts(points_in, normals_in,
             tid = threadid()
             status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
-                                       &prm, &grids[tid, 0], &vox[tid, 0], &counts[k, 0])
+                                       &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &counts[k, 0])
     return counts_arr, status_arr
 
 
@@ -540,7 +612,7 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
     for t in range(n_p):
         if not (0 <= pairs[t, 0] < n and 0 <= pairs[t, 1] < n):
             raise ValueError("pair indices out of range")
-    _fill_grid(&points[0, 0], 3, n, grid_size, &bits[0], &vox[0, 0])
+    _fill_grid(&points[0, 0], 3, n, grid_size, &bits[0], &vox[0, 0], NULL)
     for t in range(n_p):
         _bin_f123(&points[0, 0], 3, &normals[0, 0], 3, pairs[t, 0], pairs[t, 1], scale, &prm, parts)
         parts[3] = parts[4] = parts[5] = 0

@@ -1,17 +1,25 @@
-/* AVX2 kernels of a batch of pairs, four pairs at a time: the f1-f3 bins
- * (``eppf_f123_batch_avx2``) and the f4 line walks (``eppf_f4_batch_avx2``).
+/* SIMD kernels of a batch of pairs for _eppf_fast.pyx, chosen at run time:
  *
- * f1-f3: the same IEEE operations in the same order as _core.pyx's
- * ``_bin_f123`` (no FMA: the target is plain "avx2" and the build passes
- * -ffp-contract=off), so the bins are bit-identical.
+ * - AVX2, four pairs at a time: the f1-f3 bins (``eppf_f123_batch_avx2``)
+ *   and the f4 line walks (``eppf_f4_batch_avx2``);
+ * - AVX-512 (F, BW, VL, DQ and VBMI), eight pairs at a time: the pair draws
+ *   (``eppf_draw_batch_avx512``), the f1-f3 bins with the check for
+ *   coinciding points (``eppf_f123_batch_avx512``) and the f4 walks
+ *   (``eppf_f4_batch_avx512``).
  *
- * Used by _core.pyx for grids of at most 64 voxels a side, where a voxel
- * position fits the packed fixed-point form of _core.pyx's ``_line_bin``:
+ * f1-f3: the same IEEE operations in the same order as _eppf_fast.pyx's
+ * ``_bin_f123`` (no FMA: the targets are plain "avx2" / AVX-512 and the build
+ * passes -ffp-contract=off), so the bins are bit-identical. The draws are
+ * splitmix64's, state seed + k gamma for the k-th draw, so eight lanes draw
+ * exactly the pairs of eight successive scalar draws.
+ *
+ * The walks serve grids of at most 64 voxels a side, where a voxel
+ * position fits the packed fixed-point form of _eppf_fast.pyx's ``_line_bin``:
  * x, y, z in three 21-bit lanes of one int64, 14 fraction bits each, so one
- * addition advances all three axes by a step. The walk here visits exactly
+ * addition advances all three axes by a step. A walk here visits exactly
  * the voxels ``_line_bin`` visits, and stops only once the f4 bin is certain,
  * so the bins are identical; only the order in which pairs are walked
- * changes (pairs are grouped by line length so that the four lanes of a group
+ * changes (pairs are grouped by line length so that the lanes of a group
  * need similar numbers of steps).
  *
  * Stopping rule, per pair: with ``occ`` the occupied voxels counted so far
@@ -20,11 +28,14 @@
  * or when rem == 0. Every empty voxel lowers occ + rem by one, so the next
  * ``occ + rem - lo + 1`` steps can be walked without a test: a phase walks
  * that many steps (at most rem) in every lane, then the rule is applied again.
+ * Walking on past the point where a bin became certain (but never past the
+ * line's end) cannot change that bin, which the AVX-512 walk uses to test
+ * only every fourth step.
  *
- * The AVX2 code is compiled with a target attribute and chosen at run time
- * (``eppf_walk_has_avx2``); other compilers and CPUs use the scalar walk of
- * _core.pyx. No floating point is involved beyond the setup, which uses the
- * same expressions as _core.pyx.
+ * The SIMD code is compiled with target attributes and chosen at run time
+ * (``eppf_walk_has_avx2`` / ``eppf_walk_has_avx512``); other compilers and
+ * CPUs use the scalar code of _eppf_fast.pyx. No floating point is involved in
+ * the walks beyond the setup, which uses the same expressions as _eppf_fast.pyx.
  */
 #ifndef EPPF_WALK_H
 #define EPPF_WALK_H
@@ -52,7 +63,33 @@
 #define EPPF_PK_S (1 << EPPF_PK_FRAC)
 #define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
 #define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
-#define EPPF_WALK_BATCH 64
+/* Pairs per batch (the walks sort a batch by line length: a longer batch
+   groups the lanes better, up to about this size). */
+#define EPPF_WALK_BATCH 256
+/* A walk's counters in one int64 for the AVX-512 walk: rem (inner voxels) in
+   bits 0-20, the f4 thresholds lo from bit 21 and hi from bit 42 (all below
+   2**21); ``lohi[T]`` holds lo and hi of T voxels in place (_eppf_fast.pyx). */
+#define EPPF_META_LO 21
+#define EPPF_META_HI 42
+#define EPPF_META_MASK 0x1FFFFF
+/* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
+#define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
+
+#define EPPF_AVX512_TARGET "avx2,avx512f,avx512bw,avx512vl,avx512dq,avx512vbmi"
+
+/* AVX-512 F, BW, VL, DQ and VBMI (with the OS saving the zmm state: libgcc's
+   cpu check reads XCR0). */
+static int eppf_walk_has_avx512(void)
+{
+#if EPPF_WALK_SIMD
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw")
+           && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq")
+           && __builtin_cpu_supports("avx512vbmi");
+#else
+    return 0;
+#endif
+}
 
 static int eppf_walk_has_avx2(void)
 {
@@ -158,31 +195,19 @@ static void eppf_f123_batch_avx2(int m, const int32_t *ii, const int32_t *jj, co
     }
 }
 
-/* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m (m <= 64).
- *
- * vox: (n, 3) voxel coordinates; bits: the grid, one 64-bit word per (x, y)
- * row (g <= 64); thr[T * n4 + b] = ceil(b T / n4). The setup of every pair
- * (line length L, the packed start and increment, the thresholds lo and hi)
- * runs four pairs at a time in original order; the walks then take the pairs
- * longest line first, in groups of four, so that the lanes of a group need
- * similar numbers of steps.
- */
+/* The setup of the walks of pairs (ii[t], jj[t]), t < m <= EPPF_WALK_BATCH,
+ * four pairs at a time in original order: line length L, the packed start P
+ * (first inner voxel) and increment INC, the thresholds LO = thr[1] and
+ * HI = thr[n4 - 1] of T = L + 1 voxels. vox: (n, 3) voxel coordinates;
+ * thr[T * n4 + b] = ceil(b T / n4). */
 __attribute__((target("avx2")))
-static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
-                               const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
-                               const double *recip_packed, int32_t *B)
+static void eppf_f4_setup_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
+                               const int32_t *thr, int n4, int64_t *P, int64_t *INC, int32_t *Ls, int32_t *LO,
+                               int32_t *HI)
 {
-    int64_t P[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
-    int64_t INC[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
-    int32_t Ls[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
-    int32_t LO[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
-    int32_t HI[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
     int32_t ri[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
     int32_t rj[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
-    int order[EPPF_WALK_BATCH + 4];
-    int count[65], start[65];
-    int t, k, n_walk;
-    (void)recip_packed;
+    int t;
 
     /* Row offsets of the two points of each pair, padded to a multiple of 4
        with the first pair (its lanes are computed and ignored). */
@@ -228,7 +253,14 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
             _mm_store_si128((__m128i *)(HI + t), _mm_i32gather_epi32(thr, _mm_add_epi32(row, n4m1), 4));
         }
     }
-    /* Walk order: L descending; L <= 1 (no inner voxel, occ = L + 1) last, unwalked. */
+}
+
+/* The pairs with inner voxels (L > 1) in walk order, longest line first, into
+   ``order``; returns their number. */
+static int eppf_f4_order(int m, const int32_t *Ls, int *order)
+{
+    int count[65], start[65];
+    int t, k, n_walk;
     for (k = 0; k < 65; k++)
         count[k] = 0;
     for (t = 0; t < m; t++)
@@ -246,6 +278,48 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
         if (L > 1)
             order[start[L]++] = t;
     }
+    return n_walk;
+}
+
+/* f4 bins of the lines without inner voxels (L <= 1): occ = T = L + 1, all voxels occupied. */
+static void eppf_f4_short_lines(int m, const int32_t *Ls, const int32_t *thr, int n4, int32_t *B)
+{
+    int t;
+    for (t = 0; t < m; t++) {
+        int64_t L = Ls[t];
+        if (L <= 1) {
+            const int32_t *th = thr + (L + 1) * n4;
+            int b = 0, j;
+            for (j = 1; j < n4; j++)
+                b += (L + 1) >= th[j];
+            B[t] += b;
+        }
+    }
+}
+
+/* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m <= EPPF_WALK_BATCH.
+ *
+ * bits: the grid, one 64-bit word per (x, y) row (g <= 64). After the setup,
+ * the walks take the pairs longest line first, in groups of four, so that
+ * the lanes of a group need similar numbers of steps.
+ */
+__attribute__((target("avx2")))
+static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox,
+                               const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
+                               const double *recip_packed, int32_t *B)
+{
+    int64_t P[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
+    int64_t INC[EPPF_WALK_BATCH + 4] __attribute__((aligned(32)));
+    int32_t Ls[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t LO[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int32_t HI[EPPF_WALK_BATCH + 4] __attribute__((aligned(16)));
+    int order[EPPF_WALK_BATCH + 4];
+    int k, n_walk;
+    (void)recip_packed;
+
+    eppf_f4_setup_avx2(m, ii, jj, vox, g, thr, n4, P, INC, Ls, LO, HI);
+    /* Walk order: L descending; L <= 1 (no inner voxel, occ = L + 1) last, unwalked. */
+    n_walk = eppf_f4_order(m, Ls, order);
     for (k = n_walk; k < n_walk + 4; k++)
         order[k] = -1;
 
@@ -348,18 +422,323 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
         }
     }
     /* Lines without inner voxels: occ = T = L + 1, all voxels occupied. */
-    if (n_walk < m) {
-        for (t = 0; t < m; t++) {
-            int64_t L = Ls[t];
-            if (L <= 1) {
-                const int32_t *th = thr + (L + 1) * n4;
-                int b = 0, j;
-                for (j = 1; j < n4; j++)
-                    b += (L + 1) >= th[j];
-                B[t] += b;
+    if (n_walk < m)
+        eppf_f4_short_lines(m, Ls, thr, n4, B);
+}
+
+
+/* The candidate pairs of the next m draws of splitmix64 from ``state``, eight
+ * draws at a time, exactly as _eppf_fast.pyx's ``_draw_pair`` draws them but
+ * without its check for coinciding points (``eppf_f123_batch_avx512`` does
+ * that check): i = (r_hi n) >> 32, j = (r_lo (n - 1)) >> 32, plus one where
+ * j >= i. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *out_i, int32_t *out_j)
+{
+    const __m512i step = _mm512_set1_epi64((long long)(8 * EPPF_SM_GAMMA));
+    const __m512i c1 = _mm512_set1_epi64((long long)0xBF58476D1CE4E5B9ULL);
+    const __m512i c2 = _mm512_set1_epi64((long long)0x94D049BB133111EBULL);
+    const __m512i vn = _mm512_set1_epi64(n), vn1 = _mm512_set1_epi64(n - 1), one = _mm512_set1_epi64(1);
+    __m512i st = _mm512_add_epi64(
+        _mm512_set1_epi64((long long)state),
+        _mm512_mullo_epi64(_mm512_set_epi64(8, 7, 6, 5, 4, 3, 2, 1), _mm512_set1_epi64((long long)EPPF_SM_GAMMA)));
+    int t;
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        __m512i z = st, i, j;
+        z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64(z, 30)), c1);
+        z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64(z, 27)), c2);
+        z = _mm512_xor_si512(z, _mm512_srli_epi64(z, 31));
+        i = _mm512_srli_epi64(_mm512_mul_epu32(_mm512_srli_epi64(z, 32), vn), 32);
+        j = _mm512_srli_epi64(_mm512_mul_epu32(z, vn1), 32);
+        j = _mm512_mask_add_epi64(j, _mm512_cmpge_epu64_mask(j, i), j, one);
+        _mm256_mask_storeu_epi32(out_i + t, keep, _mm512_cvtepi64_epi32(i));
+        _mm256_mask_storeu_epi32(out_j + t, keep, _mm512_cvtepi64_epi32(j));
+        st = _mm512_add_epi64(st, step);
+    }
+}
+
+/* 8 rows r[0..7] (offsets in doubles) of an array: columns 0, 1, 2 as vectors. */
+#define EPPF_GATHER3(A, R, K, X, Y, Z)                                              \
+    do {                                                                            \
+        (X) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A), 8);     \
+        (Y) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 1, 8); \
+        (Z) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 2, 8); \
+    } while (0)
+
+/* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
+ * the same order, so the same bins), which also checks the pairs as
+ * ``_draw_pair`` does: returns the first t whose two points coincide (all
+ * three coordinates equal), or m when none does. B[t] is written for every t. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                                  const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+{
+    const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
+    const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
+    const __m512i vps = _mm512_set1_epi64(ps), vns = _mm512_set1_epi64(ns);
+    const __m256i one32 = _mm256_set1_epi32(1);
+    int t, k, bad = m;
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        const __m512i vi = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, ii + t));
+        const __m512i vj = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, jj + t));
+        __m512d pix, piy, piz, pjx, pjy, pjz, dx, dy, dz, dist, v;
+        __m256i b1, b2 = _mm256_setzero_si256(), b3 = _mm256_setzero_si256(), b;
+        __mmask8 same;
+        EPPF_GATHER3(pts, _mm512_mul_epu32(vi, vps), keep, pix, piy, piz);
+        EPPF_GATHER3(pts, _mm512_mul_epu32(vj, vps), keep, pjx, pjy, pjz);
+        same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
+               & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
+        if (same && bad == m)
+            bad = t + __builtin_ctz(same);
+        dx = _mm512_sub_pd(pjx, pix);
+        dy = _mm512_sub_pd(pjy, piy);
+        dz = _mm512_sub_pd(pjz, piz);
+        dist = _mm512_sqrt_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
+                                            _mm512_mul_pd(dz, dz)));
+        v = _mm512_mul_pd(_mm512_mul_pd(dist, vscale), vdens);
+        b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
+        if (n2 > 1 || n3 > 1) {
+            __m512d nix, niy, niz, njx, njy, njz;
+            EPPF_GATHER3(nrm, _mm512_mul_epu32(vi, vns), keep, nix, niy, niz);
+            EPPF_GATHER3(nrm, _mm512_mul_epu32(vj, vns), keep, njx, njy, njz);
+            if (n2 > 1) {
+                __m512d inv = _mm512_div_pd(one, dist), m1, m2;
+                m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
+                                                 _mm512_mul_pd(niz, dz)), inv);
+                m2 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(njx, dx), _mm512_mul_pd(njy, dy)),
+                                                 _mm512_mul_pd(njz, dz)), inv);
+                m1 = _mm512_min_pd(m2, m1);  /* m2 < m1 ? m2 : m1 */
+                for (k = 0; k < n2 - 1; k++)
+                    b2 = _mm256_mask_add_epi32(b2, _mm512_cmp_pd_mask(m1, _mm512_set1_pd(cos2[k]), _CMP_LE_OQ),
+                                               b2, one32);
+            }
+            if (n3 > 1) {
+                v = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, njx), _mm512_mul_pd(niy, njy)),
+                                  _mm512_mul_pd(niz, njz));
+                v = _mm512_abs_pd(v);
+                for (k = 0; k < n3 - 1; k++)
+                    b3 = _mm256_mask_add_epi32(b3, _mm512_cmp_pd_mask(v, _mm512_set1_pd(cos3[k]), _CMP_LE_OQ),
+                                               b3, one32);
             }
         }
+        b = _mm256_add_epi32(_mm256_mullo_epi32(b1, _mm256_set1_epi32(n2)), b2);
+        b = _mm256_add_epi32(_mm256_mullo_epi32(b, _mm256_set1_epi32(n3)), b3);
+        b = _mm256_mullo_epi32(b, _mm256_set1_epi32(n4));
+        _mm256_mask_storeu_epi32(B + t, keep, b);
     }
+    return bad;
+}
+#undef EPPF_GATHER3
+
+/* ``eppf_f4_setup_avx2`` eight pairs at a time, from ``pv``: each point's
+ * voxel already in the packed walk's start form (lanes v S + S/2 + g, see
+ * _eppf_fast.pyx's ``_fill_grid``), so a pair needs two gathers. The packed
+ * difference of two such words holds the three lane differences d S exactly
+ * (each below 2**20 in size), recovered by sign-extending 21-bit fields. The
+ * same integer results as the AVX2 setup: the increments' scale 2**14 / L is
+ * read from ``recip_packed``, the same correctly rounded quotient as the
+ * division there. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
+                                 const int64_t *lohi, const double *recip_packed, int64_t *P, int64_t *INC,
+                                 int32_t *Ls, int64_t *META)
+{
+    const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1);
+    int t;
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        const __m512i a = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, ii + t), pv, 8);
+        const __m512i b = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, jj + t), pv, 8);
+        const __m512i d = _mm512_sub_epi64(b, a);
+        const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
+        const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
+        const __m512i dys = _mm512_srai_epi64(_mm512_slli_epi64(d1, 43), 43);
+        const __m512i dxs = _mm512_srai_epi64(_mm512_sub_epi64(d1, dys), EPPF_PK_YLANE);
+        const __m512i dx = _mm512_srai_epi64(dxs, EPPF_PK_FRAC), dy = _mm512_srai_epi64(dys, EPPF_PK_FRAC);
+        const __m512i dz = _mm512_srai_epi64(dzs, EPPF_PK_FRAC);
+        const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
+                                           _mm512_abs_epi64(dz));
+        const __m256i L32 = _mm512_cvtepi64_epi32(L);
+        /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
+        const __m512d q = _mm512_i64gather_pd(_mm512_max_epi64(L, one), recip_packed, 8);
+        const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
+        const __m512i iy = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dy), q));
+        const __m512i iz = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dz), q));
+        const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
+                                                              _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
+        _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(a, inc));
+        _mm512_mask_storeu_epi64(INC + t, keep, inc);
+        _mm256_mask_storeu_epi32(Ls + t, keep, L32);
+        /* rem = L - 1 (a wrapped field for lines of L <= 1, which are never walked) | lo | hi */
+        _mm512_mask_storeu_epi64(META + t, keep, _mm512_add_epi64(
+            _mm512_mask_i64gather_epi64(zero, keep, _mm512_add_epi64(L, one), lohi, 8),
+            _mm512_and_si512(_mm512_sub_epi64(L, one), _mm512_set1_epi64(EPPF_META_MASK))));
+    }
+}
+
+/* The AVX-512 walk: eight lanes, the same stopping rule and bins as
+ * ``eppf_f4_batch_avx2`` (same arguments). One step of a lane is a few
+ * byte operations on the packed position: VBMI's multishift copies the integer
+ * parts of y, x, z to bytes 0, 1, 2 of the lane, a multiply-add of bytes 0
+ * and 1 by (1, g) gives the row x g + y, byte 2 the bit; lanes past their steps
+ * are masked out of the gather and stand still. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
+                                 const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
+                                 const int64_t *lohi, const double *recip_packed, int32_t *B)
+{
+    int64_t P[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t INC[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int32_t Ls[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t META[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int order[EPPF_WALK_BATCH + 16];
+    int k, n_walk, n_pad, grp;
+    const __m512i one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2), zero = _mm512_setzero_si512();
+    const __m512i three = _mm512_set1_epi64(3), four = _mm512_set1_epi64(4);
+    /* multishift control: byte 0 <- bits 35.. (y), byte 1 <- bits 56.. (x), byte 2 <- bits 14.. (z) */
+    const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_ZSHIFT << 16) | ((int64_t)EPPF_PK_XSHIFT << 8)
+                                           | EPPF_PK_YSHIFT);
+    const __m512i m6 = _mm512_set1_epi64(0x3f3f3f);
+    const __m512i mul = _mm512_set1_epi64((g << 8) | 1);  /* bytes (1, g): y + g x, at most 4095 */
+    const long long *base = (const long long *)bits;
+    (void)recip_packed;
+
+    eppf_f4_setup_avx512(m, ii, jj, pv, lohi, recip_packed, P, INC, Ls, META);
+    n_walk = eppf_f4_order(m, Ls, order);
+    /* Padding lanes of the last group: a valid pair's position, masked out. */
+    n_pad = (n_walk + 15) & ~15;
+    for (k = n_walk; k < n_pad; k++)
+        order[k] = order[0];
+
+#define EPPF_STEP512(MASKED, p, inc, occ, on)                                                     \
+    do {                                                                                          \
+        __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p), m6);                \
+        __m512i row_ = _mm512_maddubs_epi16(t_, mul);                                             \
+        __m512i bit_ = _mm512_sllv_epi64(one, _mm512_srli_epi64(t_, 16));                        \
+        __m512i w_;                                                                               \
+        __mmask8 hit_;                                                                            \
+        if (MASKED) {                                                                             \
+            w_ = _mm512_mask_i64gather_epi64(zero, on, row_, base, 8);                            \
+            p = _mm512_mask_add_epi64(p, on, p, inc);                                             \
+        } else {                                                                                  \
+            w_ = _mm512_i64gather_epi64(row_, base, 8);                                           \
+            p = _mm512_add_epi64(p, inc);                                                         \
+        }                                                                                         \
+        hit_ = _mm512_test_epi64_mask(w_, bit_);                                                  \
+        occ = _mm512_mask_add_epi64(occ, hit_, occ, one);                                         \
+    } while (0)
+
+/* The lanes of the group at walk position G: nothing to walk in padding lanes
+   (rem = 0, occ = lo = hi = 0); then the shortest quiet stretch of the
+   group: every lane is still undecided for its first
+   clamp(occ + rem - lo + 1, 0, rem) steps (0 once occ >= hi). */
+#define EPPF_GROUP512(G, valid, p, inc, lo, hi, rem, occ, quiet)                                  \
+    do {                                                                                          \
+        const __m256i oi_ = _mm256_loadu_si256((const __m256i *)(order + (G)));                   \
+        __m512i need_, steps_;                                                                    \
+        __mmask8 live_;                                                                           \
+        valid = n_walk - (G) >= 8 ? (__mmask8)0xff                                                \
+                : n_walk <= (G) ? (__mmask8)0 : (__mmask8)((1u << (n_walk - (G))) - 1);           \
+        p = _mm512_i32gather_epi64(oi_, P, 8);                                                    \
+        inc = _mm512_mask_i32gather_epi64(zero, valid, oi_, INC, 8);                              \
+        rem = _mm512_mask_i32gather_epi64(zero, valid, oi_, META, 8);                             \
+        lo = _mm512_and_si512(_mm512_srli_epi64(rem, EPPF_META_LO), _mm512_set1_epi64(EPPF_META_MASK)); \
+        hi = _mm512_srli_epi64(rem, EPPF_META_HI);                                                \
+        rem = _mm512_and_si512(rem, _mm512_set1_epi64(EPPF_META_MASK));                           \
+        occ = _mm512_maskz_mov_epi64(valid, two);                                                 \
+        need_ = _mm512_add_epi64(_mm512_sub_epi64(_mm512_add_epi64(occ, rem), lo), one);          \
+        steps_ = _mm512_min_epi64(rem, need_);                                                    \
+        live_ = _mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(steps_, zero);         \
+        quiet = live_ == 0xff ? _mm512_reduce_min_epi64(steps_) : 0;                              \
+        rem = _mm512_sub_epi64(rem, _mm512_set1_epi64(quiet));                                    \
+    } while (0)
+
+/* Four steps in the lanes ``live`` (still undecided: occ < hi,
+   occ + rem >= lo, rem > 0), never past a line's last inner voxel. A lane
+   decided within the four walks on: counting more voxels of its own line
+   cannot change a certain bin (occ only grows, and stays below lo when
+   even all the rest could not lift it there). */
+#define EPPF_LIVE512(occ, rem, lo, hi)                                                            \
+    (_mm512_cmpgt_epi64_mask(hi, occ) & _mm512_cmpgt_epi64_mask(rem, zero)                        \
+     & _mm512_cmpge_epi64_mask(_mm512_add_epi64(occ, rem), lo))
+#define EPPF_FOUR512(live, p, inc, occ, rem)                                                      \
+    do {                                                                                          \
+        __mmask8 on_ = live;                                                                      \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        on_ = live & _mm512_cmpgt_epi64_mask(rem, one);                                           \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        on_ = live & _mm512_cmpgt_epi64_mask(rem, two);                                           \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        on_ = live & _mm512_cmpgt_epi64_mask(rem, three);                                         \
+        EPPF_STEP512(1, p, inc, occ, on_);                                                        \
+        rem = _mm512_mask_sub_epi64(rem, live, rem, _mm512_min_epi64(rem, four));                 \
+    } while (0)
+
+/* Add the bins of the group at walk position G to B. */
+#define EPPF_BINS512(G, occ, lo, hi)                                                              \
+    do {                                                                                          \
+        int64_t res_[8] __attribute__((aligned(64)));                                             \
+        int l_;                                                                                   \
+        if (n4 <= 3) {                                                                            \
+            /* lo and hi are all the thresholds (one and the same for n4 = 2) */                  \
+            __m512i b_ = _mm512_maskz_mov_epi64(_mm512_cmpge_epi64_mask(occ, lo), one);           \
+            if (n4 == 3)                                                                          \
+                b_ = _mm512_mask_add_epi64(b_, _mm512_cmpge_epi64_mask(occ, hi), b_, one);        \
+            _mm512_store_si512(res_, b_);                                                         \
+            for (l_ = 0; l_ < 8 && (G) + l_ < n_walk; l_++)                                       \
+                B[order[(G) + l_]] += (int32_t)res_[l_];                                          \
+        } else {                                                                                  \
+            _mm512_store_si512(res_, occ);                                                        \
+            for (l_ = 0; l_ < 8 && (G) + l_ < n_walk; l_++) {                                     \
+                int o_ = order[(G) + l_], b_ = 0, j_;                                             \
+                const int32_t *th_ = thr + (int64_t)(Ls[o_] + 1) * n4;                           \
+                for (j_ = 1; j_ < n4; j_++)                                                       \
+                    b_ += res_[l_] >= th_[j_];                                                    \
+                B[o_] += b_;                                                                      \
+            }                                                                                     \
+        }                                                                                         \
+    } while (0)
+
+    /* Two groups at a time, so that the latency of one group's gathers
+       before its next test hides behind the other group's steps. */
+    for (grp = 0; grp < n_walk; grp += 16) {
+        __m512i pa, inca, loa, hia, rema, occa, pb, incb, lob, hib, remb, occb;
+        __mmask8 va, vb;
+        int64_t qa, qb, s, q;
+        EPPF_GROUP512(grp, va, pa, inca, loa, hia, rema, occa, qa);
+        EPPF_GROUP512(grp + 8, vb, pb, incb, lob, hib, remb, occb, qb);
+        q = qa < qb ? qa : qb;
+        for (s = 0; s < q; s++) {
+            EPPF_STEP512(0, pa, inca, occa, va);
+            EPPF_STEP512(0, pb, incb, occb, vb);
+        }
+        for (; s < qa; s++)
+            EPPF_STEP512(0, pa, inca, occa, va);
+        for (; s < qb; s++)
+            EPPF_STEP512(0, pb, incb, occb, vb);
+        for (;;) {
+            const __mmask8 la = EPPF_LIVE512(occa, rema, loa, hia), lb = EPPF_LIVE512(occb, remb, lob, hib);
+            if (!(la | lb))
+                break;
+            if (la)
+                EPPF_FOUR512(la, pa, inca, occa, rema);
+            if (lb)
+                EPPF_FOUR512(lb, pb, incb, occb, remb);
+        }
+        EPPF_BINS512(grp, occa, loa, hia);
+        if (grp + 8 < n_walk)
+            EPPF_BINS512(grp + 8, occb, lob, hib);
+    }
+#undef EPPF_STEP512
+#undef EPPF_GROUP512
+#undef EPPF_LIVE512
+#undef EPPF_FOUR512
+#undef EPPF_BINS512
+    if (n_walk < m)
+        eppf_f4_short_lines(m, Ls, thr, n4, B);
 }
 
 #else
@@ -378,6 +757,28 @@ static void eppf_f4_batch_avx2(int m, const int32_t *ii, const int32_t *jj, cons
 {
     (void)m; (void)ii; (void)jj; (void)vox; (void)bits; (void)g; (void)thr; (void)n4;
     (void)recip_packed; (void)B;
+}
+
+static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
+                                 const uint64_t *bits, int64_t g, const int32_t *thr, int n4,
+                                 const int64_t *lohi, const double *recip_packed, int32_t *B)
+{
+    (void)m; (void)ii; (void)jj; (void)pv; (void)bits; (void)g; (void)thr; (void)n4; (void)lohi;
+    (void)recip_packed; (void)B;
+}
+
+static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *out_i, int32_t *out_j)
+{
+    (void)m; (void)state; (void)n; (void)out_i; (void)out_j;
+}
+
+static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                                  const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+{
+    (void)m; (void)ii; (void)jj; (void)pts; (void)ps; (void)nrm; (void)ns; (void)scale; (void)n1; (void)n2; (void)n3;
+    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
+    return 0;
 }
 
 #endif

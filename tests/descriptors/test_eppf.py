@@ -13,7 +13,14 @@ from sklearn.pipeline import Pipeline
 
 import eppf_reference as ref
 from eppf import FUNCTIONS, EPPFTransformer, KLNearestNeighbors
-from eppf.descriptors._eppf_fast import _set_simd, eppf_counts, eppf_pair_features, eppf_pairs
+from eppf.descriptors._eppf_fast import (
+    _set_simd,
+    _set_simd_level,
+    _simd_levels,
+    eppf_counts,
+    eppf_pair_features,
+    eppf_pairs,
+)
 from eppf.utils._validation import (
     _bounding_sides,
     _stacked_view,
@@ -100,8 +107,20 @@ def _packed(clouds):
     return points, normals, offsets
 
 
-# Grids 64 and <= 64 take the AVX2 walk (where the CPU has it), 100 the generic
-# walk; odd pair counts leave partial batches of 64 and partial groups of 4 lanes.
+# Every kernel level the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (draws, f1-f3 and walk in 8 lanes).
+LEVELS = _simd_levels()
+
+
+def _counts_at(level, *args):
+    old = _set_simd_level(level)
+    try:
+        return eppf_counts(*args)
+    finally:
+        _set_simd_level(old)
+
+
+# Grids 64 and <= 64 take the SIMD walks (where the CPU has them), 100 the generic
+# walk; odd pair counts leave partial batches of 256 and partial groups of 4 and 8 lanes.
 @pytest.mark.parametrize("grid, n_bins, n_pairs", [
     (64, (20, 4, 5, 3), 1001), (64, (3, 2, 2, 2), 67), (64, (2, 1, 1, 7), 1),
     (8, (7, 5, 2, 6), 130), (17, (15, 3, 4, 3), 999), (100, (20, 4, 5, 3), 515), (2, (3, 1, 1, 3), 66),
@@ -110,12 +129,8 @@ def test_counts_match_reference_on_every_walk(clouds, grid, n_bins, n_pairs):
     seeds = object_seeds(5, len(clouds))
     points, normals, offsets = _packed(clouds)
     scales = np.full(len(clouds), 0.3)
-    for simd in (True, False):
-        old = _set_simd(simd)
-        try:
-            got, status = eppf_counts(points, normals, offsets, scales, seeds, n_pairs, n_bins, grid, ref.F1_MAX, 2)
-        finally:
-            _set_simd(old)
+    for level in LEVELS:
+        got, status = _counts_at(level, points, normals, offsets, scales, seeds, n_pairs, n_bins, grid, ref.F1_MAX, 2)
         assert not status.any()
         for k, cloud in enumerate(clouds):
             want = _reference_counts(cloud, seeds[k], n_pairs, 0.3, n_bins, grid)
@@ -147,15 +162,101 @@ def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
     points, normals, offsets = _packed(clouds)
     seeds = object_seeds(grid, len(clouds))
     args = (points, normals, offsets, np.ones(len(clouds)), seeds, 3001, (4, 1, 1, n4), grid, ref.F1_MAX, 1)
-    old = _set_simd(True)
+    slow, _ = _counts_at(0, *args)
+    for level in LEVELS[1:]:
+        fast, _ = _counts_at(level, *args)
+        assert_array_equal(fast, slow)
+    assert (slow.reshape(len(clouds), 4, n4)[:, :, 1:].sum() > 0)  # not every pair in the bottom f4 bin
+
+
+def _first_coinciding_draw(points, seed, n_draws):
+    """Index of the first of ``n_draws`` splitmix64 candidate pairs whose points coincide, or None.
+
+    Written from the generator's definition (Python integers), independently of the kernel."""
+    mask, n, state = (1 << 64) - 1, len(points), int(seed)
+    for k in range(n_draws):
+        state = (state + 0x9E3779B97F4A7C15) & mask
+        z = ((state ^ (state >> 30)) * 0xBF58476D1CE4E5B9) & mask
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+        z ^= z >> 31
+        i, j = ((z >> 32) * n) >> 32, ((z & 0xFFFFFFFF) * (n - 1)) >> 32
+        j += j >= i
+        if (points[i] == points[j]).all():
+            return k
+    return None
+
+
+@pytest.mark.parametrize("n_pairs", [1, 9, 300, 2001])
+def test_draws_past_coinciding_points_match_reference_at_every_level(n_pairs):
+    # The AVX-512 draws skip the check for coinciding points and leave the rest
+    # of the object to the scalar draw (with its redraws) from the first such
+    # candidate on; the pairs must be the ones eppf_pairs draws one at a time.
+    rng = np.random.default_rng(n_pairs)
+    early = _sphere(40, rng)
+    early[20:] = early[:20]  # half the points repeated: a coinciding candidate in the first batch
+    late = _sphere(60, rng)
+    late[59] = late[0]  # one repeated point: for 2001 pairs, the first coinciding candidate comes after batch one
+    heavy = _sphere(30, rng)
+    heavy[2:] = heavy[0]  # 29 of 30 points equal: most draws are redrawn
+    clouds = [early, late, _sphere(2, rng), _sphere(500, rng), heavy]
+    seeds = object_seeds(n_pairs, len(clouds))
+    if n_pairs == 2001:
+        assert _first_coinciding_draw(early[:, :3], seeds[0], n_pairs) < 256
+        assert 256 < _first_coinciding_draw(late[:, :3], seeds[1], n_pairs) < n_pairs
+        assert _first_coinciding_draw(clouds[3][:, :3], seeds[3], n_pairs) is None
+    points, normals, offsets = _packed(clouds)
+    args = (points, normals, offsets, np.full(len(clouds), 0.4), seeds, n_pairs, (6, 3, 2, 3), 64, ref.F1_MAX, 2)
+    want = [_reference_counts(c, seeds[k], n_pairs, 0.4, (6, 3, 2, 3), 64) for k, c in enumerate(clouds)]
+    for level in LEVELS:
+        got, status = _counts_at(level, *args)
+        assert not status.any()
+        for k in range(len(clouds)):
+            assert_array_equal(got[k], want[k])
+
+
+def test_coinciding_cloud_is_reported_at_every_level():
+    # all points equal: no pair can be drawn, on every path
+    cloud = np.tile(np.array([[0.5, 0.5, 0.5, 0.0, 0.0, 1.0]]), (20, 1))
+    points, normals, offsets = _packed([cloud])
+    for level in LEVELS:
+        _, status = _counts_at(level, points, normals, offsets, np.ones(1), np.array([3], dtype=np.uint64), 100,
+                               (20, 4, 5, 3), 64, ref.F1_MAX, 1)
+        assert status[0] == 1
+
+
+@pytest.mark.parametrize("grid", [2, 17, 64])
+def test_every_level_counts_every_pair_of_non_finite_clouds(grid):
+    # Overflowing sides, NaN/inf scales and coordinates: every level clamps its
+    # indices (each pair still lands in a bin) and all levels agree bit for bit.
+    rng = np.random.default_rng(grid)
+    huge = rng.normal(size=(300, 6))
+    huge[0, 0], huge[1, 0] = 1e308, -1e308
+    odd = rng.normal(size=(200, 6))
+    odd[5, :3] = np.inf
+    odd[6, 1] = np.nan
+    points, normals, offsets = _packed([huge, odd])
+    seeds = object_seeds(11, 2)
+    for scale in (1.0, np.inf, np.nan, -1.0):
+        args = (points, normals, offsets, np.full(2, scale), seeds, 777, (5, 4, 3, 3), grid, ref.F1_MAX, 1)
+        want, _ = _counts_at(0, *args)
+        assert (want.sum(axis=1) == 777).all()
+        for level in LEVELS[1:]:
+            assert_array_equal(_counts_at(level, *args)[0], want)
+
+
+def test_kernel_levels_report_what_the_cpu_has():
+    assert LEVELS[0] == 0 and list(LEVELS) == list(range(len(LEVELS)))
+    old = _set_simd_level(99)  # capped at the best level the CPU has
     try:
-        fast, _ = eppf_counts(*args)
-        _set_simd(False)
-        slow, _ = eppf_counts(*args)
+        assert _set_simd_level(old) == LEVELS[-1]
+    finally:
+        _set_simd_level(old)
+    old = _set_simd(False)
+    try:
+        assert _set_simd_level(LEVELS[-1]) == 0
+        assert _set_simd(False) is (len(LEVELS) > 1)
     finally:
         _set_simd(old)
-    assert_array_equal(fast, slow)
-    assert (fast.reshape(len(clouds), 4, n4)[:, :, 1:].sum() > 0)  # not every pair in the bottom f4 bin
 
 
 def test_pairs_are_distinct_and_in_range():
