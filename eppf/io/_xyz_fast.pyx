@@ -110,6 +110,15 @@ cdef inline bint _is_sep(char c) noexcept nogil:
     return c == b' ' or c == b'\t' or c == b',' or c == b';'
 
 
+cdef inline bint _not_python_float(const char* p, const char* end) noexcept nogil:
+    """Whether strtod's token ``[p, end)`` is one Python's ``float`` refuses (hexadecimal, ``nan(...)``)."""
+    while p < end:
+        if p[0] == b'x' or p[0] == b'X' or p[0] == b'(':
+            return True
+        p += 1
+    return False
+
+
 def parse_float_table(bytes data, Py_ssize_t start):
     """Parse rows of numbers (separated by spaces, tabs, commas or semicolons) from ``data[start:]``.
 
@@ -135,7 +144,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
         if j >= n or s[j] == b'\n':
             break
         _strtod(s + j, s + n, &end)
-        if end == s + j:
+        if end == s + j or _not_python_float(s + j, end):
             return None
         j = end - s
         cols += 1
@@ -159,7 +168,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
                     ok = False
                     break
                 o[k] = _strtod(s + i, s + n, &end)
-                if end == s + i:
+                if end == s + i or _not_python_float(s + i, end):
                     ok = False
                     break
                 i = end - s

@@ -62,6 +62,20 @@ def test_xyz_malformed(tmp_path, text, msg):
 
 
 
+@pytest.mark.parametrize("token", ["0x10", "-0x1p3", "+0X1", "+nan(1)", "-inf(2)"])
+def test_text_compiled_path_refuses_what_python_float_refuses(tmp_path, token):
+    # strtod takes hexadecimal and nan(...) tokens; Python's float, hence the general reader, does not.
+    # Both paths must read a file the same way, so the compiled one hands such a table back.
+    from eppf.io import _xyz as io
+
+    text = f"0 0 0\n1 0 0\n{token} 1 0\n0 0 1\n"
+    if io._parse_float_table is not None:
+        assert io._xyz_compiled(text.encode()) is None
+    path = _write(tmp_path / "hex.xyz", text)
+    with pytest.raises(FileFormatError, match=re.escape("line 3: malformed number in point 2")):
+        read_point_cloud(path)
+
+
 @pytest.mark.parametrize(
     "text, plain",
     [
