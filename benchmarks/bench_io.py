@@ -34,7 +34,7 @@ point files read again beside the descriptor): the first pass is not hidden
 behind the descriptor, as reading is with ``--scaling object`` (``--extra
 "--scaling object"`` to measure that).
 
-One run (2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs, load
+One run (2-vCPU Intel Xeon KVM guest, shared with other jobs, load
 average 6 to 8; ``--n-jobs 2``)::
 
     kind          read ms/file  +normals ms/file
