@@ -25,6 +25,7 @@ from cython.parallel cimport prange, threadid
 from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, log, pow, INFINITY
 from libc.float cimport DBL_EPSILON
 from libc.stdint cimport int64_t
+from libc.stdlib cimport malloc, free
 
 from ..utils._common cimport clamp_floor64
 
@@ -665,7 +666,9 @@ cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
     # lambda_mid - lambda_min = 2 sqrt(3) p sin(phi) and
     # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3).
     sphi = sin(phi)
-    if sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
+    # (sin(phi + pi/3) <= 1, so sphi >= _GAP_RATIO already rules the test out:
+    # the same decision without its sine in the common case.)
+    if sphi < _GAP_RATIO and sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
         _jacobi_smallest(a, out)
         return
     lam = q + 2.0 * p * cos(phi + 2.0 * _PI / 3.0)
@@ -802,6 +805,34 @@ def normals_packed(const double[:, ::1] points, const int64_t[::1] offsets, Py_s
                             obase + 3 * offsets[o])
 
 
+cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mode,
+                          const double* viewpoint, double* obase, double* fs, Py_ssize_t f_stride,
+                          int64_t* its, Py_ssize_t i_stride, int num_threads) noexcept:
+    """Body of :func:`normals_single` on raw rows of ``f_stride`` doubles and
+    ``i_stride`` int64 per thread."""
+    cdef Py_ssize_t cap = 4 * n + 64
+    cdef Py_ssize_t kk = k if k < n else n
+    cdef Py_ssize_t s, tid, t
+    cdef Grid g
+    cdef Scratch shared
+    cdef Scratch sc
+    _split_scratch(fs, its, n, k, &shared)
+    with nogil:
+        _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sidx,
+                    shared.cell_of, shared.cell_start)
+        for t in range(num_threads):
+            _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)
+            sc.guess[0] = INFINITY
+        if num_threads == 1:
+            for s in range(n):
+                _shared_grid_normal(&g, &shared, s, kk, fs, its, n, obase)
+        else:
+            for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
+                tid = threadid()
+                _shared_grid_normal(&g, &shared, s, kk, fs + tid * f_stride, its + tid * i_stride, n, obase)
+        _orient(pts, n, mode, viewpoint, obase)
+
+
 def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
                    const double[::1] viewpoint, double[:, ::1] out,
                    double[:, ::1] fscratch, int64_t[:, ::1] iscratch, int num_threads):
@@ -813,28 +844,80 @@ def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
     ``max_n = len(points)``).
     """
     cdef Py_ssize_t n = points.shape[0]
-    cdef Py_ssize_t cap = max_cells(n)
-    cdef Py_ssize_t kk = k if k < n else n
-    cdef Py_ssize_t s, tid, t
-    cdef Grid g
-    cdef Scratch shared
-    cdef Scratch sc
-    cdef double* obase
     if n == 0:
         return
     _check_scratch(fscratch, iscratch, n, k, num_threads, "normals_single")
-    _split_scratch(&fscratch[0, 0], &iscratch[0, 0], n, k, &shared)
-    obase = &out[0, 0]
+    _normals_single(&points[0, 0], n, k, mode, &viewpoint[0], &out[0, 0], &fscratch[0, 0],
+                    fscratch.shape[1], &iscratch[0, 0], iscratch.shape[1], num_threads)
+
+
+def cloud_in_window(const double[:, ::1] points, double min_side, double max_abs):
+    """True when every coordinate is finite, the largest bounding-box side is
+    at least ``min_side`` and every |coordinate| at most ``max_abs``: the
+    clouds the validation layer would accept and leave unscaled. One pass
+    over the points, without copies, for :func:`estimate_normals`'s fast
+    path (anything else goes through the full validation)."""
+    cdef Py_ssize_t i, n = points.shape[0]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double x, side = 0.0, amax = 0.0
+    cdef int a
+    cdef bint finite = True
+    if n == 0 or points.shape[1] != 3:
+        return False
+    for a in range(3):
+        lo[a] = INFINITY
+        hi[a] = -INFINITY
     with nogil:
-        _build_grid(&points[0, 0], n, kk, cap, &g, shared.spts, shared.sidx,
-                    shared.cell_of, shared.cell_start)
-        for t in range(num_threads):
-            _split_scratch(&fscratch[t, 0], &iscratch[t, 0], n, k, &sc)
-            sc.guess[0] = INFINITY
-        for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
-            tid = threadid()
-            _shared_grid_normal(&g, &shared, s, kk, &fscratch[tid, 0], &iscratch[tid, 0], n, obase)
-        _orient(&points[0, 0], n, mode, &viewpoint[0], obase)
+        for i in range(n):
+            for a in range(3):
+                x = points[i, a]
+                # NaN fails both comparisons below and the finiteness test.
+                finite = finite & (fabs(x) <= 1.7976931348623157e308)
+                if x < lo[a]:
+                    lo[a] = x
+                if x > hi[a]:
+                    hi[a] = x
+    if not finite:
+        return False
+    for a in range(3):
+        if hi[a] - lo[a] > side:
+            side = hi[a] - lo[a]
+        if fabs(lo[a]) > amax:
+            amax = fabs(lo[a])
+        if fabs(hi[a]) > amax:
+            amax = fabs(hi[a])
+    return side >= min_side and amax <= max_abs
+
+
+def normals_cloud(const double[:, ::1] points, Py_ssize_t k, int mode,
+                  const double[::1] viewpoint, int num_threads):
+    """Normals of one validated object (as :func:`normals_single`), with the
+    output and the scratch rows allocated here: one call per cloud."""
+    cdef Py_ssize_t n = points.shape[0]
+    cdef Py_ssize_t f_len, i_len
+    cdef double* fs
+    cdef int64_t* its
+    if num_threads < 1:
+        num_threads = 1
+    f_len, i_len = scratch_sizes(n, k)
+    out_arr = np.empty((n, 3), dtype=np.float64)
+    if n == 0:
+        return out_arr
+    cdef double[:, ::1] out = out_arr
+    fs = <double*>malloc(num_threads * f_len * sizeof(double))
+    its = <int64_t*>malloc(num_threads * i_len * sizeof(int64_t))
+    if fs == NULL or its == NULL:
+        free(fs)
+        free(its)
+        raise MemoryError(f"estimate_normals: no memory for the scratch of {n} points")
+    try:
+        _normals_single(&points[0, 0], n, k, mode, &viewpoint[0], &out[0, 0], fs, f_len, its, i_len,
+                        num_threads)
+    finally:
+        free(fs)
+        free(its)
+    return out_arr
 
 
 def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
