@@ -35,6 +35,13 @@ import numpy as np
 cdef enum:
     _N_BUCKETS = 32
 
+# Outcomes of the fast path.
+cdef enum:
+    _FAST_OK = 0
+    _FAST_FEW = 1
+    _FAST_MANY = 2
+    _FAST_FAR = 3
+
 # Modes of orientation understood by the kernel.
 cdef enum:
     ORIENT_NONE = 0
@@ -81,6 +88,7 @@ cdef struct Scratch:
     double* guess         # 1          k-th squared distance guess for the next query
     int64_t* kpos         # k + 1      the k-list's grid-order positions (+1 slack
                           #            for the fast path's branch-free compaction)
+    unsigned char* cand_b # max_n      fast-path candidate buckets (in the int64 row's tail)
 
 
 def max_cells(Py_ssize_t n):
@@ -91,7 +99,7 @@ def max_cells(Py_ssize_t n):
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
     at most ``max_n`` points and neighbourhoods of ``k`` points."""
-    return 4 * max_n + 4 * k + 1, 4 * max_n + max_cells(max_n) + 1 + k + 1
+    return 4 * max_n + 4 * k + 1, 4 * max_n + max_cells(max_n) + 1 + k + 1 + (max_n + 7) // 8
 
 
 cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_ssize_t k,
@@ -109,6 +117,7 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     sc.cand_pos = sc.cell_start + cap + 1
     sc.sel = sc.cand_pos + max_n
     sc.kpos = sc.sel + max_n
+    sc.cand_b = <unsigned char*>(sc.kpos + k + 1)
 
 
 cdef inline double _pow2_below(double m) noexcept nogil:
@@ -402,15 +411,17 @@ cdef inline Py_ssize_t _bucket(double x) noexcept nogil:
     return <Py_ssize_t>x
 
 
-cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
+cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
                      const double* q, const int64_t* c, Py_ssize_t k, double guess,
                      double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
-                     int64_t* kpos) noexcept nogil:
+                     int64_t* kpos, unsigned char* cand_b) noexcept nogil:
     """Fast path: select the k nearest among the points of the 3x3x3 block
     within squared distance ``guess`` of the query. On success, ``kpos`` holds
     their grid-order positions in ascending order and ``kd2[k - 1]`` the k-th
-    squared distance. Returns False (outputs undefined) when it cannot prove
-    the result exact; the caller then falls back to :func:`_knn_shells`."""
+    squared distance, and the return value is _FAST_OK. Otherwise (outputs
+    undefined) it says why: _FAST_FEW (fewer than k within the guess),
+    _FAST_MANY (more than ``_MAX_CAND_PER_K * k``) or _FAST_FAR (the k-th
+    lies too far to prove that the block holds the k nearest)."""
     cdef int64_t jy, jz, row, x0, x1, p, b, e
     cdef Py_ssize_t m = 0, i, j, rank, max_cand = _MAX_CAND_PER_K * k
     cdef int counts[_N_BUCKETS]
@@ -444,7 +455,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
             b = cell_start[row + x0]
             e = cell_start[row + x1 + 1]
             if m > max_cand:
-                return False
+                return _FAST_MANY
             for p in range(b, e):
                 dx = spts[3 * p] - qx
                 dy = spts[3 * p + 1] - qy
@@ -453,8 +464,10 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
                 cand_d2[m] = d2
                 cand_pos[m] = p
                 m += d2 <= guess
-    if m < k or m > max_cand:
-        return False
+    if m < k:
+        return _FAST_FEW
+    if m > max_cand:
+        return _FAST_MANY
     # The k-th smallest (d2, position) by a histogram of d2 over [0, guess]
     # (the bucket is monotone in d2), then ranking inside its bucket only.
     for i in range(_N_BUCKETS):
@@ -462,6 +475,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
     to_bucket = _N_BUCKETS / guess
     for i in range(m):
         bk = _bucket(cand_d2[i] * to_bucket)
+        cand_b[i] = bk
         counts[bk] += 1
     below = 0
     bk = 0
@@ -471,9 +485,8 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
     need = k - below
     n_in = 0
     for i in range(m):
-        b2 = _bucket(cand_d2[i] * to_bucket)
         sel[n_in] = i
-        n_in += b2 == bk
+        n_in += cand_b[i] == bk
     kth_i = sel[0]
     for i in range(n_in):
         di = cand_d2[sel[i]]
@@ -493,7 +506,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
         kpos[j] = cand_pos[i]
         j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
     kd2[k - 1] = kth
-    return _block_done(g, q, c, 1, kth)
+    return _FAST_OK if _block_done(g, q, c, 1, kth) else _FAST_FAR
 
 
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
@@ -507,12 +520,23 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     cdef double mx = 0.0, my = 0.0, mz = 0.0, x, y, z, kth
     cdef double cov[9]
     cdef double* nb = sc.nb
-    cdef int a
+    cdef double guess = sc.guess[0]
+    cdef int a, res = _FAST_FAR
     for a in range(3):
         q[a] = spts[3 * s + a]
         c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
-    if sc.guess[0] < INFINITY and _knn_block(g, spts, cell_start, q, c, k, sc.guess[0], sc.cand_d2,
-                                             sc.cand_pos, sc.sel, sc.kd2, sc.kpos):
+    if guess < INFINITY:
+        res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
+                         sc.kd2, sc.kpos, sc.cand_b)
+        # One more try with a guess four times larger or smaller (any
+        # positive guess gives the same, exact list) before the shells.
+        if res == _FAST_FEW:
+            res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+        elif res == _FAST_MANY:
+            res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+    if res == _FAST_OK:
         kth = sc.kd2[k - 1]
     else:
         _knn_shells(g, spts, cell_start, q, c, k, sc.kd2, sc.kpos)
