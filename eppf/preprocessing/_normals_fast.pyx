@@ -8,8 +8,9 @@ points of one object) with OpenMP.
   cells around a query usually holds its neighbourhood. Fast path: candidates of that block closer than a guess of the
   k-th distance (taken from the previous query) are ranked without branches,
   and the result is accepted when the k-th distance is provably smaller than
-  the distance to the block's boundary. Otherwise an exact search over growing
-  shells of cells with a sorted k-list takes over. Both paths return the same
+  the distance to the block's boundary. With too few or too many candidates
+  it tries once more with a guess four times larger or smaller; otherwise an
+  exact search over growing shells of cells with a sorted k-list takes over. Both paths return the same
   list: the k smallest squared distances, ties broken by the point's position
   in the grid order (cell, then original index).
 - The normal is the eigenvector of the smallest eigenvalue of the
@@ -57,7 +58,7 @@ cdef double _PI = 3.141592653589793
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
 # k-th squared distance, and gives up when more than _MAX_CAND_PER_K * k pass.
-cdef double _GUESS_FACTOR = 2.0
+cdef double _GUESS_FACTOR = 1.6
 cdef Py_ssize_t _MAX_CAND_PER_K = 8
 
 
@@ -688,13 +689,16 @@ cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
         r = 1.0
     phi = acos(r) / 3.0
     # lambda_mid - lambda_min = 2 sqrt(3) p sin(phi) and
-    # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3).
-    sphi = sin(phi)
-    # (sin(phi + pi/3) <= 1, so sphi >= _GAP_RATIO already rules the test out:
-    # the same decision without its sine in the common case.)
-    if sphi < _GAP_RATIO and sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
-        _jacobi_smallest(a, out)
-        return
+    # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3). Jacobi takes
+    # over when sin(phi) < _GAP_RATIO * sin(phi + pi/3). Since
+    # sin(phi + pi/3) <= 1 and sin(phi) > 0.999 phi >= _GAP_RATIO for
+    # phi >= 1.002 * _GAP_RATIO (far beyond the sines' rounding), the sines
+    # are only evaluated below that: the same decision, mostly without them.
+    if phi < 1.002 * _GAP_RATIO:
+        sphi = sin(phi)
+        if sphi < _GAP_RATIO and sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
+            _jacobi_smallest(a, out)
+            return
     lam = q + 2.0 * p * cos(phi + 2.0 * _PI / 3.0)
     m00 = a[0] - lam
     m11 = a[4] - lam
