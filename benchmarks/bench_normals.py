@@ -20,9 +20,10 @@ Each figure is the best of ``--repeats`` passes over all the clouds of a row
 (eppf and Open3D passes alternate, so both see the same load), CPU time
 (``time.process_time``) divided by the number of clouds; Open3D's normals are
 cleared before each of its calls (with normals present it would also orient
-them to the old ones), untimed. The ``angle`` column is the median angle
-between eppf's and Open3D's normals up to sign (both are exact PCA over 20
-nearest neighbours; the last neighbour may differ where distances tie).
+them to the old ones), untimed. The ``p99 angle`` column is the 99th
+percentile over all points of the angle between eppf's and Open3D's normals,
+up to sign (both are exact PCA over the 20 nearest neighbours; they differ
+only by rounding, or where the 20th neighbour is tied with the 21st).
 Open3D is a benchmark-only dependency (``pip install open3d``): without it
 the Open3D columns are skipped with a printed line. ``OMP_NUM_THREADS`` is
 set to 1 before Open3D is imported, and its threads are checked against the
@@ -32,7 +33,19 @@ Measured on a 2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs, with
 ``OMP_NUM_THREADS=1 python benchmarks/bench_normals.py --data-dir DIR``
 (Open3D 0.20.0)::
 
-    FIGURES
+    machine: x86_64, 2 logical CPUs, load average 7.41
+    ms of CPU per cloud, one thread, n_neighbors=20, best of 5 passes
+    data        points clouds     eppf   open3d  ratio  p99 angle
+    -------------------------------------------------------------
+    modelnet10    1024     40    0.834    2.244   2.69   1.5e-06°
+    modelnet10   10000     40    8.129   26.370   3.24   1.7e-06°
+    dales         1024     40    0.763    2.087   2.74   1.5e-06°
+    dales        10000     21    7.559   25.274   3.34   1.5e-06°
+    open3d cpu/wall: 0.36 (above 1: more than one thread)
+
+The previous kernel, timed in the same session by the same command: 1.145,
+10.069, 1.009 and 9.209 ms (ratios 1.93, 2.57, 1.96, 2.74): the normals are
+the same bit for bit. The 3x goal holds at 10,000 points, not yet at 1,024.
 
 ``--table`` prints instead the older table of eppf alone: milliseconds per
 object at 1,024 / 2,048 / 10,000 points for k = 10, 20 and 30, through the
@@ -125,7 +138,7 @@ def compare(datasets, repeats, o3d):
     print(f"ms of CPU per cloud, one thread, n_neighbors={K}, best of {repeats} passes")
     cols = f"{'data':<11} {'points':>6} {'clouds':>6} {'eppf':>8}"
     if o3d is not None:
-        cols += f" {'open3d':>8} {'ratio':>6} {'angle':>7}"
+        cols += f" {'open3d':>8} {'ratio':>6} {'p99 angle':>10}"
     print(cols)
     print("-" * len(cols))
     for name, clouds in datasets:
@@ -151,8 +164,9 @@ def compare(datasets, repeats, o3d):
         line = f"{name:<11} {len(clouds[0]):>6} {len(clouds):>6} {ms['eppf']:>8.3f}"
         if o3d is not None:
             cos = np.concatenate([np.abs(np.sum(ours(c) * np.asarray(pc.normals), axis=1)) for c, pc in zip(clouds, pcs)])
-            angle = np.degrees(np.arccos(np.clip(np.median(cos), 0.0, 1.0)))
-            line += f" {ms['open3d']:>8.3f} {ms['open3d'] / ms['eppf']:>6.2f} {angle:>6.1e}°"
+            sines = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+            angle = np.degrees(np.arcsin(np.clip(np.percentile(sines, 99), 0.0, 1.0)))
+            line += f" {ms['open3d']:>8.3f} {ms['open3d'] / ms['eppf']:>6.2f} {angle:>9.1e}°"
         print(line, flush=True)
     if o3d is not None and datasets:
         # One thread for Open3D: its wall time matches its CPU time.
