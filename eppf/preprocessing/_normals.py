@@ -9,12 +9,15 @@ import numbers
 
 import numpy as np
 
-from ._normals_fast import normals_packed, normals_single, scratch_sizes
-from ..utils._validation import _scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds
+from ._normals_fast import cloud_in_window, normals_cloud, normals_packed, normals_single, scratch_sizes
+from ..utils._validation import (
+    SAFE_MAX_EXP, SAFE_MIN_EXP, _scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds,
+)
 
 __all__ = ["estimate_normals", "estimate_normals_batch"]
 
 ORIENT_NONE, ORIENT_CENTROID, _ORIENT_VIEWPOINT = 0, 1, 2
+_MIN_SIDE, _MAX_ABS = 2.0**SAFE_MIN_EXP, 2.0**SAFE_MAX_EXP
 
 
 def check_n_neighbors(n_neighbors, owner):
@@ -185,8 +188,9 @@ default="centroid"
     rotations when the two smallest eigenvalues nearly coincide. A cloud of
     extreme magnitude (largest side below ``2**-100`` or coordinates above
     ``2**100``) is first rescaled by an exact power of two, and a viewpoint
-    with it, so any finite coordinates give the normals of a sane scale. About 0.6 ms
-    for 1,024 points and ``n_neighbors=10`` on one core (see
+    with it, so any finite coordinates give the normals of a sane scale. About 0.8 ms
+    of CPU for 1,024 points and 7.5 ms for 10,000 with ``n_neighbors=20`` on
+    one core, 2.7 to 3.4 times less than Open3D's ``estimate_normals`` (see
     ``benchmarks/bench_normals.py``). The grid's cost grows with the square
     of the number of points that share one cell, so tens of thousands of
     exact duplicates of one point are slow (seconds), though still exact.
@@ -214,6 +218,23 @@ default="centroid"
     if method != "pca" or method_params is not None:
         return _other_method(method, method_params, owner).hough_single(
             points, n_neighbors, orientation, n_jobs, random_state, method_params, owner)
+    if (type(points) is np.ndarray and points.ndim == 2 and points.shape[1] == 3 and points.shape[0] >= 3
+            and points.dtype.kind == "f" and points.dtype.itemsize in (4, 8)):
+        # Fast path for the common case, a float array already inside the
+        # kernel's magnitude window (most small clouds spend more time in
+        # validation than in the kernel otherwise): one pass checks what
+        # check_point_cloud and condition_point_clouds would (finite values,
+        # not all points identical, no rescaling needed), and the kernel
+        # reads the caller's array without a copy. Anything else takes the
+        # general path below, with its error messages; the normals are the
+        # same either way.
+        cloud = points if points.dtype == np.float64 else points.astype(np.float64)
+        cloud = np.ascontiguousarray(cloud)
+        if cloud_in_window(cloud, _MIN_SIDE, _MAX_ABS):
+            k = min(check_n_neighbors(n_neighbors, owner), cloud.shape[0])
+            mode, viewpoint = resolve_orientation(orientation, owner)
+            n_threads = max(1, min(check_n_jobs(n_jobs, owner=owner), cloud.shape[0] // 512))
+            return normals_cloud(cloud, k, mode, viewpoint, n_threads)
     cloud = check_point_cloud(points, owner=owner, min_points=3, allow_normals=False)
     k = check_n_neighbors(n_neighbors, owner)
     mode, viewpoint = resolve_orientation(orientation, owner)

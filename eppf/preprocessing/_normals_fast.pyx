@@ -8,8 +8,9 @@ points of one object) with OpenMP.
   cells around a query usually holds its neighbourhood. Fast path: candidates of that block closer than a guess of the
   k-th distance (taken from the previous query) are ranked without branches,
   and the result is accepted when the k-th distance is provably smaller than
-  the distance to the block's boundary. Otherwise an exact search over growing
-  shells of cells with a sorted k-list takes over. Both paths return the same
+  the distance to the block's boundary. With too few or too many candidates
+  it tries once more with a guess four times larger or smaller; otherwise an
+  exact search over growing shells of cells with a sorted k-list takes over. Both paths return the same
   list: the k smallest squared distances, ties broken by the point's position
   in the grid order (cell, then original index).
 - The normal is the eigenvector of the smallest eigenvalue of the
@@ -25,6 +26,7 @@ from cython.parallel cimport prange, threadid
 from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, log, pow, INFINITY
 from libc.float cimport DBL_EPSILON
 from libc.stdint cimport int64_t
+from libc.stdlib cimport malloc, free
 
 from ..utils._common cimport clamp_floor64
 
@@ -33,6 +35,13 @@ import numpy as np
 # Buckets of the fast path's histogram selection.
 cdef enum:
     _N_BUCKETS = 32
+
+# Outcomes of the fast path.
+cdef enum:
+    _FAST_OK = 0
+    _FAST_FEW = 1
+    _FAST_MANY = 2
+    _FAST_FAR = 3
 
 # Modes of orientation understood by the kernel.
 cdef enum:
@@ -49,7 +58,7 @@ cdef double _PI = 3.141592653589793
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
 # k-th squared distance, and gives up when more than _MAX_CAND_PER_K * k pass.
-cdef double _GUESS_FACTOR = 2.0
+cdef double _GUESS_FACTOR = 1.6
 cdef Py_ssize_t _MAX_CAND_PER_K = 8
 
 
@@ -80,6 +89,7 @@ cdef struct Scratch:
     double* guess         # 1          k-th squared distance guess for the next query
     int64_t* kpos         # k + 1      the k-list's grid-order positions (+1 slack
                           #            for the fast path's branch-free compaction)
+    unsigned char* cand_b # max_n      fast-path candidate buckets (in the int64 row's tail)
 
 
 def max_cells(Py_ssize_t n):
@@ -90,7 +100,7 @@ def max_cells(Py_ssize_t n):
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
     at most ``max_n`` points and neighbourhoods of ``k`` points."""
-    return 4 * max_n + 4 * k + 1, 4 * max_n + max_cells(max_n) + 1 + k + 1
+    return 4 * max_n + 4 * k + 1, 4 * max_n + max_cells(max_n) + 1 + k + 1 + (max_n + 7) // 8
 
 
 cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_ssize_t k,
@@ -108,6 +118,7 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     sc.cand_pos = sc.cell_start + cap + 1
     sc.sel = sc.cand_pos + max_n
     sc.kpos = sc.sel + max_n
+    sc.cand_b = <unsigned char*>(sc.kpos + k + 1)
 
 
 cdef inline double _pow2_below(double m) noexcept nogil:
@@ -401,15 +412,17 @@ cdef inline Py_ssize_t _bucket(double x) noexcept nogil:
     return <Py_ssize_t>x
 
 
-cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
+cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
                      const double* q, const int64_t* c, Py_ssize_t k, double guess,
                      double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
-                     int64_t* kpos) noexcept nogil:
+                     int64_t* kpos, unsigned char* cand_b) noexcept nogil:
     """Fast path: select the k nearest among the points of the 3x3x3 block
     within squared distance ``guess`` of the query. On success, ``kpos`` holds
     their grid-order positions in ascending order and ``kd2[k - 1]`` the k-th
-    squared distance. Returns False (outputs undefined) when it cannot prove
-    the result exact; the caller then falls back to :func:`_knn_shells`."""
+    squared distance, and the return value is _FAST_OK. Otherwise (outputs
+    undefined) it says why: _FAST_FEW (fewer than k within the guess),
+    _FAST_MANY (more than ``_MAX_CAND_PER_K * k``) or _FAST_FAR (the k-th
+    lies too far to prove that the block holds the k nearest)."""
     cdef int64_t jy, jz, row, x0, x1, p, b, e
     cdef Py_ssize_t m = 0, i, j, rank, max_cand = _MAX_CAND_PER_K * k
     cdef int counts[_N_BUCKETS]
@@ -443,7 +456,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
             b = cell_start[row + x0]
             e = cell_start[row + x1 + 1]
             if m > max_cand:
-                return False
+                return _FAST_MANY
             for p in range(b, e):
                 dx = spts[3 * p] - qx
                 dy = spts[3 * p + 1] - qy
@@ -452,8 +465,10 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
                 cand_d2[m] = d2
                 cand_pos[m] = p
                 m += d2 <= guess
-    if m < k or m > max_cand:
-        return False
+    if m < k:
+        return _FAST_FEW
+    if m > max_cand:
+        return _FAST_MANY
     # The k-th smallest (d2, position) by a histogram of d2 over [0, guess]
     # (the bucket is monotone in d2), then ranking inside its bucket only.
     for i in range(_N_BUCKETS):
@@ -461,6 +476,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
     to_bucket = _N_BUCKETS / guess
     for i in range(m):
         bk = _bucket(cand_d2[i] * to_bucket)
+        cand_b[i] = bk
         counts[bk] += 1
     below = 0
     bk = 0
@@ -470,9 +486,8 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
     need = k - below
     n_in = 0
     for i in range(m):
-        b2 = _bucket(cand_d2[i] * to_bucket)
         sel[n_in] = i
-        n_in += b2 == bk
+        n_in += cand_b[i] == bk
     kth_i = sel[0]
     for i in range(n_in):
         di = cand_d2[sel[i]]
@@ -492,7 +507,7 @@ cdef bint _knn_block(const Grid* g, const double* spts, const int64_t* cell_star
         kpos[j] = cand_pos[i]
         j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
     kd2[k - 1] = kth
-    return _block_done(g, q, c, 1, kth)
+    return _FAST_OK if _block_done(g, q, c, 1, kth) else _FAST_FAR
 
 
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
@@ -506,12 +521,23 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     cdef double mx = 0.0, my = 0.0, mz = 0.0, x, y, z, kth
     cdef double cov[9]
     cdef double* nb = sc.nb
-    cdef int a
+    cdef double guess = sc.guess[0]
+    cdef int a, res = _FAST_FAR
     for a in range(3):
         q[a] = spts[3 * s + a]
         c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
-    if sc.guess[0] < INFINITY and _knn_block(g, spts, cell_start, q, c, k, sc.guess[0], sc.cand_d2,
-                                             sc.cand_pos, sc.sel, sc.kd2, sc.kpos):
+    if guess < INFINITY:
+        res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
+                         sc.kd2, sc.kpos, sc.cand_b)
+        # One more try with a guess four times larger or smaller (any
+        # positive guess gives the same, exact list) before the shells.
+        if res == _FAST_FEW:
+            res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+        elif res == _FAST_MANY:
+            res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+    if res == _FAST_OK:
         kth = sc.kd2[k - 1]
     else:
         _knn_shells(g, spts, cell_start, q, c, k, sc.kd2, sc.kpos)
@@ -663,11 +689,16 @@ cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
         r = 1.0
     phi = acos(r) / 3.0
     # lambda_mid - lambda_min = 2 sqrt(3) p sin(phi) and
-    # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3).
-    sphi = sin(phi)
-    if sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
-        _jacobi_smallest(a, out)
-        return
+    # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3). Jacobi takes
+    # over when sin(phi) < _GAP_RATIO * sin(phi + pi/3). Since
+    # sin(phi + pi/3) <= 1 and sin(phi) > 0.999 phi >= _GAP_RATIO for
+    # phi >= 1.002 * _GAP_RATIO (far beyond the sines' rounding), the sines
+    # are only evaluated below that: the same decision, mostly without them.
+    if phi < 1.002 * _GAP_RATIO:
+        sphi = sin(phi)
+        if sphi < _GAP_RATIO and sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
+            _jacobi_smallest(a, out)
+            return
     lam = q + 2.0 * p * cos(phi + 2.0 * _PI / 3.0)
     m00 = a[0] - lam
     m11 = a[4] - lam
@@ -802,6 +833,34 @@ def normals_packed(const double[:, ::1] points, const int64_t[::1] offsets, Py_s
                             obase + 3 * offsets[o])
 
 
+cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mode,
+                          const double* viewpoint, double* obase, double* fs, Py_ssize_t f_stride,
+                          int64_t* its, Py_ssize_t i_stride, int num_threads) noexcept:
+    """Body of :func:`normals_single` on raw rows of ``f_stride`` doubles and
+    ``i_stride`` int64 per thread."""
+    cdef Py_ssize_t cap = 4 * n + 64
+    cdef Py_ssize_t kk = k if k < n else n
+    cdef Py_ssize_t s, tid, t
+    cdef Grid g
+    cdef Scratch shared
+    cdef Scratch sc
+    _split_scratch(fs, its, n, k, &shared)
+    with nogil:
+        _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sidx,
+                    shared.cell_of, shared.cell_start)
+        for t in range(num_threads):
+            _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)
+            sc.guess[0] = INFINITY
+        if num_threads == 1:
+            for s in range(n):
+                _shared_grid_normal(&g, &shared, s, kk, fs, its, n, obase)
+        else:
+            for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
+                tid = threadid()
+                _shared_grid_normal(&g, &shared, s, kk, fs + tid * f_stride, its + tid * i_stride, n, obase)
+        _orient(pts, n, mode, viewpoint, obase)
+
+
 def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
                    const double[::1] viewpoint, double[:, ::1] out,
                    double[:, ::1] fscratch, int64_t[:, ::1] iscratch, int num_threads):
@@ -813,28 +872,80 @@ def normals_single(const double[:, ::1] points, Py_ssize_t k, int mode,
     ``max_n = len(points)``).
     """
     cdef Py_ssize_t n = points.shape[0]
-    cdef Py_ssize_t cap = max_cells(n)
-    cdef Py_ssize_t kk = k if k < n else n
-    cdef Py_ssize_t s, tid, t
-    cdef Grid g
-    cdef Scratch shared
-    cdef Scratch sc
-    cdef double* obase
     if n == 0:
         return
     _check_scratch(fscratch, iscratch, n, k, num_threads, "normals_single")
-    _split_scratch(&fscratch[0, 0], &iscratch[0, 0], n, k, &shared)
-    obase = &out[0, 0]
+    _normals_single(&points[0, 0], n, k, mode, &viewpoint[0], &out[0, 0], &fscratch[0, 0],
+                    fscratch.shape[1], &iscratch[0, 0], iscratch.shape[1], num_threads)
+
+
+def cloud_in_window(const double[:, ::1] points, double min_side, double max_abs):
+    """True when every coordinate is finite, the largest bounding-box side is
+    at least ``min_side`` and every |coordinate| at most ``max_abs``: the
+    clouds the validation layer would accept and leave unscaled. One pass
+    over the points, without copies, for :func:`estimate_normals`'s fast
+    path (anything else goes through the full validation)."""
+    cdef Py_ssize_t i, n = points.shape[0]
+    cdef double lo[3]
+    cdef double hi[3]
+    cdef double x, side = 0.0, amax = 0.0
+    cdef int a
+    cdef bint finite = True
+    if n == 0 or points.shape[1] != 3:
+        return False
+    for a in range(3):
+        lo[a] = INFINITY
+        hi[a] = -INFINITY
     with nogil:
-        _build_grid(&points[0, 0], n, kk, cap, &g, shared.spts, shared.sidx,
-                    shared.cell_of, shared.cell_start)
-        for t in range(num_threads):
-            _split_scratch(&fscratch[t, 0], &iscratch[t, 0], n, k, &sc)
-            sc.guess[0] = INFINITY
-        for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
-            tid = threadid()
-            _shared_grid_normal(&g, &shared, s, kk, &fscratch[tid, 0], &iscratch[tid, 0], n, obase)
-        _orient(&points[0, 0], n, mode, &viewpoint[0], obase)
+        for i in range(n):
+            for a in range(3):
+                x = points[i, a]
+                # NaN fails both comparisons below and the finiteness test.
+                finite = finite & (fabs(x) <= 1.7976931348623157e308)
+                if x < lo[a]:
+                    lo[a] = x
+                if x > hi[a]:
+                    hi[a] = x
+    if not finite:
+        return False
+    for a in range(3):
+        if hi[a] - lo[a] > side:
+            side = hi[a] - lo[a]
+        if fabs(lo[a]) > amax:
+            amax = fabs(lo[a])
+        if fabs(hi[a]) > amax:
+            amax = fabs(hi[a])
+    return side >= min_side and amax <= max_abs
+
+
+def normals_cloud(const double[:, ::1] points, Py_ssize_t k, int mode,
+                  const double[::1] viewpoint, int num_threads):
+    """Normals of one validated object (as :func:`normals_single`), with the
+    output and the scratch rows allocated here: one call per cloud."""
+    cdef Py_ssize_t n = points.shape[0]
+    cdef Py_ssize_t f_len, i_len
+    cdef double* fs
+    cdef int64_t* its
+    if num_threads < 1:
+        num_threads = 1
+    f_len, i_len = scratch_sizes(n, k)
+    out_arr = np.empty((n, 3), dtype=np.float64)
+    if n == 0:
+        return out_arr
+    cdef double[:, ::1] out = out_arr
+    fs = <double*>malloc(num_threads * f_len * sizeof(double))
+    its = <int64_t*>malloc(num_threads * i_len * sizeof(int64_t))
+    if fs == NULL or its == NULL:
+        free(fs)
+        free(its)
+        raise MemoryError(f"estimate_normals: no memory for the scratch of {n} points")
+    try:
+        _normals_single(&points[0, 0], n, k, mode, &viewpoint[0], &out[0, 0], fs, f_len, its, i_len,
+                        num_threads)
+    finally:
+        free(fs)
+        free(its)
+    return out_arr
 
 
 def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
