@@ -29,7 +29,7 @@ the Open3D columns are skipped with a printed line. ``OMP_NUM_THREADS`` is
 set to 1 before Open3D is imported, and its threads are checked against the
 wall clock (the ``open3d cpu/wall`` line: at most 1 for one thread).
 
-Measured on a 2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs, with
+Measured on a 2-vCPU Intel Xeon KVM guest, shared with other jobs, with
 ``OMP_NUM_THREADS=1 python benchmarks/bench_normals.py --data-dir DIR``
 (Open3D 0.20.0)::
 
