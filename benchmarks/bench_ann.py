@@ -34,7 +34,7 @@ indices is printed too. The database is float32 (1,000,000 x 1,200 is
 descriptors between runs (about 1 minute per run otherwise on 2 cores).
 
 Figures (2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs; 2 threads;
-defaults ``n_candidates=64, n_components=64, n_probe=16``)::
+defaults ``n_candidates=32, n_components=32, n_probe=64``)::
 
     see docs/performance.rst, "Approximate retrieval", for the recorded figures
 """
@@ -187,10 +187,10 @@ def main(argv=None):
     ap.add_argument("--cache", default=None, help="npz file keeping the real EPPF descriptors between runs")
     ap.add_argument("--n-database", type=int, default=1_000_000)
     ap.add_argument("--n-queries", type=int, default=2000, help="queries timed on the synthetic database")
-    ap.add_argument("--n-exact", type=int, default=1000, help="of them, with exact ground truth")
-    ap.add_argument("--n-candidates", type=int, default=64)
-    ap.add_argument("--n-components", type=int, default=64)
-    ap.add_argument("--n-probe", type=int, default=16)
+    ap.add_argument("--n-exact", type=int, default=500, help="of them, with exact ground truth")
+    ap.add_argument("--n-candidates", type=int, default=32)
+    ap.add_argument("--n-components", type=int, default=32)
+    ap.add_argument("--n-probe", type=int, default=64)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip-real", action="store_true")
