@@ -360,14 +360,29 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         counts = np.empty(n, dtype=np.int64)
         indices, values = [], []
         row_terms = np.empty((3, n))
+        f, n_bins = self.floor_, X.shape[1]
+        f_ln_f = f * np.log(f)
         for start in range(0, n, _EMBED_ROWS):
             rows = X[start : start + _EMBED_ROWS]
-            mask = rows > self.floor_
-            counts[start : start + rows.shape[0]] = mask.sum(axis=1)
-            indices.append(np.nonzero(mask)[1].astype(np.int32 if X.shape[1] < 2**31 else np.int64))
-            values.append(rows[mask])
-            P = prepare_histograms(rows, self.floor_, False, name)
-            row_terms[:, start : start + rows.shape[0]] = P.s, P.mass, P.lam
+            m = rows.shape[0]
+            mask = rows > f
+            cnt = mask.sum(axis=1)
+            counts[start : start + m] = cnt
+            row_id, col = np.nonzero(mask)
+            indices.append(col.astype(np.int32 if n_bins < 2**31 else np.int64))
+            vals = rows[mask]
+            values.append(vals)
+            # the floored rows' sum h ln h, mass and largest |ln h|, from their support alone
+            v = vals.astype(np.float64)
+            with np.errstate(over="ignore", invalid="ignore"):
+                s_rows = np.bincount(row_id, weights=v * np.log(v), minlength=m) + (n_bins - cnt) * f_ln_f
+            if not np.all(np.isfinite(s_rows)):
+                raise ValueError(f"{name}: histogram values are too large for the KL divergence (overflow in x ln x)")
+            mass = np.bincount(row_id, weights=v, minlength=m) + (n_bins - cnt) * f
+            lo = np.maximum(rows.min(axis=1), f).astype(np.float64)
+            hi = np.maximum(rows.max(axis=1), f).astype(np.float64)
+            lam = np.maximum(np.abs(np.log(lo)), np.abs(np.log(hi)))
+            row_terms[:, start : start + m] = s_rows, mass, lam
         indptr = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(counts, out=indptr[1:])
         self._X = None

@@ -247,3 +247,14 @@ def test_missing_faiss_names_the_pip_command(monkeypatch):
     monkeypatch.setitem(sys.modules, "faiss", None)  # import faiss now raises ImportError
     with pytest.raises(ImportError, match=re.escape("pip install faiss-cpu")):
         ApproximateKLNearestNeighbors().fit(X, y)
+
+
+def test_row_terms_from_supports_match_the_dense_ones(data, fitted):
+    # s = sum h ln h, the mass and the largest |ln h| of the floored rows, from the kept bins alone
+    X, _, _ = data
+    h = np.maximum(X, fitted.floor_)
+    L = np.log(h)
+    s, mass, lam = fitted._row_terms
+    assert_allclose(s, (h * L).sum(axis=1), rtol=1e-12)
+    assert_allclose(mass, h.sum(axis=1), rtol=1e-12)
+    assert_allclose(lam, np.abs(L).max(axis=1), rtol=1e-12)
