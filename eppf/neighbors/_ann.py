@@ -42,9 +42,11 @@ _RERANK_ENTRIES = 1 << 23
 # Rows embedded at a time while building the index.
 _EMBED_ROWS = 8192
 # Rows used to fit the principal components.
-_PCA_ROWS = 20000
+_PCA_ROWS = 10000
 # Training rows per inverted list for k-means.
 _TRAIN_PER_LIST = 64
+# Candidate-list size while inserting into an HNSW graph.
+_EF_CONSTRUCTION = 64
 # Fewest training rows per inverted list that "auto" allows.
 _MIN_PER_LIST = 39
 
@@ -132,12 +134,25 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
     n_components : int or None, default=32
         Dimension of the PCA-reduced embedding in the index; ``None``, or a
         value not below the number of bins, keeps all bins (no PCA).
+    index : {"ivf", "hnsw"}, default="ivf"
+        The candidate index. ``"ivf"``: faiss's ``IndexIVFFlat``, k-means
+        cells of which a query scans the ``n_probe`` nearest; quick to build.
+        ``"hnsw"``: faiss's ``IndexHNSWFlat``, a navigable small-world graph
+        walked with ``ef_search`` entries; faster queries at equal recall on
+        large databases, but about 20 times slower to build (one thread,
+        so that the graph is the same on every run).
     n_lists : int or "auto", default="auto"
         Inverted lists (k-means cells) of the index. ``"auto"`` uses about
-        ``2 * sqrt(n_samples)``, with at least 39 training rows per list.
+        ``4 * sqrt(n_samples)`` (4,000 for a million), with at least 39
+        training rows per list.
     n_probe : int, default=64
-        Lists scanned per query (capped at ``n_lists``). More lists: higher
-        recall, slower queries.
+        Lists scanned per query (capped at ``n_lists``; ``"ivf"`` only).
+        More lists: higher recall, slower queries.
+    hnsw_m : int, default=16
+        Links per node of the HNSW graph (``"hnsw"`` only).
+    ef_search : int, default=64
+        Size of the HNSW search's candidate list (``"hnsw"`` only; at least
+        ``n_candidates`` is used). Larger: higher recall, slower queries.
     chunk_size : int, default=None
         Queries handled per block; ``None`` picks blocks whose re-ranking
         temporaries are about 64 MiB each.
@@ -150,6 +165,9 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         OpenMP default, see :func:`eppf.utils.check_n_jobs`). Each block
         runs its faiss search and its matrix products on one thread, so
         results do not depend on it. Building the index is single-threaded.
+        Queries always run in threads of this process, also under a joblib
+        backend such as dask (the index is not sent to a cluster; the exact
+        :class:`KLNearestNeighbors` is the one that spreads over one).
 
     Attributes
     ----------
@@ -168,9 +186,9 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         Mean embedded training vector (the PCA's centre), or None without PCA.
     components_ : ndarray of shape (n_components, n_bins)
         Principal axes of the embedding, or None without PCA.
-    n_lists_ : int
-        Inverted lists of the index.
-    index_ : faiss.IndexIVFFlat
+    n_lists_ : int or None
+        Inverted lists of the index (None for ``"hnsw"``).
+    index_ : faiss.IndexIVFFlat or faiss.IndexHNSWFlat
         The candidate index (serialised to bytes when pickled).
 
     See Also
@@ -191,7 +209,7 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
     (about 0.14 GB with ``n_components=32``). With ``renormalize=True`` the
     dense ``X`` itself is kept, as given.
 
-    The principal components are fitted on at most 20,000 training rows
+    The principal components are fitted on at most 10,000 training rows
     and the k-means on at most 64 rows per list, all drawn with
     ``random_state``. A query whose probed lists hold fewer than
     ``n_neighbors`` rows is searched again over all lists. Among
@@ -201,9 +219,12 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
     are those of :class:`KLNearestNeighbors`. :meth:`kneighbors` without
     ``X`` excludes each training row from its own neighbours.
 
-    The index is faiss's ``IndexIVFFlat`` (inverted file, vectors stored
-    uncompressed): deterministic to build, exact within the lists it
-    scans, and with one parameter (``n_probe``) trading speed for recall.
+    The default index, faiss's ``IndexIVFFlat`` (inverted file, vectors
+    stored uncompressed), is deterministic and quick to build, exact within
+    the lists it scans, and has one parameter (``n_probe``) trading speed
+    for recall. ``index="hnsw"`` answers queries faster on large databases
+    at the price of a long single-threaded build (for determinism: a graph
+    built by several threads depends on their scheduling).
 
     References
     ----------
@@ -212,6 +233,10 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
        Machine Intelligence, 2011 (inverted-file search).
     .. [2] J. Johnson, M. Douze and H. Jegou, "Billion-scale similarity
        search with GPUs", IEEE Transactions on Big Data, 2019 (faiss).
+    .. [3] Y. A. Malkov and D. A. Yashunin, "Efficient and Robust Approximate
+       Nearest Neighbor Search Using Hierarchical Navigable Small World
+       Graphs", IEEE Transactions on Pattern Analysis and Machine
+       Intelligence, 2020 (HNSW).
 
     Examples
     --------
@@ -227,15 +252,19 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
     """
 
     def __init__(self, n_neighbors=1, *, weights="uniform", floor="auto", renormalize=False, n_candidates=32,
-                 n_components=32, n_lists="auto", n_probe=64, chunk_size=None, random_state=None, n_jobs=None):
+                 n_components=32, index="ivf", n_lists="auto", n_probe=64, hnsw_m=16, ef_search=64,
+                 chunk_size=None, random_state=None, n_jobs=None):
         self.n_neighbors = n_neighbors
         self.weights = weights
         self.floor = floor
         self.renormalize = renormalize
         self.n_candidates = n_candidates
         self.n_components = n_components
+        self.index = index
         self.n_lists = n_lists
         self.n_probe = n_probe
+        self.hnsw_m = hnsw_m
+        self.ef_search = ef_search
         self.chunk_size = chunk_size
         self.random_state = random_state
         self.n_jobs = n_jobs
@@ -261,18 +290,22 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         if isinstance(n_lists, str) and n_lists != "auto":
             raise ValueError(f"{name}: n_lists must be an int >= 1 or 'auto', got {n_lists!r}")
         n_probe = _check_int(self.n_probe, "n_probe", name)
+        if self.index not in ("ivf", "hnsw"):
+            raise ValueError(f"{name}: index must be 'ivf' or 'hnsw', got {self.index!r}")
+        _check_int(self.hnsw_m, "hnsw_m", name, minimum=2)
+        _check_int(self.ef_search, "ef_search", name)
         return floor, renormalize, chunk_size, n_candidates, n_components, n_lists, n_probe
 
     # ------------------------------------------------------------ embedding
 
     def _embed(self, rows):
-        """float32 index vectors of raw histogram rows (float32 or float64)."""
-        h = np.maximum(rows, self.floor_, dtype=np.float64)
-        h /= h.sum(axis=1, keepdims=True)
+        """float32 index vectors of raw histogram rows (float32 or float64), computed in float32."""
+        h = np.maximum(rows, np.float32(self.floor_), dtype=np.float32)
+        h /= h.sum(axis=1, keepdims=True, dtype=np.float64).astype(np.float32)
         np.sqrt(h, out=h)
         if self.components_ is not None:
-            h -= self.mean_
-            h = h @ self.components_.T
+            h -= self.mean_.astype(np.float32)
+            h = h @ self.components_.T.astype(np.float32)
         return np.ascontiguousarray(h, dtype=np.float32)
 
     def _n_threads(self):
@@ -305,8 +338,10 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         n, n_bins = X.shape
         if n_components is not None and n_components >= n_bins:
             n_components = None
-        if n_lists == "auto":
-            n_lists = int(max(1, min(round(2 * np.sqrt(n)), n // _MIN_PER_LIST)))
+        if self.index == "hnsw":
+            n_lists = None
+        elif n_lists == "auto":
+            n_lists = int(max(1, min(round(4 * np.sqrt(n)), n // _MIN_PER_LIST)))
         elif n_lists > n:
             raise ValueError(f"{name}: n_lists={n_lists} is more than the {n} training samples")
         self.floor_ = learn_floor(X, name) if floor == "auto" else floor
@@ -318,7 +353,7 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
 
         rng = check_random_state(self.random_state)
         seed = int(rng.randint(np.iinfo(np.int32).max))
-        n_train = min(n, _TRAIN_PER_LIST * n_lists)
+        n_train = min(n, _TRAIN_PER_LIST * n_lists) if n_lists else min(n, _PCA_ROWS)
         train = np.sort(rng.permutation(n)[:n_train])
         with single_blas_thread(), _faiss_threads(faiss, 1):
             self.components_ = self.mean_ = None
@@ -336,15 +371,19 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
                 comps *= np.sign(comps[np.arange(n_components), big])[:, None]
                 self.mean_, self.components_ = mean, comps
             dim = n_bins if n_components is None else n_components
-            quantizer = faiss.IndexFlatL2(dim)
-            index = faiss.IndexIVFFlat(quantizer, dim, n_lists, faiss.METRIC_L2)
-            index.own_fields = True
-            quantizer.this.disown()
-            index.cp.seed = seed
-            index.cp.max_points_per_centroid = _TRAIN_PER_LIST
-            index.cp.min_points_per_centroid = 1
-            index.verbose = False
-            index.train(self._embed(X[train]))
+            if n_lists is None:
+                index = faiss.IndexHNSWFlat(dim, self.hnsw_m, faiss.METRIC_L2)
+                index.hnsw.efConstruction = _EF_CONSTRUCTION
+            else:
+                quantizer = faiss.IndexFlatL2(dim)
+                index = faiss.IndexIVFFlat(quantizer, dim, n_lists, faiss.METRIC_L2)
+                index.own_fields = True
+                quantizer.this.disown()
+                index.cp.seed = seed
+                index.cp.max_points_per_centroid = _TRAIN_PER_LIST
+                index.cp.min_points_per_centroid = 1
+                index.verbose = False
+                index.train(self._embed(X[train]))
             for start in range(0, n, _EMBED_ROWS):
                 index.add(self._embed(X[start : start + _EMBED_ROWS]))
         self.index_ = index
@@ -430,11 +469,19 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         n_q = rows.shape[0]
         extra = 1 if loo_start is not None else 0
         m_search = min(m + extra, self.n_samples_fit_)
-        _, cand = self.index_.search(Z, m_search, params=faiss.SearchParametersIVF(nprobe=n_probe))
+        if self.n_lists_ is None:
+            params = faiss.SearchParametersHNSW(efSearch=max(self.ef_search, m_search))
+        else:
+            params = faiss.SearchParametersIVF(nprobe=n_probe)
+        _, cand = self.index_.search(Z, m_search, params=params)
         short = (cand >= 0).sum(axis=1) < k + extra
-        if short.any():  # too few rows in the probed lists: scan them all
-            full = faiss.SearchParametersIVF(nprobe=self.n_lists_)
-            cand[short] = self.index_.search(Z[short], m_search, params=full)[1]
+        if short.any():  # too few rows reached (probed lists, graph walk): scan every vector
+            if self.n_lists_ is None:
+                exhaustive = faiss.downcast_index(self.index_.storage)
+                cand[short] = exhaustive.search(Z[short], m_search)[1]
+            else:
+                full = faiss.SearchParametersIVF(nprobe=self.n_lists_)
+                cand[short] = self.index_.search(Z[short], m_search, params=full)[1]
         if loo_start is not None:
             cand = _drop_own(cand, loo_start)
         P = prepare_histograms(rows, self.floor_, self._renormalize, name)
@@ -480,7 +527,7 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         if k > n_candidates:
             raise ValueError(f"{name}: n_neighbors={k} is more than n_candidates={n_candidates}")
         m = min(n_candidates, available)
-        n_probe = min(n_probe, self.n_lists_)
+        n_probe = min(n_probe, self.n_lists_ or 1)
         n_q = self.n_samples_fit_ if loo else Q.shape[0]
         step = chunk_size or max(1, _RERANK_ENTRIES // (m * self.n_features_in_))
         starts = range(0, n_q, step)

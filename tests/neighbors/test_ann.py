@@ -35,8 +35,8 @@ def _slow_kl(q, c, floor):
 
 @pytest.fixture(scope="module")
 def data():
-    X, y = _clustered(1500, seed=0)
-    Q, _ = _clustered(200, seed=1)
+    X, y = _clustered(800, seed=0)
+    Q, _ = _clustered(150, seed=1)
     return X, y, Q
 
 
@@ -68,6 +68,9 @@ def test_recall_against_exact_search(data, fitted):
     # without PCA the Hellinger embedding alone finds (nearly) every neighbour
     full = clone(fitted).set_params(n_components=None, n_candidates=32).fit(X, y)
     assert np.mean(full.kneighbors(Q)[0][:, 0] <= e_dist[:, 0] * (1 + 1e-9)) >= 0.99
+    graph = clone(fitted).set_params(index="hnsw").fit(X, y)
+    assert graph.n_lists_ is None
+    assert np.mean(graph.kneighbors(Q)[0][:, 0] <= e_dist[:, 0] * (1 + 1e-9)) >= 0.97
 
 
 def test_fewer_probes_lose_recall(data):
@@ -91,9 +94,9 @@ def test_reranked_distances_are_exact(data, fitted):
     assert_allclose(dist, np.take_along_axis(full, ind, axis=1), rtol=1e-12, atol=1e-13)
 
 
-@pytest.mark.parametrize("renormalize", [False, True])
-@pytest.mark.parametrize("floor", ["auto", 5e-3])
-def test_exhaustive_settings_give_exact_search(data, renormalize, floor):
+@pytest.mark.parametrize("renormalize, floor, index", [(False, "auto", "ivf"), (True, "auto", "ivf"),
+                                                        (False, 5e-3, "ivf"), (True, 5e-3, "hnsw")])
+def test_exhaustive_settings_give_exact_search(data, renormalize, floor, index):
     # all candidates from all lists: the same neighbours as KLNearestNeighbors, ties included
     X, y, Q = data
     X, y = X[:150], y[:150]
@@ -102,7 +105,8 @@ def test_exhaustive_settings_give_exact_search(data, renormalize, floor):
     Q = np.vstack([Q[:40], X[:5]])
     params = dict(n_neighbors=4, floor=floor, renormalize=renormalize)
     exact = KLNearestNeighbors(**params).fit(X, y)
-    ann = ApproximateKLNearestNeighbors(n_candidates=len(X), n_probe=10**6, random_state=0, **params).fit(X, y)
+    ann = ApproximateKLNearestNeighbors(n_candidates=len(X), n_probe=10**6, index=index, random_state=0,
+                                        **params).fit(X, y)
     for args in [(Q,), ()]:
         e_dist, e_ind = exact.kneighbors(*args)
         a_dist, a_ind = ann.kneighbors(*args)
@@ -140,10 +144,11 @@ def test_predict_uses_the_neighbours_votes(data, fitted):
 # ---------------------------------------------------------------- determinism
 
 
-def test_same_random_state_same_index_and_results(data):
+@pytest.mark.parametrize("index", ["ivf", "hnsw"])
+def test_same_random_state_same_index_and_results(data, index):
     X, y, Q = data
-    a = ApproximateKLNearestNeighbors(n_probe=2, random_state=3).fit(X, y)
-    b = ApproximateKLNearestNeighbors(n_probe=2, random_state=3).fit(X, y)
+    a = ApproximateKLNearestNeighbors(n_probe=2, ef_search=8, n_candidates=8, index=index, random_state=3).fit(X, y)
+    b = ApproximateKLNearestNeighbors(n_probe=2, ef_search=8, n_candidates=8, index=index, random_state=3).fit(X, y)
     assert_array_equal(a.components_, b.components_)
     import faiss
 
@@ -154,9 +159,11 @@ def test_same_random_state_same_index_and_results(data):
     assert_array_equal(da, db)
 
 
-def test_results_do_not_depend_on_n_jobs(data):
+@pytest.mark.parametrize("index", ["ivf", "hnsw"])
+def test_results_do_not_depend_on_n_jobs(data, index):
     X, y, Q = data
-    one = ApproximateKLNearestNeighbors(n_probe=2, chunk_size=16, n_jobs=1, random_state=0).fit(X, y)
+    one = ApproximateKLNearestNeighbors(n_probe=2, ef_search=8, n_candidates=8, index=index, chunk_size=16,
+                                        n_jobs=1, random_state=0).fit(X, y)
     two = clone(one).set_params(n_jobs=2).fit(X, y)
     for args in [(Q,), ()]:
         d1, i1 = one.kneighbors(*args)
@@ -205,6 +212,9 @@ def test_too_few_rows_in_probed_lists_falls_back_to_all_lists():
         (dict(n_lists="many"), TypeError, "n_lists must be an int >= 1 or 'auto'"),
         (dict(n_lists=0), ValueError, "n_lists must be an int >= 1 or 'auto'"),
         (dict(n_probe=True), TypeError, "n_probe must be an int >= 1"),
+        (dict(index="flat"), ValueError, "index must be 'ivf' or 'hnsw', got 'flat'"),
+        (dict(hnsw_m=1), ValueError, "hnsw_m must be an int >= 2"),
+        (dict(ef_search=0), ValueError, "ef_search must be an int >= 1"),
         (dict(n_lists=500), ValueError, "n_lists=500 is more than the 50 training samples"),
         (dict(floor=-1.0), ValueError, "floor must be 'auto' or a positive float"),
         (dict(weights="far"), ValueError, "weights must be 'uniform' or 'distance'"),
