@@ -118,11 +118,12 @@ def peak_mib():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def make_ann(args):
+def make_ann(args, index):
     from eppf.neighbors import ApproximateKLNearestNeighbors
 
     return ApproximateKLNearestNeighbors(n_candidates=args.n_candidates, n_components=args.n_components,
-                                         n_probe=args.n_probe, random_state=0, n_jobs=args.threads)
+                                         index=index, n_probe=args.n_probe, ef_search=args.ef_search,
+                                         random_state=0, n_jobs=args.threads)
 
 
 def index_mib(ann):
@@ -134,22 +135,26 @@ def index_mib(ann):
 def bench_real(X, y, args):
     from eppf import KLNearestNeighbors
 
-    t = time.perf_counter()
-    ann = make_ann(args).fit(X, y)
-    t_fit = time.perf_counter() - t
-    t = time.perf_counter()
-    dist, ind = ann.kneighbors(n_neighbors=1)
-    t_q = time.perf_counter() - t
     exact = KLNearestNeighbors(n_jobs=args.threads).fit(X, y)
     t = time.perf_counter()
     e_dist, e_ind = exact.kneighbors(n_neighbors=1)
     t_exact = time.perf_counter() - t
-    r, same = recall(ind[:, 0], dist[:, 0], e_ind[:, 0], e_dist[:, 0])
-    return {"part": "real", "n_database": len(X), "n_queries": len(X), "build_s": t_fit,
-            "index_mib": index_mib(ann), "qps": len(X) / t_q, "exact_qps": len(X) / t_exact,
-            "recall_at_1": r, "same_index": same,
-            "loo_accuracy_ann": float(np.mean(y[ind[:, 0]] == y)),
-            "loo_accuracy_exact": float(np.mean(y[e_ind[:, 0]] == y))}
+    out = []
+    for index in args.index:
+        t = time.perf_counter()
+        ann = make_ann(args, index).fit(X, y)
+        t_fit = time.perf_counter() - t
+        t = time.perf_counter()
+        dist, ind = ann.kneighbors(n_neighbors=1)
+        t_q = time.perf_counter() - t
+        r, same = recall(ind[:, 0], dist[:, 0], e_ind[:, 0], e_dist[:, 0])
+        out.append({"part": "real", "index": index, "n_database": len(X), "n_queries": len(X), "build_s": t_fit,
+                    "index_mib": index_mib(ann), "qps": len(X) / t_q, "exact_qps": len(X) / t_exact,
+                    "recall_at_1": r, "same_index": same,
+                    "loo_accuracy_ann": float(np.mean(y[ind[:, 0]] == y)),
+                    "loo_accuracy_exact": float(np.mean(y[e_ind[:, 0]] == y))})
+        print(json.dumps(out[-1]), flush=True)
+    return out
 
 
 def bench_synthetic(seeds, args):
@@ -160,25 +165,32 @@ def bench_synthetic(seeds, args):
     t_gen = time.perf_counter() - t
     print(f"generated {args.n_database:,} + {args.n_queries:,} histograms in {t_gen:.1f} s", flush=True)
     labels = np.zeros(len(db), dtype=np.int8)
-    before = peak_mib()
-    t = time.perf_counter()
-    ann = make_ann(args).fit(db, labels)
-    t_fit = time.perf_counter() - t
-    fit_peak = peak_mib() - before
-    print(f"index built in {t_fit:.1f} s", flush=True)
-    ann.kneighbors(Q[:50], n_neighbors=1)  # warm-up
-    t = time.perf_counter()
-    dist, ind = ann.kneighbors(Q, n_neighbors=1)
-    t_q = time.perf_counter() - t
+    runs = []
+    for index in args.index:
+        t = time.perf_counter()
+        ann = make_ann(args, index).fit(db, labels)
+        t_fit = time.perf_counter() - t
+        print(f"{index} index built in {t_fit:.1f} s", flush=True)
+        ann.kneighbors(Q[:50], n_neighbors=1)  # warm-up
+        t = time.perf_counter()
+        dist, ind = ann.kneighbors(Q, n_neighbors=1)
+        t_q = time.perf_counter() - t
+        print(f"{index}: {len(Q) / t_q:.0f} queries/s", flush=True)
+        runs.append((index, t_fit, index_mib(ann), t_q, dist[:, 0], ind[:, 0], ann.floor_))
+        del ann
     n_exact = min(args.n_exact, len(Q))
     t = time.perf_counter()
-    e_ind, e_dist = exact_nearest(Q[:n_exact], db, ann.floor_, args.threads)
+    e_ind, e_dist = exact_nearest(Q[:n_exact], db, runs[0][6], args.threads)
     t_exact = time.perf_counter() - t
-    r, same = recall(ind[:n_exact, 0], dist[:n_exact, 0], e_ind, e_dist)
-    return {"part": "synthetic", "n_database": len(db), "n_queries": len(Q), "n_exact": n_exact,
-            "build_s": t_fit, "index_mib": index_mib(ann), "database_mib": db.nbytes / 2**20,
-            "fit_peak_increase_mib": fit_peak, "qps": len(Q) / t_q, "exact_qps": n_exact / t_exact,
-            "recall_at_1": r, "same_index": same, "peak_mib": peak_mib()}
+    out = []
+    for index, t_fit, mib, t_q, dist, ind, _ in runs:
+        r, same = recall(ind[:n_exact], dist[:n_exact], e_ind, e_dist)
+        out.append({"part": "synthetic", "index": index, "n_database": len(db), "n_queries": len(Q),
+                    "n_exact": n_exact, "build_s": t_fit, "index_mib": mib, "database_mib": db.nbytes / 2**20,
+                    "qps": len(Q) / t_q, "exact_qps": n_exact / t_exact, "recall_at_1": r, "same_index": same,
+                    "peak_mib": peak_mib()})
+        print(json.dumps(out[-1]), flush=True)
+    return out
 
 
 def main(argv=None):
@@ -191,6 +203,8 @@ def main(argv=None):
     ap.add_argument("--n-candidates", type=int, default=32)
     ap.add_argument("--n-components", type=int, default=32)
     ap.add_argument("--n-probe", type=int, default=64)
+    ap.add_argument("--ef-search", type=int, default=64)
+    ap.add_argument("--index", nargs="+", default=["ivf", "hnsw"], choices=["ivf", "hnsw"])
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip-real", action="store_true")
@@ -200,15 +214,13 @@ def main(argv=None):
     X, y = real_descriptors(args.data_dir, args.cache, args.threads)
     results = []
     if not args.skip_real:
-        results.append(bench_real(X, y, args))
-        print(json.dumps(results[-1]), flush=True)
+        results += bench_real(X, y, args)
     if not args.skip_synthetic:
-        results.append(bench_synthetic(X, args))
-        print(json.dumps(results[-1]), flush=True)
+        results += bench_synthetic(X, args)
     print(f"\nparameters: n_candidates={args.n_candidates} n_components={args.n_components} "
-          f"n_probe={args.n_probe} threads={args.threads}")
+          f"n_probe={args.n_probe} ef_search={args.ef_search} threads={args.threads}; peak {peak_mib():.0f} MiB")
     for r in results:
-        print(f"{r['part']:9s} n={r['n_database']:>9,}  recall@1={r['recall_at_1']:.4f} "
+        print(f"{r['part']:9s} {r['index']:4s} n={r['n_database']:>9,}  recall@1={r['recall_at_1']:.4f} "
               f"(same index {r['same_index']:.4f})  {r['qps']:8.0f} queries/s (exact {r['exact_qps']:.0f}/s)  "
               f"build {r['build_s']:.1f} s  index {r['index_mib']:.0f} MiB")
     return 0
