@@ -4,6 +4,7 @@ Usage::
 
     nice -n 10 python benchmarks/bench_retrieval.py              # 5,000 and 12,000 x 1,200
     python benchmarks/bench_retrieval.py --sizes 2000 --n-bins 540 --compare
+    nice -n 10 python benchmarks/bench_retrieval.py --sizes 5000 --dask 2 --no-reference
 
 For each size, sparse histograms like EPPF descriptors (a class profile per
 object, 20,000 pair samples drawn into 1,200 bins) are written to a temporary
@@ -12,6 +13,9 @@ object, 20,000 pair samples drawn into 1,200 bins) are written to a temporary
 process's peak resident memory (interpreter, libraries and the input
 included). ``--compare`` also times ``KLNearestNeighbors().fit(X, y).kneighbors()``
 (the full, non-symmetric route) and checks both give the same neighbours.
+``--dask N`` runs the leave-one-out again inside
+``joblib.parallel_config(backend="dask")`` on a local cluster of ``N``
+one-thread worker processes, and checks its neighbours are bit-identical.
 
 When PCL's reference descriptors are given (``--reference-dir`` with
 ``pcl_modelnet10_1024.npz`` / ``pcl_dales_objects.npz``, arrays ``esf`` and
@@ -69,6 +73,16 @@ if compare:
     ind2 = KLNearestNeighbors(n_jobs=n_jobs).fit(X, y).kneighbors(return_distance=False)[:, 0]
     out["t_full"] = time.perf_counter() - t
     out["same"] = int(np.sum(ind2 == ind))
+n_dask = int(sys.argv[5])
+if n_dask:
+    from dask.distributed import Client, LocalCluster
+    from joblib import parallel_config
+    with LocalCluster(n_workers=n_dask, threads_per_worker=1, dashboard_address=None) as cluster, Client(cluster):
+        with parallel_config(backend="dask"):
+            t = time.perf_counter()
+            y2, ind2 = leave_one_out_retrieval(X, y, return_indices=True, n_jobs=n_jobs)
+            out["t_dask"] = time.perf_counter() - t
+    out["dask_identical"] = bool(np.array_equal(ind2, ind) and np.array_equal(y2, y_pred))
 print(json.dumps(out))
 """
 
@@ -92,14 +106,14 @@ def make_descriptors(n, n_bins, n_classes=40, n_pairs=20000, seed=0):
     return X, y
 
 
-def run_size(n, n_bins, compare, n_jobs=None):
+def run_size(n, n_bins, compare, n_jobs=None, dask_workers=0):
     X, y = make_descriptors(n, n_bins)
     with tempfile.TemporaryDirectory() as tmp:
         xp, yp = os.path.join(tmp, "X.npy"), os.path.join(tmp, "y.npy")
         np.save(xp, X)
         np.save(yp, y)
         res = subprocess.run(
-            [sys.executable, "-c", CHILD, xp, yp, "1" if compare else "0", str(n_jobs)], capture_output=True, text=True, check=True
+            [sys.executable, "-c", CHILD, xp, yp, "1" if compare else "0", str(n_jobs), str(dask_workers)], capture_output=True, text=True, check=True
         )
     out = json.loads(res.stdout.strip().splitlines()[-1])
     out["zero_share"] = float(np.mean(X == 0))
@@ -128,6 +142,9 @@ def main(argv=None):
     parser.add_argument("--n-bins", type=int, default=1200)
     parser.add_argument("--n-jobs", type=int, default=None, help="BLAS threads (default: BLAS's own setting)")
     parser.add_argument("--compare", action="store_true", help="also time KLNearestNeighbors.kneighbors()")
+    parser.add_argument("--dask", type=int, default=0, metavar="N",
+                        help="also run leave-one-out on a local dask cluster of N one-thread worker processes "
+                             "(joblib's dask backend) and check it is bit-identical")
     parser.add_argument("--no-reference", action="store_true", help="skip the check on the PCL reference descriptors")
     parser.add_argument("--reference-dir", default=None, help="folder with PCL's pcl_<data set>.npz (optional)")
     parser.add_argument("--data-dir", default=default_dir(),
@@ -144,12 +161,16 @@ def main(argv=None):
     header = f"{'n':>7} {'bins':>5} {'zeros':>6} {'threads':>7} {'LOO s':>7} {'CPU s':>7} {'peak MiB':>9}"
     if args.compare:
         header += f" {'kneighbors s':>12} {'same NN':>8}"
+    if args.dask:
+        header += f" {'dask s':>7} {'identical':>9}"
     print(header)
     for n in args.sizes:
-        r = run_size(n, args.n_bins, args.compare, args.n_jobs)
+        r = run_size(n, args.n_bins, args.compare, args.n_jobs, args.dask)
         line = f"{n:>7} {args.n_bins:>5} {r['zero_share']:>6.2f} {str(r['blas_threads']):>7} {r['t_loo']:>7.2f} {r['cpu_loo']:>7.2f} {r['peak_mib']:>9.0f}"
         if args.compare:
             line += f" {r['t_full']:>12.2f} {r['same']:>8}"
+        if args.dask:
+            line += f" {r['t_dask']:>7.2f} {str(r['dask_identical']):>9}"
         print(line, flush=True)
 
     if args.no_reference:

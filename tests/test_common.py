@@ -41,7 +41,7 @@ from eppf.registry import CLASSIFIERS, DESCRIPTORS
 # ------------------------------------------------------------------ estimators
 
 # Estimators on descriptor matrices that pass every scikit-learn check.
-FULL_CHECKS = {"KLNearestNeighbors"}
+FULL_CHECKS = {"KLNearestNeighbors", "ApproximateKLNearestNeighbors"}
 
 # Small settings, so that the whole file runs in seconds on one core. Classes
 # not listed are built with their defaults (and random_state=0 when they have

@@ -12,7 +12,9 @@ processed in chunks so that no more than a chunk of the distance matrix
 """
 
 import numbers
+import threading
 from collections import namedtuple
+from contextlib import contextmanager
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -58,6 +60,34 @@ def _check_renormalize(renormalize, owner):
     return bool(renormalize)
 
 
+_one_blas_lock = threading.Lock()
+_one_blas_state = {"depth": 0, "limiter": None}
+
+
+@contextmanager
+def _one_blas_thread():
+    """Every BLAS call in this process on one thread while any holder is inside.
+
+    Reference-counted, so that blocks running concurrently in the threads of
+    one process (a thread pool, a dask worker with several threads) never
+    restore the original thread count under one another's matrix products.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with _one_blas_lock:
+        if _one_blas_state["depth"] == 0:
+            _one_blas_state["limiter"] = threadpool_limits(limits=1, user_api="blas")
+        _one_blas_state["depth"] += 1
+    try:
+        yield
+    finally:
+        with _one_blas_lock:
+            _one_blas_state["depth"] -= 1
+            if _one_blas_state["depth"] == 0:
+                _one_blas_state["limiter"].restore_original_limits()
+                _one_blas_state["limiter"] = None
+
+
 class _blas_limits:
     """Context for the distance computations: every matrix product single-threaded.
 
@@ -65,8 +95,10 @@ class _blas_limits:
     on the shape of the operands), so the products run on one BLAS thread
     each, over row blocks whose shapes never depend on ``n_jobs``; the
     blocks themselves are spread over ``n_jobs`` threads (joblib's meaning)
-    by :func:`_ordered_map`. Distances are therefore bit-identical for any
-    thread count. Entering the context gives the number of threads.
+    by :func:`_map_blocks`, or handed to the joblib backend set by an
+    enclosing ``joblib.parallel_config`` (e.g. a dask cluster). Distances
+    are therefore bit-identical for any thread count and any backend.
+    Entering the context gives the number of threads.
     """
 
     def __init__(self, n_jobs, owner):
@@ -75,9 +107,7 @@ class _blas_limits:
         self.n_threads = check_n_jobs(n_jobs, owner=owner)
 
     def __enter__(self):
-        from threadpoolctl import threadpool_limits
-
-        self._limits = threadpool_limits(limits=1, user_api="blas")
+        self._limits = _one_blas_thread()
         self._limits.__enter__()
         return self.n_threads
 
@@ -107,6 +137,43 @@ def _ordered_map(func, items, n_threads):
                 yield pending.popleft().result()
         while pending:
             yield pending.popleft().result()
+
+
+def _joblib_backend_is_set():
+    """Whether an enclosing ``joblib.parallel_config`` (or ``parallel_backend``) names a backend."""
+    from joblib import parallel
+
+    config = getattr(parallel._backend, "config", None)
+    return isinstance(config, dict) and isinstance(config.get("backend"), parallel.ParallelBackendBase)
+
+
+def _run_on_one_blas_thread(func, *args):
+    """Task wrapper: ``func(*args)`` with single-threaded BLAS in whatever process runs it."""
+    with _one_blas_thread():
+        return func(*args)
+
+
+def _map_blocks(func, arg_tuples, n_threads):
+    """``func(*args)`` for each tuple of ``arg_tuples``, results yielded in order.
+
+    Under a joblib backend set by the caller (``with
+    joblib.parallel_config(backend="dask"): ...``) the blocks are joblib
+    tasks on that backend, with its ``n_jobs``; otherwise they run in up to
+    ``n_threads`` threads of this process. ``func`` is a module-level
+    function and the large arrays are passed as separate arguments, so that
+    joblib's dask backend ships each of them to the cluster once (it
+    scatters every large argument once per call). Each block runs with
+    single-threaded BLAS wherever it runs, and the blocks are fixed by the
+    caller, so the results do not depend on where or in which order they run.
+    """
+    if _joblib_backend_is_set():
+        from joblib import Parallel, delayed
+
+        yield from Parallel(return_as="generator")(
+            delayed(_run_on_one_blas_thread)(func, *args) for args in arg_tuples
+        )
+    else:
+        yield from _ordered_map(lambda args: func(*args), arg_tuples, n_threads)
 
 
 def _check_non_negative(X, owner, name="X"):
@@ -190,26 +257,58 @@ def _auto_chunk(n_ref):
     return max(1, _BLOCK_ENTRIES // max(1, n_ref))
 
 
+def _row_bounds(n_p, n_q, chunk_size):
+    """Fixed ``(start, stop)`` row blocks of P: they depend on ``chunk_size`` and the shapes only."""
+    step = chunk_size if chunk_size is not None else _auto_chunk(n_q)
+    step = min(step, max(n_p, 1))
+    return [(start, min(start + step, n_p)) for start in range(0, n_p, step)]
+
+
+_N_FIELDS = len(_Prepared._fields)
+
+
+def _distance_task(start, stop, with_tolerance, *arrays):
+    """Distances (and tie tolerances) of rows ``start:stop`` of P to all of Q.
+
+    ``arrays`` are the fields of P followed by those of Q (see :func:`_map_blocks`).
+    """
+    P, Q = _Prepared(*arrays[:_N_FIELDS]), _Prepared(*arrays[_N_FIELDS:])
+    Pc = P.rows(start, stop)
+    shape = (stop - start, Q.H.shape[0])
+    D = _kl_block(Pc, Q, np.empty(shape), np.empty(shape))
+    T = _tie_tolerance(Pc, Q, np.empty(shape)) if with_tolerance else None
+    return D, T
+
+
+def _kneighbors_task(start, stop, k, loo, *arrays):
+    """Indices and distances of the ``k`` nearest rows of Q for rows ``start:stop`` of P."""
+    D, T = _distance_task(start, stop, True, *arrays)
+    if loo:
+        D[np.arange(stop - start), np.arange(start, stop)] = np.inf
+    idx = _smallest_k(D, T, k)
+    return idx, np.take_along_axis(D, idx, axis=1)
+
+
 def _iter_kl_chunks(P, Q, chunk_size, with_tolerance=False, n_threads=1):
     """Yield ``(start, D, T)``: distances of rows ``start:start+len(D)`` of P to all of Q.
 
     ``T`` holds the tie tolerance of each entry (None unless asked for).
-    Blocks are computed in up to ``n_threads`` threads (call it inside
+    Blocks are computed by :func:`_map_blocks` (call it inside
     :class:`_blas_limits`) and yielded in row order; their shapes depend on
     ``chunk_size`` and the data only.
     """
-    n_p, n_q = P.H.shape[0], Q.H.shape[0]
-    step = chunk_size if chunk_size is not None else _auto_chunk(n_q)
-    step = min(step, max(n_p, 1))
+    bounds = _row_bounds(P.H.shape[0], Q.H.shape[0], chunk_size)
+    args = [(start, stop, with_tolerance, *P, *Q) for start, stop in bounds]
+    for (start, _), (D, T) in zip(bounds, _map_blocks(_distance_task, args, n_threads)):
+        yield start, D, T
 
-    def block(start):
-        stop = min(start + step, n_p)
-        Pc = P.rows(start, stop)
-        D = _kl_block(Pc, Q, np.empty((stop - start, n_q)), np.empty((stop - start, n_q)))
-        T = _tie_tolerance(Pc, Q, np.empty((stop - start, n_q))) if with_tolerance else None
-        return start, D, T
 
-    yield from _ordered_map(block, range(0, n_p, step), n_threads)
+def _iter_kneighbors(P, Q, chunk_size, k, loo, n_threads=1):
+    """Yield ``(start, indices, distances)`` of the ``k`` nearest rows of Q, block by block of P."""
+    bounds = _row_bounds(P.H.shape[0], Q.H.shape[0], chunk_size)
+    args = [(start, stop, k, loo, *P, *Q) for start, stop in bounds]
+    for (start, _), (idx, dist) in zip(bounds, _map_blocks(_kneighbors_task, args, n_threads)):
+        yield start, idx, dist
 
 
 def _named(owner, func, *args, **kwargs):
@@ -251,12 +350,17 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
     chunk_size : int, default=None
         Rows of ``X`` handled per block; temporaries are two blocks of shape
         ``(chunk_size, n_samples_Y)``. ``None`` picks blocks of about 64 MiB.
-        The result does not depend on it.
+        Distances may differ with it in the last bits only (a matrix
+        product's rounding depends on its shape); for a given value they
+        are bit-identical whatever ``n_jobs`` or joblib backend.
     n_jobs : int, default=None
         Threads over blocks of distances (joblib's meaning; ``None``
         is the OpenMP default, see :func:`eppf.utils.check_n_jobs`). Each
         block's matrix products run on one BLAS thread, so the result is
-        bit-identical for any value.
+        bit-identical for any value. Inside ``joblib.parallel_config``
+        (or ``parallel_backend``) naming a backend, e.g. ``"dask"`` with a
+        ``dask.distributed`` client, the same fixed blocks are that
+        backend's tasks instead, with bit-identical results.
 
     Returns
     -------
@@ -363,15 +467,34 @@ def _smallest_k(D, T, k):
     return out
 
 
+def _loo_block_task(i0, i1, j0, j1, *arrays):
+    """Each row's and each column's nearest candidate in block (i0:i1, j0:j1) of P against itself."""
+    P = _Prepared(*arrays)
+    Pi, Pj = P.rows(i0, i1), P.rows(j0, j1)
+    D = _kl_block(Pi, Pj, np.empty((i1 - i0, j1 - j0)), np.empty((i1 - i0, j1 - j0)))
+    T = _tie_tolerance(Pi, Pj, np.empty((i1 - i0, j1 - j0)))
+    if i0 == j0:
+        np.fill_diagonal(D, np.inf)
+    arg = _first_near_min(D, T, axis=1)
+    r = np.arange(i1 - i0)
+    rows = (D[r, arg], T[r, arg], arg + j0)
+    cols = None
+    if j0 != i0:
+        arg = _first_near_min(D, T, axis=0)
+        c = np.arange(j1 - j0)
+        cols = (D[arg, c], T[arg, c], arg + i0)
+    return rows, cols
+
+
 def _loo_nearest(P, block=None, n_threads=1):
     """Leave-one-out nearest neighbour of every row of ``P`` among the others.
 
     Uses the symmetry of the distance: only blocks on or above the block
     diagonal are computed, each serving both its rows and its columns, so
     the cost is half that of the full matrix. Near-ties (within rounding)
-    go to the lowest index. Blocks run in up to ``n_threads`` threads (call
-    it inside :class:`_blas_limits`) and are merged in a fixed order, so the
-    result does not depend on the thread count.
+    go to the lowest index. Blocks are computed by :func:`_map_blocks`
+    (call it inside :class:`_blas_limits`) and merged in a fixed order, so
+    the result depends neither on the thread count nor on the backend.
 
     Returns ``(indices, distances)``, each of shape (n_samples,).
     """
@@ -389,27 +512,9 @@ def _loo_nearest(P, block=None, n_threads=1):
         best_t[rows] = np.where(better, cand_t, cur_t)
         best_i[rows] = np.where(better, cand_i, cur_i)
 
-    def candidates(pair):
-        """Each row's and each column's nearest candidate in block (i0, j0)."""
-        i0, j0 = pair
-        i1, j1 = min(i0 + b, n), min(j0 + b, n)
-        Pi, Pj = P.rows(i0, i1), P.rows(j0, j1)
-        D = _kl_block(Pi, Pj, np.empty((i1 - i0, j1 - j0)), np.empty((i1 - i0, j1 - j0)))
-        T = _tie_tolerance(Pi, Pj, np.empty((i1 - i0, j1 - j0)))
-        if i0 == j0:
-            np.fill_diagonal(D, np.inf)
-        arg = _first_near_min(D, T, axis=1)
-        r = np.arange(i1 - i0)
-        rows = (D[r, arg], T[r, arg], arg + j0)
-        cols = None
-        if j0 != i0:
-            arg = _first_near_min(D, T, axis=0)
-            c = np.arange(j1 - j0)
-            cols = (D[arg, c], T[arg, c], arg + i0)
-        return i0, i1, j0, j1, rows, cols
-
-    pairs = [(i0, j0) for i0 in range(0, n, b) for j0 in range(i0, n, b)]
-    for i0, i1, j0, j1, rows, cols in _ordered_map(candidates, pairs, n_threads):
+    blocks = [(i0, min(i0 + b, n), j0, min(j0 + b, n)) for i0 in range(0, n, b) for j0 in range(i0, n, b)]
+    args = [(*blk, *P) for blk in blocks]
+    for (i0, i1, j0, j1), (rows, cols) in zip(blocks, _map_blocks(_loo_block_task, args, n_threads)):
         merge(slice(i0, i1), *rows)
         if cols is not None:
             merge(slice(j0, j1), *cols)
@@ -444,12 +549,16 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
     chunk_size : int, default=None
         Query rows handled per block; memory beyond the training data is two
         blocks of ``chunk_size * n_samples_fit`` floats. ``None`` picks blocks
-        of about 64 MiB. Results do not depend on it.
+        of about 64 MiB. Neighbours do not depend on it (near-ties within
+        rounding go to the lowest index); distances only in the last bits.
     n_jobs : int, default=None
         Threads over blocks of distances (joblib's meaning; ``None``
         is the OpenMP default, see :func:`eppf.utils.check_n_jobs`). Each
         block's matrix products run on one BLAS thread, so the result is
-        bit-identical for any value.
+        bit-identical for any value. Inside ``joblib.parallel_config``
+        (or ``parallel_backend``) naming a backend, e.g. ``"dask"`` with a
+        ``dask.distributed`` client, the same fixed blocks are that
+        backend's tasks instead, with bit-identical results.
 
     Attributes
     ----------
@@ -620,15 +729,10 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         ind = np.empty((n_q, k), dtype=np.intp)
         dist = np.empty((n_q, k)) if return_distance else None
         with _blas_limits(self.n_jobs, name) as n_threads:
-            for start, D, T in _iter_kl_chunks(P, self._fit_data, chunk_size, with_tolerance=True,
-                                               n_threads=n_threads):
-                c = D.shape[0]
-                if loo:
-                    D[np.arange(c), np.arange(start, start + c)] = np.inf
-                idx = _smallest_k(D, T, k)
-                ind[start : start + c] = idx
+            for start, idx, d in _iter_kneighbors(P, self._fit_data, chunk_size, k, loo, n_threads):
+                ind[start : start + idx.shape[0]] = idx
                 if return_distance:
-                    dist[start : start + c] = np.take_along_axis(D, idx, axis=1)
+                    dist[start : start + idx.shape[0]] = d
         return (dist, ind) if return_distance else ind
 
     def predict_proba(self, X):
@@ -647,19 +751,7 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         """
         check_is_fitted(self)
         dist, ind = self.kneighbors(X)
-        if self.weights == "uniform":
-            w = np.ones_like(dist)
-        else:
-            zero = dist == 0
-            with np.errstate(divide="ignore"):
-                w = 1.0 / dist
-            rows = zero.any(axis=1)
-            w[rows] = zero[rows].astype(np.float64)
-        labels = self._y[ind]
-        proba = np.zeros((ind.shape[0], self.classes_.size))
-        np.add.at(proba, (np.arange(ind.shape[0])[:, None], labels), w)
-        proba /= proba.sum(axis=1, keepdims=True)
-        return proba
+        return neighbour_votes(dist, ind, self._y, self.classes_.size, self.weights)
 
     def predict(self, X):
         """Predict the class of each query histogram.
@@ -678,3 +770,317 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
         check_is_fitted(self)
         proba = self.predict_proba(X)
         return self.classes_[np.argmax(proba, axis=1)]
+
+
+# ------------------------------------------------------------------------
+# Shared with the approximate search (eppf.neighbors._ann): public names of
+# this private module, not part of the package's API.
+
+
+def single_blas_thread():
+    """Context manager: every BLAS call of this process on one thread while inside.
+
+    Reference-counted across threads (see ``_one_blas_thread``), so that
+    the matrix products of blocks running concurrently are all
+    single-threaded and round the same way as when they run alone.
+
+    Returns
+    -------
+    context : context manager
+        The single-thread BLAS context.
+    """
+    return _one_blas_thread()
+
+
+def check_kl_params(est):
+    """Validate an estimator's ``n_neighbors``, ``weights``, ``floor``, ``renormalize``, ``chunk_size``, ``n_jobs``.
+
+    Parameters
+    ----------
+    est : estimator
+        An estimator with those parameters.
+
+    Returns
+    -------
+    floor : "auto" or float
+        The checked floor.
+    renormalize : bool
+        The checked flag.
+    chunk_size : int or None
+        The checked block size.
+    """
+    name = type(est).__name__
+    check_n_neighbors(est.n_neighbors, name)
+    if est.weights not in ("uniform", "distance"):
+        raise ValueError(f"{name}: weights must be 'uniform' or 'distance', got {est.weights!r}")
+    floor = _check_floor(est.floor, name)
+    renormalize = _check_renormalize(est.renormalize, name)
+    chunk_size = _check_chunk_size(est.chunk_size, name)
+    if est.n_jobs is not None:
+        from ..utils._validation import check_n_jobs
+
+        check_n_jobs(est.n_jobs, owner=name)
+    return floor, renormalize, chunk_size
+
+
+def check_n_neighbors(k, owner):
+    """Raise unless ``k`` is a positive int (not a bool); return it as an int.
+
+    Parameters
+    ----------
+    k : object
+        The value to check.
+    owner : str
+        Name used in the error message.
+
+    Returns
+    -------
+    k : int
+        The checked value.
+    """
+    if isinstance(k, bool) or not isinstance(k, numbers.Integral):
+        raise TypeError(f"{owner}: n_neighbors must be a positive int, got {type(k).__name__}")
+    if k < 1:
+        raise ValueError(f"{owner}: n_neighbors must be a positive int, got {k}")
+    return int(k)
+
+
+def validate_histograms(est, X, y="no_validation", *, reset, dtype=np.float64):
+    """Validate training or query histograms of a KL estimator (finite, non-negative).
+
+    Parameters
+    ----------
+    est : estimator
+        The estimator (``n_features_in_`` is set or checked, errors name it).
+    X : array-like of shape (n_samples, n_bins)
+        Histograms.
+    y : array-like of shape (n_samples,) or None, default="no_validation"
+        Class labels, checked to be classification targets (``None`` is an
+        error, as for scikit-learn's ``validate_data``); the default checks
+        ``X`` only.
+    reset : bool
+        Whether this is :meth:`fit` (set ``n_features_in_``).
+    dtype : dtype or list of dtypes, default=np.float64
+        Accepted dtype(s), as in :func:`sklearn.utils.check_array`.
+
+    Returns
+    -------
+    X : ndarray of shape (n_samples, n_bins)
+        The validated histograms.
+    y : ndarray of shape (n_samples,)
+        The validated labels, only returned when ``y`` is passed.
+    """
+    name = type(est).__name__
+    no_y = isinstance(y, str) and y == "no_validation"
+    if no_y:
+        X = _named(name, validate_data, est, X, dtype=dtype, ensure_all_finite=True, reset=reset)
+    else:
+        X, y = _named(name, validate_data, est, X, y, dtype=dtype, ensure_all_finite=True, reset=reset)
+        _named(name, check_classification_targets, y)
+    for start in range(0, X.shape[0], max(1, _BLOCK_ENTRIES // max(1, X.shape[1]))):
+        _check_non_negative(X[start : start + _BLOCK_ENTRIES // max(1, X.shape[1])], name)
+    return X if no_y else (X, y)
+
+
+def learn_floor(X, owner):
+    """Half the smallest positive value of ``X`` (read in blocks, so no full-size temporary).
+
+    Parameters
+    ----------
+    X : ndarray of shape (n_samples, n_bins)
+        Non-negative histograms.
+    owner : str
+        Name used in the error message.
+
+    Returns
+    -------
+    floor : float
+        The floor of ``floor="auto"``.
+    """
+    step = max(1, _BLOCK_ENTRIES // max(1, X.shape[1]))
+    return _learn_floor([X[i : i + step] for i in range(0, X.shape[0], step)], owner)
+
+
+def prepare_histograms(X, floor, renormalize, owner):
+    """Floored histograms, their logarithms and row terms, as used by every distance here.
+
+    Parameters
+    ----------
+    X : ndarray of shape (n_samples, n_bins)
+        Non-negative histograms (float32 or float64; computed in float64).
+    floor : float
+        Positive floor.
+    renormalize : bool
+        Whether floored rows are divided by their sum.
+    owner : str
+        Name used in error messages.
+
+    Returns
+    -------
+    prepared : namedtuple
+        Fields ``H, L, s, mass, lam`` (see ``_Prepared``).
+    """
+    return _prepare(X, floor, renormalize, owner)
+
+
+def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
+    """Exact symmetric KL re-ranking of candidate neighbours.
+
+    Parameters
+    ----------
+    P : namedtuple
+        Prepared queries (:func:`prepare_histograms`), ``n_queries`` rows.
+    database : ndarray of shape (n_database, n_bins)
+        Raw database histograms (any float dtype; rows are floored, optionally
+        renormalised and taken to float64 exactly as :func:`prepare_histograms` does).
+    candidates : ndarray of shape (n_queries, n_candidates)
+        Candidate database indices per query; ``-1`` marks no candidate.
+        Each row must hold at least ``k`` valid, distinct indices.
+    k : int
+        Neighbours kept per query.
+    floor : float
+        Positive floor.
+    renormalize : bool
+        Whether floored rows are divided by their sum.
+    owner : str
+        Name used in error messages.
+
+    Returns
+    -------
+    neigh_dist : ndarray of shape (n_queries, k)
+        Symmetric KL distances, increasing along each row.
+    neigh_ind : ndarray of shape (n_queries, k)
+        Database indices. Among candidates, near-ties (within the rounding
+        bound of the distance) go to the lowest index, as in
+        :class:`KLNearestNeighbors`.
+    """
+    n_q, m = candidates.shape
+    order = np.argsort(np.where(candidates < 0, np.iinfo(np.intp).max, candidates), axis=1, kind="stable")
+    cand = np.take_along_axis(candidates, order, axis=1).astype(np.intp)
+    valid = cand >= 0
+    C = _prepare(database[np.where(valid, cand, 0).ravel()], floor, renormalize, owner)
+    n_bins = C.H.shape[1]
+    Hc = C.H.reshape(n_q, m, n_bins)
+    Lc = C.L.reshape(n_q, m, n_bins)
+    # d = s_q + s_c - (h_q . ln h_c + ln h_q . h_c), in _kl_block's order
+    D = np.matmul(Lc, P.H[:, :, None])[:, :, 0]
+    D += np.matmul(Hc, P.L[:, :, None])[:, :, 0]
+    np.subtract(P.s[:, None], D, out=D)
+    D += C.s.reshape(n_q, m)
+    np.maximum(D, 0.0, out=D)
+    rel = 4.0 * max(n_bins, 16) * np.finfo(np.float64).eps
+    T = (P.mass[:, None] * C.lam.reshape(n_q, m) + P.lam[:, None] * C.mass.reshape(n_q, m)
+         + np.abs(P.s)[:, None] + np.abs(C.s.reshape(n_q, m))) * rel
+    D[~valid] = np.inf
+    T[~valid] = 0.0
+    pick = _smallest_k(D, T, k)
+    return np.take_along_axis(D, pick, axis=1), np.take_along_axis(cand, pick, axis=1)
+
+
+def neighbour_votes(dist, ind, labels, n_classes, weights):
+    """Class probabilities from the (weighted) votes of neighbours.
+
+    Parameters
+    ----------
+    dist : ndarray of shape (n_queries, k)
+        Distances to the neighbours.
+    ind : ndarray of shape (n_queries, k)
+        Indices of the neighbours in the training set.
+    labels : ndarray of shape (n_samples_fit,)
+        Encoded training labels (indices into ``classes_``).
+    n_classes : int
+        Number of classes.
+    weights : {"uniform", "distance"}
+        Voting rule: equal votes, or inverse-distance votes where neighbours
+        at distance zero, when there are any, take all the weight.
+
+    Returns
+    -------
+    proba : ndarray of shape (n_queries, n_classes)
+        Share of the votes per class.
+    """
+    if weights == "uniform":
+        w = np.ones_like(dist)
+    else:
+        zero = dist == 0
+        with np.errstate(divide="ignore"):
+            w = 1.0 / dist
+        rows = zero.any(axis=1)
+        w[rows] = zero[rows].astype(np.float64)
+    proba = np.zeros((ind.shape[0], n_classes))
+    np.add.at(proba, (np.arange(ind.shape[0])[:, None], labels[ind]), w)
+    proba /= proba.sum(axis=1, keepdims=True)
+    return proba
+
+
+def rerank_sparse_candidates(P, support, row_terms, candidates, k, floor):
+    """Exact symmetric KL re-ranking of candidates stored as sparse supports.
+
+    For histograms floored at ``f`` (not renormalised), every bin at or
+    below ``f`` in both histograms contributes nothing, so the divergence
+    between a query ``q`` and a candidate ``c`` is a sum over the support of
+    ``c`` (its bins above ``f``) plus one term per query:
+
+    .. math:: d(q, c) = A_q + \\sum_{i \\in S_c} \\left[(q_i - c_i)(\\ln q_i - \\ln c_i)
+              - (q_i - f)(\\ln q_i - \\ln f)\\right],
+              \\quad A_q = \\sum_i (q_i - f)(\\ln q_i - \\ln f),
+
+    with ``q`` floored. Only the candidates' non-empty bins are read, so a
+    database of sparse histograms (EPPF descriptors fill a few percent of
+    their bins) is kept in compressed rows and re-ranked in a small
+    fraction of the time of the dense formula.
+
+    Parameters
+    ----------
+    P : namedtuple
+        Prepared queries (:func:`prepare_histograms` with
+        ``renormalize=False``).
+    support : tuple of ndarray
+        ``(indptr, indices, values)``: compressed rows of the database
+        holding its bins above ``floor`` (values in any float dtype).
+    row_terms : tuple of ndarray
+        ``(s, mass, lam)`` of the database rows, as in
+        :func:`prepare_histograms`; they set the tie tolerance.
+    candidates : ndarray of shape (n_queries, n_candidates)
+        Candidate database indices per query; ``-1`` marks no candidate.
+    k : int
+        Neighbours kept per query.
+    floor : float
+        Positive floor.
+
+    Returns
+    -------
+    neigh_dist : ndarray of shape (n_queries, k)
+        Symmetric KL distances, increasing along each row.
+    neigh_ind : ndarray of shape (n_queries, k)
+        Database indices; near-ties go to the lowest index.
+    """
+    indptr, indices, values = support
+    row_s, row_mass, row_lam = row_terms
+    n_q, m = candidates.shape
+    order = np.argsort(np.where(candidates < 0, np.iinfo(np.intp).max, candidates), axis=1, kind="stable")
+    cand = np.take_along_axis(candidates, order, axis=1).astype(np.intp)
+    valid = cand >= 0
+    c = np.where(valid, cand, 0).ravel()
+    lo = indptr[c]
+    lens = np.where(valid.ravel(), indptr[c + 1] - lo, 0)
+    pair = np.repeat(np.arange(n_q * m), lens)
+    pos = np.arange(pair.size) - np.repeat(np.cumsum(lens) - lens, lens) + np.repeat(lo, lens)
+    bins = indices[pos]
+    cv = values[pos].astype(np.float64)
+    qrow = pair // m
+    hq, lq = P.H[qrow, bins], P.L[qrow, bins]
+    ln_f = np.log(floor)
+    term = (hq - cv) * (lq - np.log(cv))
+    term -= (hq - floor) * (lq - ln_f)
+    A = np.einsum("ij,ij->i", P.H - floor, P.L - ln_f)
+    D = np.bincount(pair, weights=term, minlength=n_q * m).reshape(n_q, m)
+    D += A[:, None]
+    np.maximum(D, 0.0, out=D)
+    rel = 4.0 * max(P.H.shape[1], 16) * np.finfo(np.float64).eps
+    T = (P.mass[:, None] * row_lam[cand] + P.lam[:, None] * row_mass[cand]
+         + np.abs(P.s)[:, None] + np.abs(row_s[cand])) * rel
+    D[~valid] = np.inf
+    T[~valid] = 0.0
+    pick = _smallest_k(D, T, k)
+    return np.take_along_axis(D, pick, axis=1), np.take_along_axis(cand, pick, axis=1)

@@ -414,3 +414,74 @@ def test_distances_bit_identical_for_any_thread_count(n_jobs, blas_threads):
     assert_array_equal(l, ref_l)
     assert_array_equal(k[0], ref_k[0])
     assert_array_equal(k[1], ref_k[1])
+
+
+# ---------------------------------------------------------------- joblib backends and dask
+
+
+def _force_small_blocks(monkeypatch):
+    import eppf.neighbors._kl as kl
+
+    monkeypatch.setattr(kl, "_LOO_BLOCK", 16)
+    monkeypatch.setattr(kl, "_BLOCK_ENTRIES", 16 * 70)  # 16-row blocks against 70 references
+
+
+def test_joblib_backend_is_detected():
+    from joblib import parallel_config
+
+    from eppf.neighbors._kl import _joblib_backend_is_set
+
+    assert not _joblib_backend_is_set()
+    with parallel_config(backend="threading", n_jobs=2):
+        assert _joblib_backend_is_set()
+    with parallel_config(n_jobs=2):  # no backend named: the thread pool of n_jobs stays in charge
+        assert not _joblib_backend_is_set()
+
+
+def _local_and_remote_results(X, Q, y):
+    from eppf.metrics import leave_one_out_retrieval
+
+    clf = KLNearestNeighbors(n_neighbors=3).fit(X, y)
+    return (
+        symmetric_kl_distances(X),
+        symmetric_kl_distances(Q, X),
+        clf.kneighbors(Q),
+        clf.kneighbors(),
+        leave_one_out_retrieval(X, y, return_indices=True),
+    )
+
+
+def _assert_same(a, b):
+    for u, v in zip(a, b):
+        if isinstance(u, tuple):
+            _assert_same(u, v)
+        else:
+            assert_array_equal(u, v)
+
+
+def test_threading_backend_gives_bit_identical_results(monkeypatch):
+    from joblib import parallel_config
+
+    X, y = _clustered(n_per_class=23, n_bins=50)
+    Q = _histograms(40, n_bins=50, seed=4)
+    _force_small_blocks(monkeypatch)  # many blocks: the same fixed blocks run in every case
+    local = _local_and_remote_results(X, Q, y)
+    with parallel_config(backend="threading", n_jobs=3):
+        threaded = _local_and_remote_results(X, Q, y)
+    _assert_same(local, threaded)
+
+
+def test_dask_local_cluster_gives_bit_identical_results(monkeypatch):
+    distributed = pytest.importorskip("dask.distributed")
+    from joblib import parallel_config
+
+    X, y = _clustered(n_per_class=23, n_bins=50)
+    Q = _histograms(40, n_bins=50, seed=4)
+    _force_small_blocks(monkeypatch)
+    local = _local_and_remote_results(X, Q, y)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        with parallel_config(backend="dask"), distributed.get_task_stream(client) as stream:
+            remote = _local_and_remote_results(X, Q, y)
+    _assert_same(local, remote)
+    assert len({task["worker"] for task in stream.data}) == 2  # both workers computed blocks
