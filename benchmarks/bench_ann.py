@@ -36,7 +36,7 @@ indices is printed too. The database is float32 (1,000,000 x 1,200 is
 ``--n-database`` for a smaller run first. ``--cache FILE`` keeps the real
 descriptors between runs (about 1 minute per run otherwise on 2 cores).
 
-Figures (2-vCPU AMD EPYC Zen 4 KVM guest, shared with other jobs, load
+Figures (2-vCPU Intel Xeon KVM guest, shared with other jobs, load
 average about 7; 2 threads; ``n_candidates=32, n_components=32``; the full
 table is in docs/performance.rst, "Approximate retrieval")::
 
