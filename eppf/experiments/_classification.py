@@ -35,7 +35,7 @@ RECIPE = dict(n_draws=8, stretch=(0.8, 1.25), filters=(16, 32, 24), n_hidden=256
               precision="bfloat16")
 
 
-def recommended_pipeline_parts(eppf, *, n_jobs=None, random_state=None, max_epochs=30, n_iter_no_change=8,
+def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=None, max_epochs=30, n_iter_no_change=8,
                                validation_fraction=0.1, quick=False, verbose=0):
     """The recommended descriptor pool and classifier ("EPPF 4D+"), built around an EPPF transformer.
 
@@ -54,6 +54,8 @@ def recommended_pipeline_parts(eppf, *, n_jobs=None, random_state=None, max_epoc
     ----------
     eppf : EPPFTransformer
         Unfitted; its ``random_state`` is overridden per draw.
+    conv : {"4d", "3d", "2d"}, default="4d"
+        Network variant (the recipe was chosen for "4d").
     n_jobs, random_state, max_epochs, n_iter_no_change, validation_fraction, verbose
         Passed on (the patience is at least 8 epochs unless ``quick``).
     quick : bool, default=False
@@ -73,7 +75,7 @@ def recommended_pipeline_parts(eppf, *, n_jobs=None, random_state=None, max_epoc
     pool = DescriptorPool(union, 2 if quick else RECIPE["n_draws"], augment=RandomScaling(*RECIPE["stretch"]),
                           random_state=random_state)
     patience = n_iter_no_change if quick else max(n_iter_no_change, RECIPE["min_patience"])
-    clf = EPPF4DClassifier(tuple(eppf.get_params()["n_bins"]), "4d", filters=RECIPE["filters"],
+    clf = EPPF4DClassifier(tuple(eppf.get_params()["n_bins"]), conv, filters=RECIPE["filters"],
                            n_hidden=RECIPE["n_hidden"], n_side_features="auto", lr_schedule="plateau",
                            precision=RECIPE["precision"], max_epochs=max_epochs, n_iter_no_change=patience,
                            validation_fraction=validation_fraction, early_stopping=True,
