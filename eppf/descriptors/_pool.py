@@ -279,9 +279,26 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
         _, test_seeds = self._seeds()
         return self._draws(X, self.transformers_, test_seeds[:, 1], bool(self.test_augment))
 
+    def get_feature_names_out(self, input_features=None):
+        """Names of the values of every draw (the last axis of the pools).
+
+        Parameters
+        ----------
+        input_features : None
+            Ignored (point clouds have no input feature names).
+
+        Returns
+        -------
+        feature_names_out : ndarray of str
+            The wrapped transformer's names.
+        """
+        check_is_fitted(self, "transformers_")
+        return np.asarray(self.transformers_[0].get_feature_names_out(), dtype=object)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.two_d_array = False
-        tags.input_tags.three_d_array = False
-        tags.non_deterministic = False
+        tags.input_tags.three_d_array = True  # a list of clouds (an (n, n_points, 3) array is read as one)
+        tags.requires_fit = True
+        tags.non_deterministic = self.random_state is None
         return tags

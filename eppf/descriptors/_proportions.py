@@ -70,8 +70,8 @@ class ProportionTransformer(PointCloudDescriptor):
     row is ``log(s2/s1), log(s3/s1), log(h2/h1), log(u/h1), log(e2/e1),
     log(e3/e1)``: invariant to scale and translation, to rotations about the
     up axis, and (except the two upright terms) to any rotation. A tiny
-    floor relative to the cloud's size keeps degenerate clouds (a point, a
-    line) finite.
+    floor relative to the cloud's size keeps degenerate clouds (a line, a
+    plane) finite; a cloud needs two distinct points.
 
     Parameters
     ----------
@@ -114,7 +114,7 @@ class ProportionTransformer(PointCloudDescriptor):
         "coverage": [Interval(numbers.Real, 0, 1, closed="right")],
         "n_jobs": N_JOBS,
     }
-    _min_points = 1
+    _min_points = 2
 
     def __init__(self, up_axis=2, coverage=0.96, n_jobs=None):
         self.up_axis = up_axis

@@ -499,7 +499,7 @@ def test_side_features_in_pools_and_width_errors():
     clf = EPPF4DClassifier(n_bins=N_BINS, n_side_features="auto", max_epochs=1, early_stopping=False, random_state=0,
                            **SMALL).fit(pool, y)
     assert clf.n_draws_fit_ == 2 and clf.predict_proba(pool).shape == (40, 2)
-    with pytest.raises(ValueError, match="rows have 48 values but n_bins=.* needs 50"):
+    with pytest.raises(ValueError, match="descriptors have 48 values but n_bins=.* needs 50"):
         clf.predict(X)
     with pytest.raises(ValueError, match="n_side_features for extra columns"):
         EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, **SMALL).fit(np.hstack([X, side]), y)

@@ -49,16 +49,18 @@ def test_matches_the_reference_function_and_names():
 
 
 def test_degenerate_clouds_are_finite():
-    out = ProportionTransformer().fit_transform([np.zeros((1, 3)), np.array([[0, 0, 0], [1, 0, 0.0]]),
+    out = ProportionTransformer().fit_transform([np.array([[0, 0, 0], [1, 0, 0.0]]),
                                                  np.array([[1e300, 1e300, 1e300], [-1e300, 1e300, 0.0]])])
     assert np.isfinite(out).all()
-    assert_allclose(out[0], 0.0)
+    # the reference function: a single point has all spreads 0, so every ratio is 1
+    assert_allclose(proportions(np.zeros((1, 3))), 0.0)
 
 
 @pytest.mark.parametrize("X, msg", [
-    ([np.array([[0.0, np.nan, 0.0]])], "NaN|finite"),
+    ([np.array([[0.0, np.nan, 0.0], [1.0, 0.0, 0.0]])], "NaN|finite"),
     ([np.zeros((3, 2))], "shape|columns"),
     ([np.zeros((0, 3))], "empty|point"),
+    ([np.zeros((1, 3))], "1 point"),
 ])
 def test_bad_clouds(X, msg):
     with pytest.raises(ValueError, match=msg):
