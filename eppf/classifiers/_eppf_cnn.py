@@ -125,9 +125,9 @@ class EPPF4DClassifier(SkorchClassifierBase):
         ``prod(n_bins)`` plus the side features.
     n_side_features_ : int
         Side features per row (0 without).
-    side_mean_ : ndarray of shape (n_side_features_,)
+    side_mean_ : ndarray of shape (``n_side_features_``,)
         Subtracted from the side features.
-    side_scale_ : ndarray of shape (n_side_features_,)
+    side_scale_ : ndarray of shape (``n_side_features_``,)
         Divides the centred side features.
     n_draws_fit_ : int
         Descriptor draws per object seen in ``fit`` (1 for a 2D ``X``).

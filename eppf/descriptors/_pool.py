@@ -280,7 +280,7 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
         return self._draws(X, self.transformers_, test_seeds[:, 1], bool(self.test_augment))
 
     def get_feature_names_out(self, input_features=None):
-        """Names of the values of every draw (the last axis of the pools).
+        """Get the names of the values of every draw (the last axis of the pools).
 
         Parameters
         ----------
