@@ -171,6 +171,67 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
   for bed 7, desk for night stand, bed or table 5 each, bathtub for bed 6,
   bed for sofa 5: classes told apart mostly by size or use, which a
   per-object scaled, rotation-invariant histogram does not see.
+* Side features and a smaller network (issue 17; the recipe of ``eppf
+  experiment classification``'s "EPPF 4D+" and of ``eppf train --recipe
+  recommended``). Every draw of the pool above (8 draws, training draws
+  1-7 stretched per axis in [0.8, 1.25], k = 30 normals) is followed by
+  GASD (512 values, ``eppf.GASDTransformer``) and the six
+  ``eppf.descriptors.ProportionTransformer`` log ratios of the same
+  (stretched) cloud, fed to ``EPPF4DClassifier(n_side_features="auto")``:
+  a 128-unit ReLU branch joins the flattened convolution features at the
+  dense layer. Network (16, 32, 24) filters, 256 dense units (37.6 M
+  multiply-adds per object forward against the paper's 156.9 M: 4.2x
+  fewer), Adam 5e-4 halved on plateaus, bfloat16, patience 8, at most 40
+  epochs and a 1,800 s budget (1,500 s for seeds 1 and 2), one thread per
+  run, two runs side by side on a machine shared with five other jobs
+  (load average 6 to 8: about 100 s per epoch, so every run here was
+  stopped by its time budget, not by early stopping). Scratch driver on
+  cached descriptors (made as by the ``descriptors`` part with GASD and
+  the ratios added); validation is 10% of the training objects, the test
+  split was scored once per run, after training:
+
+  ==============================  ====  ======  ====  =====  =====  =====
+  run (all 4D, small network)     seed  epochs  best  val    TTA    sTTA
+  ==============================  ====  ======  ====  =====  =====  =====
+  EPPF only (no side features)    0     18      18    88.2   82.16  83.70
+  EPPF + GASD + ratios            0     18      17    94.0   86.78  87.89
+  EPPF + GASD + ratios            1     22      19    95.0   87.11  87.44
+  EPPF + GASD + ratios            2     19      16    94.0   86.78  88.11
+  ==============================  ====  ======  ====  =====  =====  =====
+
+  Over the three seeds (weights, batches, validation split): sTTA
+  87.81 +- 0.34% (sample standard deviation; 87.44 to 88.11), mean class
+  accuracy 86.66 to 87.10%; averaging the three networks' probabilities
+  gives 88.33%. The 90% target is not reached.
+
+  (test total accuracy in %; TTA averages over 8 plain test draws, sTTA
+  over a plain and 7 stretched copies, which is what ``DescriptorPool``'s
+  ``transform`` returns.) At the same wall budget the side features lift
+  validation accuracy by 6 points and test accuracy by 4; the KL 1-NN on
+  draw 0 of the same EPPF descriptors gets 80.95%. The errors left
+  (seed 0, sTTA): table taken for desk 22 times, dresser for night stand
+  19 and the reverse 12, desk for table 9, bathtub for bed 7. The
+  machine of these rows is a 2-vCPU KVM guest reporting an Intel Xeon with
+  AVX512_BF16 and AMX (``lscpu``), not the Zen 4 of the rows above.
+  On DALES objects the same recipe loses: ``eppf experiment
+  classification --data dales_objects.npz --scaling fit --epochs 30
+  --models 4d+ kl``: 4D+ 88.00%, KL 1-NN 96.00% (the paper's 4D network
+  96.00% in the shipped report); on the training objects of that run's
+  pools with 20% held out for validation, the small network without the
+  side columns reaches validation 98.6% (loss 0.094), with them 97.1%
+  (loss 0.452): with 349 training objects in metres the 518 side values
+  over-fit.
+* Epoch time of the recommended network on that Xeon guest, under load
+  (load average 4 to 5 from other jobs; ``PYTHONPATH=. python
+  benchmarks/bench_cnn.py epoch --threads 2 --max-epochs 2 --variants 4d
+  --precision bfloat16 --recommended``, and ``--max-epochs 1`` for the
+  others): 4D+ bfloat16 96.2 s wall, 61.5 CPU s per 4,000-object epoch;
+  4D+ float32 100.9 s wall, 64.4 CPU s; the paper's 4D network, bfloat16,
+  199.8 s wall, 115.9 CPU s. The smaller network halves the CPU time of an
+  epoch here (the 4.2x fewer multiply-adds do not all show: its narrower
+  layers run further from peak). The 20 s target could not be checked on
+  this shared machine; on the quiet Zen 4 above the paper's network took
+  17.3 s in bfloat16.
 """
 
 import argparse
@@ -347,11 +408,17 @@ def epoch(args):
     rng = np.random.default_rng(0)
     X = rng.dirichlet(np.ones(1200), size=4000).astype(np.float32)
     y = rng.integers(0, 10, 4000)
+    extra = {}
+    if args.recommended:  # the "4D+" network: smaller, 512 GASD + 6 proportion side features
+        from eppf.experiments._classification import RECIPE
+
+        X = np.hstack([X, rng.random((4000, 518), dtype=np.float32)])
+        extra = dict(filters=RECIPE["filters"], n_hidden=RECIPE["n_hidden"], n_side_features="auto")
     for precision in args.precision:
         for conv in args.variants:
             clf = EPPF4DClassifier(
                 conv=conv, max_epochs=args.max_epochs, early_stopping=False, batch_size=args.batch_size,
-                n_jobs=args.threads, random_state=0, precision=precision,
+                n_jobs=args.threads, random_state=0, precision=precision, **extra,
             )
             load = _os.getloadavg()[0]
             c0, w0 = time.process_time(), time.perf_counter()
@@ -488,6 +555,8 @@ def main(argv=None):
     )
     parser.add_argument("--weight-decay", type=float, default=0.0)
     parser.add_argument("--augment", action="store_true")
+    parser.add_argument("--recommended", action="store_true",
+                        help="epoch: time the recommended network (eppf experiment's 'EPPF 4D+') with side features")
     parser.add_argument(
         "--stretch", nargs=2, type=float, metavar=("LOW", "HIGH"),
         help="descriptors: stretch the training clouds of draws 1.. by random per-axis factors in [LOW, HIGH]",

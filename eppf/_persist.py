@@ -56,6 +56,8 @@ _ALLOWED = {
     "eppf.GASDColorTransformer": ("eppf.descriptors", "GASDColorTransformer"),
     "eppf.GRSDTransformer": ("eppf.descriptors", "GRSDTransformer"),
     "eppf.DescriptorUnion": ("eppf.descriptors", "DescriptorUnion"),
+    "eppf.DescriptorPool": ("eppf.descriptors", "DescriptorPool"),
+    "eppf.ProportionTransformer": ("eppf.descriptors", "ProportionTransformer"),
     "eppf.EPPFGASDTransformer": ("eppf.descriptors", "EPPFGASDTransformer"),
     "eppf.KLNearestNeighbors": ("eppf.neighbors", "KLNearestNeighbors"),
     "eppf.EPPF4DClassifier": ("eppf.classifiers", "EPPF4DClassifier"),

@@ -52,6 +52,7 @@ TINY = {
     "WahlTransformer": dict(n_pairs=300),
     "EPPFGASDTransformer": dict(n_pairs=300),
     "Resampler": dict(n_points=32),
+    "DescriptorPool": dict(n_draws=2),
     "PointNetClassifier": dict(n_points=16, max_epochs=1, batch_size=4, early_stopping=False, n_jobs=1),
     "EPPF4DClassifier": dict(n_bins=(2, 2, 3, 1), max_epochs=1, n_hidden=4, filters=(2, 2, 2), batch_size=4,
                              early_stopping=False, n_jobs=1),
@@ -64,7 +65,7 @@ def _tiny(cls, **fixed):
     params = dict(TINY.get(cls.__name__, {}))
     if "random_state" in accepted:
         params["random_state"] = 0
-    if cls.__name__ == "CachedTransformer":  # a wrapper: give it a small seeded descriptor to wrap
+    if cls.__name__ in ("CachedTransformer", "DescriptorPool"):  # a wrapper: give it a small seeded descriptor
         from eppf.descriptors import ESFTransformer
 
         params["transformer"] = _tiny(ESFTransformer)
@@ -344,7 +345,7 @@ def check_get_feature_names_out(est):
         assert not hasattr(fitted, "get_feature_names_out")
         return
     names = fitted.get_feature_names_out()
-    assert len(names) == out.shape[1]
+    assert len(names) == out.shape[-1]  # the last axis (a descriptor pool's is (objects, draws, features))
     assert all(isinstance(n, str) for n in names)
     assert len(set(names)) == len(names)
     assert_array_equal(fitted.get_feature_names_out(None), names)
@@ -432,10 +433,12 @@ def check_output_dtype_and_shape(est):
             assert isinstance(new, np.ndarray) and new.ndim == 2 and new.shape[1] == np.shape(cloud)[1]
             assert new.dtype == np.float64 and np.isfinite(new).all()
     else:
-        assert isinstance(out, np.ndarray) and out.shape[0] == len(X) and out.ndim == 2
+        # a descriptor pool is (objects, draws, features), every other transformer (objects, features)
+        ndim = 3 if type(est).__name__ == "DescriptorPool" else 2
+        assert isinstance(out, np.ndarray) and out.shape[0] == len(X) and out.ndim == ndim
         assert out.dtype == np.float64 and np.isfinite(out).all()
         if hasattr(fitted, "n_features_out_"):
-            assert out.shape[1] == fitted.n_features_out_
+            assert out.shape[-1] == fitted.n_features_out_
     # float32 input: float32 out only if the tags say the dtype is preserved
     out32 = _output(_fit(clone(est), [np.asarray(c, dtype=np.float32) for c in X], y),
                     [np.asarray(c, dtype=np.float32) for c in X])

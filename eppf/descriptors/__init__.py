@@ -17,7 +17,9 @@ its own module with its compiled kernel beside it (``_esf.py`` over
   Spatial Distribution (Lima & Teichrieb 2016), shape and shape + colour;
 - :class:`DescriptorUnion`: several descriptors weighted into one row;
   :class:`EPPFGASDTransformer`, its measured EPPF + GASD preset;
-- :func:`descriptor_pool`: several seeded draws of one descriptor per object.
+- :func:`descriptor_pool`: several seeded draws of one descriptor per object;
+  :class:`DescriptorPool`, the same as a pipeline step;
+- :class:`ProportionTransformer`: six scale-invariant proportions (a side input).
 """
 
 from ._eppf import FUNCTIONS, EPPFTransformer
@@ -26,13 +28,15 @@ from ._esf import ESFTransformer
 from ._gasd import GASDColorTransformer, GASDTransformer, gasd_alignment
 from ._grsd import GRSDTransformer
 from ._ourcvfh import OURCVFHTransformer
-from ._pool import descriptor_pool
+from ._pool import DescriptorPool, descriptor_pool
+from ._proportions import ProportionTransformer
 from ._union import DescriptorUnion, EPPFGASDTransformer
 from ._vfh import VFHTransformer
 from ._wahl import WahlTransformer
 
 __all__ = [
     "CVFHTransformer",
+    "DescriptorPool",
     "DescriptorUnion",
     "EPPFTransformer",
     "EPPFGASDTransformer",
@@ -42,6 +46,7 @@ __all__ = [
     "GASDTransformer",
     "GRSDTransformer",
     "OURCVFHTransformer",
+    "ProportionTransformer",
     "VFHTransformer",
     "WahlTransformer",
     "descriptor_pool",

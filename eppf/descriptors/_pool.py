@@ -3,10 +3,11 @@
 import numbers
 
 import numpy as np
-from sklearn.base import clone
+from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.utils import check_random_state
+from sklearn.utils.validation import check_is_fitted
 
-__all__ = ["descriptor_pool"]
+__all__ = ["DescriptorPool", "descriptor_pool"]
 
 _OWNER = "descriptor_pool"
 
@@ -88,3 +89,216 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
         clouds = X if augment is None or r == 0 else clone(augment).set_params(random_state=int(aug_seed)).fit_transform(X)
         draws.append(np.asarray(est.transform(clouds)))
     return np.stack(draws, axis=1)
+
+
+def _seed_params(est, seed):
+    """``est`` with every ``random_state`` it has, nested ones included, set to ``seed``."""
+    keys = [k for k in est.get_params(deep=True) if k == "random_state" or k.endswith("__random_state")]
+    return est.set_params(**{k: int(seed) for k in keys})
+
+
+class DescriptorPool(TransformerMixin, BaseEstimator):
+    """Describe every cloud several times: a descriptor pool as a pipeline step.
+
+    The transformer form of :func:`descriptor_pool`, so that a
+    :class:`~sklearn.pipeline.Pipeline` of this step and
+    :class:`eppf.classifiers.EPPF4DClassifier` trains on fresh draws every
+    epoch and averages its predictions over draws, with no hand-stacked
+    arrays. ``fit_transform`` (what ``Pipeline.fit`` calls) returns the
+    training pool: draw 0 describes the clouds as given, draws ``1 ..
+    n_draws - 1`` describe copies perturbed by ``augment``. ``transform``
+    (what ``Pipeline.predict`` calls) returns ``test_draws`` draws for
+    test-time averaging: draw 0 plain, the others perturbed when
+    ``test_augment``, with seeds of their own (never the training ones).
+
+    Parameters
+    ----------
+    transformer : estimator
+        A descriptor transformer (:class:`EPPFTransformer`,
+        :class:`DescriptorUnion`, ...). Every ``random_state`` parameter it
+        has, nested ones included, is set per draw; draw ``r`` is described
+        by a clone fitted on the clouds given to ``fit``.
+    n_draws : int, default=8
+        Draws per object in the training pool.
+    augment : transformer or None, default=None
+        Perturbs a list of clouds (``fit_transform``) and has a
+        ``random_state`` parameter, e.g.
+        :class:`eppf.preprocessing.RandomScaling`. None: the draws differ
+        only in their random point pairs.
+    test_draws : int, default=None
+        Draws per object returned by ``transform``; None means ``n_draws``.
+    test_augment : bool, default=True
+        Whether draws ``1 ..`` of ``transform`` describe perturbed copies too
+        (test-time augmentation); False describes the clouds as given in
+        every draw.
+    random_state : int, RandomState instance or None, default=None
+        Seed of the per-draw seeds; an int gives the same pools on every call.
+
+    Attributes
+    ----------
+    transformers_ : list of estimator
+        The fitted clone of ``transformer`` of every draw.
+    n_features_out_ : int
+        Values per draw.
+
+    See Also
+    --------
+    descriptor_pool : The same pool as a function.
+    eppf.classifiers.EPPF4DClassifier : Reads pools of shape (n_objects, n_draws, n_features).
+
+    Notes
+    -----
+    ``fit_transform(X)`` differs from ``fit(X).transform(X)`` on purpose:
+    the first is the augmented training pool, the second the test-time pool
+    (other seeds), as for any augmentation step.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf import EPPFTransformer
+    >>> from eppf.descriptors import DescriptorPool
+    >>> from eppf.preprocessing import RandomScaling
+    >>> clouds = [np.random.RandomState(i).normal(size=(200, 3)) for i in range(3)]
+    >>> pool = DescriptorPool(EPPFTransformer(n_pairs=500), 3, augment=RandomScaling(), test_draws=2,
+    ...                       random_state=0)
+    >>> pool.fit_transform(clouds).shape, pool.transform(clouds).shape
+    ((3, 3, 1200), (3, 2, 1200))
+    """
+
+    def __init__(self, transformer, n_draws=8, *, augment=None, test_draws=None, test_augment=True,
+                 random_state=None):
+        self.transformer = transformer
+        self.n_draws = n_draws
+        self.augment = augment
+        self.test_draws = test_draws
+        self.test_augment = test_augment
+        self.random_state = random_state
+
+    def _check_params(self):
+        owner = type(self).__name__
+        for name, value, none_ok in (("n_draws", self.n_draws, False), ("test_draws", self.test_draws, True)):
+            if value is None and none_ok:
+                continue
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+                raise TypeError(f"{owner}: {name} must be an int, got {type(value).__name__}")
+            if value < 1:
+                raise ValueError(f"{owner}: {name} must be >= 1, got {value}")
+        if not isinstance(self.test_augment, (bool, np.bool_)):
+            raise TypeError(f"{owner}: test_augment must be True or False, got {self.test_augment!r}")
+        for role, est, methods in (("transformer", self.transformer, ("fit", "transform")),
+                                   ("augment", self.augment, ("fit_transform",))):
+            if est is None and role == "augment":
+                continue
+            missing = [m for m in methods if not callable(getattr(est, m, None))]
+            params = getattr(est, "get_params", lambda deep=True: {})(deep=True)
+            if missing or not any(k == "random_state" or k.endswith("__random_state") for k in params):
+                raise TypeError(
+                    f"{owner}: {role} must be a scikit-learn style estimator with {' and '.join(methods)} and a "
+                    f"random_state parameter, got {type(est).__name__}"
+                )
+
+    def _seeds(self):
+        # Columns: descriptor seed and augmentation seed of each training draw, then of each test draw.
+        rng = check_random_state(self.random_state)
+        n_test = self.n_draws if self.test_draws is None else self.test_draws
+        return rng.randint(np.iinfo(np.int32).max, size=(int(self.n_draws), 2)), \
+            rng.randint(np.iinfo(np.int32).max, size=(int(n_test), 2))
+
+    def _draws(self, X, transformers, aug_seeds, augment):
+        draws = []
+        for r, aug_seed in enumerate(aug_seeds):
+            clouds = X
+            if augment and self.augment is not None and r > 0:
+                clouds = _seed_params(clone(self.augment), aug_seed).fit_transform(X)
+            draws.append(np.asarray(transformers[r % len(transformers)].transform(clouds)))
+        pool = np.stack(draws, axis=1)
+        self.n_features_out_ = pool.shape[2]
+        return pool
+
+    def fit(self, X, y=None):
+        """Fit one clone of ``transformer`` per draw.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : DescriptorPool
+            Fitted transformer.
+        """
+        self._check_params()
+        if hasattr(X, "__next__"):
+            X = list(X)
+        train_seeds, _ = self._seeds()
+        self.transformers_ = [_seed_params(clone(self.transformer), s).fit(X) for s, _ in train_seeds]
+        return self
+
+    def fit_transform(self, X, y=None):
+        """Fit, then return the augmented training pool.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        pool : ndarray of shape (n_objects, n_draws, n_features)
+            Draw 0 of the clouds as given, the others of perturbed copies.
+        """
+        if hasattr(X, "__next__"):
+            X = list(X)
+        self.fit(X)
+        train_seeds, _ = self._seeds()
+        return self._draws(X, self.transformers_, train_seeds[:, 1], True)
+
+    def transform(self, X):
+        """The test-time pool.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds.
+
+        Returns
+        -------
+        pool : ndarray of shape (n_objects, test_draws, n_features)
+            Draw 0 of the clouds as given; the others perturbed when
+            ``test_augment``. Draw ``r`` uses the fitted transformer
+            ``r % n_draws``.
+        """
+        check_is_fitted(self, "transformers_")
+        if hasattr(X, "__next__"):
+            X = list(X)
+        _, test_seeds = self._seeds()
+        return self._draws(X, self.transformers_, test_seeds[:, 1], bool(self.test_augment))
+
+    def get_feature_names_out(self, input_features=None):
+        """Get the names of the values of every draw (the last axis of the pools).
+
+        Parameters
+        ----------
+        input_features : None
+            Ignored (point clouds have no input feature names).
+
+        Returns
+        -------
+        feature_names_out : ndarray of str
+            The wrapped transformer's names.
+        """
+        check_is_fitted(self, "transformers_")
+        return np.asarray(self.transformers_[0].get_feature_names_out(), dtype=object)
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.input_tags.two_d_array = False
+        tags.input_tags.three_d_array = True  # a list of clouds (an (n, n_points, 3) array is read as one)
+        tags.requires_fit = True
+        tags.non_deterministic = self.random_state is None
+        return tags

@@ -210,21 +210,58 @@ def _check_network_args(owner, n_bins, n_classes, dropout, filters, n_hidden):
     return n_bins, int(n_classes), float(dropout), tuple(int(f) for f in filters), int(n_hidden)
 
 
-class _EPPFNetBase(nn.Module):
-    """Shared head (max-pool, dense, dropout, dense) and the precision switch.
+def _check_options(owner, n_side, side_hidden, batch_norm):
+    for name, value, low in (("n_side", n_side, 0), ("side_hidden", side_hidden, 1)):
+        if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < low:
+            raise ValueError(f"{owner}: {name} must be an int >= {low}, got {value!r}")
+    if not isinstance(batch_norm, bool):
+        raise ValueError(f"{owner}: batch_norm must be True or False, got {batch_norm!r}")
+    return int(n_side), int(side_hidden), batch_norm
 
-    Subclasses implement ``_body``: the convolutions (each followed by a
-    ReLU) from a checked (batch, n_features) tensor to the head's input.
+
+class _ChannelNorm(nn.BatchNorm1d):
+    """Batch normalisation over dimension 1 of a tensor of any rank >= 2.
+
+    ``torch.nn.functional.batch_norm`` normalises every channel over all
+    other axes whatever the rank; only the rank check of ``BatchNorm1d`` is
+    relaxed, so the 4D network's (batch, C, n1, n2, n3) tensors need no copy.
     """
 
+    def _check_input_dim(self, input):
+        if input.dim() < 2:
+            raise ValueError(f"_ChannelNorm: expected a tensor of rank >= 2, got {input.dim()}")
+
+
+class _EPPFNetBase(nn.Module):
+    """Shared head (max-pool, dense, dropout, dense), options and the precision switch.
+
+    Subclasses implement ``_body``: the convolutions (each followed by
+    :meth:`_act`) from a checked (batch, n_features) tensor to the head's
+    input, and call :meth:`_init_options` before building their layers.
+    """
+
+    def _init_options(self, owner, n_side, side_hidden, batch_norm, filters):
+        self.n_side, self.side_hidden, self.batch_norm = _check_options(owner, n_side, side_hidden, batch_norm)
+        if self.batch_norm:
+            self.norms = nn.ModuleList(_ChannelNorm(f) for f in filters)
+
+    def _act(self, x, i):
+        """ReLU after convolution ``i``, batch-normalised first when ``batch_norm``."""
+        if getattr(self, "batch_norm", False):
+            x = self.norms[i](x)
+        return torch.relu(x)
+
     def forward(self, x):
-        """Logits, float32, for a (batch, prod(n_bins)) tensor of descriptors."""
+        """Logits, float32, for a (batch, prod(n_bins) + n_side) tensor: descriptors, then side features."""
         self._check_features(x)
+        n = self.n_features
+        side = x[:, n:] if getattr(self, "n_side", 0) else None
+        x = x[:, :n] if side is not None else x
         # (getattr: networks pickled before the option existed are float32)
         if getattr(self, "precision", "float32") == "float32":
-            return self._head(self._body(x))
+            return self._head(self._body(x), side)
         with torch.autocast(device_type=x.device.type, dtype=torch.bfloat16):
-            out = self._head(self._body(x))
+            out = self._head(self._body(x), side)
         return out.float()
 
     def _build_head(self, n_channels, spatial, pool, n_hidden, dropout, n_classes):
@@ -232,21 +269,29 @@ class _EPPFNetBase(nn.Module):
         self.pool = pool_layer(pool, stride=pool, ceil_mode=True)
         pooled = [math.ceil(s / p) for s, p in zip(spatial, pool)]
         self.n_flat = n_channels * math.prod(pooled)
-        self.fc1 = nn.Linear(self.n_flat, n_hidden)
+        n_in = self.n_flat
+        if getattr(self, "n_side", 0):
+            self.side = nn.Sequential(nn.Linear(self.n_side, self.side_hidden), nn.ReLU())
+            n_in += self.side_hidden
+        self.fc1 = nn.Linear(n_in, n_hidden)
         self.dropout = nn.Dropout(dropout)
         self.fc2 = nn.Linear(n_hidden, n_classes)
 
-    def _head(self, x):
+    def _head(self, x, side=None):
         x = self.pool(x)
         x = torch.flatten(x, 1)
+        if side is not None:
+            x = torch.cat([x, self.side(side).to(x.dtype)], dim=1)
         x = self.dropout(torch.relu(self.fc1(x)))
         return self.fc2(x)
 
     def _check_features(self, x):
-        if x.dim() != 2 or x.shape[1] != self.n_features:
+        n_side = getattr(self, "n_side", 0)
+        if x.dim() != 2 or x.shape[1] != self.n_features + n_side:
+            extra = f" + {n_side} side features" if n_side else ""
             raise ValueError(
-                f"{type(self).__name__}: expected input of shape (batch, {self.n_features}) for n_bins="
-                f"{self.n_bins}, got {tuple(x.shape)}"
+                f"{type(self).__name__}: expected input of shape (batch, {self.n_features + n_side}) for n_bins="
+                f"{self.n_bins}{extra}, got {tuple(x.shape)}"
             )
 
 
@@ -273,6 +318,16 @@ class EPPFNet4D(_EPPFNetBase):
     precision : {"float32", "bfloat16"}, default="float32"
         Arithmetic of the forward pass; "bfloat16" is mixed precision under
         :func:`torch.autocast` (see :func:`check_precision`).
+    n_side : int, default=0
+        Side features after the descriptor's bins in every input row (beyond
+        the paper; 0 is Table I). They pass a dense layer of ``side_hidden``
+        units with a ReLU whose output joins the flattened convolution
+        features at the input of the first dense layer.
+    side_hidden : int, default=128
+        Units of the side branch (unused when ``n_side == 0``).
+    batch_norm : bool, default=False
+        Batch normalisation between every convolution and its ReLU (beyond
+        the paper).
 
     Attributes
     ----------
@@ -310,11 +365,16 @@ class EPPFNet4D(_EPPFNetBase):
         kernel_size_2d=(5, 5),
         n_hidden=1024,
         precision="float32",
+        *,
+        n_side=0,
+        side_hidden=128,
+        batch_norm=False,
     ):
         super().__init__()
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet4D", n_bins, n_classes, dropout, filters, n_hidden
         )
+        self._init_options("EPPFNet4D", n_side, side_hidden, batch_norm, filters)
         self.precision = check_precision(precision, owner="EPPFNet4D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
@@ -331,19 +391,19 @@ class EPPFNet4D(_EPPFNetBase):
         if self.conv1.kernel_size[3] == 1 and self.conv2.kernel_size[3] == 1 and self.folded:
             # Fast route: keep f4 folded into the batch through both 4D layers.
             x = x.reshape(batch, 1, n1, n2, n3, n4).permute(0, 5, 1, 2, 3, 4).reshape(batch * n4, 1, n1, n2, n3)
-            x = torch.relu(self.conv1.forward_folded(x))
-            x = torch.relu(self.conv2.forward_folded(x))
+            x = self._act(self.conv1.forward_folded(x), 0)
+            x = self._act(self.conv2.forward_folded(x), 1)
             x = x.reshape(batch, n4, x.shape[1], n1, n2, n3).permute(0, 3, 4, 5, 1, 2)
         else:
             x = x.reshape(batch, 1, n1, n2, n3, n4)
-            x = torch.relu(self.conv1(x))
-            x = torch.relu(self.conv2(x))
+            x = self._act(self.conv1(x), 0)
+            x = self._act(self.conv2(x), 1)
             x = x.permute(0, 2, 3, 4, 5, 1)
         # (batch, n1, n2, n3, n4, C) -> channels-last (batch, C, rows, cols): the
         # plane is each channel's 4D response in C order, and the channels-last
         # memory layout is the fast one for the CPU convolution that follows.
         x = x.reshape(batch, *self.plane, x.shape[-1]).permute(0, 3, 1, 2)
-        return torch.relu(self.conv3(x))
+        return self._act(self.conv3(x), 2)
 
 
 class EPPFNet2D(_EPPFNetBase):
@@ -366,6 +426,16 @@ class EPPFNet2D(_EPPFNetBase):
         Units of the first dense layer.
     precision : {"float32", "bfloat16"}, default="float32"
         Arithmetic of the forward pass (see :class:`EPPFNet4D`).
+    n_side : int, default=0
+        Side features after the descriptor's bins in every input row (beyond
+        the paper; 0 is Table I). They pass a dense layer of ``side_hidden``
+        units with a ReLU whose output joins the flattened convolution
+        features at the input of the first dense layer.
+    side_hidden : int, default=128
+        Units of the side branch (unused when ``n_side == 0``).
+    batch_norm : bool, default=False
+        Batch normalisation between every convolution and its ReLU (beyond
+        the paper).
 
     Attributes
     ----------
@@ -399,11 +469,16 @@ class EPPFNet2D(_EPPFNetBase):
         kernel_size=(5, 5),
         n_hidden=1024,
         precision="float32",
+        *,
+        n_side=0,
+        side_hidden=128,
+        batch_norm=False,
     ):
         super().__init__()
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet2D", n_bins, n_classes, dropout, filters, n_hidden
         )
+        self._init_options("EPPFNet2D", n_side, side_hidden, batch_norm, filters)
         self.precision = check_precision(precision, owner="EPPFNet2D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
@@ -416,9 +491,9 @@ class EPPFNet2D(_EPPFNetBase):
 
     def _body(self, x):
         x = x.reshape(x.shape[0], 1, *self.plane).contiguous(memory_format=torch.channels_last)
-        x = torch.relu(self.conv1(x))
-        x = torch.relu(self.conv2(x))
-        return torch.relu(self.conv3(x))
+        x = self._act(self.conv1(x), 0)
+        x = self._act(self.conv2(x), 1)
+        return self._act(self.conv3(x), 2)
 
 
 class EPPFNet3D(_EPPFNetBase):
@@ -441,6 +516,16 @@ class EPPFNet3D(_EPPFNetBase):
         Units of the first dense layer.
     precision : {"float32", "bfloat16"}, default="float32"
         Arithmetic of the forward pass (see :class:`EPPFNet4D`).
+    n_side : int, default=0
+        Side features after the descriptor's bins in every input row (beyond
+        the paper; 0 is Table I). They pass a dense layer of ``side_hidden``
+        units with a ReLU whose output joins the flattened convolution
+        features at the input of the first dense layer.
+    side_hidden : int, default=128
+        Units of the side branch (unused when ``n_side == 0``).
+    batch_norm : bool, default=False
+        Batch normalisation between every convolution and its ReLU (beyond
+        the paper).
 
     Attributes
     ----------
@@ -476,11 +561,16 @@ class EPPFNet3D(_EPPFNetBase):
         kernel_size=(5, 5, 1),
         n_hidden=1024,
         precision="float32",
+        *,
+        n_side=0,
+        side_hidden=128,
+        batch_norm=False,
     ):
         super().__init__()
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet3D", n_bins, n_classes, dropout, filters, n_hidden
         )
+        self._init_options("EPPFNet3D", n_side, side_hidden, batch_norm, filters)
         self.precision = check_precision(precision, owner="EPPFNet3D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
@@ -493,6 +583,6 @@ class EPPFNet3D(_EPPFNetBase):
 
     def _body(self, x):
         x = x.reshape(x.shape[0], 1, *self.volume)
-        x = torch.relu(self.conv1(x))
-        x = torch.relu(self.conv2(x))
-        return torch.relu(self.conv3(x))
+        x = self._act(self.conv1(x), 0)
+        x = self._act(self.conv2(x), 1)
+        return self._act(self.conv3(x), 2)

@@ -459,3 +459,93 @@ def test_tags():
     assert tags.input_tags.three_d_array
     assert not tags.non_deterministic
     assert EPPF4DClassifier(device="cuda").__sklearn_tags__().non_deterministic
+
+
+# ------------------------------------------------- options beyond the paper
+def _side_toy(rng, n=60):
+    """Descriptors that are pure noise; the label sits in one of two side columns."""
+    X = rng.dirichlet(np.ones(math.prod(N_BINS)), size=n)
+    y = rng.integers(0, 2, n)
+    side = np.column_stack([np.where(y == 1, 1.0, -1.0) + 0.1 * rng.standard_normal(n), rng.standard_normal(n)])
+    return X, side * 50 + 7, np.asarray(["no", "yes"])[y]  # far from standardised: the classifier must scale them
+
+
+def test_side_features_are_learned_and_standardised_on_their_own():
+    rng = np.random.default_rng(0)
+    X, side, y = _side_toy(rng)
+    params = dict(n_bins=N_BINS, max_epochs=6, lr=1e-2, early_stopping=False, random_state=0, **SMALL)
+    with_side = EPPF4DClassifier(n_side_features="auto", **params).fit(np.hstack([X, side]), y)
+    assert with_side.n_side_features_ == 2 and with_side.n_features_in_ == X.shape[1] + 2
+    assert_allclose(with_side.side_mean_, side.mean(axis=0), rtol=1e-5)
+    assert_allclose(with_side.side_scale_, side.std(axis=0), rtol=1e-5)
+    # the descriptor's global scaling ignores the side columns
+    assert_allclose(with_side.input_mean_, [X.mean()], rtol=1e-5)
+    X2, side2, y2 = _side_toy(np.random.default_rng(1))
+    assert np.mean(with_side.predict(np.hstack([X2, side2])) == y2) > 0.9
+    # an explicit count is the same model
+    one = dict(params, max_epochs=1)
+    explicit = EPPF4DClassifier(n_side_features=2, **one).fit(np.hstack([X, side]), y)
+    auto = EPPF4DClassifier(n_side_features="auto", **one).fit(np.hstack([X, side]), y)
+    assert_allclose(explicit.predict_proba(np.hstack([X2, side2])), auto.predict_proba(np.hstack([X2, side2])))
+    # without the side columns the label cannot be learned
+    alone = EPPF4DClassifier(**params).fit(X, y)
+    assert np.mean(alone.predict(X2) == y2) < 0.75
+
+
+def test_side_features_in_pools_and_width_errors():
+    rng = np.random.default_rng(0)
+    X, side, y = _side_toy(rng, 40)
+    pool = np.stack([np.hstack([X, side]), np.hstack([X[::-1] * 0 + X, side + 1])], axis=1)
+    clf = EPPF4DClassifier(n_bins=N_BINS, n_side_features="auto", max_epochs=1, early_stopping=False, random_state=0,
+                           **SMALL).fit(pool, y)
+    assert clf.n_draws_fit_ == 2 and clf.predict_proba(pool).shape == (40, 2)
+    with pytest.raises(ValueError, match="descriptors have 48 values but n_bins=.* needs 50"):
+        clf.predict(X)
+    with pytest.raises(ValueError, match="n_side_features for extra columns"):
+        EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, **SMALL).fit(np.hstack([X, side]), y)
+    with pytest.raises(ValueError, match="n_side_features=3 needs 51"):
+        EPPF4DClassifier(n_bins=N_BINS, n_side_features=3, max_epochs=1, **SMALL).fit(np.hstack([X, side]), y)
+    with pytest.raises(ValueError, match="needs at least 48"):
+        EPPF4DClassifier(n_bins=N_BINS, n_side_features="auto", max_epochs=1, **SMALL).fit(X[:, :10], y)
+
+
+def test_batch_norm_label_smoothing_and_side_features_survive_save_and_load(tmp_path):
+    import eppf
+
+    rng = np.random.default_rng(0)
+    X, side, y = _side_toy(rng, 40)
+    Xs = np.hstack([X, side])
+    clf = EPPF4DClassifier(n_bins=N_BINS, n_side_features="auto", batch_norm=True, label_smoothing=0.2, max_epochs=2,
+                           early_stopping=False, random_state=0, **SMALL).fit(Xs, y)
+    assert clf.net_.criterion_.label_smoothing == pytest.approx(0.2)
+    assert clf.net_.module_.batch_norm and len(clf.net_.module_.norms) == 3
+    path = tmp_path / "m.eppf"
+    eppf.save_model(clf, path)
+    loaded = eppf.load_model(path)
+    assert_array_equal(loaded.predict_proba(Xs), clf.predict_proba(Xs))
+
+
+def test_label_smoothing_softens_the_training_loss_floor():
+    # with smoothing s over k classes the cross-entropy cannot fall below the entropy of the smoothed target
+    rng = np.random.default_rng(0)
+    X, y = _toy(60, rng)
+    clf = EPPF4DClassifier(n_bins=N_BINS, label_smoothing=0.3, max_epochs=10, lr=1e-2, early_stopping=False,
+                           random_state=0, **SMALL).fit(X, y)
+    k, s = 3, 0.3
+    q = np.full(k, s / k)
+    q[0] += 1 - s
+    floor = -(q * np.log(q)).sum()
+    assert min(clf.net_.history[:, "train_loss"]) > floor - 1e-3
+
+
+@pytest.mark.parametrize("params, msg", [
+    (dict(n_side_features=-1), "n_side_features"),
+    (dict(n_side_features="some"), "n_side_features"),
+    (dict(side_hidden=0), "side_hidden"),
+    (dict(batch_norm=1), "batch_norm"),
+    (dict(label_smoothing=1.0), "label_smoothing"),
+])
+def test_bad_option_values(params, msg):
+    X, y = _toy(20, np.random.default_rng(0))
+    with pytest.raises(ValueError, match=msg):
+        EPPF4DClassifier(n_bins=N_BINS, **params).fit(X, y)

@@ -80,3 +80,76 @@ def test_errors(kwargs, exc, msg):
 def test_bad_clouds_are_reported_by_the_transformer():
     with pytest.raises(ValueError, match="EPPFTransformer: point cloud 1 contains NaN"):
         descriptor_pool(TR, [np.ones((5, 3)) * np.arange(5)[:, None], np.full((5, 3), np.nan)], 2)
+
+
+# ------------------------------------------------------------ DescriptorPool
+def test_descriptor_pool_step_training_and_test_pools():
+    from eppf.descriptors import DescriptorPool
+    from eppf.descriptors._pool import _seed_params
+
+    X = _clouds()
+    step = DescriptorPool(TR, 3, augment=RandomScaling(0.5, 2.0), test_draws=2, random_state=0)
+    train = step.fit_transform(X)
+    assert train.shape == (4, 3, 1200) and step.n_features_out_ == 1200 and len(step.transformers_) == 3
+    rng = np.random.RandomState(0)
+    seeds, test_seeds = rng.randint(np.iinfo(np.int32).max, size=(3, 2)), rng.randint(np.iinfo(np.int32).max, size=(2, 2))
+    for r in range(3):  # draw r: its own seeded transformer; draws 1.. of stretched copies
+        clouds = X if r == 0 else RandomScaling(0.5, 2.0, random_state=int(seeds[r, 1])).fit_transform(X)
+        ref = EPPFTransformer(n_pairs=800, n_neighbors=10, random_state=int(seeds[r, 0])).fit(X).transform(clouds)
+        assert_array_equal(train[:, r], ref)
+    test = step.transform(X)
+    assert test.shape == (4, 2, 1200)
+    assert_array_equal(test[:, 0], train[:, 0])  # draw 0 is the plain clouds through transformer 0
+    stretched = RandomScaling(0.5, 2.0, random_state=int(test_seeds[1, 1])).fit_transform(X)
+    assert_array_equal(test[:, 1], step.transformers_[1].transform(stretched))
+    assert not np.array_equal(test[:, 1], train[:, 1])  # test copies are not the training ones
+    # without test-time augmentation every draw describes the clouds as given
+    plain = step.set_params(test_augment=False).transform(X)
+    assert_array_equal(plain[:, 1], step.transformers_[1].transform(X))
+    # reproducible, and nested random_state parameters are the ones seeded
+    assert_array_equal(DescriptorPool(TR, 3, augment=RandomScaling(0.5, 2.0), random_state=0).fit_transform(X), train)
+    from eppf.descriptors import DescriptorUnion, GASDTransformer
+
+    union = _seed_params(DescriptorUnion([("e", TR), ("g", GASDTransformer())]), 7)
+    assert union.get_params()["e__random_state"] == 7
+
+
+def test_descriptor_pool_step_in_a_pipeline_with_side_features():
+    from sklearn.pipeline import Pipeline
+
+    from eppf.descriptors import DescriptorPool, DescriptorUnion, ProportionTransformer
+
+    X = _clouds(12, seed=3)
+    y = np.arange(12) % 2
+    union = DescriptorUnion([("eppf", TR), ("prop", ProportionTransformer())], normalize="none")
+    pipe = Pipeline([("pool", DescriptorPool(union, 2, augment=RandomScaling(), random_state=0)),
+                     ("cnn", EPPF4DClassifier(n_side_features="auto", max_epochs=1, filters=(2, 2, 2), n_hidden=4,
+                                              early_stopping=False, random_state=0, n_jobs=1))])
+    pipe.fit(X, y)
+    assert pipe[-1].n_side_features_ == 6 and pipe[-1].n_draws_fit_ == 2
+    assert pipe.predict_proba(X).shape == (12, 2)
+
+
+@pytest.mark.parametrize("params, err, msg", [
+    (dict(n_draws=0), ValueError, "n_draws must be >= 1"),
+    (dict(n_draws=2.0), TypeError, "n_draws must be an int"),
+    (dict(test_draws=0), ValueError, "test_draws must be >= 1"),
+    (dict(test_augment="no"), TypeError, "test_augment must be True or False"),
+    (dict(augment=object()), TypeError, "augment must be a scikit-learn style estimator"),
+    (dict(transformer=object()), TypeError, "transformer must be a scikit-learn style estimator"),
+])
+def test_descriptor_pool_step_bad_parameters(params, err, msg):
+    from eppf.descriptors import DescriptorPool
+
+    kwargs = {"transformer": TR, **params}
+    with pytest.raises(err, match=f"DescriptorPool: {msg}"):
+        DescriptorPool(**kwargs).fit(_clouds(2))
+
+
+def test_descriptor_pool_step_needs_fit():
+    from sklearn.exceptions import NotFittedError
+
+    from eppf.descriptors import DescriptorPool
+
+    with pytest.raises(NotFittedError):
+        DescriptorPool(TR).transform(_clouds(2))

@@ -1,0 +1,36 @@
+"""The recommended recipe ("EPPF 4D+") of the classification experiment and of ``eppf train``."""
+
+import numpy as np
+
+from eppf import EPPF4DClassifier, EPPFTransformer
+from eppf.descriptors import DescriptorPool, DescriptorUnion, GASDTransformer, ProportionTransformer
+from eppf.experiments import run_classification
+from eppf.experiments._classification import RECIPE, recommended_pipeline_parts
+
+
+def test_recommended_parts_are_the_documented_recipe():
+    pool, clf = recommended_pipeline_parts(EPPFTransformer(n_bins=(15, 3, 4, 3)), n_jobs=1, random_state=3,
+                                           max_epochs=7, n_iter_no_change=2)
+    assert isinstance(pool, DescriptorPool) and pool.n_draws == RECIPE["n_draws"] and pool.random_state == 3
+    assert (pool.augment.low, pool.augment.high) == RECIPE["stretch"]
+    union = pool.transformer
+    assert isinstance(union, DescriptorUnion) and union.normalize == "none"
+    assert [type(t) for _, t in union.transformer_list] == [EPPFTransformer, GASDTransformer, ProportionTransformer]
+    assert isinstance(clf, EPPF4DClassifier) and clf.conv == "4d" and clf.n_bins == (15, 3, 4, 3)
+    assert clf.n_side_features == "auto" and clf.filters == RECIPE["filters"] and clf.n_hidden == RECIPE["n_hidden"]
+    assert clf.lr_schedule == "plateau" and clf.precision == "bfloat16" and clf.max_epochs == 7
+    assert clf.n_iter_no_change == RECIPE["min_patience"]  # at least 8 epochs of patience
+    quick_pool, quick_clf = recommended_pipeline_parts(EPPFTransformer(), quick=True, n_iter_no_change=2)
+    assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2
+
+
+def test_classification_experiment_trains_4d_plus_on_pools(tmp_path):
+    result = run_classification("builtin", quick=True, models=["4d+"], n_jobs=1, out=str(tmp_path), verbose=False)
+    (row,) = result["rows"]
+    assert row["model"] == "EPPF 4D+" and row["n_test"] == 20 and 0 <= row["total_accuracy"] <= 1
+    report = (tmp_path / "classification.md").read_text()
+    assert "EPPF 4D+: the recommended recipe" in report and "n_side_features='auto'" in report
+    # the pools are cached: a second run reads them
+    again = run_classification("builtin", quick=True, models=["4d+"], n_jobs=1, out=str(tmp_path), verbose=False)
+    assert again["cache"].n_loaded == 1 and again["cache"].n_computed == 0
+    np.testing.assert_array_equal(again["predictions"]["4d+"], result["predictions"]["4d+"])

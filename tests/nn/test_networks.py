@@ -1,0 +1,106 @@
+"""Tests of the EPPF networks' options beyond the paper: side features and batch normalisation."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from eppf.nn import EPPFNet2D, EPPFNet3D, EPPFNet4D, count_parameters
+from eppf.nn._networks import _ChannelNorm
+
+NETS = {"2d": EPPFNet2D, "3d": EPPFNet3D, "4d": EPPFNet4D}
+N_BINS = (4, 2, 3, 2)
+N = math.prod(N_BINS)
+
+
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_side_features_join_the_dense_layer_as_written(conv):
+    torch.manual_seed(0)
+    net = NETS[conv](n_bins=N_BINS, n_classes=3, filters=(2, 3, 2), n_hidden=5, n_side=4, side_hidden=6).eval()
+    x = torch.rand(7, N + 4)
+    # reference: the same layers applied by hand, the side branch concatenated after the flattened pool
+    conv_out = net.pool(net._body(x[:, :N])).flatten(1)
+    side = torch.relu(net.side[0](x[:, N:]))
+    ref = net.fc2(torch.relu(net.fc1(torch.cat([conv_out, side], 1))))
+    torch.testing.assert_close(net(x), ref)
+    assert net.fc1.in_features == net.n_flat + 6
+    # the side columns matter, and only through the branch
+    x2 = x.clone()
+    x2[:, N:] += 1.0
+    assert not torch.allclose(net(x), net(x2))
+    plain = NETS[conv](n_bins=N_BINS, n_classes=3, filters=(2, 3, 2), n_hidden=5)
+    assert count_parameters(net) == count_parameters(plain) + (4 * 6 + 6) + 6 * 5
+
+
+def test_paper_network_unchanged_by_default():
+    net = EPPFNet4D(n_classes=10)
+    assert net.n_side == 0 and net.batch_norm is False
+    assert not hasattr(net, "side") and not hasattr(net, "norms")
+    assert count_parameters(net) == 14_875_418
+
+
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_batch_norm_normalises_every_channel(conv):
+    torch.manual_seed(0)
+    net = NETS[conv](n_bins=N_BINS, n_classes=3, filters=(2, 3, 2), n_hidden=5, batch_norm=True).train()
+    seen = []
+    for norm in net.norms:
+        norm.register_forward_hook(lambda m, inp, out: seen.append(out.detach()))
+    net(torch.rand(16, N) * 5 + 3)
+    assert len(seen) == 3
+    for out in seen:  # per channel over the batch and every position: mean 0, variance 1
+        flat = out.transpose(0, 1).reshape(out.shape[1], -1)
+        torch.testing.assert_close(flat.mean(1), torch.zeros(out.shape[1]), atol=1e-5, rtol=0)
+        torch.testing.assert_close(flat.var(1, unbiased=False), torch.ones(out.shape[1]), atol=1e-3, rtol=0)
+
+
+def test_channel_norm_matches_batchnorm3d():
+    torch.manual_seed(0)
+    x = torch.randn(4, 3, 5, 2, 3)
+    ours, ref = _ChannelNorm(3), torch.nn.BatchNorm3d(3)
+    torch.testing.assert_close(ours(x), ref(x))
+    torch.testing.assert_close(ours.running_var, ref.running_var)
+    with pytest.raises(ValueError, match="rank"):
+        ours(torch.zeros(3))
+
+
+def test_4d_folded_route_matches_general_route_with_batch_norm():
+    torch.manual_seed(0)
+    net = EPPFNet4D(n_bins=N_BINS, n_classes=3, filters=(2, 3, 2), n_hidden=5, batch_norm=True, n_side=2).eval()
+    for norm in net.norms:  # non-trivial running statistics
+        norm.running_mean.uniform_(-1, 1)
+        norm.running_var.uniform_(0.5, 2)
+    x = torch.rand(5, N + 2)
+    folded = net(x)
+    net.folded = False
+    torch.testing.assert_close(net(x), folded, atol=1e-5, rtol=1e-5)
+
+
+def test_bfloat16_with_side_features_matches_float32_up_to_rounding():
+    torch.manual_seed(0)
+    net = EPPFNet4D(n_bins=N_BINS, n_classes=3, filters=(2, 3, 2), n_hidden=5, n_side=3, batch_norm=True).eval()
+    x = torch.rand(6, N + 3)
+    ref = net(x)
+    net.precision = "bfloat16"
+    out = net(x)
+    assert out.dtype == torch.float32
+    torch.testing.assert_close(out, ref, atol=0.05, rtol=0.05)
+
+
+@pytest.mark.parametrize("kwargs, msg", [
+    (dict(n_side=-1), "n_side must be an int >= 0"),
+    (dict(n_side=1.5), "n_side must be an int >= 0"),
+    (dict(side_hidden=0), "side_hidden must be an int >= 1"),
+    (dict(batch_norm="yes"), "batch_norm must be True or False"),
+])
+def test_option_errors(kwargs, msg):
+    with pytest.raises(ValueError, match=msg):
+        EPPFNet4D(n_bins=N_BINS, **kwargs)
+
+
+def test_wrong_width_names_the_side_features():
+    net = EPPFNet2D(n_bins=N_BINS, n_side=3, filters=(2, 2, 2), n_hidden=4)
+    with pytest.raises(ValueError, match=r"\(batch, 51\).*\+ 3 side features"):
+        net(torch.zeros(2, N))
+    assert np.isfinite(net(torch.zeros(2, N + 3)).detach().numpy()).all()
