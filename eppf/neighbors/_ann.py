@@ -145,9 +145,11 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
         Inverted lists (k-means cells) of the index. ``"auto"`` uses about
         ``4 * sqrt(n_samples)`` (4,000 for a million), with at least 39
         training rows per list.
-    n_probe : int, default=64
+    n_probe : int, default=128
         Lists scanned per query (capped at ``n_lists``; ``"ivf"`` only).
-        More lists: higher recall, slower queries.
+        More lists: higher recall, slower queries. On a million EPPF-like
+        descriptors, 64 lists gave recall@1 0.988 and 128 gave 0.998 at
+        1,657 queries per second on two cores.
     hnsw_m : int, default=16
         Links per node of the HNSW graph (``"hnsw"`` only).
     ef_search : int, default=64
@@ -252,7 +254,7 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
     """
 
     def __init__(self, n_neighbors=1, *, weights="uniform", floor="auto", renormalize=False, n_candidates=32,
-                 n_components=32, index="ivf", n_lists="auto", n_probe=64, hnsw_m=16, ef_search=64,
+                 n_components=32, index="ivf", n_lists="auto", n_probe=128, hnsw_m=16, ef_search=64,
                  chunk_size=None, random_state=None, n_jobs=None):
         self.n_neighbors = n_neighbors
         self.weights = weights
