@@ -52,8 +52,17 @@ average 6 to 8; ``--n-jobs 2``)::
     ply            1000      146    10.6         5.08           148
     ply           10000      128    82.1         3.36           155
 
-The process got about 40% of the machine; what two free cores would give is
-worked out from the CPU times in ``docs/performance.rst`` ("Files").
+The process got about 40% of the machine. A quiet run (load average 1.4 to
+1.7) after the faster normals and EPPF kernels, ``--kinds ply,ply_normals
+--sizes 10000``::
+
+    kind          read ms/file  +normals ms/file
+    ply                  0.133             1.430
+    ply_normals          0.186             0.156
+
+    kind          files  files/s  wall s  CPU ms/file  peak RSS MiB
+    ply_normals   10000      821    14.4         1.43           158
+    ply           10000      515    21.3         2.70           157
 """
 
 import argparse
