@@ -23,10 +23,10 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from ._kl import (
+    NeighbourVotesMixin,
     check_kl_params,
     check_n_neighbors,
     learn_floor,
-    neighbour_votes,
     prepare_histograms,
     rerank_candidates,
     rerank_sparse_candidates,
@@ -100,7 +100,7 @@ def _drop_own(cand, start):
     return cand[keep].reshape(n_q, m - 1)
 
 
-class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
+class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
     """Approximate nearest neighbours by symmetric KL divergence, for millions of histograms.
 
     A fast index proposes ``n_candidates`` neighbours per query in the
@@ -553,39 +553,3 @@ class ApproximateKLNearestNeighbors(ClassifierMixin, BaseEstimator):
                     for start, (d, i) in zip(starts, pool.map(block, starts)):
                         dist[start : start + step], ind[start : start + step] = d, i
         return (dist, ind) if return_distance else ind
-
-    def predict_proba(self, X):
-        """Class probabilities from the votes of the (approximate) nearest neighbours.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, n_bins)
-            Query histograms.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_queries, n_classes)
-            Share of the (weighted) votes per class, columns ordered as
-            ``classes_``.
-        """
-        check_is_fitted(self)
-        dist, ind = self.kneighbors(X)
-        return neighbour_votes(dist, ind, self._y, self.classes_.size, self.weights)
-
-    def predict(self, X):
-        """Predict the class of each query histogram.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, n_bins)
-            Query histograms.
-
-        Returns
-        -------
-        y_pred : ndarray of shape (n_queries,)
-            Predicted labels; a tie between classes goes to the first of them
-            in ``classes_``.
-        """
-        check_is_fitted(self)
-        proba = self.predict_proba(X)
-        return self.classes_[np.argmax(proba, axis=1)]

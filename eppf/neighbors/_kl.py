@@ -521,7 +521,52 @@ def _loo_nearest(P, block=None, n_threads=1):
     return best_i, best_d
 
 
-class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
+class NeighbourVotesMixin:
+    """``predict_proba`` and ``predict`` from the votes of ``kneighbors``.
+
+    For the symmetric-KL neighbour classifiers of this package: they set
+    ``classes_``, ``weights`` and ``_y`` (training labels as indices into
+    ``classes_``) in ``fit`` and implement ``kneighbors``.
+    """
+
+    def predict_proba(self, X):
+        """Class probabilities from the votes of the nearest neighbours.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, n_bins)
+            Query histograms.
+
+        Returns
+        -------
+        proba : ndarray of shape (n_queries, n_classes)
+            Share of the (weighted) votes per class, columns ordered as
+            ``classes_``.
+        """
+        check_is_fitted(self)
+        dist, ind = self.kneighbors(X)
+        return neighbour_votes(dist, ind, self._y, self.classes_.size, self.weights)
+
+    def predict(self, X):
+        """Predict the class of each query histogram.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_queries, n_bins)
+            Query histograms.
+
+        Returns
+        -------
+        y_pred : ndarray of shape (n_queries,)
+            Predicted labels; a tie between classes goes to the first of them
+            in ``classes_``.
+        """
+        check_is_fitted(self)
+        proba = self.predict_proba(X)
+        return self.classes_[np.argmax(proba, axis=1)]
+
+
+class KLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
     """Nearest-neighbour classifier on histograms with symmetric KL divergence.
 
     The paper's retrieval matcher: descriptors are compared with the
@@ -734,42 +779,6 @@ class KLNearestNeighbors(ClassifierMixin, BaseEstimator):
                 if return_distance:
                     dist[start : start + idx.shape[0]] = d
         return (dist, ind) if return_distance else ind
-
-    def predict_proba(self, X):
-        """Class probabilities from the votes of the nearest neighbours.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, n_bins)
-            Query histograms.
-
-        Returns
-        -------
-        proba : ndarray of shape (n_queries, n_classes)
-            Share of the (weighted) votes per class, columns ordered as
-            ``classes_``.
-        """
-        check_is_fitted(self)
-        dist, ind = self.kneighbors(X)
-        return neighbour_votes(dist, ind, self._y, self.classes_.size, self.weights)
-
-    def predict(self, X):
-        """Predict the class of each query histogram.
-
-        Parameters
-        ----------
-        X : array-like of shape (n_queries, n_bins)
-            Query histograms.
-
-        Returns
-        -------
-        y_pred : ndarray of shape (n_queries,)
-            Predicted labels; a tie between classes goes to the first of them
-            in ``classes_``.
-        """
-        check_is_fitted(self)
-        proba = self.predict_proba(X)
-        return self.classes_[np.argmax(proba, axis=1)]
 
 
 # ------------------------------------------------------------------------
