@@ -65,6 +65,21 @@ def add_arguments(p):
     add_runtime(p)
 
 
+def _write_stream(fh, run, plan, state):
+    """Run the stream into a ``.npy`` row writer on ``fh``; the number of columns written."""
+    writer = []
+
+    def sink(rows):
+        if not writer:
+            writer.append(RowWriter(fh, rows.shape[1]))
+        writer[0].write(rows)
+
+    run(sink)
+    plan.report_skipped(state["skipped"], len(state["kept"]))
+    writer[0].close()
+    return writer[0].n_cols
+
+
 def run_describe(args, out=None):
     """Run ``eppf describe``: compute descriptors of files and save them.
 
@@ -316,34 +331,13 @@ def _stream(args, est, sampling, output, progress, cmd):
         finally:
             bar.close()
 
-    n_features = None
     if output.lower().endswith(".npy"):
         with atomic_write(output) as fh:
-            writer = []
-
-            def sink(rows):
-                if not writer:
-                    writer.append(RowWriter(fh, rows.shape[1]))
-                writer[0].write(rows)
-
-            run(sink)
-            plan.report_skipped(state["skipped"], len(state["kept"]))
-            writer[0].close()
-            n_features = writer[0].n_cols
+            n_features = _write_stream(fh, run, plan, state)
         meta = plan.objects(state["kept"], None, state["skipped"])
     else:
         with tempfile.TemporaryFile(prefix="eppf-describe-rows-") as rows_file:
-            writer = []
-
-            def sink(rows):
-                if not writer:
-                    writer.append(RowWriter(rows_file, rows.shape[1]))
-                writer[0].write(rows)
-
-            run(sink)
-            plan.report_skipped(state["skipped"], len(state["kept"]))
-            writer[0].close()
-            n_features = writer[0].n_cols
+            n_features = _write_stream(rows_file, run, plan, state)
             objects = plan.objects(state["kept"], None, state["skipped"])
             meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
                          getattr(est, "scale_", None), params)
