@@ -157,8 +157,12 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         raise NotImplementedError
 
     # ------------------------------------------------------------- plumbing
-    def _threads(self):
-        return check_n_jobs(getattr(self, "n_jobs", None), owner=type(self).__name__)
+    def _threads(self, none_means=None):
+        """Threads for ``n_jobs`` (joblib's meaning); ``none_means`` overrides what None gives."""
+        n_jobs = getattr(self, "n_jobs", None)
+        if n_jobs is None and none_means is not None:
+            return none_means
+        return check_n_jobs(n_jobs, owner=type(self).__name__)
 
     def _validate_clouds(self, X, n_threads=1):
         """Validated clouds, and the list of their checked extra columns (None without any)."""

@@ -6,7 +6,6 @@ import numpy as np
 from joblib import Parallel, delayed
 from scipy.spatial import cKDTree
 
-from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Options, StrOptions
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
 from ._cvfh_fast import pcl_region_growing, vfh_signatures
@@ -337,7 +336,7 @@ class CVFHTransformer(PointCloudDescriptor):
             n_neighbors=int(self.n_neighbors),
         )
         # None means one thread (see n_jobs).
-        return params, 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=type(self).__name__)
+        return params, self._threads(none_means=1)
 
     def _learn(self, clouds, params):
         self.scale_ = self._fit_scale(clouds)

@@ -4,7 +4,6 @@ import numbers
 
 import numpy as np
 
-from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Options
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
 from ._grsd_fast import grsd_batch
@@ -194,7 +193,7 @@ class GRSDTransformer(PointCloudDescriptor):
             n_neighbors=int(self.n_neighbors),
         )
         # None means one thread (see n_jobs).
-        return params, 1 if self.n_jobs is None else check_n_jobs(self.n_jobs, owner=type(self).__name__)
+        return params, self._threads(none_means=1)
 
     def _learn(self, clouds, params):
         self.scale_ = self._fit_scale(clouds)
