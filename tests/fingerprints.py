@@ -8,6 +8,12 @@ compares. The recorded file was written by the code as it stood before the
 package was split into subpackages, so the test proves that the move changed
 no output bit.
 
+The networks' probabilities are the exception: torch's float kernels (MKL,
+oneDNN, ATen) are chosen by CPU model, and on one machine switching between
+them moves a one-epoch PointNet's probabilities by up to 2.6e-5, enough to flip
+a fourth decimal. They are recorded as values and compared within
+``PROBA_ATOL``; their labels, and everything eppf computes itself, are digests.
+
 Only public names are used (``eppf.X``, ``eppf.preprocessing.X``, ...), so the
 same script runs on the old and the new layout.
 """
@@ -35,6 +41,27 @@ def _digest(value):
     else:
         h.update(json.dumps(value, sort_keys=True, default=str).encode())
     return h.hexdigest()
+
+
+#: Tolerance of the recorded network probabilities: about 8x the largest change
+#: seen between torch's CPU kernel choices, 4x below the change a 10% different
+#: learning rate makes to the one-epoch PointNet (7.7e-4).
+PROBA_ATOL = 2e-4
+
+
+def _approx(values):
+    """A fingerprint compared within PROBA_ATOL instead of bit for bit."""
+    return {"values": np.round(np.asarray(values, dtype=float), 6).tolist(), "atol": PROBA_ATOL}
+
+
+def matches(now, ref):
+    """Whether a fingerprint equals the recorded one (exact digest, or values within the recorded atol)."""
+    if isinstance(ref, dict):
+        if not isinstance(now, dict):
+            return False
+        a, b = np.asarray(now["values"]), np.asarray(ref["values"])
+        return a.shape == b.shape and bool(np.all(np.abs(a - b) <= ref["atol"]))
+    return now == ref
 
 
 def _shapes(n=60):
@@ -112,7 +139,7 @@ def matching_fingerprints():
 
 
 def network_fingerprints():
-    """Predictions of tiny EPPF networks and PointNet (labels and rounded probabilities)."""
+    """Predictions of tiny EPPF networks and PointNet (label digests, probabilities as values)."""
     import torch
 
     import eppf
@@ -127,11 +154,11 @@ def network_fingerprints():
         clf.fit(X[:40], y[:40])
         proba = clf.predict_proba(X[40:])
         out[f"cnn_{conv}_labels"] = _digest(clf.predict(X[40:]))
-        out[f"cnn_{conv}_proba"] = _digest(np.round(proba, 4))
+        out[f"cnn_{conv}_proba"] = _approx(proba)
     pn = eppf.PointNetClassifier(n_points=128, max_epochs=1, early_stopping=False, n_jobs=1, random_state=0)
     pn.fit(clouds[:30], y[:30])
     out["pointnet_labels"] = _digest(pn.predict(clouds[30:40]))
-    out["pointnet_proba"] = _digest(np.round(pn.predict_proba(clouds[30:40]), 4))
+    out["pointnet_proba"] = _approx(pn.predict_proba(clouds[30:40]))
     return out
 
 
@@ -188,7 +215,7 @@ def main(argv=None):
     if args.check:
         with open(args.check) as fh:
             ref = json.load(fh)
-        bad = sorted(k for k in ref if fp.get(k) != ref[k])
+        bad = sorted(k for k in ref if not matches(fp.get(k), ref[k]))
         for k in bad:
             print(f"differs: {k}")
         print(f"{len(ref) - len(bad)} of {len(ref)} fingerprints equal")
