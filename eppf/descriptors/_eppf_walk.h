@@ -7,6 +7,13 @@
  *   coinciding points (``eppf_f123_batch_avx512``) and the f4 walks
  *   (``eppf_f4_batch_avx512``).
  *
+ * Gathers are used only for the walk's look-ups: AMD Zen 4 runs an
+ * eight-element gather at about 13 cycles (0.65 ns an element measured on a
+ * Zen 4 KVM guest, against about 0.4 ns a scalar load), so the AVX-512 code
+ * reads the points and normals of f1-f3 with row loads and a transpose, and
+ * the setup and the groups of the walks with scalar loads and in-register
+ * table look-ups.
+ *
  * f1-f3: the same IEEE operations in the same order as _eppf_fast.pyx's
  * ``_bin_f123`` (no FMA: the targets are plain "avx2" / AVX-512 and the build
  * passes -ffp-contract=off), so the bins are bit-identical. The draws are
@@ -458,13 +465,31 @@ static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *o
     }
 }
 
-/* 8 rows r[0..7] (offsets in doubles) of an array: columns 0, 1, 2 as vectors. */
-#define EPPF_GATHER3(A, R, K, X, Y, Z)                                              \
-    do {                                                                            \
-        (X) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A), 8);     \
-        (Y) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 1, 8); \
-        (Z) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 2, 8); \
-    } while (0)
+/* The points (x, y, z) at rows r[0..7] of an array with rows of ``stride``
+ * doubles, as x, y, z vectors: eight masked row loads and a transpose (on
+ * CPUs with slow gathers, such as AMD Zen 4, much cheaper than three
+ * gathers; the values, and so the bins, are the same). */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_load3x8(const double *a, int64_t stride, const int32_t *r, __m512d *x, __m512d *y,
+                                __m512d *z)
+{
+    const __m512i pick_xy = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);   /* x0 x1 x2 x3 y0 y1 y2 y3 */
+    const __m512i pick_z = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);  /* z0 z1 z2 z3 ... */
+    __m512d a0, a1, a2, a3, u0, u1, v0, v1;
+#define EPPF_ROW(k) _mm256_maskz_loadu_pd(0x7, a + stride * r[k])
+    a0 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(0)), EPPF_ROW(1), 1);  /* x0 y0 z0 0 x1 y1 z1 0 */
+    a1 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(2)), EPPF_ROW(3), 1);
+    a2 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(4)), EPPF_ROW(5), 1);
+    a3 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(6)), EPPF_ROW(7), 1);
+#undef EPPF_ROW
+    u0 = _mm512_permutex2var_pd(a0, pick_xy, a1);
+    u1 = _mm512_permutex2var_pd(a2, pick_xy, a3);
+    v0 = _mm512_permutex2var_pd(a0, pick_z, a1);
+    v1 = _mm512_permutex2var_pd(a2, pick_z, a3);
+    *x = _mm512_shuffle_f64x2(u0, u1, 0x44);
+    *y = _mm512_shuffle_f64x2(u0, u1, 0xEE);
+    *z = _mm512_shuffle_f64x2(v0, v1, 0x44);
+}
 
 /* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
  * the same order, so the same bins), which also checks the pairs as
@@ -477,18 +502,25 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
 {
     const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
     const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
-    const __m512i vps = _mm512_set1_epi64(ps), vns = _mm512_set1_epi64(ns);
     const __m256i one32 = _mm256_set1_epi32(1);
-    int t, k, bad = m;
+    int32_t ri[8], rj[8];
+    int t, k, l, bad = m;
     for (t = 0; t < m; t += 8) {
         const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const __m512i vi = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, ii + t));
-        const __m512i vj = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, jj + t));
+        const int32_t *vi = ii + t, *vj = jj + t;
         __m512d pix, piy, piz, pjx, pjy, pjz, dx, dy, dz, dist, v;
         __m256i b1, b2 = _mm256_setzero_si256(), b3 = _mm256_setzero_si256(), b;
         __mmask8 same;
-        EPPF_GATHER3(pts, _mm512_mul_epu32(vi, vps), keep, pix, piy, piz);
-        EPPF_GATHER3(pts, _mm512_mul_epu32(vj, vps), keep, pjx, pjy, pjz);
+        if (keep != 0xff) {  /* a partial last group repeats its last pair */
+            for (l = 0; l < 8; l++) {
+                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+            }
+            vi = ri;
+            vj = rj;
+        }
+        eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
+        eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
         same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
                & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
         if (same && bad == m)
@@ -502,8 +534,8 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
         b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
         if (n2 > 1 || n3 > 1) {
             __m512d nix, niy, niz, njx, njy, njz;
-            EPPF_GATHER3(nrm, _mm512_mul_epu32(vi, vns), keep, nix, niy, niz);
-            EPPF_GATHER3(nrm, _mm512_mul_epu32(vj, vns), keep, njx, njy, njz);
+            eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
+            eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
             if (n2 > 1) {
                 __m512d inv = _mm512_div_pd(one, dist), m1, m2;
                 m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
@@ -531,51 +563,97 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
     }
     return bad;
 }
-#undef EPPF_GATHER3
 
-/* ``eppf_f4_setup_avx2`` eight pairs at a time, from ``pv``: each point's
- * voxel already in the packed walk's start form (lanes v S + S/2 + g, see
- * _eppf_fast.pyx's ``_fill_grid``), so a pair needs two gathers. The packed
- * difference of two such words holds the three lane differences d S exactly
- * (each below 2**20 in size), recovered by sign-extending 21-bit fields. The
- * same integer results as the AVX2 setup: the increments' scale 2**14 / L is
- * read from ``recip_packed``, the same correctly rounded quotient as the
- * division there. */
+/* The walk setup of the eight pairs (i8[l], j8[l]), from ``pv``: each
+ * point's voxel already in the packed walk's start form (lanes v S + S/2 + g,
+ * see _eppf_fast.pyx's ``_fill_grid``). The packed difference of two such
+ * words holds the three lane differences d S exactly (each below 2**20 in
+ * size), recovered by sign-extending 21-bit fields. The same integer results
+ * as ``eppf_f4_setup_avx2``: the increments' scale 2**14 / L is the same
+ * correctly rounded division (the value of ``recip_packed[L]``), and
+ * lo | hi of T = L + 1 voxels is ``lohi[T]``, looked up in registers:
+ * ``tab`` holds lohi[1..63] at 1..63 and lohi[64] at 0 (T >= 3 on every
+ * walked line). No gathers: on CPUs with slow ones (AMD Zen 4) eight loads
+ * and in-register look-ups cost a fraction of them. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, const int64_t *pv, const __m512i *tab,
+                                      __m512i *P, __m512i *INC, __m512i *Lout, __m512i *LOHI)
+{
+    const __m512i one = _mm512_set1_epi64(1);
+    const __m512i a = _mm512_set_epi64(pv[i8[7]], pv[i8[6]], pv[i8[5]], pv[i8[4]], pv[i8[3]], pv[i8[2]], pv[i8[1]],
+                                       pv[i8[0]]);
+    const __m512i b = _mm512_set_epi64(pv[j8[7]], pv[j8[6]], pv[j8[5]], pv[j8[4]], pv[j8[3]], pv[j8[2]], pv[j8[1]],
+                                       pv[j8[0]]);
+    const __m512i d = _mm512_sub_epi64(b, a);
+    const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
+    const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
+    const __m512i dys = _mm512_srai_epi64(_mm512_slli_epi64(d1, 43), 43);
+    const __m512i dxs = _mm512_srai_epi64(_mm512_sub_epi64(d1, dys), EPPF_PK_YLANE);
+    const __m512i dx = _mm512_srai_epi64(dxs, EPPF_PK_FRAC), dy = _mm512_srai_epi64(dys, EPPF_PK_FRAC);
+    const __m512i dz = _mm512_srai_epi64(dzs, EPPF_PK_FRAC);
+    const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
+                                       _mm512_abs_epi64(dz));
+    /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
+    const __m512d q = _mm512_div_pd(_mm512_set1_pd((double)EPPF_PK_S), _mm512_cvtepi64_pd(_mm512_max_epi64(L, one)));
+    const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
+    const __m512i iy = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dy), q));
+    const __m512i iz = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dz), q));
+    const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
+                                                          _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
+    /* tab[(L + 1) & 63]: bits 0-3 pick within 16 entries, bits 4 and 5 which 16 */
+    const __m512i k = _mm512_add_epi64(L, one);
+    const __mmask8 b4 = _mm512_test_epi64_mask(k, _mm512_set1_epi64(16));
+    const __mmask8 b5 = _mm512_test_epi64_mask(k, _mm512_set1_epi64(32));
+    const __m512i r01 = _mm512_mask_blend_epi64(b4, _mm512_permutex2var_epi64(tab[0], k, tab[1]),
+                                                _mm512_permutex2var_epi64(tab[2], k, tab[3]));
+    const __m512i r23 = _mm512_mask_blend_epi64(b4, _mm512_permutex2var_epi64(tab[4], k, tab[5]),
+                                                _mm512_permutex2var_epi64(tab[6], k, tab[7]));
+    *P = _mm512_add_epi64(a, inc);
+    *INC = inc;
+    *Lout = L;
+    *LOHI = _mm512_mask_blend_epi64(b5, r01, r23);
+}
+
+/* ``tab`` of ``eppf_setup8_avx512`` from lohi[0..64]. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_lohi_tab_avx512(const int64_t *lohi, __m512i *tab)
+{
+    int k;
+    for (k = 0; k < 8; k++)
+        tab[k] = _mm512_loadu_si512(lohi + 8 * k);
+    tab[0] = _mm512_mask_mov_epi64(tab[0], 1, _mm512_set1_epi64(lohi[64]));
+}
+
+/* ``eppf_f4_setup_avx2`` eight pairs at a time (``eppf_setup8_avx512``). */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const int64_t *lohi, const double *recip_packed, int64_t *P, int64_t *INC,
                                  int32_t *Ls, int64_t *META)
 {
-    const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1);
-    int t;
+    __m512i tab[8];
+    int32_t ri[8], rj[8];
+    int t, l;
+    (void)recip_packed;
+    eppf_lohi_tab_avx512(lohi, tab);
     for (t = 0; t < m; t += 8) {
         const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const __m512i a = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, ii + t), pv, 8);
-        const __m512i b = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, jj + t), pv, 8);
-        const __m512i d = _mm512_sub_epi64(b, a);
-        const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
-        const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
-        const __m512i dys = _mm512_srai_epi64(_mm512_slli_epi64(d1, 43), 43);
-        const __m512i dxs = _mm512_srai_epi64(_mm512_sub_epi64(d1, dys), EPPF_PK_YLANE);
-        const __m512i dx = _mm512_srai_epi64(dxs, EPPF_PK_FRAC), dy = _mm512_srai_epi64(dys, EPPF_PK_FRAC);
-        const __m512i dz = _mm512_srai_epi64(dzs, EPPF_PK_FRAC);
-        const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
-                                           _mm512_abs_epi64(dz));
-        const __m256i L32 = _mm512_cvtepi64_epi32(L);
-        /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
-        const __m512d q = _mm512_i64gather_pd(_mm512_max_epi64(L, one), recip_packed, 8);
-        const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
-        const __m512i iy = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dy), q));
-        const __m512i iz = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dz), q));
-        const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
-                                                              _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
-        _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(a, inc));
+        const int32_t *i8 = ii + t, *j8 = jj + t;
+        __m512i p, inc, L, lh;
+        if (keep != 0xff) {  /* a partial last group repeats its last pair */
+            for (l = 0; l < 8; l++) {
+                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+            }
+            i8 = ri;
+            j8 = rj;
+        }
+        eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh);
+        _mm512_mask_storeu_epi64(P + t, keep, p);
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
-        _mm256_mask_storeu_epi32(Ls + t, keep, L32);
+        _mm256_mask_storeu_epi32(Ls + t, keep, _mm512_cvtepi64_epi32(L));
         /* rem = L - 1 (a wrapped field for lines of L <= 1, which are never walked) | lo | hi */
         _mm512_mask_storeu_epi64(META + t, keep, _mm512_add_epi64(
-            _mm512_mask_i64gather_epi64(zero, keep, _mm512_add_epi64(L, one), lohi, 8),
-            _mm512_and_si512(_mm512_sub_epi64(L, one), _mm512_set1_epi64(EPPF_META_MASK))));
+            lh, _mm512_and_si512(_mm512_sub_epi64(L, _mm512_set1_epi64(1)), _mm512_set1_epi64(EPPF_META_MASK))));
     }
 }
 
@@ -631,20 +709,25 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
         occ = _mm512_mask_add_epi64(occ, hit_, occ, one);                                         \
     } while (0)
 
+/* A[order[G + l]], l < 8, as a vector: eight loads (cheaper than a gather on
+   CPUs with slow gathers, such as AMD Zen 4). */
+#define EPPF_PICK8(A, G)                                                                          \
+    _mm512_set_epi64((A)[order[(G) + 7]], (A)[order[(G) + 6]], (A)[order[(G) + 5]], (A)[order[(G) + 4]], \
+                     (A)[order[(G) + 3]], (A)[order[(G) + 2]], (A)[order[(G) + 1]], (A)[order[(G) + 0]])
+
 /* The lanes of the group at walk position G: nothing to walk in padding lanes
    (rem = 0, occ = lo = hi = 0); then the shortest quiet stretch of the
    group: every lane is still undecided for its first
    clamp(occ + rem - lo + 1, 0, rem) steps (0 once occ >= hi). */
 #define EPPF_GROUP512(G, valid, p, inc, lo, hi, rem, occ, quiet)                                  \
     do {                                                                                          \
-        const __m256i oi_ = _mm256_loadu_si256((const __m256i *)(order + (G)));                   \
         __m512i need_, steps_;                                                                    \
         __mmask8 live_;                                                                           \
         valid = n_walk - (G) >= 8 ? (__mmask8)0xff                                                \
                 : n_walk <= (G) ? (__mmask8)0 : (__mmask8)((1u << (n_walk - (G))) - 1);           \
-        p = _mm512_i32gather_epi64(oi_, P, 8);                                                    \
-        inc = _mm512_mask_i32gather_epi64(zero, valid, oi_, INC, 8);                              \
-        rem = _mm512_mask_i32gather_epi64(zero, valid, oi_, META, 8);                             \
+        p = EPPF_PICK8(P, G);                                                                     \
+        inc = _mm512_maskz_mov_epi64(valid, EPPF_PICK8(INC, G));                                  \
+        rem = _mm512_maskz_mov_epi64(valid, EPPF_PICK8(META, G));                                 \
         lo = _mm512_and_si512(_mm512_srli_epi64(rem, EPPF_META_LO), _mm512_set1_epi64(EPPF_META_MASK)); \
         hi = _mm512_srli_epi64(rem, EPPF_META_HI);                                                \
         rem = _mm512_and_si512(rem, _mm512_set1_epi64(EPPF_META_MASK));                           \
@@ -734,12 +817,14 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     }
 #undef EPPF_STEP512
 #undef EPPF_GROUP512
+#undef EPPF_PICK8
 #undef EPPF_LIVE512
 #undef EPPF_FOUR512
 #undef EPPF_BINS512
     if (n_walk < m)
         eppf_f4_short_lines(m, Ls, thr, n4, B);
 }
+
 
 #else
 
@@ -780,6 +865,7 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
     (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
     return 0;
 }
+
 
 #endif
 
