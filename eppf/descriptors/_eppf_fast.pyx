@@ -393,7 +393,9 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
     that the latency of one pair's square root and divisions overlaps with
-    the next pair's instead of stalling behind a voxel walk.
+    the next pair's instead of stalling behind a voxel walk. At level 3 the
+    f4 walk counts the pairs itself, and lines still being walked at the end
+    of a batch carry over (in ``lanes``) to the next one.
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j

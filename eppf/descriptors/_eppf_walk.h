@@ -92,6 +92,12 @@
 #define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
 
 #define EPPF_AVX512_TARGET "avx2,avx512f,avx512bw,avx512vl,avx512dq,avx512vbmi"
+/* Plain C compiled for AVX-512 where the SIMD kernels are built (it serves only them). */
+#if EPPF_WALK_SIMD
+#define EPPF_AVX512_FN __attribute__((target(EPPF_AVX512_TARGET)))
+#else
+#define EPPF_AVX512_FN
+#endif
 
 /* AVX-512 F, BW, VL, DQ and VBMI (with the OS saving the zmm state: libgcc's
    cpu check reads XCR0). */
@@ -905,7 +911,7 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
 /* ``out`` = ``src`` dilated by the 3^3 box, never across the grid's faces in
    x and y (bits past z = g - 1 are set but never read); a and b: g^2 words
    of scratch each. */
-__attribute__((target(EPPF_AVX512_TARGET)))
+EPPF_AVX512_FN
 static void eppf_dilate(const uint64_t *src, uint64_t *out, uint64_t *a, uint64_t *b, int64_t g)
 {
     int64_t x, y, r;
@@ -929,7 +935,7 @@ static void eppf_dilate(const uint64_t *src, uint64_t *out, uint64_t *a, uint64_
 }
 
 /* The low 32 bits of x spread to the even bits of the result. */
-__attribute__((target(EPPF_AVX512_TARGET)))
+EPPF_AVX512_FN
 static inline uint64_t eppf_spread32(uint64_t x)
 {
     x &= 0xFFFFFFFFULL;
@@ -941,7 +947,7 @@ static inline uint64_t eppf_spread32(uint64_t x)
     return x;
 }
 
-__attribute__((target(EPPF_AVX512_TARGET)))
+EPPF_AVX512_FN
 static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
 {
     uint64_t *d1 = work, *d2 = work + g * g, *a = work + 2 * g * g, *b = work + 3 * g * g;
