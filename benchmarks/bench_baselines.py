@@ -18,27 +18,30 @@ neighbours pointing away from its centroid, computed once and given to every
 descriptor (normal estimation is timed separately).
 
 Before the table, the EPPF kernel is timed at every level the CPU has
-(scalar, AVX2 = the default before the AVX-512 kernel, AVX-512 = now),
-passes alternating, beside our GASD and VFH (``--eppf-kernel`` does only
-this, on ModelNet10; every level's output is checked equal to the scalar
-kernel's). ``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU Intel Xeon
-KVM guest (Sapphire Rapids class, AVX-512 with VBMI), shared with other
-jobs (load average about 7), CPU ms per object, one thread, normals given,
-the paper's settings:
+(scalar, AVX2, AVX-512 with the grouped walk, AVX-512 with the skipping
+walk; the row marked "default" is the one the kernel picks here), passes
+alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
+ModelNet10; every level's output is checked equal to the scalar kernel's).
+``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
+guest, shared with other jobs (load average about 9), CPU ms per object,
+one thread, normals given, the paper's settings:
 
-=============================  ======  =========  ===============  ==============  ==================
-descriptor                     kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
-=============================  ======  =========  ===============  ==============  ==================
-EPPF, scalar kernel            1.486   1.649      14.2             9.8             5-7x
-EPPF, AVX2 kernel (before)     0.685   0.806      6.9              4.8             12-15x
-EPPF, AVX-512 kernel (now)     0.370   0.468      4.0              2.8             22-27x
-GASD (ours)                    -       0.116      1.0              0.69
-VFH (ours)                     -       0.169      1.45             1.0
-=============================  ======  =========  ===============  ==============  ==================
+================================================  ======  =========  ================  ==============  ==================
+descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
+================================================  ======  =========  ================  ==============  ==================
+EPPF, scalar kernel                               1.426   1.475      17.0              14.2            6-7x
+EPPF, AVX2 kernel                                 0.687   0.743      8.6               7.1             12-15x
+EPPF, AVX-512, grouped walk                       0.485   0.537      6.2               5.2             17-21x
+EPPF, AVX-512, skipping walk (default here)       0.478   0.505      5.8               4.9             17-21x
+GASD (ours)                                       -       0.087      1.0               0.83
+VFH (ours)                                        -       0.104      1.20              1.0
+================================================  ======  =========  ================  ==============  ==================
 
 (PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
-VFH 0.41-0.62.) The 0.3 ms of 30x ESF is not reached; where the kernel's
-time goes is in the performance page of the docs.
+VFH 0.41-0.62. The AVX-512 kernel before the gather-free loads and the
+skipping walk took 0.572 ms in the run just before.) The 0.3 ms of 30x ESF
+is not reached; where the kernel's time goes is in the performance page of
+the docs.
 
 Usage::
 

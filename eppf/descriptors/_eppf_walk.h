@@ -8,7 +8,7 @@
  *   grouped walk (``eppf_f4_batch_avx512``, level 2) and the skipping walk
  *   (``eppf_f4_dist_avx512``, level 3), which keeps every lane busy by
  *   refilling it from a queue and jumps over voxels proved empty by their
- *   distance to the nearest occupied voxel (``eppf_code_grid``): 1.7 gathers
+ *   distance to the nearest occupied voxel (``eppf_code_grid``): 1.8 gathers
  *   a pair instead of 3.0. The default is level 3 on AMD, 2 elsewhere
  *   (``eppf_walk_prefers_skips``).
  *
@@ -115,7 +115,7 @@ static int eppf_walk_has_avx512(void)
 
 /* Whether the skipping AVX-512 walk (``eppf_f4_dist_avx512``) is the better of
    the two AVX-512 walks here: on AMD Zen 4 an eight-element gather costs about
-   13 cycles, and the skipping walk's 1.7 gathers a pair (against 3.0) pay for
+   13 cycles, and the skipping walk's 1.8 gathers a pair (against 3.0) pay for
    its extra vector work (measured, walk alone: 0.36 against 0.42 ms per
    1,024-point object); where gathers are cheaper (Intel) the grouped walk's
    lighter steps are expected to win. Both give the same counts. */
