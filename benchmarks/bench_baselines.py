@@ -23,23 +23,23 @@ walk; the row marked "default" is the one the kernel picks here), passes
 alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
 ModelNet10; every level's output is checked equal to the scalar kernel's).
 ``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
-guest, shared with other jobs (load average about 9), CPU ms per object,
+guest, shared with other jobs (load average about 4), CPU ms per object,
 one thread, normals given, the paper's settings:
 
 ================================================  ======  =========  ================  ==============  ==================
 descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
 ================================================  ======  =========  ================  ==============  ==================
-EPPF, scalar kernel                               1.426   1.475      17.0              14.2            6-7x
-EPPF, AVX2 kernel                                 0.687   0.743      8.6               7.1             12-15x
-EPPF, AVX-512, grouped walk                       0.485   0.537      6.2               5.2             17-21x
-EPPF, AVX-512, skipping walk (default here)       0.478   0.505      5.8               4.9             17-21x
-GASD (ours)                                       -       0.087      1.0               0.83
-VFH (ours)                                        -       0.104      1.20              1.0
+EPPF, scalar kernel                               1.404   1.473      15.3              11.6            6-7x
+EPPF, AVX2 kernel                                 0.689   0.756      7.8               6.0             12-15x
+EPPF, AVX-512, grouped walk                       0.474   0.532      5.5               4.2             17-21x
+EPPF, AVX-512, skipping walk (default here)       0.448   0.483      5.0               3.8             18-22x
+GASD (ours)                                       -       0.096      1.0               0.76
+VFH (ours)                                        -       0.127      1.32              1.0
 ================================================  ======  =========  ================  ==============  ==================
 
 (PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
 VFH 0.41-0.62. The AVX-512 kernel before the gather-free loads and the
-skipping walk took 0.572 ms in the run just before.) The 0.3 ms of 30x ESF
+skipping walk took 0.627 ms in the run right after.) The 0.3 ms of 30x ESF
 is not reached; where the kernel's time goes is in the performance page of
 the docs.
 
