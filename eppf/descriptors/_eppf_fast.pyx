@@ -26,12 +26,15 @@ Conventions (the user guide's reading of the paper):
 Where the CPU has them (checked at import), batches of 256 pairs go through
 the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F, BW, VL, DQ, VBMI) the
 draws, the f1-f3 bins and the f4 walks of grids up to 64 run eight pairs at
-a time; with AVX2 only, f1-f3 and the walks run four at a time. f1-f3 use
-the same IEEE operations in the same order, the walks visit the same voxels
-and pairs are grouped by line length. Their bins and draws are bit-identical
-to the scalar code here, which every other case uses; ``_set_simd(False)``
-forces it and ``_set_simd_level`` picks a level (tests compare all levels
-with each other and with the NumPy reference).
+a time (level 2: walks grouped by line length; level 3: lanes refilled from
+a queue, skipping voxels proved empty by their distance to the nearest
+occupied voxel; level 3 is the default on AMD, where gathers are slow); with
+AVX2 only, f1-f3 and the walks run four at a time (level 1). f1-f3 use the
+same IEEE operations in the same order, the walks visit the same voxels or
+prove them empty. Their bins and draws are bit-identical to the scalar code
+here, which every other case uses; ``_set_simd(False)`` forces it and
+``_set_simd_level`` picks a level (tests compare all levels with each other
+and with the NumPy reference).
 """
 import numpy as np
 
@@ -61,6 +64,7 @@ cdef extern from "_eppf_walk.h":
     int64_t EPPF_PK_Y
     int eppf_walk_has_avx2() noexcept nogil
     int eppf_walk_has_avx512() noexcept nogil
+    int eppf_walk_prefers_skips() noexcept nogil
     void eppf_f123_batch_avx2(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                               double f1_density, const double* cos2, const double* cos3,
@@ -76,16 +80,34 @@ cdef extern from "_eppf_walk.h":
     void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
                               const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                               const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
+    enum:
+        EPPF_LANES_WORDS
+    void eppf_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
+    void eppf_f4_dist_avx512(int m, const int32_t* I, const int32_t* J, const int32_t* B, const int64_t* pv,
+                             const uint64_t* code, int64_t g, const int32_t* thr, int n4, const int64_t* lohi,
+                             int64_t* lanes, int drain, int32_t* counts) noexcept nogil
 
-# The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (f4
-# walk; f1-f3 use AVX2 at levels 1 and 2). ``_set_simd`` / ``_set_simd_level``
-# choose a lower level for tests.
+# The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512
+# with the grouped f4 walk, 3 AVX-512 with the skipping f4 walk (f1-f3 use AVX2
+# at level 1, AVX-512 at levels 2 and 3). ``_set_simd`` / ``_set_simd_level``
+# choose another level for tests.
 cdef int _max_level():
     if eppf_walk_has_avx2() == 0:
         return 0
-    return 2 if eppf_walk_has_avx512() != 0 else 1
+    return 3 if eppf_walk_has_avx512() != 0 else 1
 
-cdef int _simd = _max_level()
+
+# The level used by default: the best, except that of the two AVX-512 walks the
+# skipping one (fewer gathers, more other work) is the default only where
+# gathers are slow (AMD).
+cdef int _default_level():
+    cdef int best = _max_level()
+    if best == 3 and eppf_walk_prefers_skips() == 0:
+        return 2
+    return best
+
+
+cdef int _simd = _default_level()
 
 # Consecutive zero-length pairs after which an object is declared degenerate.
 cdef enum:
@@ -94,6 +116,7 @@ cdef enum:
     FIX_SHIFT = 32
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
+    CODE_WORDS = 8192       # the AVX-512 walk's code grid: 2 words a row, any voxel index below it
     # packed line walk for grids up to 64 (layout in _eppf_walk.h)
     PK_S = EPPF_PK_S
     PK_ZSHIFT = EPPF_PK_ZSHIFT
@@ -112,22 +135,29 @@ def _simd_enabled():
 
 
 def _set_simd(enabled):
-    """Use the best SIMD kernels the CPU has when ``enabled``, the scalar code
-    otherwise; return the previous setting (True or False)."""
+    """Use the default SIMD kernels for this CPU when ``enabled``, the scalar
+    code otherwise; return the previous setting (True or False)."""
     global _simd
     old = _simd > 0
-    _simd = _max_level() if enabled else 0
+    _simd = _default_level() if enabled else 0
     return old
 
 
 def _simd_levels():
-    """The kernel levels this CPU can run: 0 scalar, 1 AVX2, 2 AVX-512."""
+    """The kernel levels this CPU can run: 0 scalar, 1 AVX2, 2 AVX-512 (grouped
+    walk), 3 AVX-512 (skipping walk)."""
     return tuple(range(_max_level() + 1))
 
 
+def _default_simd_level():
+    """The kernel level used unless ``_set_simd_level`` says otherwise."""
+    return _default_level()
+
+
 def _set_simd_level(int level):
-    """Use kernel level ``level`` (0 scalar, 1 AVX2, 2 AVX-512; capped at what the
-    CPU has); return the previous level."""
+    """Use kernel level ``level`` (0 scalar, 1 AVX2, 2 AVX-512 with the grouped
+    walk, 3 AVX-512 with the skipping walk; capped at what the CPU has);
+    return the previous level."""
     global _simd
     old = _simd
     _simd = max(0, min(level, _max_level()))
@@ -145,7 +175,7 @@ cdef struct Params:
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
     int64_t lohi[66]        # thr[T * n4 + 1] and thr[T * n4 + n4 - 1] packed as the AVX-512 walk reads them
-    int simd                # walk f4 in AVX2 (1) or AVX-512 (2) lanes (grids up to 64), 0: scalar
+    int simd                # walk f4 in AVX2 (1) or AVX-512 lanes, grouped (2) or skipping (3) (grids up to 64), 0: scalar
     int simd123             # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
 
 
@@ -358,12 +388,14 @@ cdef inline int _draw_pair(const double* pts, int64_t ps, uint32_t n, uint64_t* 
 
 cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
-                        int32_t* vox, int64_t* pv, int32_t* counts) noexcept nogil:
+                        int32_t* vox, int64_t* pv, uint64_t* code, int32_t* counts) noexcept nogil:
     """Histogram counts of one object; returns 1 if pairs could not be drawn.
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
     that the latency of one pair's square root and divisions overlaps with
-    the next pair's instead of stalling behind a voxel walk.
+    the next pair's instead of stalling behind a voxel walk. At level 3 the
+    f4 walk counts the pairs itself, and lines still being walked at the end
+    of a batch carry over (in ``lanes``) to the next one.
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
@@ -377,10 +409,15 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     # on the scalar draw (with its redraws) takes over for the rest of the object.
     cdef bint vec_draw = prm.simd123 == 2
     cdef int good
+    cdef int64_t lanes[EPPF_LANES_WORDS]
+    cdef bint dist = prm.simd == 3 and prm.n4 > 1
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
     if prm.n4 > 1:
-        _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd == 2 else NULL)
+        _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd >= 2 else NULL)
+    if dist:
+        eppf_code_grid(bits, prm.grid, code + CODE_WORDS, code)
+        memset(lanes, 0, sizeof(lanes))
     base = 0
     while base < n_pairs:
         m = n_pairs - base
@@ -414,6 +451,9 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
                 for t in range(m):
                     B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
+        if dist:
+            eppf_f4_dist_avx512(<int>m, I, J, B, pv, code, prm.grid, prm.thr, prm.n4, prm.lohi, lanes, 0, counts)
+            continue
         if prm.n4 > 1:
             if prm.simd == 2:
                 eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi, prm.recip_packed,
@@ -432,6 +472,8 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
                                       &occ, &total)
         for t in range(m):
             counts[B[t]] += 1
+    if dist:
+        eppf_f4_dist_avx512(0, I, J, B, pv, code, prm.grid, prm.thr, prm.n4, prm.lohi, lanes, 1, counts)
     return 0
 
 
@@ -453,7 +495,7 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
         prm.lohi[k] = 0
         if n4 > 1 and k <= grid + 1:
             prm.lohi[k] = ((<int64_t>thr[k * n4 + 1]) << EPPF_META_LO) | ((<int64_t>thr[k * n4 + n4 - 1]) << EPPF_META_HI)
-    prm.simd123 = _simd
+    prm.simd123 = _simd if _simd < 2 else 2
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max
     for k in range(1, n2):
@@ -544,12 +586,15 @@ def eppf_counts(points_in, normals_in,
     cdef int64_t max_n = np.max(np.diff(offsets))
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
-    pv_arr = np.zeros((num_threads, max_n if prm.simd == 2 else 1), dtype=np.int64)
+    pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
+    # the AVX-512 walk's free-distance grid (CODE_WORDS) and its scratch (4 g^2 words)
+    code_arr = np.zeros((num_threads, CODE_WORDS + 4 * 64 * 64 if prm.simd == 3 else 1), dtype=np.uint64)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
     cdef uint64_t[:, ::1] grids = grids_arr
     cdef int32_t[:, ::1] vox = vox_arr
     cdef int64_t[:, ::1] pv = pv_arr
+    cdef uint64_t[:, ::1] code = code_arr
     cdef Py_ssize_t k, tid
     cdef int64_t start
     with nogil:
@@ -558,7 +603,8 @@ def eppf_counts(points_in, normals_in,
             tid = threadid()
             status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
-                                       &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &counts[k, 0])
+                                       &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &code[tid, 0],
+                                       &counts[k, 0])
     return counts_arr, status_arr
 
 

@@ -4,8 +4,20 @@
  *   and the f4 line walks (``eppf_f4_batch_avx2``);
  * - AVX-512 (F, BW, VL, DQ and VBMI), eight pairs at a time: the pair draws
  *   (``eppf_draw_batch_avx512``), the f1-f3 bins with the check for
- *   coinciding points (``eppf_f123_batch_avx512``) and the f4 walks
- *   (``eppf_f4_batch_avx512``).
+ *   coinciding points (``eppf_f123_batch_avx512``) and two f4 walks: the
+ *   grouped walk (``eppf_f4_batch_avx512``, level 2) and the skipping walk
+ *   (``eppf_f4_dist_avx512``, level 3), which keeps every lane busy by
+ *   refilling it from a queue and jumps over voxels proved empty by their
+ *   distance to the nearest occupied voxel (``eppf_code_grid``): 1.8 gathers
+ *   a pair instead of 3.0. The default is level 3 on AMD, 2 elsewhere
+ *   (``eppf_walk_prefers_skips``).
+ *
+ * Gathers are used only for the walk's look-ups: AMD Zen 4 runs an
+ * eight-element gather at about 13 cycles (0.65 ns an element measured on a
+ * Zen 4 KVM guest, against about 0.4 ns a scalar load), so the AVX-512 code
+ * reads the points and normals of f1-f3 with row loads and a transpose, and
+ * the setup and the groups of the walks with scalar loads and in-register
+ * table look-ups.
  *
  * f1-f3: the same IEEE operations in the same order as _eppf_fast.pyx's
  * ``_bin_f123`` (no FMA: the targets are plain "avx2" / AVX-512 and the build
@@ -17,10 +29,10 @@
  * position fits the packed fixed-point form of _eppf_fast.pyx's ``_line_bin``:
  * x, y, z in three 21-bit lanes of one int64, 14 fraction bits each, so one
  * addition advances all three axes by a step. A walk here visits exactly
- * the voxels ``_line_bin`` visits, and stops only once the f4 bin is certain,
- * so the bins are identical; only the order in which pairs are walked
- * changes (pairs are grouped by line length so that the lanes of a group
- * need similar numbers of steps).
+ * the voxels ``_line_bin`` visits (or proves them empty), and stops only once
+ * the f4 bin is certain, so the bins are identical; only the order in which
+ * pairs are walked changes (the grouped walks group pairs by line length so
+ * that the lanes of a group need similar numbers of steps).
  *
  * Stopping rule, per pair: with ``occ`` the occupied voxels counted so far
  * (both end voxels included) and ``rem`` the inner voxels not yet looked at,
@@ -72,10 +84,20 @@
 #define EPPF_META_LO 21
 #define EPPF_META_HI 42
 #define EPPF_META_MASK 0x1FFFFF
+/* The lane state of ``eppf_f4_dist_avx512`` between calls for one object: per
+   set of eight lanes (six sets), seven vectors of eight int64 and the mask
+   of lanes in use. */
+#define EPPF_LANES_WORDS 384
 /* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
 #define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
 
 #define EPPF_AVX512_TARGET "avx2,avx512f,avx512bw,avx512vl,avx512dq,avx512vbmi"
+/* Plain C compiled for AVX-512 where the SIMD kernels are built (it serves only them). */
+#if EPPF_WALK_SIMD
+#define EPPF_AVX512_FN __attribute__((target(EPPF_AVX512_TARGET)))
+#else
+#define EPPF_AVX512_FN
+#endif
 
 /* AVX-512 F, BW, VL, DQ and VBMI (with the OS saving the zmm state: libgcc's
    cpu check reads XCR0). */
@@ -86,6 +108,22 @@ static int eppf_walk_has_avx512(void)
     return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw")
            && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq")
            && __builtin_cpu_supports("avx512vbmi");
+#else
+    return 0;
+#endif
+}
+
+/* Whether the skipping AVX-512 walk (``eppf_f4_dist_avx512``) is the better of
+   the two AVX-512 walks here: on AMD Zen 4 an eight-element gather costs about
+   13 cycles, and the skipping walk's 1.8 gathers a pair (against 3.0) pay for
+   its extra vector work (measured, walk alone: 0.36 against 0.42 ms per
+   1,024-point object); where gathers are cheaper (Intel) the grouped walk's
+   lighter steps are expected to win. Both give the same counts. */
+static int eppf_walk_prefers_skips(void)
+{
+#if EPPF_WALK_SIMD
+    __builtin_cpu_init();
+    return __builtin_cpu_is("amd") != 0;
 #else
     return 0;
 #endif
@@ -458,13 +496,31 @@ static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *o
     }
 }
 
-/* 8 rows r[0..7] (offsets in doubles) of an array: columns 0, 1, 2 as vectors. */
-#define EPPF_GATHER3(A, R, K, X, Y, Z)                                              \
-    do {                                                                            \
-        (X) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A), 8);     \
-        (Y) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 1, 8); \
-        (Z) = _mm512_mask_i64gather_pd(_mm512_setzero_pd(), (K), (R), (A) + 2, 8); \
-    } while (0)
+/* The points (x, y, z) at rows r[0..7] of an array with rows of ``stride``
+ * doubles, as x, y, z vectors: eight masked row loads and a transpose (on
+ * CPUs with slow gathers, such as AMD Zen 4, much cheaper than three
+ * gathers; the values, and so the bins, are the same). */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_load3x8(const double *a, int64_t stride, const int32_t *r, __m512d *x, __m512d *y,
+                                __m512d *z)
+{
+    const __m512i pick_xy = _mm512_set_epi64(13, 9, 5, 1, 12, 8, 4, 0);   /* x0 x1 x2 x3 y0 y1 y2 y3 */
+    const __m512i pick_z = _mm512_set_epi64(15, 11, 7, 3, 14, 10, 6, 2);  /* z0 z1 z2 z3 ... */
+    __m512d a0, a1, a2, a3, u0, u1, v0, v1;
+#define EPPF_ROW(k) _mm256_maskz_loadu_pd(0x7, a + stride * r[k])
+    a0 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(0)), EPPF_ROW(1), 1);  /* x0 y0 z0 0 x1 y1 z1 0 */
+    a1 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(2)), EPPF_ROW(3), 1);
+    a2 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(4)), EPPF_ROW(5), 1);
+    a3 = _mm512_insertf64x4(_mm512_castpd256_pd512(EPPF_ROW(6)), EPPF_ROW(7), 1);
+#undef EPPF_ROW
+    u0 = _mm512_permutex2var_pd(a0, pick_xy, a1);
+    u1 = _mm512_permutex2var_pd(a2, pick_xy, a3);
+    v0 = _mm512_permutex2var_pd(a0, pick_z, a1);
+    v1 = _mm512_permutex2var_pd(a2, pick_z, a3);
+    *x = _mm512_shuffle_f64x2(u0, u1, 0x44);
+    *y = _mm512_shuffle_f64x2(u0, u1, 0xEE);
+    *z = _mm512_shuffle_f64x2(v0, v1, 0x44);
+}
 
 /* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
  * the same order, so the same bins), which also checks the pairs as
@@ -477,18 +533,25 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
 {
     const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
     const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
-    const __m512i vps = _mm512_set1_epi64(ps), vns = _mm512_set1_epi64(ns);
     const __m256i one32 = _mm256_set1_epi32(1);
-    int t, k, bad = m;
+    int32_t ri[8], rj[8];
+    int t, k, l, bad = m;
     for (t = 0; t < m; t += 8) {
         const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const __m512i vi = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, ii + t));
-        const __m512i vj = _mm512_cvtepu32_epi64(_mm256_maskz_loadu_epi32(keep, jj + t));
+        const int32_t *vi = ii + t, *vj = jj + t;
         __m512d pix, piy, piz, pjx, pjy, pjz, dx, dy, dz, dist, v;
         __m256i b1, b2 = _mm256_setzero_si256(), b3 = _mm256_setzero_si256(), b;
         __mmask8 same;
-        EPPF_GATHER3(pts, _mm512_mul_epu32(vi, vps), keep, pix, piy, piz);
-        EPPF_GATHER3(pts, _mm512_mul_epu32(vj, vps), keep, pjx, pjy, pjz);
+        if (keep != 0xff) {  /* a partial last group repeats its last pair */
+            for (l = 0; l < 8; l++) {
+                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+            }
+            vi = ri;
+            vj = rj;
+        }
+        eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
+        eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
         same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
                & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
         if (same && bad == m)
@@ -502,8 +565,8 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
         b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
         if (n2 > 1 || n3 > 1) {
             __m512d nix, niy, niz, njx, njy, njz;
-            EPPF_GATHER3(nrm, _mm512_mul_epu32(vi, vns), keep, nix, niy, niz);
-            EPPF_GATHER3(nrm, _mm512_mul_epu32(vj, vns), keep, njx, njy, njz);
+            eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
+            eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
             if (n2 > 1) {
                 __m512d inv = _mm512_div_pd(one, dist), m1, m2;
                 m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
@@ -531,51 +594,97 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
     }
     return bad;
 }
-#undef EPPF_GATHER3
 
-/* ``eppf_f4_setup_avx2`` eight pairs at a time, from ``pv``: each point's
- * voxel already in the packed walk's start form (lanes v S + S/2 + g, see
- * _eppf_fast.pyx's ``_fill_grid``), so a pair needs two gathers. The packed
- * difference of two such words holds the three lane differences d S exactly
- * (each below 2**20 in size), recovered by sign-extending 21-bit fields. The
- * same integer results as the AVX2 setup: the increments' scale 2**14 / L is
- * read from ``recip_packed``, the same correctly rounded quotient as the
- * division there. */
+/* The walk setup of the eight pairs (i8[l], j8[l]), from ``pv``: each
+ * point's voxel already in the packed walk's start form (lanes v S + S/2 + g,
+ * see _eppf_fast.pyx's ``_fill_grid``). The packed difference of two such
+ * words holds the three lane differences d S exactly (each below 2**20 in
+ * size), recovered by sign-extending 21-bit fields. The same integer results
+ * as ``eppf_f4_setup_avx2``: the increments' scale 2**14 / L is the same
+ * correctly rounded division (the value of ``recip_packed[L]``), and
+ * lo | hi of T = L + 1 voxels is ``lohi[T]``, looked up in registers:
+ * ``tab`` holds lohi[1..63] at 1..63 and lohi[64] at 0 (T >= 3 on every
+ * walked line). No gathers: on CPUs with slow ones (AMD Zen 4) eight loads
+ * and in-register look-ups cost a fraction of them. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, const int64_t *pv, const __m512i *tab,
+                                      __m512i *P, __m512i *INC, __m512i *Lout, __m512i *LOHI)
+{
+    const __m512i one = _mm512_set1_epi64(1);
+    const __m512i a = _mm512_set_epi64(pv[i8[7]], pv[i8[6]], pv[i8[5]], pv[i8[4]], pv[i8[3]], pv[i8[2]], pv[i8[1]],
+                                       pv[i8[0]]);
+    const __m512i b = _mm512_set_epi64(pv[j8[7]], pv[j8[6]], pv[j8[5]], pv[j8[4]], pv[j8[3]], pv[j8[2]], pv[j8[1]],
+                                       pv[j8[0]]);
+    const __m512i d = _mm512_sub_epi64(b, a);
+    const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
+    const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
+    const __m512i dys = _mm512_srai_epi64(_mm512_slli_epi64(d1, 43), 43);
+    const __m512i dxs = _mm512_srai_epi64(_mm512_sub_epi64(d1, dys), EPPF_PK_YLANE);
+    const __m512i dx = _mm512_srai_epi64(dxs, EPPF_PK_FRAC), dy = _mm512_srai_epi64(dys, EPPF_PK_FRAC);
+    const __m512i dz = _mm512_srai_epi64(dzs, EPPF_PK_FRAC);
+    const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
+                                       _mm512_abs_epi64(dz));
+    /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
+    const __m512d q = _mm512_div_pd(_mm512_set1_pd((double)EPPF_PK_S), _mm512_cvtepi64_pd(_mm512_max_epi64(L, one)));
+    const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
+    const __m512i iy = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dy), q));
+    const __m512i iz = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dz), q));
+    const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
+                                                          _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
+    /* tab[(L + 1) & 63]: bits 0-3 pick within 16 entries, bits 4 and 5 which 16 */
+    const __m512i k = _mm512_add_epi64(L, one);
+    const __mmask8 b4 = _mm512_test_epi64_mask(k, _mm512_set1_epi64(16));
+    const __mmask8 b5 = _mm512_test_epi64_mask(k, _mm512_set1_epi64(32));
+    const __m512i r01 = _mm512_mask_blend_epi64(b4, _mm512_permutex2var_epi64(tab[0], k, tab[1]),
+                                                _mm512_permutex2var_epi64(tab[2], k, tab[3]));
+    const __m512i r23 = _mm512_mask_blend_epi64(b4, _mm512_permutex2var_epi64(tab[4], k, tab[5]),
+                                                _mm512_permutex2var_epi64(tab[6], k, tab[7]));
+    *P = _mm512_add_epi64(a, inc);
+    *INC = inc;
+    *Lout = L;
+    *LOHI = _mm512_mask_blend_epi64(b5, r01, r23);
+}
+
+/* ``tab`` of ``eppf_setup8_avx512`` from lohi[0..64]. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_lohi_tab_avx512(const int64_t *lohi, __m512i *tab)
+{
+    int k;
+    for (k = 0; k < 8; k++)
+        tab[k] = _mm512_loadu_si512(lohi + 8 * k);
+    tab[0] = _mm512_mask_mov_epi64(tab[0], 1, _mm512_set1_epi64(lohi[64]));
+}
+
+/* ``eppf_f4_setup_avx2`` eight pairs at a time (``eppf_setup8_avx512``). */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const int64_t *lohi, const double *recip_packed, int64_t *P, int64_t *INC,
                                  int32_t *Ls, int64_t *META)
 {
-    const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1);
-    int t;
+    __m512i tab[8];
+    int32_t ri[8], rj[8];
+    int t, l;
+    (void)recip_packed;
+    eppf_lohi_tab_avx512(lohi, tab);
     for (t = 0; t < m; t += 8) {
         const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const __m512i a = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, ii + t), pv, 8);
-        const __m512i b = _mm512_mask_i32gather_epi64(zero, keep, _mm256_maskz_loadu_epi32(keep, jj + t), pv, 8);
-        const __m512i d = _mm512_sub_epi64(b, a);
-        const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
-        const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
-        const __m512i dys = _mm512_srai_epi64(_mm512_slli_epi64(d1, 43), 43);
-        const __m512i dxs = _mm512_srai_epi64(_mm512_sub_epi64(d1, dys), EPPF_PK_YLANE);
-        const __m512i dx = _mm512_srai_epi64(dxs, EPPF_PK_FRAC), dy = _mm512_srai_epi64(dys, EPPF_PK_FRAC);
-        const __m512i dz = _mm512_srai_epi64(dzs, EPPF_PK_FRAC);
-        const __m512i L = _mm512_max_epi64(_mm512_max_epi64(_mm512_abs_epi64(dx), _mm512_abs_epi64(dy)),
-                                           _mm512_abs_epi64(dz));
-        const __m256i L32 = _mm512_cvtepi64_epi32(L);
-        /* L <= 1 lanes are never walked; max(L, 1) only keeps them finite */
-        const __m512d q = _mm512_i64gather_pd(_mm512_max_epi64(L, one), recip_packed, 8);
-        const __m512i ix = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dx), q));  /* = llrint */
-        const __m512i iy = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dy), q));
-        const __m512i iz = _mm512_cvtpd_epi64(_mm512_mul_pd(_mm512_cvtepi64_pd(dz), q));
-        const __m512i inc = _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(ix, EPPF_PK_XLANE),
-                                                              _mm512_slli_epi64(iy, EPPF_PK_YLANE)), iz);
-        _mm512_mask_storeu_epi64(P + t, keep, _mm512_add_epi64(a, inc));
+        const int32_t *i8 = ii + t, *j8 = jj + t;
+        __m512i p, inc, L, lh;
+        if (keep != 0xff) {  /* a partial last group repeats its last pair */
+            for (l = 0; l < 8; l++) {
+                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+            }
+            i8 = ri;
+            j8 = rj;
+        }
+        eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh);
+        _mm512_mask_storeu_epi64(P + t, keep, p);
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
-        _mm256_mask_storeu_epi32(Ls + t, keep, L32);
+        _mm256_mask_storeu_epi32(Ls + t, keep, _mm512_cvtepi64_epi32(L));
         /* rem = L - 1 (a wrapped field for lines of L <= 1, which are never walked) | lo | hi */
         _mm512_mask_storeu_epi64(META + t, keep, _mm512_add_epi64(
-            _mm512_mask_i64gather_epi64(zero, keep, _mm512_add_epi64(L, one), lohi, 8),
-            _mm512_and_si512(_mm512_sub_epi64(L, one), _mm512_set1_epi64(EPPF_META_MASK))));
+            lh, _mm512_and_si512(_mm512_sub_epi64(L, _mm512_set1_epi64(1)), _mm512_set1_epi64(EPPF_META_MASK))));
     }
 }
 
@@ -631,20 +740,25 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
         occ = _mm512_mask_add_epi64(occ, hit_, occ, one);                                         \
     } while (0)
 
+/* A[order[G + l]], l < 8, as a vector: eight loads (cheaper than a gather on
+   CPUs with slow gathers, such as AMD Zen 4). */
+#define EPPF_PICK8(A, G)                                                                          \
+    _mm512_set_epi64((A)[order[(G) + 7]], (A)[order[(G) + 6]], (A)[order[(G) + 5]], (A)[order[(G) + 4]], \
+                     (A)[order[(G) + 3]], (A)[order[(G) + 2]], (A)[order[(G) + 1]], (A)[order[(G) + 0]])
+
 /* The lanes of the group at walk position G: nothing to walk in padding lanes
    (rem = 0, occ = lo = hi = 0); then the shortest quiet stretch of the
    group: every lane is still undecided for its first
    clamp(occ + rem - lo + 1, 0, rem) steps (0 once occ >= hi). */
 #define EPPF_GROUP512(G, valid, p, inc, lo, hi, rem, occ, quiet)                                  \
     do {                                                                                          \
-        const __m256i oi_ = _mm256_loadu_si256((const __m256i *)(order + (G)));                   \
         __m512i need_, steps_;                                                                    \
         __mmask8 live_;                                                                           \
         valid = n_walk - (G) >= 8 ? (__mmask8)0xff                                                \
                 : n_walk <= (G) ? (__mmask8)0 : (__mmask8)((1u << (n_walk - (G))) - 1);           \
-        p = _mm512_i32gather_epi64(oi_, P, 8);                                                    \
-        inc = _mm512_mask_i32gather_epi64(zero, valid, oi_, INC, 8);                              \
-        rem = _mm512_mask_i32gather_epi64(zero, valid, oi_, META, 8);                             \
+        p = EPPF_PICK8(P, G);                                                                     \
+        inc = _mm512_maskz_mov_epi64(valid, EPPF_PICK8(INC, G));                                  \
+        rem = _mm512_maskz_mov_epi64(valid, EPPF_PICK8(META, G));                                 \
         lo = _mm512_and_si512(_mm512_srli_epi64(rem, EPPF_META_LO), _mm512_set1_epi64(EPPF_META_MASK)); \
         hi = _mm512_srli_epi64(rem, EPPF_META_HI);                                                \
         rem = _mm512_and_si512(rem, _mm512_set1_epi64(EPPF_META_MASK));                           \
@@ -734,12 +848,14 @@ static void eppf_f4_batch_avx512(int m, const int32_t *ii, const int32_t *jj, co
     }
 #undef EPPF_STEP512
 #undef EPPF_GROUP512
+#undef EPPF_PICK8
 #undef EPPF_LIVE512
 #undef EPPF_FOUR512
 #undef EPPF_BINS512
     if (n_walk < m)
         eppf_f4_short_lines(m, Ls, thr, n4, B);
 }
+
 
 #else
 
@@ -781,6 +897,342 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
     return 0;
 }
 
+
+#endif
+
+/* The exact free distance behind the AVX-512 walk's skips: ``code`` (8192
+ * words, of which the first 2 g^2 are written, rows of 2 words) holds for every voxel c = min(d, 3), d the
+ * Chebyshev distance (in voxels) to the nearest occupied voxel of the bit grid
+ * ``bits`` (g^2 words, one per (x, y) row, z bits; g <= 64): c is bits
+ * 2 (z & 31) and 2 (z & 31) + 1 of word 2 row + (z >> 5). c counts the
+ * grids D0 (occupied), D1 and D2 (dilated by the 3^3 box once and twice:
+ * voxels within distance 1 and 2 of an occupied one) that do not hold the
+ * voxel. ``work``: 4 g^2 words of scratch; 2 <= g <= 64. */
+/* ``out`` = ``src`` dilated by the 3^3 box, never across the grid's faces in
+   x and y (bits past z = g - 1 are set but never read); a and b: g^2 words
+   of scratch each. */
+EPPF_AVX512_FN
+static void eppf_dilate(const uint64_t *src, uint64_t *out, uint64_t *a, uint64_t *b, int64_t g)
+{
+    int64_t x, y, r;
+    for (r = 0; r < g * g; r++)
+        a[r] = src[r] | (src[r] << 1) | (src[r] >> 1);
+    for (x = 0; x < g; x++) {
+        const uint64_t *t = a + x * g;
+        uint64_t *o = b + x * g;
+        o[0] = t[0] | t[1];
+        for (y = 1; y < g - 1; y++)
+            o[y] = t[y - 1] | t[y] | t[y + 1];
+        o[g - 1] = t[g - 2] | t[g - 1];
+    }
+    for (y = 0; y < g; y++)
+        out[y] = b[y] | b[g + y];
+    for (x = 1; x < g - 1; x++)
+        for (y = 0; y < g; y++)
+            out[x * g + y] = b[(x - 1) * g + y] | b[x * g + y] | b[(x + 1) * g + y];
+    for (y = 0; y < g; y++)
+        out[(g - 1) * g + y] = b[(g - 2) * g + y] | b[(g - 1) * g + y];
+}
+
+/* The low 32 bits of x spread to the even bits of the result. */
+EPPF_AVX512_FN
+static inline uint64_t eppf_spread32(uint64_t x)
+{
+    x &= 0xFFFFFFFFULL;
+    x = (x | (x << 16)) & 0x0000FFFF0000FFFFULL;
+    x = (x | (x << 8)) & 0x00FF00FF00FF00FFULL;
+    x = (x | (x << 4)) & 0x0F0F0F0F0F0F0F0FULL;
+    x = (x | (x << 2)) & 0x3333333333333333ULL;
+    x = (x | (x << 1)) & 0x5555555555555555ULL;
+    return x;
+}
+
+EPPF_AVX512_FN
+static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
+{
+    uint64_t *d1 = work, *d2 = work + g * g, *a = work + 2 * g * g, *b = work + 3 * g * g;
+    int64_t r;
+    eppf_dilate(bits, d1, a, b, g);
+    eppf_dilate(d1, d2, a, b, g);
+    for (r = 0; r < g * g; r++) {
+        const uint64_t b0 = (d1[r] & ~bits[r]) | ~d2[r];  /* c = 1 or 3 */
+        const uint64_t b1 = ~d1[r];                       /* c = 2 or 3 */
+        code[2 * r] = eppf_spread32(b0) | (eppf_spread32(b1) << 1);
+        code[2 * r + 1] = eppf_spread32(b0 >> 32) | (eppf_spread32(b1 >> 32) << 1);
+    }
+}
+
+#if EPPF_WALK_SIMD
+/* The f4 walks of a batch and their counts, AVX-512: three sets of eight
+ * lanes, each lane refilled from a queue as soon as its line's bin is
+ * certain, each step skipping the voxels the free distance proves empty.
+ *
+ * The pairs (ii[t], jj[t]), t < m <= EPPF_WALK_BATCH, with f1-f3 bins B[t]
+ * (already times n4): lines without inner voxels (L <= 1) are counted at
+ * once; the others join a queue of (first inner voxel, increment,
+ * rem | lo | hi, key) in batch order (setup of ``eppf_setup8_avx512``).
+ *
+ * A step of a lane reads c = min(d, 3) at its voxel (``eppf_code_grid``).
+ * c = 0: the voxel is occupied (occ + 1), one step. c > 0: the voxel and the
+ * next c - 1 of the line are empty, since a step moves every coordinate by
+ * at most one voxel, so the k-th voxel after this one lies within distance
+ * k < d of it: the lane advances min(c, rem) steps at once (P += steps
+ * INC, the same integer position as that many single steps), occ unchanged.
+ * Every voxel is thus still counted or proved empty in line order, and occ
+ * and rem mean what they mean in the scalar walk. After two steps the
+ * stopping rule of ``eppf_f4_batch_avx2`` applies, with one more case for
+ * n4 = 3: the middle bin is certain once lo <= occ and occ + rem < hi.
+ * Walking past the point where the bin became certain (never past the
+ * line's end) cannot change it. A lane whose bin is certain or whose line has
+ * ended adds one to counts[B + f4 bin] and takes the next queued line.
+ *
+ * Lines still being walked when the queue runs dry stay in ``lanes``
+ * (EPPF_LANES_WORDS int64, all zero before an object's first call) for the
+ * next call; ``drain`` walks them to their end (the object's last call,
+ * m = 0). A histogram is a sum, so the order in which lines finish does not
+ * change it: the counts are the scalar kernel's.
+ */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *B,
+                                const int64_t *pv, const uint64_t *code, int64_t g, const int32_t *thr, int n4,
+                                const int64_t *lohi, int64_t *lanes, int drain, int32_t *counts)
+{
+    int64_t QP[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t QI[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t QM[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    int64_t QK[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
+    /* finished lines: counts index (n4 <= 3), or key and occ (n4 > 3); at most 48 + m of them */
+    int64_t OK[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
+    int64_t OO[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
+    const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2);
+    const __m512i fmask = _mm512_set1_epi64(EPPF_META_MASK), three = _mm512_set1_epi64(3);
+    /* multishift fields: byte 0 <- bits 35.. (y), byte 1 <- bits 56.. (x), byte 2 <- bit 19 (z >> 5),
+       byte 3 <- bits 13.. (2 z and a fraction bit); kept: 6, 6, 1 bits and 2 (z & 31) */
+    const __m512i ctrl = _mm512_set1_epi64(((int64_t)(EPPF_PK_ZSHIFT - 1) << 24) | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 16)
+                                           | ((int64_t)EPPF_PK_XSHIFT << 8) | EPPF_PK_YSHIFT);
+    const __m512i mfield = _mm512_set1_epi64(0x3E013F3F);
+    /* bytes (1, g, 1, 0): words y + g x (at most 4095) and z >> 5; then (2, 1): the word index */
+    const __m512i mul = _mm512_set1_epi64((1 << 16) | (g << 8) | 1), w21 = _mm512_set1_epi64(0x00010002);
+    const long long *cbase = (const long long *)code;
+    const int wide = n4 > 3;
+    __m512i pA, incA, remA, occA, pB, incB, remB, occB, pC, incC, remC, occC;
+    __m512i pD, incD, remD, occD, pE, incE, remE, occE, pF, incF, remF, occF;
+    __mmask8 actA, actB, actC, actD, actE, actF;
+    __m512i tab[8];
+    int32_t ri[8], rj[8];
+    int t, nq = 0, q = 0, nout = 0, i;
+
+    /* The queue. */
+    eppf_lohi_tab_avx512(lohi, tab);
+    for (t = 0; t < m; t += 8) {
+        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
+        const int32_t *i8 = ii + t, *j8 = jj + t;
+        __m512i a, vinc, L, lh, vkey, meta;
+        __mmask8 walk, few;
+        if (keep != 0xff) {  /* a partial last group repeats its last pair */
+            int l;
+            for (l = 0; l < 8; l++) {
+                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+            }
+            i8 = ri;
+            j8 = rj;
+        }
+        eppf_setup8_avx512(i8, j8, pv, tab, &a, &vinc, &L, &lh);
+        walk = keep & _mm512_cmpgt_epi64_mask(L, one);
+        few = keep & (__mmask8)~walk;
+        vkey = _mm512_cvtepi32_epi64(_mm256_maskz_loadu_epi32(keep, B + t));
+        if (wide)
+            vkey = _mm512_add_epi64(vkey, _mm512_slli_epi64(L, 32));
+        meta = _mm512_add_epi64(lh, _mm512_sub_epi64(L, one));  /* rem = L - 1 | lo | hi */
+        _mm512_storeu_si512(QP + nq, _mm512_maskz_compress_epi64(walk, a));
+        _mm512_storeu_si512(QI + nq, _mm512_maskz_compress_epi64(walk, vinc));
+        _mm512_storeu_si512(QM + nq, _mm512_maskz_compress_epi64(walk, meta));
+        _mm512_storeu_si512(QK + nq, _mm512_maskz_compress_epi64(walk, vkey));
+        nq += __builtin_popcount(walk);
+        if (few) {
+            /* no inner voxel: occ = T = L + 1, every voxel occupied */
+            int64_t Lf[8] __attribute__((aligned(64)));
+            int l;
+            _mm512_store_si512(Lf, L);
+            for (l = 0; l < 8; l++) {
+                if ((few >> l) & 1) {
+                    const int32_t *th = thr + (Lf[l] + 1) * n4;
+                    int bb = 0, j;
+                    for (j = 1; j < n4; j++)
+                        bb += (Lf[l] + 1) >= th[j];
+                    counts[B[t + l] + bb]++;
+                }
+            }
+        }
+    }
+
+/* Set S's lanes: position, increment, rem and occ in registers, lo, hi and
+   key in ``lanes`` (read only when a lane may finish). */
+#define EPPF_LOADL(S, o)                                                                          \
+    do {                                                                                          \
+        p##S = _mm512_loadu_si512(lanes + (o));                                                   \
+        inc##S = _mm512_loadu_si512(lanes + (o) + 8);                                             \
+        rem##S = _mm512_loadu_si512(lanes + (o) + 16);                                            \
+        occ##S = _mm512_loadu_si512(lanes + (o) + 40);                                            \
+        act##S = (__mmask8)lanes[(o) + 56];                                                       \
+    } while (0)
+#define EPPF_SAVEL(S, o)                                                                          \
+    do {                                                                                          \
+        _mm512_storeu_si512(lanes + (o), p##S);                                                   \
+        _mm512_storeu_si512(lanes + (o) + 8, inc##S);                                             \
+        _mm512_storeu_si512(lanes + (o) + 16, rem##S);                                            \
+        _mm512_storeu_si512(lanes + (o) + 40, occ##S);                                            \
+        lanes[(o) + 56] = act##S;                                                                 \
+    } while (0)
+/* The free lanes of set S take the next lines of the queue, in lane order. */
+#define EPPF_REFILL(S, o)                                                                         \
+    do {                                                                                          \
+        __mmask8 fill_ = (__mmask8)~act##S;                                                       \
+        if (nq - q < 8) {                                                                         \
+            while (__builtin_popcount(fill_) > nq - q)                                            \
+                fill_ &= (__mmask8)~(1u << (31 - __builtin_clz(fill_)));                          \
+        }                                                                                         \
+        {   /* (no branch: a free lane is as likely as not) */                                    \
+            const __m512i mt_ = _mm512_maskz_expand_epi64(fill_, _mm512_loadu_si512(QM + q));     \
+            p##S = _mm512_mask_expand_epi64(p##S, fill_, _mm512_loadu_si512(QP + q));             \
+            inc##S = _mm512_mask_expand_epi64(inc##S, fill_, _mm512_loadu_si512(QI + q));         \
+            rem##S = _mm512_mask_and_epi64(rem##S, fill_, mt_, fmask);                            \
+            occ##S = _mm512_mask_mov_epi64(occ##S, fill_, two);                                   \
+            _mm512_storeu_si512(lanes + (o) + 48, _mm512_mask_expand_epi64(                       \
+                _mm512_loadu_si512(lanes + (o) + 48), fill_, _mm512_loadu_si512(QK + q)));        \
+            _mm512_storeu_si512(lanes + (o) + 24, _mm512_mask_and_epi64(                          \
+                _mm512_loadu_si512(lanes + (o) + 24), fill_, _mm512_srli_epi64(mt_, EPPF_META_LO), fmask)); \
+            _mm512_storeu_si512(lanes + (o) + 32, _mm512_mask_srli_epi64(                         \
+                _mm512_loadu_si512(lanes + (o) + 32), fill_, mt_, EPPF_META_HI));                 \
+            act##S |= fill_;                                                                      \
+            q += __builtin_popcount(fill_);                                                       \
+        }                                                                                         \
+    } while (0)
+/* One step of set S: the lanes with voxels left (rem > 0) look up c and
+   count an occupied voxel; every lane advances max(c, 1) voxels (a lane
+   whose line ends within them has rem <= 0 after it and counts no more; its
+   position is then never looked up again, and any position gives a word
+   index below 8192, the code grid's size). */
+#define EPPF_STEPD(S)                                                                             \
+    do {                                                                                          \
+        const __mmask8 on_ = _mm512_cmpgt_epi64_mask(rem##S, zero);                              \
+        const __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p##S), mfield);   \
+        const __m512i wi_ = _mm512_madd_epi16(_mm512_maddubs_epi16(t_, mul), w21);               \
+        __m512i c_ = _mm512_mask_i64gather_epi64(zero, on_, wi_, cbase, 8);                      \
+        c_ = _mm512_and_si512(_mm512_srlv_epi64(c_, _mm512_srli_epi64(t_, 24)), three);          \
+        occ##S = _mm512_mask_add_epi64(occ##S, _mm512_mask_cmpeq_epi64_mask(on_, c_, zero), occ##S, one); \
+        c_ = _mm512_max_epu64(c_, one);                                                           \
+        p##S = _mm512_add_epi64(p##S, _mm512_mullo_epi64(c_, inc##S));                            \
+        rem##S = _mm512_sub_epi64(rem##S, c_);                                                    \
+    } while (0)
+/* The lanes of set S whose bin is certain (or whose line has ended) give
+   their counts index (or key and occ) to the output and free their lane. */
+#define EPPF_DONE(S, o)                                                                           \
+    do {                                                                                          \
+        const __m512i lo_ = _mm512_loadu_si512(lanes + (o) + 24), hi_ = _mm512_loadu_si512(lanes + (o) + 32); \
+        const __m512i key_ = _mm512_loadu_si512(lanes + (o) + 48);                                \
+        const __m512i end_ = _mm512_add_epi64(occ##S, rem##S);                                    \
+        __mmask8 done_ = _mm512_cmple_epi64_mask(rem##S, zero) | _mm512_cmpge_epi64_mask(occ##S, hi_) \
+                         | _mm512_cmplt_epi64_mask(end_, lo_);                                    \
+        if (!wide)                                                                                \
+            done_ |= _mm512_cmpge_epi64_mask(occ##S, lo_) & _mm512_cmplt_epi64_mask(end_, hi_);   \
+        done_ &= act##S;                                                                          \
+        if (wide) {                                                                               \
+            _mm512_storeu_si512(OK + nout, _mm512_maskz_compress_epi64(done_, key_));             \
+            _mm512_storeu_si512(OO + nout, _mm512_maskz_compress_epi64(done_, occ##S));           \
+        } else {                                                                                  \
+            /* the bin: how many of lo, hi (one and the same for n4 = 2) occ reaches */           \
+            __m512i bb_ = _mm512_mask_add_epi64(key_, _mm512_cmpge_epi64_mask(occ##S, lo_), key_, one); \
+            if (n4 == 3)                                                                          \
+                bb_ = _mm512_mask_add_epi64(bb_, _mm512_cmpge_epi64_mask(occ##S, hi_), bb_, one); \
+            _mm512_storeu_si512(OK + nout, _mm512_maskz_compress_epi64(done_, bb_));              \
+        }                                                                                         \
+        nout += __builtin_popcount(done_);                                                        \
+        act##S &= (__mmask8)~done_;                                                               \
+        rem##S = _mm512_mask_mov_epi64(rem##S, done_, zero);  /* a free lane looks nothing up */  \
+    } while (0)
+
+    EPPF_LOADL(A, 0);
+    EPPF_LOADL(B, 64);
+    EPPF_LOADL(C, 128);
+    EPPF_LOADL(D, 192);
+    EPPF_LOADL(E, 256);
+    EPPF_LOADL(F, 320);
+    for (;;) {
+        EPPF_REFILL(A, 0);
+        EPPF_REFILL(B, 64);
+        EPPF_REFILL(C, 128);
+        EPPF_REFILL(D, 192);
+        EPPF_REFILL(E, 256);
+        EPPF_REFILL(F, 320);
+        if (drain ? (actA | actB | actC | actD | actE | actF) == 0
+                  : (q >= nq && (actA & actB & actC & actD & actE & actF) != 0xff))
+            break;
+        EPPF_STEPD(A);
+        EPPF_STEPD(B);
+        EPPF_STEPD(C);
+        EPPF_STEPD(D);
+        EPPF_STEPD(E);
+        EPPF_STEPD(F);
+        EPPF_STEPD(A);
+        EPPF_STEPD(B);
+        EPPF_STEPD(C);
+        EPPF_STEPD(D);
+        EPPF_STEPD(E);
+        EPPF_STEPD(F);
+        EPPF_STEPD(A);
+        EPPF_STEPD(B);
+        EPPF_STEPD(C);
+        EPPF_STEPD(D);
+        EPPF_STEPD(E);
+        EPPF_STEPD(F);
+        EPPF_STEPD(A);
+        EPPF_STEPD(B);
+        EPPF_STEPD(C);
+        EPPF_STEPD(D);
+        EPPF_STEPD(E);
+        EPPF_STEPD(F);
+        EPPF_DONE(A, 0);
+        EPPF_DONE(B, 64);
+        EPPF_DONE(C, 128);
+        EPPF_DONE(D, 192);
+        EPPF_DONE(E, 256);
+        EPPF_DONE(F, 320);
+    }
+    EPPF_SAVEL(A, 0);
+    EPPF_SAVEL(B, 64);
+    EPPF_SAVEL(C, 128);
+    EPPF_SAVEL(D, 192);
+    EPPF_SAVEL(E, 256);
+    EPPF_SAVEL(F, 320);
+#undef EPPF_LOADL
+#undef EPPF_SAVEL
+#undef EPPF_REFILL
+#undef EPPF_STEPD
+#undef EPPF_DONE
+
+    if (!wide) {
+        for (i = 0; i < nout; i++)
+            counts[OK[i]]++;
+    } else {
+        for (i = 0; i < nout; i++) {
+            const int32_t *th = thr + ((OK[i] >> 32) + 1) * n4;
+            int bb = 0, j;
+            for (j = 1; j < n4; j++)
+                bb += OO[i] >= th[j];
+            counts[(int32_t)(OK[i] & 0xFFFFFFFF) + bb]++;
+        }
+    }
+}
+#else
+static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *B,
+                                const int64_t *pv, const uint64_t *code, int64_t g, const int32_t *thr, int n4,
+                                const int64_t *lohi, int64_t *lanes, int drain, int32_t *counts)
+{
+    (void)m; (void)ii; (void)jj; (void)B; (void)pv; (void)code; (void)g; (void)thr; (void)n4; (void)lohi;
+    (void)lanes; (void)drain; (void)counts;
+}
 #endif
 
 #endif /* EPPF_WALK_H */

@@ -107,7 +107,8 @@ def _packed(clouds):
     return points, normals, offsets
 
 
-# Every kernel level the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (draws, f1-f3 and walk in 8 lanes).
+# Every kernel level the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (draws, f1-f3 and walk in 8 lanes),
+# 3 AVX-512 with the walk that skips voxels proved free by their distance to the nearest occupied one.
 LEVELS = _simd_levels()
 
 
@@ -153,10 +154,11 @@ def test_huge_distances_fall_in_the_last_distance_bin(clouds, simd):
     assert got.reshape(len(clouds), 20, -1)[:, 19].sum() == 500 * len(clouds)
 
 
-@pytest.mark.parametrize("grid", [64, 33, 5, 128])
+@pytest.mark.parametrize("grid", [64, 63, 33, 32, 5, 2, 128])
 @pytest.mark.parametrize("n4", [2, 3, 6, 64])
 def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
-    # Dense and sparse occupancy, long and short lines: every stopping rule of the walk.
+    # Dense and sparse occupancy, long and short lines: every stopping rule of the walk,
+    # and (level 3) skips over free voxels at every distance, up to the grid's faces.
     rng = np.random.default_rng(grid * n4)
     clouds = [_sphere(600, rng), _box(900, rng), np.hstack([rng.uniform(size=(3000, 3)), _sphere(3000, rng)[:, 3:]])]
     points, normals, offsets = _packed(clouds)
@@ -168,6 +170,28 @@ def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
         assert_array_equal(fast, slow)
     assert (slow.reshape(len(clouds), 4, n4)[:, :, 1:].sum() > 0)  # not every pair in the bottom f4 bin
 
+
+
+@pytest.mark.parametrize("spacing", [1, 2, 3, 4, 7])
+@pytest.mark.parametrize("n4", [3, 5])
+def test_walks_on_lattices_give_identical_counts(spacing, n4):
+    # Points on a voxel lattice (every ``spacing``-th voxel, some left out): lines run along
+    # and across rows of occupied voxels, so free distances of 1, 2, 3 and more lie next to
+    # occupied voxels on the same lines, where a skip one voxel too long would miss a count.
+    rng = np.random.default_rng(spacing * 10 + n4)
+    axis = np.arange(0, 64, spacing) + 0.5
+    grid_pts = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    keep = rng.uniform(size=len(grid_pts)) < min(1.0, 1500 / len(grid_pts))
+    pts = np.vstack([grid_pts[keep], [[0.0, 0.0, 0.0], [64.0, 64.0, 64.0]]])
+    cloud = np.hstack([pts, _sphere(len(pts), rng)[:, 3:]])
+    points, normals, offsets = _packed([cloud])
+    args = (points, normals, offsets, np.ones(1), object_seeds(spacing, 1), 5000, (2, 1, 1, n4), 64,
+            ref.F1_MAX, 1)
+    slow, _ = _counts_at(0, *args)
+    for level in LEVELS[1:]:
+        assert_array_equal(_counts_at(level, *args)[0], slow)
+    # dense enough lattices put some lines above the bottom f4 bin
+    assert spacing > 4 or slow.reshape(2, n4)[:, 1:].sum() > 0
 
 def _first_coinciding_draw(points, seed, n_draws):
     """Index of the first of ``n_draws`` splitmix64 candidate pairs whose points coincide, or None.
