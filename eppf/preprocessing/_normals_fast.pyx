@@ -465,9 +465,10 @@ cdef inline Py_ssize_t _bucket(double x) noexcept nogil:
 cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
                      const double* q, const int64_t* c, Py_ssize_t k, double guess,
                      double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
-                     int64_t* kpos, unsigned char* cand_b) noexcept nogil:
-    """Fast path: select the k nearest among the points of the 3x3x3 block
-    within squared distance ``guess`` of the query. On success, ``kpos`` holds
+                     int64_t* kpos, unsigned char* cand_b, int64_t r) noexcept nogil:
+    """Fast path: select the k nearest among the points of the block of
+    cells within Chebyshev distance ``r`` of the query's cell (3x3x3 for
+    ``r = 1``) within squared distance ``guess`` of the query. On success, ``kpos`` holds
     their grid-order positions in ascending order and ``kd2[k - 1]`` the k-th
     squared distance, and the return value is _FAST_OK. Otherwise (outputs
     undefined) it says why: _FAST_FEW (fewer than k within the guess),
@@ -479,12 +480,14 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
     cdef double to_bucket, kth
     cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, di, gz, gz2, gy, gyz2, gx
-    for jz in range(c[2] - 1 if c[2] > 0 else 0, (c[2] + 1 if c[2] + 1 < g.res[2] else g.res[2] - 1) + 1):
+    cdef int64_t xlo = c[0] - r if c[0] - r > 0 else 0
+    cdef int64_t xhi = c[0] + r if c[0] + r < g.res[0] else g.res[0] - 1
+    for jz in range(c[2] - r if c[2] - r > 0 else 0, (c[2] + r if c[2] + r < g.res[2] else g.res[2] - 1) + 1):
         gz = _gap(qz, g.lo[2], g.h, c[2], jz) - g.margin
         gz2 = gz * gz if gz > 0.0 else 0.0
         if gz2 > guess:
             continue
-        for jy in range(c[1] - 1 if c[1] > 0 else 0, (c[1] + 1 if c[1] + 1 < g.res[1] else g.res[1] - 1) + 1):
+        for jy in range(c[1] - r if c[1] - r > 0 else 0, (c[1] + r if c[1] + r < g.res[1] else g.res[1] - 1) + 1):
             gy = _gap(qy, g.lo[1], g.h, c[1], jy) - g.margin
             gyz2 = gz2 + (gy * gy if gy > 0.0 else 0.0)
             if gyz2 > guess:
@@ -493,15 +496,17 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             # is one contiguous run of grid-order positions, and runs come in
             # ascending position order.
             x0 = c[0]
-            if x0 > 0:
+            while x0 > xlo:
                 gx = qx - (g.lo[0] + x0 * g.h) - g.margin
-                if gyz2 + (gx * gx if gx > 0.0 else 0.0) <= guess:
-                    x0 -= 1
+                if gyz2 + (gx * gx if gx > 0.0 else 0.0) > guess:
+                    break
+                x0 -= 1
             x1 = c[0]
-            if x1 + 1 < g.res[0]:
+            while x1 < xhi:
                 gx = (g.lo[0] + (x1 + 1) * g.h) - qx - g.margin
-                if gyz2 + (gx * gx if gx > 0.0 else 0.0) <= guess:
-                    x1 += 1
+                if gyz2 + (gx * gx if gx > 0.0 else 0.0) > guess:
+                    break
+                x1 += 1
             row = (jz * g.res[1] + jy) * g.res[0]
             b = cell_start[row + x0]
             e = cell_start[row + x1 + 1]
@@ -527,7 +532,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     if _simd == 2:
         kth_i = eppf_nrm_select_avx512(cand_d2, cand_pos, m, k, _N_BUCKETS / guess, sel, kpos)
         kd2[k - 1] = cand_d2[kth_i]
-        return _FAST_OK if _block_done(g, q, c, 1, kd2[k - 1]) else _FAST_FAR
+        return _FAST_OK if _block_done(g, q, c, r, kd2[k - 1]) else _FAST_FAR
     # The k-th smallest (d2, position) by a histogram of d2 over [0, guess]
     # (the bucket is monotone in d2), then ranking inside its bucket only.
     for i in range(_N_BUCKETS):
@@ -566,7 +571,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
         kpos[j] = cand_pos[i]
         j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
     kd2[k - 1] = kth
-    return _FAST_OK if _block_done(g, q, c, 1, kth) else _FAST_FAR
+    return _FAST_OK if _block_done(g, q, c, r, kth) else _FAST_FAR
 
 
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
@@ -587,15 +592,23 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
         c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
     if guess < INFINITY:
         res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
-                         sc.kd2, sc.kpos, sc.cand_b)
+                         sc.kd2, sc.kpos, sc.cand_b, 1)
         # One more try with a guess four times larger or smaller (any
         # positive guess gives the same, exact list) before the shells.
         if res == _FAST_FEW:
             res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
         elif res == _FAST_MANY:
             res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+        if res == _FAST_FAR:
+            # The k found bound the k-th distance from above: the 5x5x5 block
+            # within that distance holds at least k, often enough to prove it.
+            kth = sc.kd2[k - 1]
+            if not (kth > 1e-200):
+                kth = g.h * g.h
+            res = _knn_block(g, spts, cell_start, q, c, k, kth, sc.cand_d2, sc.cand_pos,
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 2)
     if res == _FAST_OK:
         kth = sc.kd2[k - 1]
     else:

@@ -141,8 +141,8 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
             __mmask8 live = left >= 8 ? (__mmask8)0xFF : (__mmask8)((1u << left) - 1u);
             __m512d x = _mm512_mul_pd(_mm512_maskz_loadu_pd(live, cand_d2 + i), vscale);
             __mmask8 in = live;
-            if (bk > 0)
-                in &= _mm512_mask_cmp_pd_mask(live, x, vlo, _CMP_GE_OQ);
+            if (bk > 0) /* not below bk: NaN (never counted below) joins the top bucket, as in the scalar code */
+                in &= _mm512_mask_cmp_pd_mask(live, x, vlo, _CMP_NLT_UQ);
             if (bk < EPPF_NRM_BUCKETS - 1)
                 in &= _mm512_mask_cmp_pd_mask(live, x, vhi, _CMP_LT_OQ);
             _mm512_storeu_si512((void *)(sel + n_in),
