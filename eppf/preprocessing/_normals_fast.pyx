@@ -9,10 +9,19 @@ points of one object) with OpenMP.
   k-th distance (taken from the previous query) are ranked without branches,
   and the result is accepted when the k-th distance is provably smaller than
   the distance to the block's boundary. With too few or too many candidates
-  it tries once more with a guess four times larger or smaller; otherwise an
-  exact search over growing shells of cells with a sorted k-list takes over. Both paths return the same
-  list: the k smallest squared distances, ties broken by the point's position
-  in the grid order (cell, then original index).
+  it tries once more with a guess four times larger or smaller (and, when
+  that overshoots, twice or half); when the k-th lies beyond what the block
+  proves, the 5x5x5 block within that distance is tried; otherwise an exact
+  search over growing shells of cells with a sorted k-list takes over. All
+  paths return the same list: the k smallest squared distances, ties broken
+  by the point's position in the grid order (cell, then original index).
+- The fast path's distance scan runs eight points at a time with AVX-512 or
+  four with AVX2 where the CPU has them (``_normals_simd.h``, chosen at
+  import), over a copy of the grid-order coordinates as x, y and z arrays,
+  and with AVX-512 its k-th selection too; the same IEEE operations in the
+  same order as the scalar loops here, so every level gives the same
+  candidates and normals bit for bit (``_set_simd_level`` picks a lower one
+  for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
   neighbourhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
@@ -594,13 +603,20 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
         res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
                          sc.kd2, sc.kpos, sc.cand_b, 1)
         # One more try with a guess four times larger or smaller (any
-        # positive guess gives the same, exact list) before the shells.
+        # positive guess gives the same, exact list) and, when that
+        # overshoots, one with the guess in between, before the shells.
         if res == _FAST_FEW:
             res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
                              sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            if res == _FAST_MANY:
+                res = _knn_block(g, spts, cell_start, q, c, k, 2.0 * guess, sc.cand_d2, sc.cand_pos,
+                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
         elif res == _FAST_MANY:
             res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
                              sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            if res == _FAST_FEW:
+                res = _knn_block(g, spts, cell_start, q, c, k, 0.5 * guess, sc.cand_d2, sc.cand_pos,
+                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
         if res == _FAST_FAR:
             # The k found bound the k-th distance from above: the 5x5x5 block
             # within that distance holds at least k, often enough to prove it.
