@@ -21,11 +21,23 @@ few chunks whatever the number of files. The rows are bit for bit those of
   pass and taken from there; the others (binary point files) are read again,
   on the reader thread, and must come back with the same shape;
 - other descriptors are fitted on the first cloud (they learn nothing from
-  the data) and describe while the files are read.
+  the data) and describe while the files are read;
+- with ``--n-jobs`` above 1, chunks are described side by side
+  (:class:`_ParallelRows`), each by a single-threaded copy of the fitted
+  descriptor on its own thread (the compiled kernels release the GIL),
+  rather than one chunk at a time on OpenMP threads: no OpenMP team waits
+  at a barrier or spins between a chunk's kernels while the other core has
+  work. A copy gets the generator in the state the chunk's first row would
+  find it in (the chunk's seeds are drawn ahead on a copy of it), so its
+  rows are those of the one generator, bit for bit; a descriptor whose
+  draws that does not predict (checked on the first chunk) is described
+  one chunk at a time as before.
 
 A ``.npz`` data set is read whole and described in one ``fit_transform``.
 """
 
+import collections
+import copy
 import json
 import os
 import re
@@ -34,10 +46,11 @@ import sys
 import tempfile
 import time
 import zipfile
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..utils import check_n_jobs
+from ..utils import check_n_jobs, object_seeds
 from ..utils._atomic import atomic_write
 from ..utils._stream import RowWriter, ordered_map
 from ._common import (Command, add_descriptor, add_runtime, add_sampling, check_output, descriptor_settings,
@@ -268,18 +281,23 @@ def _stream(args, est, sampling, output, progress, cmd):
             raise _name_files(exc, [file]) from None
         state["fitted"] = True
 
+    rows = _ParallelRows(est, n_threads)
+
     def describe(clouds, files, sink):
         if not clouds:
             return
         if not state["fitted"]:
             fit(clouds[0], files[0])
-        try:
-            rows = est.transform(clouds)
-        except ValueError as exc:
-            raise _name_files(exc, files) from None
-        sink(rows)
+        rows.submit(clouds, files, sink)
 
     def run(sink):
+        try:
+            _run(sink)
+            rows.finish(sink)
+        finally:
+            rows.close()
+
+    def _run(sink):
         bar = _Bar(len(plan.entries), progress, "reading" if _learns_scale(est) else "describing")
         try:
             if not _learns_scale(est):
@@ -354,6 +372,112 @@ def _stream(args, est, sampling, output, progress, cmd):
     if not isinstance(meta, _Meta):
         meta = _Meta(meta.ids, meta.labels, meta.class_names, meta.split, None, params)
     return len(state["kept"]), n_features, meta
+
+
+class _ParallelRows:
+    """Descriptor rows of chunks, in order: one chunk at a time, or side by side on threads.
+
+    With ``n_threads`` above 1, a descriptor that describes each cloud on its
+    own (its rows depend on the cloud, the fitted state and, with a
+    ``random_state``, consecutive seeds of one generator) runs a chunk's
+    ``transform`` on one of ``n_threads`` threads, with a shallow copy of the
+    fitted descriptor set to one thread (``n_jobs=1``) and to a copy of the
+    generator in the state that chunk's first row finds it in: the chunk's
+    seeds are drawn ahead from the one generator, the way ``transform``
+    draws them (:func:`eppf.utils.object_seeds`, one per cloud). The
+    first chunk is described on the calling thread, with the descriptor's
+    own ``n_jobs``, and checks that prediction: when its generator ends
+    elsewhere (a descriptor that draws otherwise), every chunk is described
+    one at a time as before. Each later chunk checks it again and stops the
+    command if it fails.
+
+    Rows reach ``sink`` in chunk order; at most ``n_threads + 1`` chunks
+    wait or run at a time, so memory does not grow with the number of files.
+    """
+
+    def __init__(self, est, n_threads):
+        self.est, self.workers = est, int(n_threads)
+        self.pool, self.pending, self.base, self.generator = None, collections.deque(), None, None
+        self.first = True
+        params = est.get_params(deep=True)
+        # only a top-level generator (one stream of seeds) and a top-level thread count can be set per copy
+        nested = [k for k in params if k.endswith("__random_state") or k.endswith("__n_jobs")]
+        rs = params.get("random_state")
+        self.parallel = (self.workers > 1 and "n_jobs" in params and not nested
+                         and (rs is None or isinstance(rs, np.random.RandomState)) and "random_state" in params)
+
+    def _copy(self, generator):
+        """A shallow copy of the fitted descriptor drawing from ``generator``."""
+        e = copy.copy(self.base)
+        if generator is not None:
+            e.set_params(random_state=generator)
+        return e
+
+    def _ahead(self, n):
+        """A copy of the generator for a chunk of ``n`` clouds, and its state after them (the one generator
+        moves on by the chunk's seeds)."""
+        if self.generator is None:
+            return None, None
+        ahead = copy.deepcopy(self.generator)
+        object_seeds(self.generator, n)
+        return ahead, self.generator.get_state()
+
+    @staticmethod
+    def _transform(e, clouds, files, expected):
+        try:
+            rows = e.transform(clouds)
+        except ValueError as exc:
+            raise _name_files(exc, files) from None
+        if expected is not None and not _same_state(e.random_state.get_state(), expected):
+            raise RuntimeError(f"eppf describe: {type(e).__name__} drew seeds other than one per cloud; "
+                               "run it with --n-jobs 1")
+        return rows
+
+    def submit(self, clouds, files, sink):
+        """Describe one chunk (rows to ``sink`` now or with a later call, in order)."""
+        if self.first:
+            self.first = False
+            if self.parallel:
+                self.base = copy.copy(self.est)
+                rs = self.est.get_params()["random_state"]
+                self.generator = None if rs is None else copy.deepcopy(rs)
+                ahead, expected = self._ahead(len(clouds))
+                probe = self._copy(ahead)  # the descriptor's own n_jobs on this thread
+                rows = self._transform(probe, clouds, files, None)
+                if expected is None or _same_state(probe.random_state.get_state(), expected):
+                    self.base.set_params(n_jobs=1)
+                    self.pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="eppf-describe")
+                else:  # not predicted: one chunk at a time, from where the probe's generator is
+                    self.est.set_params(random_state=probe.random_state)
+                    self.parallel = False
+                sink(rows)
+                return
+        if not self.parallel:
+            sink(self._transform(self.est, clouds, files, None))
+            return
+        ahead, expected = self._ahead(len(clouds))
+        self.pending.append(self.pool.submit(self._transform, self._copy(ahead), clouds, files, expected))
+        while len(self.pending) > self.workers:
+            sink(self.pending.popleft().result())
+
+    def finish(self, sink):
+        """Send the rows of the chunks still running."""
+        while self.pending:
+            sink(self.pending.popleft().result())
+
+    def close(self):
+        """Cancel what has not started and wait for the rest (after an error, Ctrl-C or :meth:`finish`)."""
+        for future in self.pending:
+            future.cancel()
+        self.pending.clear()
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            self.pool = None
+
+
+def _same_state(a, b):
+    """Whether two ``RandomState.get_state()`` tuples are the same state."""
+    return a[0] == b[0] and np.array_equal(a[1], b[1]) and a[2:] == b[2:]
 
 
 def _largest_sides(clouds):

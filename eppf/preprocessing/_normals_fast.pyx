@@ -9,10 +9,19 @@ points of one object) with OpenMP.
   k-th distance (taken from the previous query) are ranked without branches,
   and the result is accepted when the k-th distance is provably smaller than
   the distance to the block's boundary. With too few or too many candidates
-  it tries once more with a guess four times larger or smaller; otherwise an
-  exact search over growing shells of cells with a sorted k-list takes over. Both paths return the same
-  list: the k smallest squared distances, ties broken by the point's position
-  in the grid order (cell, then original index).
+  it tries once more with a guess four times larger or smaller (and, when
+  that overshoots, twice or half); when the k-th lies beyond what the block
+  proves, the 5x5x5 block within that distance is tried; otherwise an exact
+  search over growing shells of cells with a sorted k-list takes over. All
+  paths return the same list: the k smallest squared distances, ties broken
+  by the point's position in the grid order (cell, then original index).
+- The fast path's distance scan runs eight points at a time with AVX-512 or
+  four with AVX2 where the CPU has them (``_normals_simd.h``, chosen at
+  import), over a copy of the grid-order coordinates as x, y and z arrays,
+  and with AVX-512 its k-th selection too; the same IEEE operations in the
+  same order as the scalar loops here, so every level gives the same
+  candidates and normals bit for bit (``_set_simd_level`` picks a lower one
+  for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
   neighbourhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
@@ -32,9 +41,46 @@ from ..utils._common cimport clamp_floor64
 
 import numpy as np
 
+cdef extern from "_normals_simd.h":
+    enum:
+        EPPF_NRM_SLACK
+        EPPF_NRM_BUCKETS
+    int eppf_nrm_has_avx2() noexcept nogil
+    int eppf_nrm_has_avx512() noexcept nogil
+    int64_t eppf_nrm_scan_avx2(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
+                               double qx, double qy, double qz, double guess, double* cand_d2,
+                               int64_t* cand_pos, int64_t m) noexcept nogil
+    int64_t eppf_nrm_scan_avx512(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
+                                 double qx, double qy, double qz, double guess, double* cand_d2,
+                                 int64_t* cand_pos, int64_t m) noexcept nogil
+    int64_t eppf_nrm_select_avx512(const double* cand_d2, const int64_t* cand_pos, int64_t m, int64_t k,
+                                   double to_bucket, int64_t* sel, int64_t* kpos) noexcept nogil
+
+# The fast path's distance scan: 0 scalar, 1 AVX2, 2 AVX-512 (the best the
+# CPU has, checked at import; ``_set_simd_level`` picks a lower one for tests).
+# Every level gives the same candidates, bit for bit.
+cdef int _max_level():
+    if eppf_nrm_has_avx2() == 0:
+        return 0
+    return 2 if eppf_nrm_has_avx512() != 0 else 1
+
+cdef int _simd = _max_level()
+
+
+def _simd_level():
+    """The level of the fast path's distance scan in use: 0 scalar, 1 AVX2, 2 AVX-512."""
+    return _simd
+
+
+def _set_simd_level(int level):
+    """Use distance-scan level ``level`` (clipped to what the CPU has); return the level in use."""
+    global _simd
+    _simd = max(0, min(level, _max_level()))
+    return _simd
+
 # Buckets of the fast path's histogram selection.
 cdef enum:
-    _N_BUCKETS = 32
+    _N_BUCKETS = EPPF_NRM_BUCKETS
 
 # Outcomes of the fast path.
 cdef enum:
@@ -72,22 +118,26 @@ cdef struct Grid:
     double margin
     int64_t res[3]
     int64_t ncells
+    double* sx            # the grid-order coordinates as three arrays (the
+    double* sy            # fast path's distance scan reads these)
+    double* sz
 
 
 cdef struct Scratch:
     # Object part (sized by the largest object, max_n points).
     double* spts          # 3 * max_n  coordinates in grid order, rescaled
-    double* cand_d2       # max_n      fast-path candidate squared distances
+    double* sxyz          # 3 * max_n  the same as x, y and z arrays (max_n each)
+    double* cand_d2       # max_n + EPPF_NRM_SLACK  fast-path candidate squared distances
     int64_t* sidx         # max_n      original index of each grid-order point
     int64_t* cell_of      # max_n      cell of each point
     int64_t* cell_start   # cap + 1    first grid-order position of each cell
-    int64_t* cand_pos     # max_n      fast-path candidate positions
-    int64_t* sel          # max_n      fast-path candidates of the k-th's bucket
+    int64_t* cand_pos     # max_n + EPPF_NRM_SLACK  fast-path candidate positions
+    int64_t* sel          # max_n + EPPF_NRM_SLACK  fast-path candidates of the k-th's bucket
     # Query part (sized by k).
     double* kd2           # k          the k-list's squared distances, ascending
     double* nb            # 3 * k      gathered neighbourhood
     double* guess         # 1          k-th squared distance guess for the next query
-    int64_t* kpos         # k + 1      the k-list's grid-order positions (+1 slack
+    int64_t* kpos         # k + EPPF_NRM_SLACK  the k-list's grid-order positions (+ slack
                           #            for the fast path's branch-free compaction)
     unsigned char* cand_b # max_n      fast-path candidate buckets (in the int64 row's tail)
 
@@ -100,7 +150,8 @@ def max_cells(Py_ssize_t n):
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
     at most ``max_n`` points and neighbourhoods of ``k`` points."""
-    return 4 * max_n + 4 * k + 1, 4 * max_n + max_cells(max_n) + 1 + k + 1 + (max_n + 7) // 8
+    return (7 * max_n + EPPF_NRM_SLACK + 4 * k + 1,
+            4 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
 
 
 cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_ssize_t k,
@@ -108,17 +159,18 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     """Carve one thread's scratch rows (see :func:`scratch_sizes`)."""
     cdef Py_ssize_t cap = 4 * max_n + 64
     sc.spts = fs
-    sc.cand_d2 = fs + 3 * max_n
-    sc.kd2 = sc.cand_d2 + max_n
+    sc.sxyz = fs + 3 * max_n
+    sc.cand_d2 = sc.sxyz + 3 * max_n
+    sc.kd2 = sc.cand_d2 + max_n + EPPF_NRM_SLACK
     sc.nb = sc.kd2 + k
     sc.guess = sc.nb + 3 * k
     sc.sidx = its
     sc.cell_of = its + max_n
     sc.cell_start = sc.cell_of + max_n
     sc.cand_pos = sc.cell_start + cap + 1
-    sc.sel = sc.cand_pos + max_n
-    sc.kpos = sc.sel + max_n
-    sc.cand_b = <unsigned char*>(sc.kpos + k + 1)
+    sc.sel = sc.cand_pos + max_n + EPPF_NRM_SLACK
+    sc.kpos = sc.sel + max_n + EPPF_NRM_SLACK
+    sc.cand_b = <unsigned char*>(sc.kpos + k + EPPF_NRM_SLACK)
 
 
 cdef inline double _pow2_below(double m) noexcept nogil:
@@ -189,17 +241,21 @@ cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cel
 
 
 cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t cap,
-                      Grid* g, double* spts, int64_t* sidx, int64_t* cell_of,
-                      int64_t* cell_start) noexcept nogil:
+                      Grid* g, double* spts, double* sxyz, Py_ssize_t stride, int64_t* sidx,
+                      int64_t* cell_of, int64_t* cell_start) noexcept nogil:
     """Move and rescale the object into the unit cube, choose the cell size,
     bin the points and store them sorted by cell (stable: ascending original
-    index within a cell)."""
+    index within a cell), in ``spts`` (x, y, z per point) and in ``sxyz``
+    (x, y and z arrays, ``stride`` apart)."""
     cdef Py_ssize_t i, a
     cdef double hi[3]
     cdef double e[3]
     cdef double m = 0.0, x, h, t, e1, e2, e3, tmp, h0, h1, pc0, pc1, d, tau
     cdef int expo
     cdef int64_t c, r
+    g.sx = sxyz
+    g.sy = sxyz + stride
+    g.sz = sxyz + 2 * stride
     # Exact rescaling by a power of two: the largest |coordinate| lands in
     # [0.5, 1), so nothing below overflows or underflows.
     for i in range(3 * n):
@@ -287,6 +343,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
         spts[3 * r] = _tr(g, pts[3 * i], 0)
         spts[3 * r + 1] = _tr(g, pts[3 * i + 1], 1)
         spts[3 * r + 2] = _tr(g, pts[3 * i + 2], 2)
+        g.sx[r] = spts[3 * r]
+        g.sy[r] = spts[3 * r + 1]
+        g.sz[r] = spts[3 * r + 2]
     for c in range(g.ncells, 0, -1):
         cell_start[c] = cell_start[c - 1]
     cell_start[0] = 0
@@ -415,9 +474,10 @@ cdef inline Py_ssize_t _bucket(double x) noexcept nogil:
 cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
                      const double* q, const int64_t* c, Py_ssize_t k, double guess,
                      double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
-                     int64_t* kpos, unsigned char* cand_b) noexcept nogil:
-    """Fast path: select the k nearest among the points of the 3x3x3 block
-    within squared distance ``guess`` of the query. On success, ``kpos`` holds
+                     int64_t* kpos, unsigned char* cand_b, int64_t r) noexcept nogil:
+    """Fast path: select the k nearest among the points of the block of
+    cells within Chebyshev distance ``r`` of the query's cell (3x3x3 for
+    ``r = 1``) within squared distance ``guess`` of the query. On success, ``kpos`` holds
     their grid-order positions in ascending order and ``kd2[k - 1]`` the k-th
     squared distance, and the return value is _FAST_OK. Otherwise (outputs
     undefined) it says why: _FAST_FEW (fewer than k within the guess),
@@ -429,12 +489,14 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
     cdef double to_bucket, kth
     cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, di, gz, gz2, gy, gyz2, gx
-    for jz in range(c[2] - 1 if c[2] > 0 else 0, (c[2] + 1 if c[2] + 1 < g.res[2] else g.res[2] - 1) + 1):
+    cdef int64_t xlo = c[0] - r if c[0] - r > 0 else 0
+    cdef int64_t xhi = c[0] + r if c[0] + r < g.res[0] else g.res[0] - 1
+    for jz in range(c[2] - r if c[2] - r > 0 else 0, (c[2] + r if c[2] + r < g.res[2] else g.res[2] - 1) + 1):
         gz = _gap(qz, g.lo[2], g.h, c[2], jz) - g.margin
         gz2 = gz * gz if gz > 0.0 else 0.0
         if gz2 > guess:
             continue
-        for jy in range(c[1] - 1 if c[1] > 0 else 0, (c[1] + 1 if c[1] + 1 < g.res[1] else g.res[1] - 1) + 1):
+        for jy in range(c[1] - r if c[1] - r > 0 else 0, (c[1] + r if c[1] + r < g.res[1] else g.res[1] - 1) + 1):
             gy = _gap(qy, g.lo[1], g.h, c[1], jy) - g.margin
             gyz2 = gz2 + (gy * gy if gy > 0.0 else 0.0)
             if gyz2 > guess:
@@ -443,32 +505,43 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             # is one contiguous run of grid-order positions, and runs come in
             # ascending position order.
             x0 = c[0]
-            if x0 > 0:
+            while x0 > xlo:
                 gx = qx - (g.lo[0] + x0 * g.h) - g.margin
-                if gyz2 + (gx * gx if gx > 0.0 else 0.0) <= guess:
-                    x0 -= 1
+                if gyz2 + (gx * gx if gx > 0.0 else 0.0) > guess:
+                    break
+                x0 -= 1
             x1 = c[0]
-            if x1 + 1 < g.res[0]:
+            while x1 < xhi:
                 gx = (g.lo[0] + (x1 + 1) * g.h) - qx - g.margin
-                if gyz2 + (gx * gx if gx > 0.0 else 0.0) <= guess:
-                    x1 += 1
+                if gyz2 + (gx * gx if gx > 0.0 else 0.0) > guess:
+                    break
+                x1 += 1
             row = (jz * g.res[1] + jy) * g.res[0]
             b = cell_start[row + x0]
             e = cell_start[row + x1 + 1]
             if m > max_cand:
                 return _FAST_MANY
-            for p in range(b, e):
-                dx = spts[3 * p] - qx
-                dy = spts[3 * p + 1] - qy
-                dz = spts[3 * p + 2] - qz
-                d2 = dx * dx + dy * dy + dz * dz
-                cand_d2[m] = d2
-                cand_pos[m] = p
-                m += d2 <= guess
+            if _simd == 2:
+                m = eppf_nrm_scan_avx512(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
+            elif _simd == 1:
+                m = eppf_nrm_scan_avx2(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
+            else:
+                for p in range(b, e):
+                    dx = g.sx[p] - qx
+                    dy = g.sy[p] - qy
+                    dz = g.sz[p] - qz
+                    d2 = dx * dx + dy * dy + dz * dz
+                    cand_d2[m] = d2
+                    cand_pos[m] = p
+                    m += d2 <= guess
     if m < k:
         return _FAST_FEW
     if m > max_cand:
         return _FAST_MANY
+    if _simd == 2:
+        kth_i = eppf_nrm_select_avx512(cand_d2, cand_pos, m, k, _N_BUCKETS / guess, sel, kpos)
+        kd2[k - 1] = cand_d2[kth_i]
+        return _FAST_OK if _block_done(g, q, c, r, kd2[k - 1]) else _FAST_FAR
     # The k-th smallest (d2, position) by a histogram of d2 over [0, guess]
     # (the bucket is monotone in d2), then ranking inside its bucket only.
     for i in range(_N_BUCKETS):
@@ -507,7 +580,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
         kpos[j] = cand_pos[i]
         j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
     kd2[k - 1] = kth
-    return _FAST_OK if _block_done(g, q, c, 1, kth) else _FAST_FAR
+    return _FAST_OK if _block_done(g, q, c, r, kth) else _FAST_FAR
 
 
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
@@ -528,15 +601,30 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
         c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
     if guess < INFINITY:
         res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
-                         sc.kd2, sc.kpos, sc.cand_b)
+                         sc.kd2, sc.kpos, sc.cand_b, 1)
         # One more try with a guess four times larger or smaller (any
-        # positive guess gives the same, exact list) before the shells.
+        # positive guess gives the same, exact list) and, when that
+        # overshoots, one with the guess in between, before the shells.
         if res == _FAST_FEW:
             res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            if res == _FAST_MANY:
+                res = _knn_block(g, spts, cell_start, q, c, k, 2.0 * guess, sc.cand_d2, sc.cand_pos,
+                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
         elif res == _FAST_MANY:
             res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            if res == _FAST_FEW:
+                res = _knn_block(g, spts, cell_start, q, c, k, 0.5 * guess, sc.cand_d2, sc.cand_pos,
+                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+        if res == _FAST_FAR:
+            # The k found bound the k-th distance from above: the 5x5x5 block
+            # within that distance holds at least k, often enough to prove it.
+            kth = sc.kd2[k - 1]
+            if not (kth > 1e-200):
+                kth = g.h * g.h
+            res = _knn_block(g, spts, cell_start, q, c, k, kth, sc.cand_d2, sc.cand_pos,
+                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 2)
     if res == _FAST_OK:
         kth = sc.kd2[k - 1]
     else:
@@ -781,7 +869,10 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     if n == 0:
         return
     _split_scratch(fs, its, max_n, k, &sc)
-    _build_grid(pts, n, kk, 4 * max_n + 64, &g, sc.spts, sc.sidx, sc.cell_of, sc.cell_start)
+    # The cell cap of the object's own size (4 n + 64), not of the largest
+    # object's: the grid, hence the neighbours' order and the sums, are those
+    # of the object alone (:func:`normals_single`), whatever it is packed with.
+    _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start)
     sc.guess[0] = INFINITY
     for s in range(n):
         _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, out + 3 * sc.sidx[s])
@@ -846,7 +937,7 @@ cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     cdef Scratch sc
     _split_scratch(fs, its, n, k, &shared)
     with nogil:
-        _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sidx,
+        _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sxyz, n, shared.sidx,
                     shared.cell_of, shared.cell_start)
         for t in range(num_threads):
             _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)

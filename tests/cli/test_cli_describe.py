@@ -242,3 +242,105 @@ def test_largest_sides_of_a_chunk_are_those_of_np_ptp():
         expected = [np.ptp(c[:, :3], axis=0).max() for c in clouds]
     got = describe_module._largest_sides(clouds)
     assert got.tolist() == expected and np.isinf(got[-1])
+
+
+# ---------------------------------------------------------------------------
+# Chunks described side by side (--n-jobs above 1)
+# ---------------------------------------------------------------------------
+
+
+class _SeedRows:
+    """A toy descriptor: one row per cloud, (its seed, its sum, the n_jobs and thread that described it).
+
+    ``per_cloud`` seeds are drawn per cloud (1 as every eppf descriptor
+    does); ``odd_after`` > 0 draws one more seed in every transform after
+    that many calls (a descriptor whose draws the first chunk cannot predict).
+    """
+
+    def __init__(self, random_state=None, n_jobs=None, per_cloud=1, odd_after=0):
+        self.random_state, self.n_jobs, self.per_cloud, self.odd_after = random_state, n_jobs, per_cloud, odd_after
+        self.calls = [0]
+
+    def get_params(self, deep=True):
+        return dict(random_state=self.random_state, n_jobs=self.n_jobs, per_cloud=self.per_cloud,
+                    odd_after=self.odd_after)
+
+    def set_params(self, **params):
+        for k, v in params.items():
+            setattr(self, k, v)
+        return self
+
+    def transform(self, clouds):
+        import threading
+
+        from eppf.utils import object_seeds
+
+        self.calls[0] += 1
+        n = len(clouds) * self.per_cloud + (self.odd_after > 0 and self.calls[0] > self.odd_after)
+        seeds = object_seeds(self.random_state, n)[::self.per_cloud][:len(clouds)]
+        return np.column_stack([seeds.astype(np.float64), [c.sum() for c in clouds],
+                                np.full(len(clouds), -1 if self.n_jobs is None else self.n_jobs),
+                                np.full(len(clouds), threading.get_ident(), dtype=np.float64)])
+
+
+def _stream_rows(est, chunks, n_threads):
+    out = []
+    rows = describe_module._ParallelRows(est, n_threads)
+    try:
+        for k, chunk in enumerate(chunks):
+            rows.submit(chunk, [f"f{k}_{i}" for i in range(len(chunk))], out.append)
+        rows.finish(out.append)
+    finally:
+        rows.close()
+    return np.vstack(out), rows
+
+
+@pytest.mark.parametrize("per_cloud", [1, 2])
+def test_chunks_side_by_side_give_the_rows_of_one_generator(per_cloud):
+    import threading
+
+    rng = np.random.default_rng(3)
+    clouds = [rng.normal(size=(int(rng.integers(5, 40)), 3)) for _ in range(40)]
+    sizes = [7, 1, 5, 9, 3, 2, 8, 5]
+    chunks = np.split(np.arange(40), np.cumsum(sizes)[:-1])
+    chunks = [[clouds[i] for i in c] for c in chunks]
+    expected = _SeedRows(np.random.RandomState(4), 2, per_cloud).transform(clouds)
+    for n_threads in (1, 2, 3):
+        got, rows = _stream_rows(_SeedRows(np.random.RandomState(4), n_threads, per_cloud), chunks, n_threads)
+        np.testing.assert_array_equal(got[:, :2], expected[:, :2])  # seeds and clouds, in order
+        side_by_side = n_threads > 1 and per_cloud == 1
+        assert rows.parallel == side_by_side
+        # the first chunk on the calling thread with the descriptor's n_jobs; then copies on one thread each
+        assert (got[:7, 2] == n_threads).all() and (got[:7, 3] == threading.get_ident()).all()
+        if side_by_side:
+            assert (got[7:, 2] == 1).all() and (got[7:, 3] != threading.get_ident()).all()
+        else:
+            assert (got[:, 2] == n_threads).all() and (got[:, 3] == threading.get_ident()).all()
+
+
+def test_chunks_side_by_side_stop_on_draws_the_first_chunk_did_not_show():
+    clouds = [np.full((4, 3), float(k)) for k in range(12)]
+    chunks = [clouds[:4], clouds[4:8], clouds[8:]]
+    with pytest.raises(RuntimeError, match="drew seeds other than one per cloud"):
+        _stream_rows(_SeedRows(np.random.RandomState(0), 2, odd_after=1), chunks, 2)
+
+
+def test_chunks_side_by_side_name_the_file_of_a_refused_cloud():
+    class Refuses(_SeedRows):
+        def transform(self, clouds):
+            if len(clouds) == 3:
+                raise ValueError("Refuses: point cloud 2 is bad")
+            return super().transform(clouds)
+
+    chunks = [[np.ones((4, 3))] * 2, [np.ones((4, 3))] * 2, [np.ones((4, 3))] * 3, [np.ones((4, 3))] * 2]
+    with pytest.raises(ValueError, match="point cloud f2_2 is bad"):
+        _stream_rows(Refuses(np.random.RandomState(0), 2), chunks, 2)
+
+
+def test_a_nested_generator_is_described_one_chunk_at_a_time():
+    est = DESCRIPTORS["eppf+gasd"].make(n_samples=500, random_state=0, n_jobs=2)
+    assert not describe_module._ParallelRows(est, 2).parallel
+    est = DESCRIPTORS["eppf"].make(n_samples=500, random_state=0, n_jobs=2).set_params(
+        random_state=np.random.RandomState(0))
+    assert describe_module._ParallelRows(est, 2).parallel
+    assert not describe_module._ParallelRows(est, 1).parallel

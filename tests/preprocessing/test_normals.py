@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 
 from eppf import estimate_normals
 from eppf.preprocessing._normals import estimate_normals_batch
-from eppf.preprocessing._normals_fast import smallest_eigvecs
+from eppf.preprocessing._normals_fast import _set_simd_level, _simd_level, smallest_eigvecs
 from eppf.utils._validation import pack_point_clouds
 
 
@@ -184,6 +184,21 @@ def test_batch_matches_single_and_threads():
     for n_jobs in [1, 2, 4]:
         got = estimate_normals_batch(points, offsets, 14, "origin", n_jobs)
         assert_array_equal(got, expected)
+
+
+def test_batch_object_is_independent_of_larger_neighbours():
+    # A small k wants more grid cells than the cap of 4 n + 64; the cap must
+    # be the object's own, not the largest packed object's, or the grid (and
+    # with it the summation order) would depend on what it is packed with.
+    rng = np.random.default_rng(17)
+    small = density_steps(rng, 2000)
+    large = random_surface(rng, 4099)
+    points, _, offsets = pack_point_clouds([small, large, small[:700]])
+    for k in (3, 4, 20):
+        got = estimate_normals_batch(points, offsets, k, "centroid", 1)
+        assert_array_equal(got[: len(small)], estimate_normals(small, k))
+        assert_array_equal(got[len(small) : len(small) + len(large)], estimate_normals(large, k))
+        assert_array_equal(got[len(small) + len(large) :], estimate_normals(small[:700], k))
 
 
 def test_batch_single_object_uses_same_result():
@@ -448,3 +463,59 @@ def test_fast_path_refuses_what_the_general_path_refuses(bad, msg):
         estimate_normals(points, 2)
     with pytest.raises(ValueError, match="n_neighbors"):
         estimate_normals(rng.random((600, 3)), 2)
+
+
+def _level_clouds(rng):
+    """Clouds that exercise the fast path's scan and selection: every size
+    remainder modulo 8, volumes (many candidates per block), surfaces, a line,
+    duplicates, a lattice full of ties, and a strong density change."""
+    clouds = [rng.normal(size=(n, 3)) * [0.5, 1.0, 2.0] for n in (3, 5, 7, 8, 9, 17, 63, 250, 1024, 3001)]
+    clouds += [random_surface(rng, n) for n in (31, 1000, 4099)]
+    clouds.append(np.outer(np.linspace(0, 1, 200), [1.0, 2.0, 3.0]) + 1e-9 * rng.normal(size=(200, 3)))
+    dup = rng.random((300, 3))
+    clouds.append(np.concatenate([dup, dup[:150], dup[:40]]))
+    grid = np.stack(np.meshgrid(*[np.arange(9.0)] * 3), -1).reshape(-1, 3)
+    clouds.append(grid)
+    clouds.append(density_steps(rng, 2000))
+    return clouds
+
+
+@pytest.mark.parametrize("k", [3, 10, 20, 45])
+def test_simd_levels_give_the_scalar_normals(k):
+    # The fast path's distance scan and selection run with AVX2 or AVX-512
+    # where the CPU has them: every level must give the scalar code's normals
+    # bit for bit (same candidates, same neighbour lists, same sums), single
+    # calls and packed batches alike, on any number of threads.
+    rng = np.random.default_rng(100 + k)
+    clouds = _level_clouds(rng)
+    points, _, offsets = pack_point_clouds(clouds)
+    old = _simd_level()
+    try:
+        assert _set_simd_level(0) == 0
+        single = [estimate_normals(c, k, n_jobs=1) for c in clouds]
+        batch = estimate_normals_batch(points, offsets, k, "centroid", 1)
+        levels = sorted({_set_simd_level(level) for level in (1, 2)})
+        for level in levels:
+            _set_simd_level(level)
+            for c, expected in zip(clouds, single):
+                assert_array_equal(estimate_normals(c, k, n_jobs=1), expected)
+            assert_array_equal(estimate_normals(clouds[9], k, n_jobs=2), single[9])
+            assert_array_equal(estimate_normals_batch(points, offsets, k, "centroid", 2), batch)
+    finally:
+        _set_simd_level(old)
+    assert_array_equal(batch, np.concatenate(single))
+    # and the normals are exact PCA ones (the scalar level against cKDTree + eigh)
+    ref, gap, tied = reference_normals(clouds[8], k)
+    ok = (gap > 1e-6) & ~tied
+    assert ok.mean() > 0.9
+    assert sine_angle(single[8], ref)[ok].max() < 1e-8
+
+
+def test_simd_level_is_clipped_to_the_cpu():
+    old = _simd_level()
+    try:
+        assert _set_simd_level(-3) == 0
+        top = _set_simd_level(99)
+        assert top in (0, 1, 2) and top >= old
+    finally:
+        _set_simd_level(old)

@@ -1,0 +1,257 @@
+/* SIMD distance scan of the normals kernel's fast neighbour search
+ * (_normals_fast.pyx's ``_knn_block``), chosen at run time:
+ *
+ * - AVX-512 (F): eight grid-order points at a time;
+ * - AVX2: four at a time, the survivors packed with a permutation table.
+ *
+ * ``eppf_nrm_scan_*`` offers the points at grid-order positions [b, e) to
+ * the candidate list: for each, in ascending position, the squared distance
+ * ``d2 = (dx * dx + dy * dy) + dz * dz`` with ``d = point - query`` is
+ * computed, and the points with ``d2 <= guess`` are appended to ``cand_d2``
+ * and ``cand_pos`` from index ``m``; the new count is returned. These are the
+ * IEEE operations, in the order, of the scalar loop in _normals_fast.pyx (no
+ * FMA: the targets name no FMA and the build passes -ffp-contract=off), so
+ * the list is the same bit for bit. The coordinates come in structure-of-
+ * arrays form (``sx``, ``sy``, ``sz``, one double per point).
+ *
+ * Whole vectors are stored at ``cand_d2 + m`` and ``cand_pos + m`` (only the
+ * first popcount lanes count), so both arrays need EPPF_NRM_SLACK entries
+ * beyond the largest count; the loads past ``e`` are masked (AVX-512) or left
+ * to a scalar tail (AVX2), so nothing beyond [b, e) is read.
+ *
+ * Other compilers and CPUs use the scalar loop of _normals_fast.pyx.
+ */
+#ifndef EPPF_NORMALS_SIMD_H
+#define EPPF_NORMALS_SIMD_H
+
+#include <stdint.h>
+
+/* Entries written past the count by one vector store. */
+#define EPPF_NRM_SLACK 8
+/* Buckets of the fast path's selection by squared distance. */
+#define EPPF_NRM_BUCKETS 32
+
+#if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
+#define EPPF_NRM_SIMD 1
+#include <immintrin.h>
+#else
+#define EPPF_NRM_SIMD 0
+#endif
+
+/* AVX-512 F (with the OS saving the zmm state: libgcc's cpu check reads XCR0). */
+static int eppf_nrm_has_avx512(void)
+{
+#if EPPF_NRM_SIMD
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("popcnt");
+#else
+    return 0;
+#endif
+}
+
+static int eppf_nrm_has_avx2(void)
+{
+#if EPPF_NRM_SIMD
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
+#else
+    return 0;
+#endif
+}
+
+#if EPPF_NRM_SIMD
+
+__attribute__((target("avx2,avx512f,popcnt")))
+static int64_t eppf_nrm_scan_avx512(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
+                                    double qx, double qy, double qz, double guess, double *cand_d2,
+                                    int64_t *cand_pos, int64_t m)
+{
+    const __m512d vqx = _mm512_set1_pd(qx), vqy = _mm512_set1_pd(qy), vqz = _mm512_set1_pd(qz);
+    const __m512d vg = _mm512_set1_pd(guess);
+    const __m512i step = _mm512_set1_epi64(8);
+    __m512i pos = _mm512_add_epi64(_mm512_set1_epi64(b), _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0));
+    int64_t p = b;
+    for (; p < e; p += 8) {
+        int64_t left = e - p;
+        __mmask8 live = left >= 8 ? (__mmask8)0xFF : (__mmask8)((1u << left) - 1u);
+        __m512d dx = _mm512_sub_pd(_mm512_maskz_loadu_pd(live, sx + p), vqx);
+        __m512d dy = _mm512_sub_pd(_mm512_maskz_loadu_pd(live, sy + p), vqy);
+        __m512d dz = _mm512_sub_pd(_mm512_maskz_loadu_pd(live, sz + p), vqz);
+        __m512d d2 = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
+                                   _mm512_mul_pd(dz, dz));
+        __mmask8 keep = _mm512_mask_cmp_pd_mask(live, d2, vg, _CMP_LE_OQ);
+        /* register compress, then a whole-vector store (the memory form is slow on some CPUs) */
+        _mm512_storeu_pd(cand_d2 + m, _mm512_maskz_compress_pd(keep, d2));
+        _mm512_storeu_si512((void *)(cand_pos + m), _mm512_maskz_compress_epi64(keep, pos));
+        m += _mm_popcnt_u32((unsigned)keep);
+        pos = _mm512_add_epi64(pos, step);
+    }
+    return m;
+}
+
+/* Candidates [0, m) with x = d2 * to_bucket below ``t`` (t = b + 1: the buckets up to b), eight at a time. */
+__attribute__((target("avx2,avx512f,popcnt")))
+static inline int64_t eppf_nrm_count_below(const double *cand_d2, int64_t m, __m512d vscale, double t)
+{
+    const __m512d vt = _mm512_set1_pd(t);
+    int64_t i, count = 0;
+    for (i = 0; i < m; i += 8) {
+        int64_t left = m - i;
+        __mmask8 live = left >= 8 ? (__mmask8)0xFF : (__mmask8)((1u << left) - 1u);
+        __m512d x = _mm512_mul_pd(_mm512_maskz_loadu_pd(live, cand_d2 + i), vscale);
+        count += _mm_popcnt_u32((unsigned)_mm512_mask_cmp_pd_mask(live, x, vt, _CMP_LT_OQ));
+    }
+    return count;
+}
+
+/* The fast path's selection (_normals_fast.pyx's ``_knn_block`` after the
+ * scan), eight candidates at a time: among the m >= k candidates (cand_d2,
+ * cand_pos, in ascending position), the k-th smallest by (d2, index) is found
+ * and the positions of the k smallest are written to ``kpos`` in ascending
+ * position; the k-th's index is returned. Buckets are those of the scalar
+ * code, ``min(floor(d2 * to_bucket), EPPF_NRM_BUCKETS - 1)``, with
+ * bucket(x) < b exactly when x < b; the bucket of the k-th is found by
+ * bisection over bucket counts instead of a histogram, and ranked inside as
+ * there. The k-th is unique, so the list is that of the scalar code whatever
+ * the method. ``sel`` needs m + EPPF_NRM_SLACK entries, ``kpos`` k +
+ * EPPF_NRM_SLACK. */
+__attribute__((target("avx2,avx512f,popcnt")))
+static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand_pos, int64_t m, int64_t k,
+                                      double to_bucket, int64_t *sel, int64_t *kpos)
+{
+    const __m512d vscale = _mm512_set1_pd(to_bucket);
+    const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i, rank;
+    double kth, di;
+    /* the smallest bucket bk whose count with those below reaches k (the top bucket holds the rest) */
+    while (lo < hi) {
+        int64_t mid = (lo + hi) / 2;
+        if (eppf_nrm_count_below(cand_d2, m, vscale, (double)(mid + 1)) >= k)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    bk = lo;
+    below = bk == 0 ? 0 : eppf_nrm_count_below(cand_d2, m, vscale, (double)bk);
+    need = k - below;
+    {
+        const __m512d vlo = _mm512_set1_pd((double)bk), vhi = _mm512_set1_pd((double)(bk + 1));
+        for (i = 0; i < m; i += 8) {
+            int64_t left = m - i;
+            __mmask8 live = left >= 8 ? (__mmask8)0xFF : (__mmask8)((1u << left) - 1u);
+            __m512d x = _mm512_mul_pd(_mm512_maskz_loadu_pd(live, cand_d2 + i), vscale);
+            __mmask8 in = live;
+            if (bk > 0) /* not below bk: NaN (never counted below) joins the top bucket, as in the scalar code */
+                in &= _mm512_mask_cmp_pd_mask(live, x, vlo, _CMP_NLT_UQ);
+            if (bk < EPPF_NRM_BUCKETS - 1)
+                in &= _mm512_mask_cmp_pd_mask(live, x, vhi, _CMP_LT_OQ);
+            _mm512_storeu_si512((void *)(sel + n_in),
+                                _mm512_maskz_compress_epi64(in, _mm512_add_epi64(_mm512_set1_epi64(i), iota)));
+            n_in += _mm_popcnt_u32((unsigned)in);
+        }
+    }
+    /* rank inside the bucket, by (d2, index) */
+    kth_i = sel[0];
+    for (i = 0; i < n_in; i++) {
+        di = cand_d2[sel[i]];
+        rank = 0;
+        for (j = 0; j < i; j++)
+            rank += cand_d2[sel[j]] <= di;
+        for (j = i + 1; j < n_in; j++)
+            rank += cand_d2[sel[j]] < di;
+        if (rank == need - 1)
+            kth_i = sel[i];
+    }
+    kth = cand_d2[kth_i];
+    /* everything up to the k-th in (d2, index) order, in position order */
+    {
+        const __m512d vk = _mm512_set1_pd(kth);
+        const __m512i vki = _mm512_set1_epi64(kth_i);
+        j = 0;
+        for (i = 0; i < m; i += 8) {
+            int64_t left = m - i;
+            __mmask8 live = left >= 8 ? (__mmask8)0xFF : (__mmask8)((1u << left) - 1u);
+            __m512d d2 = _mm512_maskz_loadu_pd(live, cand_d2 + i);
+            __m512i idx = _mm512_add_epi64(_mm512_set1_epi64(i), iota);
+            __mmask8 keep = _mm512_mask_cmp_pd_mask(live, d2, vk, _CMP_LT_OQ)
+                            | (_mm512_mask_cmp_pd_mask(live, d2, vk, _CMP_EQ_OQ)
+                               & _mm512_cmp_epi64_mask(idx, vki, _MM_CMPINT_LE));
+            _mm512_storeu_si512((void *)(kpos + j),
+                                _mm512_maskz_compress_epi64(keep, _mm512_maskz_loadu_epi64(live, cand_pos + i)));
+            j += _mm_popcnt_u32((unsigned)keep);
+        }
+    }
+    return kth_i;
+}
+
+/* Lane permutations (as eight 32-bit indices) that move the lanes of a 4-bit mask to the front. */
+static const int32_t eppf_nrm_pack4[16][8] = {
+    {0, 1, 2, 3, 4, 5, 6, 7}, {0, 1, 2, 3, 4, 5, 6, 7}, {2, 3, 0, 1, 4, 5, 6, 7}, {0, 1, 2, 3, 4, 5, 6, 7},
+    {4, 5, 0, 1, 2, 3, 6, 7}, {0, 1, 4, 5, 2, 3, 6, 7}, {2, 3, 4, 5, 0, 1, 6, 7}, {0, 1, 2, 3, 4, 5, 6, 7},
+    {6, 7, 0, 1, 2, 3, 4, 5}, {0, 1, 6, 7, 2, 3, 4, 5}, {2, 3, 6, 7, 0, 1, 4, 5}, {0, 1, 2, 3, 6, 7, 4, 5},
+    {4, 5, 6, 7, 0, 1, 2, 3}, {0, 1, 4, 5, 6, 7, 2, 3}, {2, 3, 4, 5, 6, 7, 0, 1}, {0, 1, 2, 3, 4, 5, 6, 7},
+};
+
+__attribute__((target("avx2,popcnt")))
+static int64_t eppf_nrm_scan_avx2(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
+                                  double qx, double qy, double qz, double guess, double *cand_d2,
+                                  int64_t *cand_pos, int64_t m)
+{
+    const __m256d vqx = _mm256_set1_pd(qx), vqy = _mm256_set1_pd(qy), vqz = _mm256_set1_pd(qz);
+    const __m256d vg = _mm256_set1_pd(guess);
+    const __m256i step = _mm256_set1_epi64x(4);
+    __m256i pos = _mm256_add_epi64(_mm256_set1_epi64x(b), _mm256_set_epi64x(3, 2, 1, 0));
+    int64_t p = b;
+    for (; p + 4 <= e; p += 4) {
+        __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(sx + p), vqx);
+        __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(sy + p), vqy);
+        __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(sz + p), vqz);
+        __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                                   _mm256_mul_pd(dz, dz));
+        int keep = _mm256_movemask_pd(_mm256_cmp_pd(d2, vg, _CMP_LE_OQ));
+        __m256i perm = _mm256_loadu_si256((const __m256i *)eppf_nrm_pack4[keep]);
+        _mm256_storeu_pd(cand_d2 + m, _mm256_castsi256_pd(
+            _mm256_permutevar8x32_epi32(_mm256_castpd_si256(d2), perm)));
+        _mm256_storeu_si256((__m256i *)(cand_pos + m), _mm256_permutevar8x32_epi32(pos, perm));
+        m += _mm_popcnt_u32((unsigned)keep);
+        pos = _mm256_add_epi64(pos, step);
+    }
+    for (; p < e; p++) {
+        double dx = sx[p] - qx, dy = sy[p] - qy, dz = sz[p] - qz;
+        double d2 = dx * dx + dy * dy + dz * dz;
+        cand_d2[m] = d2;
+        cand_pos[m] = p;
+        m += d2 <= guess;
+    }
+    return m;
+}
+
+#else
+
+static int64_t eppf_nrm_scan_avx512(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
+                                    double qx, double qy, double qz, double guess, double *cand_d2,
+                                    int64_t *cand_pos, int64_t m)
+{
+    (void)sx; (void)sy; (void)sz; (void)b; (void)e; (void)qx; (void)qy; (void)qz; (void)guess;
+    (void)cand_d2; (void)cand_pos;
+    return m; /* never called: eppf_nrm_has_avx512() is 0 */
+}
+
+static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand_pos, int64_t m, int64_t k,
+                                      double to_bucket, int64_t *sel, int64_t *kpos)
+{
+    (void)cand_d2; (void)cand_pos; (void)m; (void)k; (void)to_bucket; (void)sel; (void)kpos;
+    return 0; /* never called: eppf_nrm_has_avx512() is 0 */
+}
+
+static int64_t eppf_nrm_scan_avx2(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
+                                  double qx, double qy, double qz, double guess, double *cand_d2,
+                                  int64_t *cand_pos, int64_t m)
+{
+    (void)sx; (void)sy; (void)sz; (void)b; (void)e; (void)qx; (void)qy; (void)qz; (void)guess;
+    (void)cand_d2; (void)cand_pos;
+    return m; /* never called: eppf_nrm_has_avx2() is 0 */
+}
+
+#endif
+#endif
