@@ -90,6 +90,15 @@ class EPPF4DClassifier(SkorchClassifierBase):
         Batch normalisation between every convolution and its ReLU.
     label_smoothing : float, default=0.0
         Label smoothing of the cross-entropy loss, in [0, 1).
+    n_estimators : int, default=1
+        Networks trained (beyond the paper): with more than one, ``fit``
+        trains a small ensemble, every member on the same validation
+        hold-out and standardisation but with its own weight initialisation,
+        minibatch order and descriptor draws (seeded from ``random_state``
+        after the first member, which is the network a single-model fit
+        trains), and ``predict_proba`` averages the members' probabilities.
+        ``fit`` and prediction take ``n_estimators`` times as long;
+        ``max_time`` is a budget per member.
     precision : {"float32", "bfloat16"}, default="float32"
         Arithmetic of the network. ``"bfloat16"`` trains and predicts in
         mixed precision (:func:`torch.autocast`): convolutions and dense
@@ -136,12 +145,15 @@ class EPPF4DClassifier(SkorchClassifierBase):
     input_scale_ : ndarray of shape (1,) or (n_features,)
         Divides the centred descriptors.
     net_ : skorch.NeuralNetClassifier
-        The trained network; ``net_.history`` holds the per-epoch record.
+        The trained network (the first member of an ensemble);
+        ``net_.history`` holds the per-epoch record.
+    ensemble_nets_ : list of skorch.NeuralNetClassifier
+        The other ``n_estimators - 1`` members (empty for one network).
     n_epochs_ : int
-        Epochs trained.
+        Epochs trained (by ``net_``).
     best_epoch_ : int
         Epoch whose weights were kept (1-based; the last one without early
-        stopping).
+        stopping), of ``net_``.
 
     See Also
     --------
@@ -221,6 +233,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         side_hidden=128,
         batch_norm=False,
         label_smoothing=0.0,
+        n_estimators=1,
         precision="float32",
         device="cpu",
         n_jobs=None,
@@ -246,6 +259,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         self.side_hidden = side_hidden
         self.batch_norm = batch_norm
         self.label_smoothing = label_smoothing
+        self.n_estimators = n_estimators
         self.precision = precision
         self.device = device
         self.n_jobs = n_jobs
@@ -266,6 +280,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         "side_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
         "batch_norm": [Options(bool)],
         "label_smoothing": [Interval(numbers.Real, 0, 1, closed="left")],
+        "n_estimators": [Interval(numbers.Integral, 1, None, closed="left")],
     }
     _seed_names = ("torch", "split", "draws")
 
