@@ -305,7 +305,9 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         # minibatch order and draws, seeded after member 0 so that member 0
         # is the network a single-model fit trains.
         self.ensemble_nets_ = []
-        for _ in range(1, int(getattr(self, "n_estimators", 1))):
+        n_members = int(getattr(self, "n_estimators", 1))
+        for m in range(1, n_members):
+            self._sink()(f"network {m + 1} of {n_members} of the ensemble")
             member = dict(zip(self._seed_names, (int(s) for s in rng.randint(0, 2**31 - 1, size=len(self._seed_names)))))
             member["split"] = seeds["split"]
             self.ensemble_nets_.append(self._train_member(X, y_enc, train_idx, valid_idx, member, n_classes))

@@ -185,8 +185,16 @@ class EPPF4DClassifier(SkorchClassifierBase):
     training time (87.8 +- 0.3% over three seeds); this is the recommended
     recipe for such objects ("EPPF 4D+" of ``eppf experiment
     classification``, ``eppf train --recipe recommended``). On the small,
-    data-set scaled DALES objects the side features over-fit (88% test
-    accuracy against 96% for the paper's network and the KL 1-NN).
+    data-set scaled DALES objects one such network scored 88% test
+    accuracy against 96% for the paper's network and the KL 1-NN.
+
+    Ensembles and label smoothing (beyond the paper): on a stratified
+    quarter of DALES's training objects (88 objects, the rest for
+    training), three seeds of that network scored 95.5, 96.6 and 94.3%, the
+    three averaged (``n_estimators=3``) 96.6%, each seed with
+    ``label_smoothing=0.1`` 97.7%, the KL 1-NN and the paper's network
+    93.2%; ``batch_norm=True`` scored 92.0% (seed 0). The recommended
+    recipe therefore trains three networks with label smoothing 0.1.
 
     The Table I reading (same padding, layer sizes, dense input of 14,400
     for 1,200 bins) is documented in ``eppf.nn``.

@@ -260,7 +260,9 @@ class TrainingSettings:
                                         "normals: PCA over 20 neighbours estimated from the (noisy) points")
         lines["model choice"] = (
             f"early stopping on a stratified validation hold-out of {self.validation_fraction:.0%} of the training "
-            f"objects (patience {self.patience} epochs; the weights of the best validation epoch are kept). "
+            f"objects (patience {self.patience} epochs"
+            + (f", {self.recommended()[1].n_iter_no_change} for EPPF 4D+" if "4d+" in models else "")
+            + "; the weights of the best validation epoch are kept). "
             "The test split is used once, for the scores below; no setting was tuned on it")
         lines["seeds"] = f"random_state={self.random_state} (weights, batches, validation split, descriptor draw)"
         lines["threads (n_jobs)"] = self.n_jobs

@@ -32,6 +32,7 @@ def test_classification_experiment_trains_4d_plus_on_pools(tmp_path):
     assert row["model"] == "EPPF 4D+" and row["n_test"] == 20 and 0 <= row["total_accuracy"] <= 1
     report = (tmp_path / "classification.md").read_text()
     assert "EPPF 4D+: the recommended recipe" in report and "n_side_features='auto'" in report
+    assert "label_smoothing=0.1" in report and "n_estimators=1" in report  # quick: one network
     # the pools are cached: a second run reads them
     again = run_classification("builtin", quick=True, models=["4d+"], n_jobs=1, out=str(tmp_path), verbose=False)
     assert again["cache"].n_loaded == 1 and again["cache"].n_computed == 0
