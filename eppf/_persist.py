@@ -169,6 +169,8 @@ class _Encoder:
                 continue
             if key == "net_" and name in _NET_OWNERS:
                 attrs[key] = self._net(value, f"{where}.{key}")
+            elif key == "ensemble_nets_" and name in _NET_OWNERS and isinstance(value, list):
+                attrs[key] = [self._net(net, f"{where}.{key}[{i}]") for i, net in enumerate(value)]
             else:
                 attrs[key] = self.encode(value, f"{where}.{key}")
         return {"__type__": "estimator", "class": name,
@@ -366,17 +368,25 @@ class _Decoder:
         except TypeError as exc:
             raise self.fail(where, f"{name} does not accept the stored parameters ({exc})") from None
         net = None
+        members = None
         state = {}
         for key, value in attrs.items():
             if not isinstance(key, str) or not key.isidentifier() or key.startswith("__") or key in params:
                 raise self.fail(where, f"{name} has a bad attribute name {key!r}")
             if key == "net_" and name in _NET_OWNERS:
                 net = value
+            elif key == "ensemble_nets_" and name in _NET_OWNERS:
+                if not isinstance(value, list):
+                    raise self.fail(where, f"{name}.ensemble_nets_ must be a list of networks")
+                members = value
             else:
                 state[key] = self.decode(value, f"{where}.{key}")
         vars(est).update(state)
         if net is not None:
             est.net_ = self._net(est, name, net, f"{where}.net_")
+        if members is not None:
+            est.ensemble_nets_ = [self._net(est, name, node, f"{where}.ensemble_nets_[{i}]")
+                                  for i, node in enumerate(members)]
         return est
 
     def _net(self, est, name, node, where):

@@ -254,7 +254,15 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         # fork_rng: torch's data loader draws a seed from the global generator
         # even at inference; leave the caller's random stream untouched.
         with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
-            return self.net_.predict_proba(X)
+            proba = self.net_.predict_proba(X)
+            members = getattr(self, "ensemble_nets_", None) or []
+            if not members:
+                return proba
+            # An ensemble: the members' probabilities averaged (float64 sum, fixed order).
+            total = proba.astype(np.float64)
+            for net in members:
+                total += net.predict_proba(X)
+            return (total / (1 + len(members))).astype(proba.dtype)
 
     # -------------------------------------------------------------------- fit
     def fit(self, X, y):
@@ -272,10 +280,6 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         self : object
             Fitted estimator.
         """
-        import torch
-        from skorch import NeuralNetClassifier
-        from skorch.helper import predefined_split
-
         self._check_params()
         rng = check_random_state(self.random_state)
         seeds = dict(zip(self._seed_names, (int(s) for s in rng.randint(0, 2**31 - 1, size=len(self._seed_names)))))
@@ -289,8 +293,33 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             train_idx, valid_idx = _validation_split(
                 y_enc, n_classes, self.validation_fraction, seeds["split"], self._owner
             )
-        train_ds, valid_ds = self._make_datasets(X, y_enc, train_idx, valid_idx, seeds)
+        self.net_ = self._train_member(X, y_enc, train_idx, valid_idx, seeds, n_classes)
+        history = self.net_.history
+        self.n_epochs_ = len(history)
+        if valid_idx is not None:
+            self.best_epoch_ = int(np.argmin(history[:, "valid_loss"])) + 1
+        else:
+            self.best_epoch_ = self.n_epochs_
+        # Further members of an ensemble (``n_estimators`` > 1): the same
+        # validation hold-out and standardisation, their own weights,
+        # minibatch order and draws, seeded after member 0 so that member 0
+        # is the network a single-model fit trains.
+        self.ensemble_nets_ = []
+        n_members = int(getattr(self, "n_estimators", 1))
+        for m in range(1, n_members):
+            self._sink()(f"network {m + 1} of {n_members} of the ensemble")
+            member = dict(zip(self._seed_names, (int(s) for s in rng.randint(0, 2**31 - 1, size=len(self._seed_names)))))
+            member["split"] = seeds["split"]
+            self.ensemble_nets_.append(self._train_member(X, y_enc, train_idx, valid_idx, member, n_classes))
+        return self
 
+    def _train_member(self, X, y_enc, train_idx, valid_idx, seeds, n_classes):
+        """One trained skorch network (``fit``'s work for one seed set)."""
+        import torch
+        from skorch import NeuralNetClassifier
+        from skorch.helper import predefined_split
+
+        train_ds, valid_ds = self._make_datasets(X, y_enc, train_idx, valid_idx, seeds)
         params = dict(
             lr=float(self.lr),
             max_epochs=int(self.max_epochs),
@@ -306,19 +335,13 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             verbose=int(self.verbose),
         )
         params.update(self._net_params(n_classes, train_idx.shape[0]))
-        self.net_ = NeuralNetClassifier(**params)
+        net = NeuralNetClassifier(**params)
         with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
             torch.manual_seed(seeds["torch"])
-            self.net_.fit(train_ds, y=None)
+            net.fit(train_ds, y=None)
         # The validation set lives in train_split; drop it so it is not pickled.
-        self.net_.train_split = None
-        history = self.net_.history
-        self.n_epochs_ = len(history)
-        if valid_ds is not None:
-            self.best_epoch_ = int(np.argmin(history[:, "valid_loss"])) + 1
-        else:
-            self.best_epoch_ = self.n_epochs_
-        return self
+        net.train_split = None
+        return net
 
     def _untrained_net(self, n_classes):
         """The skorch network ``fit`` builds for ``n_classes``, initialised but untrained and without

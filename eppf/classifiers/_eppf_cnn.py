@@ -90,6 +90,15 @@ class EPPF4DClassifier(SkorchClassifierBase):
         Batch normalisation between every convolution and its ReLU.
     label_smoothing : float, default=0.0
         Label smoothing of the cross-entropy loss, in [0, 1).
+    n_estimators : int, default=1
+        Networks trained (beyond the paper): with more than one, ``fit``
+        trains a small ensemble, every member on the same validation
+        hold-out and standardisation but with its own weight initialisation,
+        minibatch order and descriptor draws (seeded from ``random_state``
+        after the first member, which is the network a single-model fit
+        trains), and ``predict_proba`` averages the members' probabilities.
+        ``fit`` and prediction take ``n_estimators`` times as long;
+        ``max_time`` is a budget per member.
     precision : {"float32", "bfloat16"}, default="float32"
         Arithmetic of the network. ``"bfloat16"`` trains and predicts in
         mixed precision (:func:`torch.autocast`): convolutions and dense
@@ -136,12 +145,15 @@ class EPPF4DClassifier(SkorchClassifierBase):
     input_scale_ : ndarray of shape (1,) or (n_features,)
         Divides the centred descriptors.
     net_ : skorch.NeuralNetClassifier
-        The trained network; ``net_.history`` holds the per-epoch record.
+        The trained network (the first member of an ensemble);
+        ``net_.history`` holds the per-epoch record.
+    ensemble_nets_ : list of skorch.NeuralNetClassifier
+        The other ``n_estimators - 1`` members (empty for one network).
     n_epochs_ : int
-        Epochs trained.
+        Epochs trained (by ``net_``).
     best_epoch_ : int
         Epoch whose weights were kept (1-based; the last one without early
-        stopping).
+        stopping), of ``net_``.
 
     See Also
     --------
@@ -173,8 +185,16 @@ class EPPF4DClassifier(SkorchClassifierBase):
     training time (87.8 +- 0.3% over three seeds); this is the recommended
     recipe for such objects ("EPPF 4D+" of ``eppf experiment
     classification``, ``eppf train --recipe recommended``). On the small,
-    data-set scaled DALES objects the side features over-fit (88% test
-    accuracy against 96% for the paper's network and the KL 1-NN).
+    data-set scaled DALES objects one such network scored 88% test
+    accuracy against 96% for the paper's network and the KL 1-NN.
+
+    Ensembles and label smoothing (beyond the paper): on a stratified
+    quarter of DALES's training objects (88 objects, the rest for
+    training), three seeds of that network scored 95.5, 96.6 and 94.3%, the
+    three averaged (``n_estimators=3``) 96.6%, each seed with
+    ``label_smoothing=0.1`` 97.7%, the KL 1-NN and the paper's network
+    93.2%; ``batch_norm=True`` scored 92.0% (seed 0). The recommended
+    recipe therefore trains three networks with label smoothing 0.1.
 
     The Table I reading (same padding, layer sizes, dense input of 14,400
     for 1,200 bins) is documented in ``eppf.nn``.
@@ -221,6 +241,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         side_hidden=128,
         batch_norm=False,
         label_smoothing=0.0,
+        n_estimators=1,
         precision="float32",
         device="cpu",
         n_jobs=None,
@@ -246,6 +267,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         self.side_hidden = side_hidden
         self.batch_norm = batch_norm
         self.label_smoothing = label_smoothing
+        self.n_estimators = n_estimators
         self.precision = precision
         self.device = device
         self.n_jobs = n_jobs
@@ -266,6 +288,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         "side_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
         "batch_norm": [Options(bool)],
         "label_smoothing": [Interval(numbers.Real, 0, 1, closed="left")],
+        "n_estimators": [Interval(numbers.Integral, 1, None, closed="left")],
     }
     _seed_names = ("torch", "split", "draws")
 

@@ -32,7 +32,8 @@ DEFAULT_MODELS = ("pointnet", "2d", "3d", "4d", "4d+", "kl")
 
 #: The recommended recipe beyond the paper ("4d+"): see :func:`recommended_pipeline_parts`.
 RECIPE = dict(n_draws=8, stretch=(0.8, 1.25), filters=(16, 32, 24), n_hidden=256, min_patience=8,
-              precision="bfloat16")
+              precision="bfloat16", n_estimators=3,
+              label_smoothing=0.1)
 
 
 def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=None, max_epochs=30, n_iter_no_change=8,
@@ -48,7 +49,9 @@ def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=Non
     :class:`~eppf.descriptors.ProportionTransformer` ratios as side features;
     the 4D network with filters (16, 32, 24) and a 256-unit dense layer, the
     side features through a 128-unit branch into that layer, Adam halved on
-    validation plateaus, bfloat16 mixed precision.
+    validation plateaus, bfloat16 mixed precision, label smoothing 0.1, and an ensemble of three
+    such networks (``n_estimators=3``, one network with ``quick``) whose
+    probabilities are averaged.
 
     Parameters
     ----------
@@ -59,7 +62,7 @@ def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=Non
     n_jobs, random_state, max_epochs, n_iter_no_change, validation_fraction, verbose
         Passed on (the patience is at least 8 epochs unless ``quick``).
     quick : bool, default=False
-        Two draws instead of 8.
+        Two draws instead of 8 and one network instead of 3.
 
     Returns
     -------
@@ -77,7 +80,9 @@ def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=Non
     patience = n_iter_no_change if quick else max(n_iter_no_change, RECIPE["min_patience"])
     clf = EPPF4DClassifier(tuple(eppf.get_params()["n_bins"]), conv, filters=RECIPE["filters"],
                            n_hidden=RECIPE["n_hidden"], n_side_features="auto", lr_schedule="plateau",
-                           precision=RECIPE["precision"], max_epochs=max_epochs, n_iter_no_change=patience,
+                           precision=RECIPE["precision"], n_estimators=1 if quick else RECIPE["n_estimators"],
+                           label_smoothing=RECIPE["label_smoothing"],
+                           max_epochs=max_epochs, n_iter_no_change=patience,
                            validation_fraction=validation_fraction, early_stopping=True,
                            n_jobs=None if n_jobs is None or n_jobs < 0 else n_jobs, random_state=random_state,
                            verbose=verbose)
@@ -245,14 +250,19 @@ class TrainingSettings:
             lines["EPPF 4D+"] = (
                 f"the recommended recipe beyond the paper: {pool.n_draws} descriptor draws per object (draws 1.. of "
                 f"copies stretched per axis in [{RECIPE['stretch'][0]}, {RECIPE['stretch'][1]}], a fresh draw every "
-                "epoch), EPPF + GASD + 6 proportion ratios (side features) per draw, probabilities averaged over a "
-                f"plain and {pool.n_draws - 1} stretched copies of each test object; `{params_text(clf)}`")
+                "epoch), EPPF + GASD + 6 proportion ratios (side features) per draw, "
+                + (f"an ensemble of {clf.n_estimators} networks (own seeds, one validation hold-out), "
+                   if clf.n_estimators > 1 else "")
+                + f"probabilities averaged over a plain and {pool.n_draws - 1} stretched copies of each test object"
+                + (" and over the networks" if clf.n_estimators > 1 else "") + f"; `{params_text(clf)}`")
         if any(m in models for m in ("2d", "3d", "4d", "kl")):
             lines["EPPF descriptor"] = (f"one draw, fitted on the training objects; `{params_text(self.descriptor())}`; "
                                         "normals: PCA over 20 neighbours estimated from the (noisy) points")
         lines["model choice"] = (
             f"early stopping on a stratified validation hold-out of {self.validation_fraction:.0%} of the training "
-            f"objects (patience {self.patience} epochs; the weights of the best validation epoch are kept). "
+            f"objects (patience {self.patience} epochs"
+            + (f", {self.recommended()[1].n_iter_no_change} for EPPF 4D+" if "4d+" in models else "")
+            + "; the weights of the best validation epoch are kept). "
             "The test split is used once, for the scores below; no setting was tuned on it")
         lines["seeds"] = f"random_state={self.random_state} (weights, batches, validation split, descriptor draw)"
         lines["threads (n_jobs)"] = self.n_jobs

@@ -1,3 +1,4 @@
+import copy
 import math
 import pickle
 import re
@@ -538,7 +539,42 @@ def test_label_smoothing_softens_the_training_loss_floor():
     assert min(clf.net_.history[:, "train_loss"]) > floor - 1e-3
 
 
+def test_ensemble_averages_members_and_survives_save_and_load(tmp_path):
+    import eppf
+
+    rng = np.random.default_rng(6)
+    X, y = _toy(60, rng)
+    X_test, _ = _toy(30, rng)
+    common = dict(n_bins=N_BINS, max_epochs=3, validation_fraction=0.2, random_state=0, **SMALL)
+    single = EPPF4DClassifier(**common).fit(X, y)
+    ens = EPPF4DClassifier(n_estimators=3, **common).fit(X, y)
+    assert len(ens.ensemble_nets_) == 2 and single.ensemble_nets_ == []
+    members = [ens.net_] + ens.ensemble_nets_
+
+    def member_proba(net):
+        one = copy.copy(ens)
+        one.net_, one.ensemble_nets_ = net, []
+        return one.predict_proba(X_test)
+
+    per_member = [member_proba(m) for m in members]
+    # member 0 is the single-model network; the others were trained with other seeds
+    assert_array_equal(per_member[0], single.predict_proba(X_test))
+    assert not np.allclose(per_member[0], per_member[1]) and not np.allclose(per_member[1], per_member[2])
+    proba = ens.predict_proba(X_test)
+    assert_allclose(proba, np.mean(per_member, axis=0), rtol=1e-6)
+    assert_allclose(proba.sum(axis=1), 1.0, rtol=1e-5)
+    # every member was early-stopped on the same hold-out (its own best epoch kept)
+    assert all(len(m.history) >= 1 for m in members)
+    path = tmp_path / "ens.eppf"
+    eppf.save_model(ens, path)
+    loaded = eppf.load_model(path)
+    assert len(loaded.ensemble_nets_) == 2
+    assert_array_equal(loaded.predict_proba(X_test), proba)
+    assert_array_equal(pickle.loads(pickle.dumps(ens)).predict_proba(X_test), proba)
+
+
 @pytest.mark.parametrize("params, msg", [
+    (dict(n_estimators=0), "n_estimators"),
     (dict(n_side_features=-1), "n_side_features"),
     (dict(n_side_features="some"), "n_side_features"),
     (dict(side_hidden=0), "side_hidden"),

@@ -390,8 +390,10 @@ def test_train_passes_precision_to_the_cnn():
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].precision == "bfloat16"  # recommended
     assert make_pipeline_from_args(build_parser().parse_args(base + ["--precision", "float32"]))[-1].precision \
         == "float32"
+    assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == 3  # an ensemble
     base = base + ["--recipe", "paper"]
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].precision == "float32"
+    assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == 1  # Table I's one network
     args = build_parser().parse_args(base + ["--precision", "bfloat16"])
     assert make_pipeline_from_args(args)[-1].precision == "bfloat16"
     with pytest.raises(SystemExit):

@@ -262,8 +262,10 @@ def test_cnn_training_prints_one_line_per_epoch_and_predict_gives_probabilities(
                            "--test-size", "0", "--n-pairs", N_PAIRS, "--n-jobs", "1"], capsys)
     assert status == 0
     epochs = [line for line in out.splitlines() if line.startswith("epoch")]
-    assert len(epochs) == 2 and "train_loss" in epochs[0] and epochs[0].rstrip().endswith(" s")
+    # the recommended recipe trains an ensemble of three networks, two epochs each
+    assert len(epochs) == 2 * 3 and "train_loss" in epochs[0] and epochs[0].rstrip().endswith(" s")
     assert "valid_acc" in epochs[0]
+    assert "network 2 of 3 of the ensemble" in out and "network 3 of 3 of the ensemble" in out
     status, _, _ = _run(["predict", folder, "--model", model, "-o", tmp_path / "p.csv", *COMMON[2:]], capsys)
     rows = _csv(tmp_path / "p.csv")
     assert status == 0 and len(rows) == len(files)

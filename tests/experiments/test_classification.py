@@ -20,8 +20,10 @@ def test_recommended_parts_are_the_documented_recipe():
     assert clf.n_side_features == "auto" and clf.filters == RECIPE["filters"] and clf.n_hidden == RECIPE["n_hidden"]
     assert clf.lr_schedule == "plateau" and clf.precision == "bfloat16" and clf.max_epochs == 7
     assert clf.n_iter_no_change == RECIPE["min_patience"]  # at least 8 epochs of patience
+    assert clf.n_estimators == RECIPE["n_estimators"] == 3  # an ensemble of three networks
+    assert clf.label_smoothing == RECIPE["label_smoothing"] == 0.1
     quick_pool, quick_clf = recommended_pipeline_parts(EPPFTransformer(), quick=True, n_iter_no_change=2)
-    assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2
+    assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2 and quick_clf.n_estimators == 1
 
 
 def test_classification_experiment_trains_4d_plus_on_pools(tmp_path):
@@ -30,6 +32,7 @@ def test_classification_experiment_trains_4d_plus_on_pools(tmp_path):
     assert row["model"] == "EPPF 4D+" and row["n_test"] == 20 and 0 <= row["total_accuracy"] <= 1
     report = (tmp_path / "classification.md").read_text()
     assert "EPPF 4D+: the recommended recipe" in report and "n_side_features='auto'" in report
+    assert "label_smoothing=0.1" in report and "n_estimators=1" in report  # quick: one network
     # the pools are cached: a second run reads them
     again = run_classification("builtin", quick=True, models=["4d+"], n_jobs=1, out=str(tmp_path), verbose=False)
     assert again["cache"].n_loaded == 1 and again["cache"].n_computed == 0
