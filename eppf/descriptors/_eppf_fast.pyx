@@ -27,8 +27,8 @@ Where the CPU has them (checked at import), batches of 256 pairs go through
 the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F, BW, VL, DQ, VBMI) the
 draws, the f1-f3 bins and the f4 walks of grids up to 64 run eight pairs at
 a time (level 2: walks grouped by line length; level 3: lanes refilled from
-a queue, skipping voxels proved empty by their distance to the nearest
-occupied voxel; level 3 is the default on AMD, where gathers are slow); with
+a queue, each line walked along its dominant axis, skipping voxels proved
+empty by the empty cone ahead of them; level 3 is the default on AMD, where gathers are slow); with
 AVX2 only, f1-f3 and the walks run four at a time (level 1). f1-f3 use the
 same IEEE operations in the same order, the walks visit the same voxels or
 prove them empty. Their bins and draws are bit-identical to the scalar code
@@ -82,6 +82,7 @@ cdef extern from "_eppf_walk.h":
                               const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
     enum:
         EPPF_LANES_WORDS
+        EPPF_CODE_WORDS
     void eppf_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
     void eppf_f4_dist_avx512(int m, const int32_t* I, const int32_t* J, const int32_t* B, const int64_t* pv,
                              const uint64_t* code, int64_t g, const int32_t* thr, int n4, const int64_t* lohi,
@@ -116,7 +117,7 @@ cdef enum:
     FIX_SHIFT = 32
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
-    CODE_WORDS = 8192       # the AVX-512 walk's code grid: 2 words a row, any voxel index below it
+    CODE_WORDS = EPPF_CODE_WORDS  # the AVX-512 walk's three cone grids (one per axis, 2 words a row)
     # packed line walk for grids up to 64 (layout in _eppf_walk.h)
     PK_S = EPPF_PK_S
     PK_ZSHIFT = EPPF_PK_ZSHIFT
@@ -587,7 +588,7 @@ def eppf_counts(points_in, normals_in,
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
-    # the AVX-512 walk's free-distance grid (CODE_WORDS) and its scratch (4 g^2 words)
+    # the AVX-512 walk's cone grids (CODE_WORDS) and their scratch (4 g^2 words)
     code_arr = np.zeros((num_threads, CODE_WORDS + 4 * 64 * 64 if prm.simd == 3 else 1), dtype=np.uint64)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
@@ -668,3 +669,29 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
         for k in range(6):
             out[t, k] = parts[k]
     return out_arr
+
+
+def _cone_codes(occupied):
+    """The skipping walk's cone codes of an occupancy grid (tests).
+
+    ``occupied``: (g, g, g) booleans, 2 <= g <= 64, indexed [x, y, z].
+    Returns a (3, g, g, g) uint8 array: entry [a, x, y, z] is min(C, 3), C
+    the number of planes of the cone along axis a from voxel (x, y, z) on
+    with no occupied voxel (``eppf_code_grid`` in ``_eppf_walk.h``). Needs
+    the AVX-512 kernels (level 3).
+    """
+    occ = np.asarray(occupied, dtype=bool)
+    if occ.ndim != 3 or occ.shape[0] != occ.shape[1] or occ.shape[0] != occ.shape[2] or not 2 <= occ.shape[0] <= 64:
+        raise ValueError("occupied must be a (g, g, g) grid with 2 <= g <= 64")
+    if _max_level() < 3:
+        raise ValueError("the cone codes need the AVX-512 kernels, which this CPU lacks")
+    cdef int g = occ.shape[0]
+    packed = np.zeros((g, g, 8), dtype=np.uint8)
+    packed[:, :, : (g + 7) // 8] = np.packbits(occ, axis=2, bitorder="little")
+    cdef uint64_t[::1] bits = np.ascontiguousarray(packed.reshape(-1).view(np.uint64))
+    code_arr = np.zeros(CODE_WORDS + 4 * 64 * 64, dtype=np.uint64)
+    cdef uint64_t[::1] code = code_arr
+    eppf_code_grid(&bits[0], g, &code[CODE_WORDS], &code[0])
+    words = code_arr[: 3 * 128 * g].reshape(3, 128 * g)[:, : 2 * g * g].reshape(3, g, g, 2)
+    z = np.arange(g)
+    return ((words[..., z >> 5] >> (2 * (z & 31)).astype(np.uint64)) & 3).astype(np.uint8)
