@@ -1299,12 +1299,11 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
             inc##S = _mm512_mask_expand_epi64(inc##S, fill_, _mm512_loadu_si512(QI + q));         \
             rem##S = _mm512_mask_and_epi64(rem##S, fill_, mt_, fmask);                            \
             occ##S = _mm512_mask_mov_epi64(occ##S, fill_, two);                                   \
-            _mm512_storeu_si512(lanes + (o) + 48, _mm512_mask_expand_epi64(                       \
-                _mm512_loadu_si512(lanes + (o) + 48), fill_, _mm512_loadu_si512(QK + q)));        \
-            _mm512_storeu_si512(lanes + (o) + 24, _mm512_mask_and_epi64(                          \
-                _mm512_loadu_si512(lanes + (o) + 24), fill_, _mm512_srli_epi64(mt_, EPPF_META_LO), fmask)); \
-            _mm512_storeu_si512(lanes + (o) + 32, _mm512_mask_srli_epi64(                         \
-                _mm512_loadu_si512(lanes + (o) + 32), fill_, mt_, EPPF_META_HI));                 \
+            _mm512_mask_storeu_epi64(lanes + (o) + 48, fill_,                                     \
+                                     _mm512_maskz_expand_epi64(fill_, _mm512_loadu_si512(QK + q))); \
+            _mm512_mask_storeu_epi64(lanes + (o) + 24, fill_,                                     \
+                                     _mm512_and_si512(_mm512_srli_epi64(mt_, EPPF_META_LO), fmask)); \
+            _mm512_mask_storeu_epi64(lanes + (o) + 32, fill_, _mm512_srli_epi64(mt_, EPPF_META_HI)); \
             act##S |= fill_;                                                                      \
             q += __builtin_popcount(fill_);                                                       \
         }                                                                                         \
