@@ -76,7 +76,9 @@ cdef extern from "_eppf_walk.h":
     int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                                const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                                double f1_density, const double* cos2, const double* cos3,
-                               int32_t* B) noexcept nogil
+                               int32_t* B, const double* pn) noexcept nogil
+    void eppf_pack_rows(int64_t n, const double* pts, int64_t ps, const double* nrm, int64_t ns,
+                        double* pn) noexcept nogil
     void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
                               const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                               const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
@@ -389,14 +391,16 @@ cdef inline int _draw_pair(const double* pts, int64_t ps, uint32_t n, uint64_t* 
 
 cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
-                        int32_t* vox, int64_t* pv, uint64_t* code, int32_t* counts) noexcept nogil:
+                        int32_t* vox, int64_t* pv, uint64_t* code, double* pn, int32_t* counts) noexcept nogil:
     """Histogram counts of one object; returns 1 if pairs could not be drawn.
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
     that the latency of one pair's square root and divisions overlaps with
     the next pair's instead of stalling behind a voxel walk. At level 3 the
     f4 walk counts the pairs itself, and lines still being walked at the end
-    of a batch carry over (in ``lanes``) to the next one.
+    of a batch carry over (in ``lanes``) to the next one. Unless ``pn`` is
+    NULL, the AVX-512 f1-f3 read the points and normals from a copy of them
+    there, one 64-byte row a point (``eppf_pack_rows``).
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
@@ -414,6 +418,10 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef bint dist = prm.simd == 3 and prm.n4 > 1
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
+    if prm.simd123 != 2:
+        pn = NULL
+    if pn != NULL:
+        eppf_pack_rows(n, pts, ps, nrm, ns, pn)
     if prm.n4 > 1:
         _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd >= 2 else NULL)
     if dist:
@@ -427,7 +435,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         if vec_draw:
             eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
             good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                          prm.f1_density, prm.cos2, prm.cos3, B)
+                                          prm.f1_density, prm.cos2, prm.cos3, B, pn)
             if good < m:
                 vec_draw = False
                 m = good
@@ -444,7 +452,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
                 J[t] = <int32_t>j
             if prm.simd123 == 2:
                 eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                       prm.f1_density, prm.cos2, prm.cos3, B)
+                                       prm.f1_density, prm.cos2, prm.cos3, B, pn)
             elif prm.simd123:
                 eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
                                      prm.f1_density, prm.cos2, prm.cos3, B)
@@ -590,12 +598,21 @@ def eppf_counts(points_in, normals_in,
     pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
     # the AVX-512 walk's cone grids (CODE_WORDS) and their scratch (4 g^2 words)
     code_arr = np.zeros((num_threads, CODE_WORDS + 4 * 64 * 64 if prm.simd == 3 else 1), dtype=np.uint64)
+    # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to 65,536 points,
+    # larger ones are read in place)
+    cdef bint rows = prm.simd123 == 2 and max_n <= 65536
+    # (each thread's rows start on a 64-byte boundary, so that no row straddles two cache lines)
+    pn_buf = np.zeros(num_threads * (8 * max_n + 8) + 8 if rows else 8, dtype=np.float64)
+    cdef Py_ssize_t pn_skip = (-(pn_buf.ctypes.data // 8)) % 8
+    pn_arr = pn_buf[pn_skip : pn_skip + num_threads * (8 * max_n + 8)].reshape(num_threads, -1) if rows \
+        else pn_buf[:8].reshape(1, 8)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
     cdef uint64_t[:, ::1] grids = grids_arr
     cdef int32_t[:, ::1] vox = vox_arr
     cdef int64_t[:, ::1] pv = pv_arr
     cdef uint64_t[:, ::1] code = code_arr
+    cdef double[:, ::1] pn = pn_arr
     cdef Py_ssize_t k, tid
     cdef int64_t start
     with nogil:
@@ -605,7 +622,7 @@ def eppf_counts(points_in, normals_in,
             status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
                                        &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &code[tid, 0],
-                                       &counts[k, 0])
+                                       &pn[tid, 0] if rows else NULL, &counts[k, 0])
     return counts_arr, status_arr
 
 

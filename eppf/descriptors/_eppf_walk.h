@@ -138,6 +138,54 @@ static int eppf_walk_has_avx2(void)
 #endif
 }
 
+/* The rows of ``eppf_f123_batch_avx512``'s ``pn``: point k's x, y, z,
+ * nx, ny, nz (and two unused doubles) at pn[8 k], so that one 64-byte load
+ * reads a point and its normal. */
+static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns, double *pn)
+{
+    int64_t k;
+    for (k = 0; k < n; k++) {
+        double *r = pn + 8 * k;
+        r[0] = pts[ps * k];
+        r[1] = pts[ps * k + 1];
+        r[2] = pts[ps * k + 2];
+        r[3] = nrm[ns * k];
+        r[4] = nrm[ns * k + 1];
+        r[5] = nrm[ns * k + 2];
+        r[6] = 0.0;
+        r[7] = 0.0;
+    }
+}
+
+#if EPPF_WALK_SIMD
+/* The points and normals at rows r[0..7] of ``eppf_pack_rows``'s ``pn`` as six
+ * vectors v[0..5] (x, y, z, nx, ny, nz): eight loads and a transpose. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_load6x8(const double *pn, const int32_t *r, __m512d *v)
+{
+    __m512d a[8], t[8], u[8];
+    int k;
+    for (k = 0; k < 8; k++)
+        a[k] = _mm512_loadu_pd(pn + 8 * (int64_t)r[k]);
+    for (k = 0; k < 4; k++) {
+        t[2 * k] = _mm512_unpacklo_pd(a[2 * k], a[2 * k + 1]);      /* x01 z01 ny01 - */
+        t[2 * k + 1] = _mm512_unpackhi_pd(a[2 * k], a[2 * k + 1]);  /* y01 nx01 nz01 - */
+    }
+    for (k = 0; k < 2; k++) {
+        u[4 * k] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0x44);          /* x01 z01 x23 z23 */
+        u[4 * k + 1] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0xEE);      /* ny01 - ny23 - */
+        u[4 * k + 2] = _mm512_shuffle_f64x2(t[4 * k + 1], t[4 * k + 3], 0x44);  /* y01 nx01 y23 nx23 */
+        u[4 * k + 3] = _mm512_shuffle_f64x2(t[4 * k + 1], t[4 * k + 3], 0xEE);  /* nz01 - nz23 - */
+    }
+    v[0] = _mm512_shuffle_f64x2(u[0], u[4], 0x88);
+    v[2] = _mm512_shuffle_f64x2(u[0], u[4], 0xDD);
+    v[1] = _mm512_shuffle_f64x2(u[2], u[6], 0x88);
+    v[3] = _mm512_shuffle_f64x2(u[2], u[6], 0xDD);
+    v[4] = _mm512_shuffle_f64x2(u[1], u[5], 0x88);
+    v[5] = _mm512_shuffle_f64x2(u[3], u[7], 0x88);
+}
+#endif
+
 #if EPPF_WALK_SIMD
 
 /* 4 points (x, y, z) at rows r[0..3] of an array with rows of ``stride``
@@ -524,11 +572,14 @@ static inline void eppf_load3x8(const double *a, int64_t stride, const int32_t *
 /* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
  * the same order, so the same bins), which also checks the pairs as
  * ``_draw_pair`` does: returns the first t whose two points coincide (all
- * three coordinates equal), or m when none does. B[t] is written for every t. */
+ * three coordinates equal), or m when none does. B[t] is written for every t.
+ * Where ``pn`` is not NULL, the points and normals are read from its rows
+ * (``eppf_pack_rows``: the same values, one load a point). */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
                                   const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
-                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B,
+                                  const double *pn)
 {
     const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
     const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
@@ -549,8 +600,15 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
             vi = ri;
             vj = rj;
         }
-        eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
-        eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
+        __m512d vi6[6], vj6[6];
+        if (pn) {
+            eppf_load6x8(pn, vi, vi6);
+            eppf_load6x8(pn, vj, vj6);
+            pix = vi6[0], piy = vi6[1], piz = vi6[2], pjx = vj6[0], pjy = vj6[1], pjz = vj6[2];
+        } else {
+            eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
+            eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
+        }
         same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
                & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
         if (same && bad == m)
@@ -564,8 +622,12 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
         b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
         if (n2 > 1 || n3 > 1) {
             __m512d nix, niy, niz, njx, njy, njz;
-            eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
-            eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
+            if (pn) {
+                nix = vi6[3], niy = vi6[4], niz = vi6[5], njx = vj6[3], njy = vj6[4], njz = vj6[5];
+            } else {
+                eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
+                eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
+            }
             if (n2 > 1) {
                 __m512d inv = _mm512_div_pd(one, dist), m1, m2;
                 m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
@@ -894,10 +956,11 @@ static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *o
 
 static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
                                   const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
-                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B,
+                                  const double *pn)
 {
     (void)m; (void)ii; (void)jj; (void)pts; (void)ps; (void)nrm; (void)ns; (void)scale; (void)n1; (void)n2; (void)n3;
-    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
+    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B; (void)pn;
     return 0;
 }
 

@@ -256,6 +256,24 @@ def test_walks_near_planes_give_identical_counts(grid, n4):
     assert want.reshape(2, n4)[:, 1:].sum() > 0  # some lines above the bottom f4 bin
 
 
+def test_objects_past_the_row_copy_limit_match_reference():
+    # Objects up to 65,536 points have their points and normals copied into rows of eight
+    # doubles for the AVX-512 f1-f3; a larger one is read in place; both beside each other.
+    rng = np.random.default_rng(65)
+    clouds = [_sphere(70000, rng), _box(500, rng)]
+    points, normals, offsets = _packed(clouds)
+    seeds = object_seeds(65, len(clouds))
+    args = (points, normals, offsets, np.full(2, 0.5), seeds, 300, (20, 4, 5, 3), 64, ref.F1_MAX, 1)
+    want = [_reference_counts(c, seeds[k], 300, 0.5, (20, 4, 5, 3), 64) for k, c in enumerate(clouds)]
+    for level in LEVELS:
+        got, _ = _counts_at(level, *args)
+        for k in range(2):
+            assert_array_equal(got[k], want[k])
+    small, _ = _counts_at(LEVELS[-1], *_packed(clouds[1:]), np.full(1, 0.5), seeds[1:], 300, (20, 4, 5, 3), 64,
+                          ref.F1_MAX, 1)
+    assert_array_equal(small[0], want[1])
+
+
 def _first_coinciding_draw(points, seed, n_draws):
     """Index of the first of ``n_draws`` splitmix64 candidate pairs whose points coincide, or None.
 
