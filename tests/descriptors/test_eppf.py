@@ -109,7 +109,8 @@ def _packed(clouds):
 
 
 # Every kernel level the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (draws, f1-f3 and walk in 8 lanes),
-# 3 AVX-512 with the walk that skips voxels proved free by their distance to the nearest occupied one.
+# 3 AVX-512 with the walk that skips voxels proved free by the empty cone ahead of a line (walked along
+# its dominant axis).
 LEVELS = _simd_levels()
 
 
