@@ -23,18 +23,18 @@ walk; the row marked "default" is the one the kernel picks here), passes
 alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
 ModelNet10; every level's output is checked equal to the scalar kernel's).
 ``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
-guest, shared with other jobs (load average about 2.8), CPU ms per object,
+guest, shared with other jobs (load average about 1.3), CPU ms per object,
 one thread, normals given, the paper's settings:
 
 ================================================  ======  =========  ================  ==============  ==================
 descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
 ================================================  ======  =========  ================  ==============  ==================
-EPPF, scalar kernel                               1.531   1.589      18.1              12.5            5-7x
-EPPF, AVX2 kernel                                 0.734   0.798      9.1               6.3             11-14x
-EPPF, AVX-512, grouped walk                       0.478   0.544      6.2               4.3             17-21x
-EPPF, AVX-512, skipping walk (default here)       0.399   0.444      5.1               3.5             20-25x
-GASD (ours)                                       -       0.088      1.0               0.69
-VFH (ours)                                        -       0.128      1.45              1.0
+EPPF, scalar kernel                               1.376   1.425      17.6              13.7            6-7x
+EPPF, AVX2 kernel                                 0.666   0.711      8.8               6.8             12-15x
+EPPF, AVX-512, grouped walk                       0.460   0.503      6.2               4.8             17-22x
+EPPF, AVX-512, skipping walk (default here)       0.361   0.399      4.9               3.8             22-28x
+GASD (ours)                                       -       0.081      1.0               0.78
+VFH (ours)                                        -       0.104      1.28              1.0
 ================================================  ======  =========  ================  ==============  ==================
 
 (PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
