@@ -23,25 +23,25 @@ walk; the row marked "default" is the one the kernel picks here), passes
 alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
 ModelNet10; every level's output is checked equal to the scalar kernel's).
 ``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
-guest, shared with other jobs (load average about 4), CPU ms per object,
+guest, shared with other jobs (load average about 1.3), CPU ms per object,
 one thread, normals given, the paper's settings:
 
 ================================================  ======  =========  ================  ==============  ==================
 descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
 ================================================  ======  =========  ================  ==============  ==================
-EPPF, scalar kernel                               1.404   1.473      15.3              11.6            6-7x
-EPPF, AVX2 kernel                                 0.689   0.756      7.8               6.0             12-15x
-EPPF, AVX-512, grouped walk                       0.474   0.532      5.5               4.2             17-21x
-EPPF, AVX-512, skipping walk (default here)       0.448   0.483      5.0               3.8             18-22x
-GASD (ours)                                       -       0.096      1.0               0.76
-VFH (ours)                                        -       0.127      1.32              1.0
+EPPF, scalar kernel                               1.376   1.425      17.6              13.7            6-7x
+EPPF, AVX2 kernel                                 0.666   0.711      8.8               6.8             12-15x
+EPPF, AVX-512, grouped walk                       0.460   0.503      6.2               4.8             17-22x
+EPPF, AVX-512, skipping walk (default here)       0.361   0.399      4.9               3.8             22-28x
+GASD (ours)                                       -       0.081      1.0               0.78
+VFH (ours)                                        -       0.104      1.28              1.0
 ================================================  ======  =========  ================  ==============  ==================
 
 (PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
-VFH 0.41-0.62. The AVX-512 kernel before the gather-free loads and the
-skipping walk took 0.627 ms in the run right after.) The 0.3 ms of 30x ESF
-is not reached; where the kernel's time goes is in the performance page of
-the docs.
+VFH 0.41-0.62. The skipping walk walks each line along its dominant axis
+and skips by the empty cone ahead; run beside the kernel before that change
+it took 0.81-0.86 of its time.) The 0.3 ms of 30x ESF is not reached; where
+the kernel's time goes is in the performance page of the docs.
 
 Usage::
 
@@ -171,7 +171,8 @@ EPPF_LEVELS = (
     ("EPPF, scalar kernel", 0, "portable C, one pair at a time"),
     ("EPPF, AVX2 kernel", 1, "the default until the AVX-512 kernel: f1-f3 and walks 4 pairs at a time"),
     ("EPPF, AVX-512, grouped walk", 2, "draws, f1-f3 and walks 8 pairs at a time, lines grouped by length"),
-    ("EPPF, AVX-512, skipping walk", 3, "as level 2, lanes refilled from a queue, free voxels skipped"),
+    ("EPPF, AVX-512, skipping walk", 3, "as level 2, lanes refilled from a queue, lines walked along their dominant "
+     "axis past voxels of an empty cone ahead"),
 )
 
 

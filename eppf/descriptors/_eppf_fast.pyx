@@ -27,8 +27,8 @@ Where the CPU has them (checked at import), batches of 256 pairs go through
 the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F, BW, VL, DQ, VBMI) the
 draws, the f1-f3 bins and the f4 walks of grids up to 64 run eight pairs at
 a time (level 2: walks grouped by line length; level 3: lanes refilled from
-a queue, skipping voxels proved empty by their distance to the nearest
-occupied voxel; level 3 is the default on AMD, where gathers are slow); with
+a queue, each line walked along its dominant axis, skipping voxels proved
+empty by the empty cone ahead of them; level 3 is the default on AMD, where gathers are slow); with
 AVX2 only, f1-f3 and the walks run four at a time (level 1). f1-f3 use the
 same IEEE operations in the same order, the walks visit the same voxels or
 prove them empty. Their bins and draws are bit-identical to the scalar code
@@ -76,12 +76,15 @@ cdef extern from "_eppf_walk.h":
     int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                                const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                                double f1_density, const double* cos2, const double* cos3,
-                               int32_t* B) noexcept nogil
+                               int32_t* B, const double* pn) noexcept nogil
+    void eppf_pack_rows(int64_t n, const double* pts, int64_t ps, const double* nrm, int64_t ns,
+                        double* pn) noexcept nogil
     void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
                               const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                               const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
     enum:
         EPPF_LANES_WORDS
+        EPPF_CODE_WORDS
     void eppf_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
     void eppf_f4_dist_avx512(int m, const int32_t* I, const int32_t* J, const int32_t* B, const int64_t* pv,
                              const uint64_t* code, int64_t g, const int32_t* thr, int n4, const int64_t* lohi,
@@ -116,7 +119,7 @@ cdef enum:
     FIX_SHIFT = 32
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
-    CODE_WORDS = 8192       # the AVX-512 walk's code grid: 2 words a row, any voxel index below it
+    CODE_WORDS = EPPF_CODE_WORDS  # the AVX-512 walk's three cone grids (one per axis, 2 words a row)
     # packed line walk for grids up to 64 (layout in _eppf_walk.h)
     PK_S = EPPF_PK_S
     PK_ZSHIFT = EPPF_PK_ZSHIFT
@@ -388,14 +391,16 @@ cdef inline int _draw_pair(const double* pts, int64_t ps, uint32_t n, uint64_t* 
 
 cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_t ns, int64_t n, double scale,
                         uint64_t seed, int64_t n_pairs, Params* prm, uint64_t* bits,
-                        int32_t* vox, int64_t* pv, uint64_t* code, int32_t* counts) noexcept nogil:
+                        int32_t* vox, int64_t* pv, uint64_t* code, double* pn, int32_t* counts) noexcept nogil:
     """Histogram counts of one object; returns 1 if pairs could not be drawn.
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
     that the latency of one pair's square root and divisions overlaps with
     the next pair's instead of stalling behind a voxel walk. At level 3 the
     f4 walk counts the pairs itself, and lines still being walked at the end
-    of a batch carry over (in ``lanes``) to the next one.
+    of a batch carry over (in ``lanes``) to the next one. Unless ``pn`` is
+    NULL, the AVX-512 f1-f3 read the points and normals from a copy of them
+    there, one 64-byte row a point (``eppf_pack_rows``).
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
@@ -413,6 +418,10 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef bint dist = prm.simd == 3 and prm.n4 > 1
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
+    if prm.simd123 != 2:
+        pn = NULL
+    if pn != NULL:
+        eppf_pack_rows(n, pts, ps, nrm, ns, pn)
     if prm.n4 > 1:
         _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd >= 2 else NULL)
     if dist:
@@ -426,7 +435,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         if vec_draw:
             eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
             good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                          prm.f1_density, prm.cos2, prm.cos3, B)
+                                          prm.f1_density, prm.cos2, prm.cos3, B, pn)
             if good < m:
                 vec_draw = False
                 m = good
@@ -443,7 +452,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
                 J[t] = <int32_t>j
             if prm.simd123 == 2:
                 eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                       prm.f1_density, prm.cos2, prm.cos3, B)
+                                       prm.f1_density, prm.cos2, prm.cos3, B, pn)
             elif prm.simd123:
                 eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
                                      prm.f1_density, prm.cos2, prm.cos3, B)
@@ -587,14 +596,23 @@ def eppf_counts(points_in, normals_in,
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
-    # the AVX-512 walk's free-distance grid (CODE_WORDS) and its scratch (4 g^2 words)
+    # the AVX-512 walk's cone grids (CODE_WORDS) and their scratch (4 g^2 words)
     code_arr = np.zeros((num_threads, CODE_WORDS + 4 * 64 * 64 if prm.simd == 3 else 1), dtype=np.uint64)
+    # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to 65,536 points,
+    # larger ones are read in place)
+    cdef bint rows = prm.simd123 == 2 and max_n <= 65536
+    # (each thread's rows start on a 64-byte boundary, so that no row straddles two cache lines)
+    pn_buf = np.zeros(num_threads * (8 * max_n + 8) + 8 if rows else 8, dtype=np.float64)
+    cdef Py_ssize_t pn_skip = (-(pn_buf.ctypes.data // 8)) % 8
+    pn_arr = pn_buf[pn_skip : pn_skip + num_threads * (8 * max_n + 8)].reshape(num_threads, -1) if rows \
+        else pn_buf[:8].reshape(1, 8)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
     cdef uint64_t[:, ::1] grids = grids_arr
     cdef int32_t[:, ::1] vox = vox_arr
     cdef int64_t[:, ::1] pv = pv_arr
     cdef uint64_t[:, ::1] code = code_arr
+    cdef double[:, ::1] pn = pn_arr
     cdef Py_ssize_t k, tid
     cdef int64_t start
     with nogil:
@@ -604,7 +622,7 @@ def eppf_counts(points_in, normals_in,
             status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
                                        &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &code[tid, 0],
-                                       &counts[k, 0])
+                                       &pn[tid, 0] if rows else NULL, &counts[k, 0])
     return counts_arr, status_arr
 
 
@@ -668,3 +686,29 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
         for k in range(6):
             out[t, k] = parts[k]
     return out_arr
+
+
+def _cone_codes(occupied):
+    """The skipping walk's cone codes of an occupancy grid (tests).
+
+    ``occupied``: (g, g, g) booleans, 2 <= g <= 64, indexed [x, y, z].
+    Returns a (3, g, g, g) uint8 array: entry [a, x, y, z] is min(C, 3), C
+    the number of planes of the cone along axis a from voxel (x, y, z) on
+    with no occupied voxel (``eppf_code_grid`` in ``_eppf_walk.h``). Needs
+    the AVX-512 kernels (level 3).
+    """
+    occ = np.asarray(occupied, dtype=bool)
+    if occ.ndim != 3 or occ.shape[0] != occ.shape[1] or occ.shape[0] != occ.shape[2] or not 2 <= occ.shape[0] <= 64:
+        raise ValueError("occupied must be a (g, g, g) grid with 2 <= g <= 64")
+    if _max_level() < 3:
+        raise ValueError("the cone codes need the AVX-512 kernels, which this CPU lacks")
+    cdef int g = occ.shape[0]
+    packed = np.zeros((g, g, 8), dtype=np.uint8)
+    packed[:, :, : (g + 7) // 8] = np.packbits(occ, axis=2, bitorder="little")
+    cdef uint64_t[::1] bits = np.ascontiguousarray(packed.reshape(-1).view(np.uint64))
+    code_arr = np.zeros(CODE_WORDS + 4 * 64 * 64, dtype=np.uint64)
+    cdef uint64_t[::1] code = code_arr
+    eppf_code_grid(&bits[0], g, &code[CODE_WORDS], &code[0])
+    words = code_arr[: 3 * 128 * g].reshape(3, 128 * g)[:, : 2 * g * g].reshape(3, g, g, 2)
+    z = np.arange(g)
+    return ((words[..., z >> 5] >> (2 * (z & 31)).astype(np.uint64)) & 3).astype(np.uint8)

@@ -7,9 +7,9 @@
  *   coinciding points (``eppf_f123_batch_avx512``) and two f4 walks: the
  *   grouped walk (``eppf_f4_batch_avx512``, level 2) and the skipping walk
  *   (``eppf_f4_dist_avx512``, level 3), which keeps every lane busy by
- *   refilling it from a queue and jumps over voxels proved empty by their
- *   distance to the nearest occupied voxel (``eppf_code_grid``): 1.8 gathers
- *   a pair instead of 3.0. The default is level 3 on AMD, 2 elsewhere
+ *   refilling it from a queue and walks each line along its dominant axis,
+ *   jumping over voxels proved empty by the cone ahead of them
+ *   (``eppf_code_grid``): 1.3 gathers a pair instead of 3.0. The default is level 3 on AMD, 2 elsewhere
  *   (``eppf_walk_prefers_skips``).
  *
  * Gathers are used only for the walk's look-ups: AMD Zen 4 runs an
@@ -115,9 +115,8 @@ static int eppf_walk_has_avx512(void)
 
 /* Whether the skipping AVX-512 walk (``eppf_f4_dist_avx512``) is the better of
    the two AVX-512 walks here: on AMD Zen 4 an eight-element gather costs about
-   13 cycles, and the skipping walk's 1.8 gathers a pair (against 3.0) pay for
-   its extra vector work (measured, walk alone: 0.36 against 0.42 ms per
-   1,024-point object); where gathers are cheaper (Intel) the grouped walk's
+   13 cycles, and the skipping walk's 1.3 gathers a pair (against 3.0) pay for
+   its extra vector work; where gathers are cheaper (Intel) the grouped walk's
    lighter steps are expected to win. Both give the same counts. */
 static int eppf_walk_prefers_skips(void)
 {
@@ -138,6 +137,54 @@ static int eppf_walk_has_avx2(void)
     return 0;
 #endif
 }
+
+/* The rows of ``eppf_f123_batch_avx512``'s ``pn``: point k's x, y, z,
+ * nx, ny, nz (and two unused doubles) at pn[8 k], so that one 64-byte load
+ * reads a point and its normal. */
+static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns, double *pn)
+{
+    int64_t k;
+    for (k = 0; k < n; k++) {
+        double *r = pn + 8 * k;
+        r[0] = pts[ps * k];
+        r[1] = pts[ps * k + 1];
+        r[2] = pts[ps * k + 2];
+        r[3] = nrm[ns * k];
+        r[4] = nrm[ns * k + 1];
+        r[5] = nrm[ns * k + 2];
+        r[6] = 0.0;
+        r[7] = 0.0;
+    }
+}
+
+#if EPPF_WALK_SIMD
+/* The points and normals at rows r[0..7] of ``eppf_pack_rows``'s ``pn`` as six
+ * vectors v[0..5] (x, y, z, nx, ny, nz): eight loads and a transpose. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_load6x8(const double *pn, const int32_t *r, __m512d *v)
+{
+    __m512d a[8], t[8], u[8];
+    int k;
+    for (k = 0; k < 8; k++)
+        a[k] = _mm512_loadu_pd(pn + 8 * (int64_t)r[k]);
+    for (k = 0; k < 4; k++) {
+        t[2 * k] = _mm512_unpacklo_pd(a[2 * k], a[2 * k + 1]);      /* x01 z01 ny01 - */
+        t[2 * k + 1] = _mm512_unpackhi_pd(a[2 * k], a[2 * k + 1]);  /* y01 nx01 nz01 - */
+    }
+    for (k = 0; k < 2; k++) {
+        u[4 * k] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0x44);          /* x01 z01 x23 z23 */
+        u[4 * k + 1] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0xEE);      /* ny01 - ny23 - */
+        u[4 * k + 2] = _mm512_shuffle_f64x2(t[4 * k + 1], t[4 * k + 3], 0x44);  /* y01 nx01 y23 nx23 */
+        u[4 * k + 3] = _mm512_shuffle_f64x2(t[4 * k + 1], t[4 * k + 3], 0xEE);  /* nz01 - nz23 - */
+    }
+    v[0] = _mm512_shuffle_f64x2(u[0], u[4], 0x88);
+    v[2] = _mm512_shuffle_f64x2(u[0], u[4], 0xDD);
+    v[1] = _mm512_shuffle_f64x2(u[2], u[6], 0x88);
+    v[3] = _mm512_shuffle_f64x2(u[2], u[6], 0xDD);
+    v[4] = _mm512_shuffle_f64x2(u[1], u[5], 0x88);
+    v[5] = _mm512_shuffle_f64x2(u[3], u[7], 0x88);
+}
+#endif
 
 #if EPPF_WALK_SIMD
 
@@ -525,11 +572,14 @@ static inline void eppf_load3x8(const double *a, int64_t stride, const int32_t *
 /* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
  * the same order, so the same bins), which also checks the pairs as
  * ``_draw_pair`` does: returns the first t whose two points coincide (all
- * three coordinates equal), or m when none does. B[t] is written for every t. */
+ * three coordinates equal), or m when none does. B[t] is written for every t.
+ * Where ``pn`` is not NULL, the points and normals are read from its rows
+ * (``eppf_pack_rows``: the same values, one load a point). */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
                                   const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
-                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B,
+                                  const double *pn)
 {
     const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
     const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
@@ -550,8 +600,15 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
             vi = ri;
             vj = rj;
         }
-        eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
-        eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
+        __m512d vi6[6], vj6[6];
+        if (pn) {
+            eppf_load6x8(pn, vi, vi6);
+            eppf_load6x8(pn, vj, vj6);
+            pix = vi6[0], piy = vi6[1], piz = vi6[2], pjx = vj6[0], pjy = vj6[1], pjz = vj6[2];
+        } else {
+            eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
+            eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
+        }
         same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
                & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
         if (same && bad == m)
@@ -565,8 +622,12 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
         b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
         if (n2 > 1 || n3 > 1) {
             __m512d nix, niy, niz, njx, njy, njz;
-            eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
-            eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
+            if (pn) {
+                nix = vi6[3], niy = vi6[4], niz = vi6[5], njx = vj6[3], njy = vj6[4], njz = vj6[5];
+            } else {
+                eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
+                eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
+            }
             if (n2 > 1) {
                 __m512d inv = _mm512_div_pd(one, dist), m1, m2;
                 m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
@@ -608,7 +669,7 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * and in-register look-ups cost a fraction of them. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, const int64_t *pv, const __m512i *tab,
-                                      __m512i *P, __m512i *INC, __m512i *Lout, __m512i *LOHI)
+                                      __m512i *P, __m512i *INC, __m512i *Lout, __m512i *LOHI, __m512i *D)
 {
     const __m512i one = _mm512_set1_epi64(1);
     const __m512i a = _mm512_set_epi64(pv[i8[7]], pv[i8[6]], pv[i8[5]], pv[i8[4]], pv[i8[3]], pv[i8[2]], pv[i8[1]],
@@ -643,6 +704,11 @@ static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, cons
     *INC = inc;
     *Lout = L;
     *LOHI = _mm512_mask_blend_epi64(b5, r01, r23);
+    if (D) {
+        D[0] = dx;
+        D[1] = dy;
+        D[2] = dz;
+    }
 }
 
 /* ``tab`` of ``eppf_setup8_avx512`` from lohi[0..64]. */
@@ -678,7 +744,7 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
             i8 = ri;
             j8 = rj;
         }
-        eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh);
+        eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh, NULL);
         _mm512_mask_storeu_epi64(P + t, keep, p);
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
         _mm256_mask_storeu_epi32(Ls + t, keep, _mm512_cvtepi64_epi32(L));
@@ -890,48 +956,92 @@ static void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t *o
 
 static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
                                   const double *nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
-                                  double f1_density, const double *cos2, const double *cos3, int32_t *B)
+                                  double f1_density, const double *cos2, const double *cos3, int32_t *B,
+                                  const double *pn)
 {
     (void)m; (void)ii; (void)jj; (void)pts; (void)ps; (void)nrm; (void)ns; (void)scale; (void)n1; (void)n2; (void)n3;
-    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B;
+    (void)n4; (void)f1_density; (void)cos2; (void)cos3; (void)B; (void)pn;
     return 0;
 }
 
 
 #endif
 
-/* The exact free distance behind the AVX-512 walk's skips: ``code`` (8192
- * words, of which the first 2 g^2 are written, rows of 2 words) holds for every voxel c = min(d, 3), d the
- * Chebyshev distance (in voxels) to the nearest occupied voxel of the bit grid
- * ``bits`` (g^2 words, one per (x, y) row, z bits; g <= 64): c is bits
- * 2 (z & 31) and 2 (z & 31) + 1 of word 2 row + (z >> 5). c counts the
- * grids D0 (occupied), D1 and D2 (dilated by the 3^3 box once and twice:
- * voxels within distance 1 and 2 of an occupied one) that do not hold the
- * voxel. ``work``: 4 g^2 words of scratch; 2 <= g <= 64. */
-/* ``out`` = ``src`` dilated by the 3^3 box, never across the grid's faces in
-   x and y (bits past z = g - 1 are set but never read); a and b: g^2 words
-   of scratch each. */
+/* The cone grids behind the AVX-512 walk's skips. A line walked along its
+ * dominant axis a, in the direction in which that coordinate grows, moves it
+ * by exactly one voxel a step and every other coordinate by at most one, so
+ * its j-th voxel after v lies in the cone of v: the 3^2 box of half side j in
+ * the plane j voxels further along a. ``code`` holds three grids, one per
+ * axis (x, y, z), at word 128 g a (EPPF_CODE_WORDS in all; rows of 2 words,
+ * the first 2 g^2 of each grid written): for every voxel v, c = min(C, 3),
+ * C the number of cone planes from v on (v's own first) with no occupied
+ * voxel, i.e. C = 0 where v is occupied, else 1 + the smallest C of the 3^2
+ * voxels of the next plane (planes past the grid's face count as empty).
+ * c is bits 2 (z & 31) and 2 (z & 31) + 1 of word 128 g a + 2 row + (z >> 5).
+ * The sets O_m of voxels with C < m: O_1 the occupied ones, O_{m+1} = O_1
+ * or the voxels whose next plane's 3^2 box meets O_m (``eppf_cone_step``).
+ * ``bits``: g^2 words, one per (x, y) row, z bits (none past z = g - 1);
+ * ``work``: 4 g^2 words of scratch; 2 <= g <= 64. */
+#define EPPF_CODE_WORDS (3 * 128 * 64)
+/* ``out`` = ``bits`` or the voxels whose next plane along ``axis`` meets
+   ``o`` in its 3^2 box; a and b: g^2 words of scratch each. */
 EPPF_AVX512_FN
-static void eppf_dilate(const uint64_t *src, uint64_t *out, uint64_t *a, uint64_t *b, int64_t g)
+static void eppf_cone_step(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a, uint64_t *b,
+                           int64_t g, int axis)
 {
+    const uint64_t gm = g == 64 ? ~(uint64_t)0 : (((uint64_t)1 << g) - 1);
     int64_t x, y, r;
-    for (r = 0; r < g * g; r++)
-        a[r] = src[r] | (src[r] << 1) | (src[r] >> 1);
-    for (x = 0; x < g; x++) {
-        const uint64_t *t = a + x * g;
-        uint64_t *o = b + x * g;
-        o[0] = t[0] | t[1];
-        for (y = 1; y < g - 1; y++)
-            o[y] = t[y - 1] | t[y] | t[y + 1];
-        o[g - 1] = t[g - 2] | t[g - 1];
-    }
-    for (y = 0; y < g; y++)
-        out[y] = b[y] | b[g + y];
-    for (x = 1; x < g - 1; x++)
+    if (axis == 2) {
+        /* the 3^2 box in (x, y), then the next z (bit z + 1) */
+        for (x = 0; x < g; x++) {
+            const uint64_t *t = o + x * g;
+            uint64_t *u = b + x * g;
+            u[0] = t[0] | t[1];
+            for (y = 1; y < g - 1; y++)
+                u[y] = t[y - 1] | t[y] | t[y + 1];
+            u[g - 1] = t[g - 2] | t[g - 1];
+        }
         for (y = 0; y < g; y++)
-            out[x * g + y] = b[(x - 1) * g + y] | b[x * g + y] | b[(x + 1) * g + y];
-    for (y = 0; y < g; y++)
-        out[(g - 1) * g + y] = b[(g - 2) * g + y] | b[(g - 1) * g + y];
+            out[y] = bits[y] | ((b[y] | b[g + y]) >> 1);
+        for (x = 1; x < g - 1; x++)
+            for (y = 0; y < g; y++)
+                out[x * g + y] = bits[x * g + y] | ((b[(x - 1) * g + y] | b[x * g + y] | b[(x + 1) * g + y]) >> 1);
+        for (y = 0; y < g; y++)
+            out[(g - 1) * g + y] = bits[(g - 1) * g + y] | ((b[(g - 2) * g + y] | b[(g - 1) * g + y]) >> 1);
+        return;
+    }
+    /* z +- 1 within the grid */
+    for (r = 0; r < g * g; r++)
+        a[r] = (o[r] | (o[r] << 1) | (o[r] >> 1)) & gm;
+    if (axis == 0) {
+        /* y +- 1, then the next x */
+        for (x = 0; x < g; x++) {
+            const uint64_t *t = a + x * g;
+            uint64_t *u = b + x * g;
+            u[0] = t[0] | t[1];
+            for (y = 1; y < g - 1; y++)
+                u[y] = t[y - 1] | t[y] | t[y + 1];
+            u[g - 1] = t[g - 2] | t[g - 1];
+        }
+        for (r = 0; r < (g - 1) * g; r++)
+            out[r] = bits[r] | b[r + g];
+        for (; r < g * g; r++)
+            out[r] = bits[r];
+    } else {
+        /* x +- 1, then the next y */
+        for (y = 0; y < g; y++)
+            b[y] = a[y] | a[g + y];
+        for (x = 1; x < g - 1; x++)
+            for (y = 0; y < g; y++)
+                b[x * g + y] = a[(x - 1) * g + y] | a[x * g + y] | a[(x + 1) * g + y];
+        for (y = 0; y < g; y++)
+            b[(g - 1) * g + y] = a[(g - 2) * g + y] | a[(g - 1) * g + y];
+        for (x = 0; x < g; x++) {
+            for (y = 0; y < g - 1; y++)
+                out[x * g + y] = bits[x * g + y] | b[x * g + y + 1];
+            out[x * g + g - 1] = bits[x * g + g - 1];
+        }
+    }
 }
 
 /* The low 32 bits of x spread to the even bits of the result. */
@@ -947,37 +1057,170 @@ static inline uint64_t eppf_spread32(uint64_t x)
     return x;
 }
 
+#if EPPF_WALK_SIMD
+/* ``eppf_code_grid`` for g = 64, in registers: a slab (the 64 rows of one x)
+   is eight vectors; y +- 1 by lane rotations across them, z +- 1 by shifts. */
+#define EPPF_SLAB_LOAD(v, src)                                                                   \
+    do {                                                                                         \
+        int k_;                                                                                  \
+        for (k_ = 0; k_ < 8; k_++)                                                               \
+            (v)[k_] = _mm512_loadu_si512((src) + 8 * k_);                                        \
+    } while (0)
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline __m512i eppf_ynext(const __m512i *v, int k)
+{
+    return _mm512_alignr_epi64(k < 7 ? v[k + 1] : _mm512_setzero_si512(), v[k], 1);
+}
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline __m512i eppf_yprev(const __m512i *v, int k)
+{
+    return _mm512_alignr_epi64(v[k], k > 0 ? v[k - 1] : _mm512_setzero_si512(), 7);
+}
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline __m512i eppf_zdil(__m512i w)
+{
+    return _mm512_ternarylogic_epi64(w, _mm512_slli_epi64(w, 1), _mm512_srli_epi64(w, 1), 0xFE);
+}
+/* out = bits | D_axis(o) for g = 64 (``eppf_cone_step``); a: 4096 words of scratch */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_cone_step64(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a, int axis)
+{
+    __m512i v[8];
+    int x, k;
+    if (axis == 0) {
+        /* a slab's y +- 1 and z +- 1 box, then the slab before it */
+        for (x = 0; x < 64; x++) {
+            if (x < 63) {
+                EPPF_SLAB_LOAD(v, o + (x + 1) * 64);
+                for (k = 0; k < 8; k++)
+                    v[k] = eppf_zdil(v[k]);
+                for (k = 0; k < 8; k++) {
+                    const __m512i r = _mm512_ternarylogic_epi64(v[k], eppf_yprev(v, k), eppf_ynext(v, k), 0xFE);
+                    _mm512_storeu_si512(out + x * 64 + 8 * k, _mm512_or_si512(r, _mm512_loadu_si512(bits + x * 64 + 8 * k)));
+                }
+            } else {
+                for (k = 0; k < 8; k++)
+                    _mm512_storeu_si512(out + x * 64 + 8 * k, _mm512_loadu_si512(bits + x * 64 + 8 * k));
+            }
+        }
+        return;
+    }
+    /* a = the slab's own box: z +- 1 (axis 1) or y +- 1 (axis 2) */
+    for (x = 0; x < 64; x++) {
+        EPPF_SLAB_LOAD(v, o + x * 64);
+        for (k = 0; k < 8; k++)
+            _mm512_storeu_si512(a + x * 64 + 8 * k, axis == 1 ? eppf_zdil(v[k])
+                                : _mm512_ternarylogic_epi64(v[k], eppf_yprev(v, k), eppf_ynext(v, k), 0xFE));
+    }
+    /* x +- 1, then the next y (axis 1) or the next z (axis 2) */
+    for (x = 0; x < 64; x++) {
+        for (k = 0; k < 8; k++) {
+            __m512i r = _mm512_loadu_si512(a + x * 64 + 8 * k);
+            if (x > 0)
+                r = _mm512_or_si512(r, _mm512_loadu_si512(a + (x - 1) * 64 + 8 * k));
+            if (x < 63)
+                r = _mm512_or_si512(r, _mm512_loadu_si512(a + (x + 1) * 64 + 8 * k));
+            v[k] = r;
+        }
+        for (k = 0; k < 8; k++) {
+            const __m512i r = axis == 1 ? eppf_ynext(v, k) : _mm512_srli_epi64(v[k], 1);
+            _mm512_storeu_si512(out + x * 64 + 8 * k, _mm512_or_si512(r, _mm512_loadu_si512(bits + x * 64 + 8 * k)));
+        }
+    }
+}
+/* The code words of eight rows from their bit planes b0 (code bit 0) and
+   b1 (code bit 1), z bits each: word 2 r + h holds z = 32 h + i at bits
+   2 i (b0) and 2 i + 1 (b1). Bytes pairing a nibble of b0 with the same
+   nibble of b1 (lo: the low nibbles of each byte, hi: the high ones), put in
+   order by a byte permutation, and spread by one GF(2) affine map (bit i to
+   2 i, bit 4 + i to 2 i + 1). */
+__attribute__((target(EPPF_AVX512_TARGET ",gfni")))
+static inline void eppf_code_rows8(__m512i b0, __m512i b1, uint64_t *out)
+{
+    const __m512i m4 = _mm512_set1_epi8(0x0F);
+    const __m512i spread = _mm512_set1_epi64(0x0110022004400880LL);
+    /* nibble bytes: lo = low nibbles (b0 | b1 << 4), hi = high nibbles (b0 >> 4 | b1 & 0xF0) */
+    const __m512i lo = _mm512_ternarylogic_epi64(m4, b0, _mm512_slli_epi64(b1, 4), 0xCA);
+    const __m512i hi = _mm512_ternarylogic_epi64(m4, _mm512_srli_epi64(b0, 4), b1, 0xCA);
+    /* output byte 16 R + 2 k + e (row R, source byte k) from lo (e = 0) or hi (e = 1) byte 8 R + k */
+    const __m512i i03 = _mm512_set_epi8(
+        95, 31, 94, 30, 93, 29, 92, 28, 91, 27, 90, 26, 89, 25, 88, 24,
+        87, 23, 86, 22, 85, 21, 84, 20, 83, 19, 82, 18, 81, 17, 80, 16,
+        79, 15, 78, 14, 77, 13, 76, 12, 75, 11, 74, 10, 73, 9, 72, 8,
+        71, 7, 70, 6, 69, 5, 68, 4, 67, 3, 66, 2, 65, 1, 64, 0);
+    const __m512i i47 = _mm512_add_epi8(i03, _mm512_set1_epi8(32));
+    _mm512_storeu_si512(out, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i03, hi), spread, 0));
+    _mm512_storeu_si512(out + 8, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i47, hi), spread, 0));
+}
+__attribute__((target(EPPF_AVX512_TARGET ",gfni")))
+static void eppf_code_grid64(const uint64_t *bits, uint64_t *work, uint64_t *code)
+{
+    uint64_t *o2 = work, *o3 = work + 4096, *a = work + 2 * 4096;
+    int axis, r;
+    for (axis = 0; axis < 3; axis++) {
+        uint64_t *c = code + 128 * 64 * axis;
+        eppf_cone_step64(bits, bits, o2, a, axis);
+        eppf_cone_step64(bits, o2, o3, a, axis);
+        for (r = 0; r < 4096; r += 8) {
+            const __m512i b = _mm512_loadu_si512(bits + r), u2 = _mm512_loadu_si512(o2 + r);
+            const __m512i u3 = _mm512_loadu_si512(o3 + r);
+            const __m512i b0 = _mm512_ternarylogic_epi64(u2, b, u3, 0x75);  /* (u2 & ~b) | ~u3: c = 1 or 3 */
+            const __m512i b1 = _mm512_ternarylogic_epi64(u2, u2, u2, 0x55); /* ~u2: c = 2 or 3 */
+            eppf_code_rows8(b0, b1, c + 2 * r);
+        }
+    }
+}
+#undef EPPF_SLAB_LOAD
+#endif
+
 EPPF_AVX512_FN
 static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
 {
-    uint64_t *d1 = work, *d2 = work + g * g, *a = work + 2 * g * g, *b = work + 3 * g * g;
+    uint64_t *o2 = work, *o3 = work + g * g, *a = work + 2 * g * g, *b = work + 3 * g * g;
     int64_t r;
-    eppf_dilate(bits, d1, a, b, g);
-    eppf_dilate(d1, d2, a, b, g);
-    for (r = 0; r < g * g; r++) {
-        const uint64_t b0 = (d1[r] & ~bits[r]) | ~d2[r];  /* c = 1 or 3 */
-        const uint64_t b1 = ~d1[r];                       /* c = 2 or 3 */
-        code[2 * r] = eppf_spread32(b0) | (eppf_spread32(b1) << 1);
-        code[2 * r + 1] = eppf_spread32(b0 >> 32) | (eppf_spread32(b1 >> 32) << 1);
+    int axis;
+#if EPPF_WALK_SIMD
+    if (g == 64 && __builtin_cpu_supports("gfni")) {  /* the same words, in registers */
+        eppf_code_grid64(bits, work, code);
+        return;
+    }
+#endif
+    for (axis = 0; axis < 3; axis++) {
+        uint64_t *c = code + 128 * g * axis;
+        eppf_cone_step(bits, bits, o2, a, b, g, axis);
+        eppf_cone_step(bits, o2, o3, a, b, g, axis);
+        for (r = 0; r < g * g; r++) {
+            const uint64_t b0 = (o2[r] & ~bits[r]) | ~o3[r];  /* c = 1 or 3 */
+            const uint64_t b1 = ~o2[r];                       /* c = 2 or 3 */
+            c[2 * r] = eppf_spread32(b0) | (eppf_spread32(b1) << 1);
+            c[2 * r + 1] = eppf_spread32(b0 >> 32) | (eppf_spread32(b1 >> 32) << 1);
+        }
     }
 }
-
 #if EPPF_WALK_SIMD
 /* The f4 walks of a batch and their counts, AVX-512: three sets of eight
  * lanes, each lane refilled from a queue as soon as its line's bin is
- * certain, each step skipping the voxels the free distance proves empty.
+ * certain, each step skipping the voxels the cone grids prove empty.
  *
  * The pairs (ii[t], jj[t]), t < m <= EPPF_WALK_BATCH, with f1-f3 bins B[t]
  * (already times n4): lines without inner voxels (L <= 1) are counted at
  * once; the others join a queue of (first inner voxel, increment,
  * rem | lo | hi, key) in batch order (setup of ``eppf_setup8_avx512``).
+ * A line is walked along a dominant axis a (|delta_a| = L: its increment's
+ * field is exactly +-2**14, so that coordinate moves by one voxel every
+ * step), in the direction in which that coordinate grows: a line whose
+ * delta_a is negative starts at its last inner voxel (first + (L - 2) INC)
+ * and steps by -INC, which visits the same integer positions in reverse. a
+ * sits in bits 62-63 of the position (above the x field, which never
+ * reaches them), where the word index picks the cone grid of axis a.
  *
- * A step of a lane reads c = min(d, 3) at its voxel (``eppf_code_grid``).
- * c = 0: the voxel is occupied (occ + 1), one step. c > 0: the voxel and the
- * next c - 1 of the line are empty, since a step moves every coordinate by
- * at most one voxel, so the k-th voxel after this one lies within distance
- * k < d of it: the lane advances min(c, rem) steps at once (P += steps
- * INC, the same integer position as that many single steps), occ unchanged.
+ * A step of a lane reads c = min(C, 3) at its voxel in the grid of its
+ * axis (``eppf_code_grid``). c = 0: the voxel is occupied (occ + 1), one
+ * step. c > 0: the voxel and the next c - 1 of the line are empty, since
+ * the k-th voxel after this one lies in its cone k planes on (one plane a
+ * step, the other coordinates at most one voxel a step): the lane advances
+ * c steps at once (P += c INC, the same integer position as that many
+ * single steps), occ unchanged.
  * Every voxel is thus still counted or proved empty in line order, and occ
  * and rem mean what they mean in the scalar walk. After two steps the
  * stopping rule of ``eppf_f4_batch_avx2`` applies, with one more case for
@@ -1006,13 +1249,18 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
     int64_t OO[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
     const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2);
     const __m512i fmask = _mm512_set1_epi64(EPPF_META_MASK), three = _mm512_set1_epi64(3);
-    /* multishift fields: byte 0 <- bits 35.. (y), byte 1 <- bits 56.. (x), byte 2 <- bit 19 (z >> 5),
-       byte 3 <- bits 13.. (2 z and a fraction bit); kept: 6, 6, 1 bits and 2 (z & 31) */
-    const __m512i ctrl = _mm512_set1_epi64(((int64_t)(EPPF_PK_ZSHIFT - 1) << 24) | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 16)
-                                           | ((int64_t)EPPF_PK_XSHIFT << 8) | EPPF_PK_YSHIFT);
-    const __m512i mfield = _mm512_set1_epi64(0x3E013F3F);
-    /* bytes (1, g, 1, 0): words y + g x (at most 4095) and z >> 5; then (2, 1): the word index */
-    const __m512i mul = _mm512_set1_epi64((1 << 16) | (g << 8) | 1), w21 = _mm512_set1_epi64(0x00010002);
+    /* multishift fields: byte 0 <- bits 13.. (2 z and a fraction bit), byte 1 <- bit 19 (z >> 5),
+       byte 2 <- bits 35.. (y), byte 3 <- bits 56.. (x and the axis a above it); kept: 2 (z & 31), 1, 6
+       and 8 bits (x + 64 a) */
+    const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_XSHIFT << 24) | ((int64_t)EPPF_PK_YSHIFT << 16)
+                                           | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 8) | (EPPF_PK_ZSHIFT - 1));
+    const __m512i mfield = _mm512_set1_epi64(0xFF3F013E);
+    /* bytes (0, 1, 1, g): words z >> 5 and y + g (x + 64 a) (at most 16383); then (1, 2): the word
+       index 2 (y + g x) + (z >> 5) + 128 g a, in the cone grid of axis a */
+    const __m512i mul = _mm512_set1_epi64(((int64_t)g << 24) | (1 << 16) | (1 << 8));
+    const __m512i w21 = _mm512_set1_epi64(0x00020001);
+    /* steps a look-up advances by its code c (index bits 0-1; bit 2 is the next voxel's): max(c, 1) */
+    const __m512i tsteps = _mm512_set_epi64(3, 2, 1, 1, 3, 2, 1, 1);
     const long long *cbase = (const long long *)code;
     const int wide = n4 > 3;
     __m512i pA, incA, remA, occA, pB, incB, remB, occB, pC, incC, remC, occC;
@@ -1020,6 +1268,7 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
     __mmask8 actA, actB, actC, actD, actE, actF;
     __m512i tab[8];
     int32_t ri[8], rj[8];
+    __m512i dd[3];
     int t, nq = 0, q = 0, nout = 0, i;
 
     /* The queue. */
@@ -1038,7 +1287,21 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
             i8 = ri;
             j8 = rj;
         }
-        eppf_setup8_avx512(i8, j8, pv, tab, &a, &vinc, &L, &lh);
+        eppf_setup8_avx512(i8, j8, pv, tab, &a, &vinc, &L, &lh, dd);
+        {
+            /* along the dominant axis (any of them on a tie: its coordinate moves by exactly one voxel a step,
+               the increment's field being +-2**14), in the direction in which it grows: lines whose axis
+               difference is negative are walked from their last inner voxel back (the same positions) */
+            const __mmask8 onx = _mm512_cmpeq_epi64_mask(_mm512_abs_epi64(dd[0]), L);
+            const __mmask8 ony = (__mmask8)~onx & _mm512_cmpeq_epi64_mask(_mm512_abs_epi64(dd[1]), L);
+            const __mmask8 onz = (__mmask8)~(onx | ony);
+            const __m512i dax = _mm512_mask_blend_epi64(onz, _mm512_mask_blend_epi64(ony, dd[0], dd[1]), dd[2]);
+            const __mmask8 back = _mm512_cmplt_epi64_mask(dax, zero);
+            const __m512i axis = _mm512_mask_blend_epi64(onz, _mm512_maskz_mov_epi64(ony, one), two);
+            a = _mm512_mask_add_epi64(a, back, a, _mm512_mullo_epi64(_mm512_sub_epi64(L, two), vinc));
+            vinc = _mm512_mask_sub_epi64(vinc, back, zero, vinc);
+            a = _mm512_add_epi64(a, _mm512_slli_epi64(axis, 62));
+        }
         walk = keep & _mm512_cmpgt_epi64_mask(L, one);
         few = keep & (__mmask8)~walk;
         vkey = _mm512_cvtepi32_epi64(_mm256_maskz_loadu_epi32(keep, B + t));
@@ -1099,30 +1362,33 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
             inc##S = _mm512_mask_expand_epi64(inc##S, fill_, _mm512_loadu_si512(QI + q));         \
             rem##S = _mm512_mask_and_epi64(rem##S, fill_, mt_, fmask);                            \
             occ##S = _mm512_mask_mov_epi64(occ##S, fill_, two);                                   \
-            _mm512_storeu_si512(lanes + (o) + 48, _mm512_mask_expand_epi64(                       \
-                _mm512_loadu_si512(lanes + (o) + 48), fill_, _mm512_loadu_si512(QK + q)));        \
-            _mm512_storeu_si512(lanes + (o) + 24, _mm512_mask_and_epi64(                          \
-                _mm512_loadu_si512(lanes + (o) + 24), fill_, _mm512_srli_epi64(mt_, EPPF_META_LO), fmask)); \
-            _mm512_storeu_si512(lanes + (o) + 32, _mm512_mask_srli_epi64(                         \
-                _mm512_loadu_si512(lanes + (o) + 32), fill_, mt_, EPPF_META_HI));                 \
+            _mm512_mask_storeu_epi64(lanes + (o) + 48, fill_,                                     \
+                                     _mm512_maskz_expand_epi64(fill_, _mm512_loadu_si512(QK + q))); \
+            _mm512_mask_storeu_epi64(lanes + (o) + 24, fill_,                                     \
+                                     _mm512_and_si512(_mm512_srli_epi64(mt_, EPPF_META_LO), fmask)); \
+            _mm512_mask_storeu_epi64(lanes + (o) + 32, fill_, _mm512_srli_epi64(mt_, EPPF_META_HI)); \
             act##S |= fill_;                                                                      \
             q += __builtin_popcount(fill_);                                                       \
         }                                                                                         \
     } while (0)
 /* One step of set S: the lanes with voxels left (rem > 0) look up c and
    count an occupied voxel; every lane advances max(c, 1) voxels (a lane
-   whose line ends within them has rem <= 0 after it and counts no more; its
-   position is then never looked up again, and any position gives a word
-   index below 8192, the code grid's size). */
+   whose line ends within them has rem <= 0 after it and counts no more). A
+   lane is looked up only while rem > 0 (masked gather), i.e. at a voxel of
+   its line, whose word index is below 384 g <= EPPF_CODE_WORDS; lanes past
+   their line (rem <= 0) drift to any position, never read. The fields of
+   the word index come from one multishift, and so does the code: byte 0
+   of t_ is the code's bit offset, so multishift(t_, word) puts c in bits
+   0-1 (the next voxel's code above, ignored by the table of max(c, 1)). */
 #define EPPF_STEPD(S)                                                                             \
     do {                                                                                          \
         const __mmask8 on_ = _mm512_cmpgt_epi64_mask(rem##S, zero);                              \
         const __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p##S), mfield);   \
         const __m512i wi_ = _mm512_madd_epi16(_mm512_maddubs_epi16(t_, mul), w21);               \
         __m512i c_ = _mm512_mask_i64gather_epi64(zero, on_, wi_, cbase, 8);                      \
-        c_ = _mm512_and_si512(_mm512_srlv_epi64(c_, _mm512_srli_epi64(t_, 24)), three);          \
-        occ##S = _mm512_mask_add_epi64(occ##S, _mm512_mask_cmpeq_epi64_mask(on_, c_, zero), occ##S, one); \
-        c_ = _mm512_max_epu64(c_, one);                                                           \
+        c_ = _mm512_multishift_epi64_epi8(t_, c_);                                                \
+        occ##S = _mm512_mask_add_epi64(occ##S, _mm512_mask_testn_epi64_mask(on_, c_, three), occ##S, one); \
+        c_ = _mm512_permutexvar_epi64(c_, tsteps);                                                \
         p##S = _mm512_add_epi64(p##S, _mm512_mullo_epi64(c_, inc##S));                            \
         rem##S = _mm512_sub_epi64(rem##S, c_);                                                    \
     } while (0)

@@ -14,6 +14,7 @@ from sklearn.pipeline import Pipeline
 import eppf_reference as ref
 from eppf import FUNCTIONS, EPPFTransformer, KLNearestNeighbors
 from eppf.descriptors._eppf_fast import (
+    _cone_codes,
     _set_simd,
     _set_simd_level,
     _simd_levels,
@@ -108,7 +109,8 @@ def _packed(clouds):
 
 
 # Every kernel level the CPU has: 0 scalar, 1 AVX2, 2 AVX-512 (draws, f1-f3 and walk in 8 lanes),
-# 3 AVX-512 with the walk that skips voxels proved free by their distance to the nearest occupied one.
+# 3 AVX-512 with the walk that skips voxels proved free by the empty cone ahead of a line (walked along
+# its dominant axis).
 LEVELS = _simd_levels()
 
 
@@ -192,6 +194,86 @@ def test_walks_on_lattices_give_identical_counts(spacing, n4):
         assert_array_equal(_counts_at(level, *args)[0], slow)
     # dense enough lattices put some lines above the bottom f4 bin
     assert spacing > 4 or slow.reshape(2, n4)[:, 1:].sum() > 0
+
+def _cone_codes_reference(occupied):
+    """min(C, 3) per axis and voxel, C the number of empty planes of the cone ahead along the axis.
+
+    Written from the definition: C = 0 at an occupied voxel, else 1 + the smallest C of the 3 x 3
+    voxels of the next plane (voxels past the grid count as free, C = 3 at the last plane)."""
+    g = occupied.shape[0]
+    out = np.zeros((3,) + occupied.shape, dtype=np.uint8)
+    for a in range(3):
+        occ = np.moveaxis(occupied, a, 0)
+        code = np.zeros(occ.shape, dtype=np.int64)
+        nxt = np.full((g + 2, g + 2), 3, dtype=np.int64)  # the plane past the grid, padded by free voxels
+        for s in range(g - 1, -1, -1):
+            box = np.min([nxt[1 + u : g + 1 + u, 1 + v : g + 1 + v] for u in (-1, 0, 1) for v in (-1, 0, 1)], axis=0)
+            code[s] = np.where(occ[s], 0, np.minimum(box + 1, 3))
+            nxt[1 : g + 1, 1 : g + 1] = code[s]
+        out[a] = np.moveaxis(code, 0, a)
+    return out
+
+
+@pytest.mark.skipif(3 not in LEVELS, reason="the cone codes need the AVX-512 kernels")
+@pytest.mark.parametrize("grid", [64, 63, 33, 32, 17, 2])
+@pytest.mark.parametrize("density", [0.002, 0.05, 0.5])
+def test_cone_codes_match_reference(grid, density):
+    # The skipping walk's proof of empty voxels: every code of all three cone grids, at the
+    # grid's faces too, against the definition (64 takes the in-register build, others the generic one).
+    rng = np.random.default_rng(int(grid * 1000 * density))
+    occupied = rng.uniform(size=(grid, grid, grid)) < density
+    occupied[0, 0, 0] = occupied[-1, -1, -1] = True
+    got = _cone_codes(occupied)
+    want = _cone_codes_reference(occupied)
+    assert_array_equal(got, want)
+    if density < 0.01 and grid >= 32:
+        assert (got == 3).any() and (got == 2).any() and (got == 1).any()  # every skip length occurs
+
+
+@pytest.mark.parametrize("grid", [64, 63, 17])
+@pytest.mark.parametrize("n4", [3, 4])
+def test_walks_near_planes_give_identical_counts(grid, n4):
+    # Points on planes across each axis and on lines along them: lines are walked along their
+    # dominant axis in either direction (backwards where it decreases), past cones that a plane
+    # cuts off on one side only, and some run inside a plane.
+    rng = np.random.default_rng(grid + n4)
+    parts = []
+    for a in range(3):
+        for level in (0.1, 0.55, 0.9):
+            p = rng.uniform(size=(150, 3))
+            p[:, a] = level
+            parts.append(p)
+        q = np.full((40, 3), 0.3 + 0.2 * a)
+        q[:, a] = np.linspace(0.0, 1.0, 40)
+        parts.append(q)
+    pts = np.vstack(parts + [[[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]])
+    cloud = np.hstack([pts, _sphere(len(pts), rng)[:, 3:]])
+    points, normals, offsets = _packed([cloud])
+    seed = object_seeds(grid, 1)
+    args = (points, normals, offsets, np.ones(1), seed, 4001, (2, 1, 1, n4), grid, ref.F1_MAX, 1)
+    want = _reference_counts(cloud, seed[0], 4001, 1.0, (2, 1, 1, n4), grid)
+    for level in LEVELS:
+        assert_array_equal(_counts_at(level, *args)[0][0], want)
+    assert want.reshape(2, n4)[:, 1:].sum() > 0  # some lines above the bottom f4 bin
+
+
+def test_objects_past_the_row_copy_limit_match_reference():
+    # Objects up to 65,536 points have their points and normals copied into rows of eight
+    # doubles for the AVX-512 f1-f3; a larger one is read in place; both beside each other.
+    rng = np.random.default_rng(65)
+    clouds = [_sphere(70000, rng), _box(500, rng)]
+    points, normals, offsets = _packed(clouds)
+    seeds = object_seeds(65, len(clouds))
+    args = (points, normals, offsets, np.full(2, 0.5), seeds, 300, (20, 4, 5, 3), 64, ref.F1_MAX, 1)
+    want = [_reference_counts(c, seeds[k], 300, 0.5, (20, 4, 5, 3), 64) for k, c in enumerate(clouds)]
+    for level in LEVELS:
+        got, _ = _counts_at(level, *args)
+        for k in range(2):
+            assert_array_equal(got[k], want[k])
+    small, _ = _counts_at(LEVELS[-1], *_packed(clouds[1:]), np.full(1, 0.5), seeds[1:], 300, (20, 4, 5, 3), 64,
+                          ref.F1_MAX, 1)
+    assert_array_equal(small[0], want[1])
+
 
 def _first_coinciding_draw(points, seed, n_draws):
     """Index of the first of ``n_draws`` splitmix64 candidate pairs whose points coincide, or None.
