@@ -352,13 +352,11 @@ def _stream(args, est, sampling, output, progress, cmd):
     if output.lower().endswith(".npy"):
         with atomic_write(output) as fh:
             n_features = _write_stream(fh, run, plan, state)
-        meta = plan.objects(state["kept"], None, state["skipped"])
+        meta = _kept_meta(plan, state["kept"], None, params)
     else:
         with tempfile.TemporaryFile(prefix="eppf-describe-rows-") as rows_file:
             n_features = _write_stream(rows_file, run, plan, state)
-            objects = plan.objects(state["kept"], None, state["skipped"])
-            meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
-                         getattr(est, "scale_", None), params)
+            meta = _kept_meta(plan, state["kept"], getattr(est, "scale_", None), params)
             rows_file.seek(0)
             with atomic_write(output) as fh:
                 # np.savez's layout (stored, one .npy per array); the descriptors are copied from the rows file
@@ -369,9 +367,22 @@ def _stream(args, est, sampling, output, progress, cmd):
                         with zf.open(name + ".npy", "w", force_zip64=True) as entry:
                             np.lib.format.write_array(entry, np.asanyarray(value), allow_pickle=False)
     warn_tiny(state["tiny_clouds"], state["tiny_ids"], est, cmd, args.descriptor)
-    if not isinstance(meta, _Meta):
-        meta = _Meta(meta.ids, meta.labels, meta.class_names, meta.split, None, params)
     return len(state["kept"]), n_features, meta
+
+
+def _kept_meta(plan, kept, scale, params):
+    """The :class:`_Meta` of the entries ``kept`` (indices, in order): the ids, labels, class names and split
+    that ``plan.objects`` gives them (the same arrays), without the resolved paths it also makes (a
+    ``realpath`` per file, which describe does not save)."""
+    entries = plan.entries
+    ids = np.asarray([entries[k][0] for k in kept], dtype=str)
+    labels = split = None
+    if plan.class_names is not None:
+        index = {c: j for j, c in enumerate(plan.class_names)}
+        labels = np.asarray([index[entries[k][2][0]] for k in kept], dtype=np.int64)
+        split = np.asarray([entries[k][2][1] for k in kept], dtype=str)
+        split = split if (split != "").all() else None
+    return _Meta(ids, labels, plan.class_names, split, scale, params)
 
 
 class _ParallelRows:
