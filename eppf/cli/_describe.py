@@ -63,6 +63,9 @@ __all__ = ["run_describe"]
 CHUNK_FILES = 128
 #: Bytes of files per chunk (file sizes on disk): bounds a chunk's memory for large files.
 CHUNK_BYTES = 32 << 20
+#: Files of the first chunk described (at most CHUNK_FILES): with ``--n-jobs`` above 1 it is described alone,
+#: on the calling thread (:class:`_ParallelRows`), before chunks go side by side, so it is kept short.
+FIRST_CHUNK_FILES = 16
 
 
 def add_arguments(p):
@@ -179,14 +182,16 @@ def _learns_scale(est):
 
 
 def _chunks(plan):
-    """Entry indices in chunks of at most CHUNK_FILES files and (but for one large file) CHUNK_BYTES bytes."""
+    """Entry indices in chunks of at most CHUNK_FILES files (FIRST_CHUNK_FILES for the first) and (but for one
+    large file) CHUNK_BYTES bytes."""
     chunks, current, size = [], [], 0
     for k, (f, _, _) in enumerate(plan.entries):
         try:
             n_bytes = os.stat(f).st_size
         except OSError:
             n_bytes = 0  # (the reader names the problem)
-        if current and (len(current) >= CHUNK_FILES or size + n_bytes > CHUNK_BYTES):
+        most = CHUNK_FILES if chunks else min(FIRST_CHUNK_FILES, CHUNK_FILES)
+        if current and (len(current) >= most or size + n_bytes > CHUNK_BYTES):
             chunks.append(current)
             current, size = [], 0
         current.append(k)
@@ -341,7 +346,9 @@ def _stream(args, est, sampling, output, progress, cmd):
                 best = None
                 spill.flush()
                 fd = spill.fileno()
-                groups = [records[i:i + CHUNK_FILES] for i in range(0, len(records), CHUNK_FILES)]
+                first = min(FIRST_CHUNK_FILES, CHUNK_FILES)
+                groups = [records[:first]] + [records[i:i + CHUNK_FILES] for i in range(first, len(records),
+                                                                                         CHUNK_FILES)]
                 bar = _Bar(len(records), progress, "describing")
                 for clouds, files in ordered_map(lambda g: _read_back(plan, fd, g), groups, workers=1, depth=2):
                     describe(clouds, files, sink)

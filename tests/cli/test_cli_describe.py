@@ -101,9 +101,10 @@ def test_streamed_folder_is_bit_identical_to_fit_transform_for_any_chunking_and_
     paths = _class_folder(tmp_path / "data")
     settings = {"scaling": extra[1]} if extra else {}
     expected, objects = _reference(paths, tmp_path / "data", name, 4, **settings)
-    for chunk, n_jobs in ((3, "1"), (1, "2")):
+    for chunk, first, n_jobs in ((3, 16, "1"), (1, 16, "2"), (3, 2, "2")):  # (a first chunk shorter than others)
         monkeypatch.setattr(describe_module, "CHUNK_FILES", chunk)
-        out = tmp_path / f"d{chunk}.npz"
+        monkeypatch.setattr(describe_module, "FIRST_CHUNK_FILES", first)
+        out = tmp_path / f"d{chunk}_{first}.npz"
         status = main(["describe", str(tmp_path / "data"), "-o", str(out), "--descriptor", name, "--n-pairs", "500",
                        "--random-state", "4", "--n-jobs", n_jobs, "--no-progress", *extra])
         captured = capsys.readouterr()
