@@ -63,6 +63,9 @@ __all__ = ["run_describe"]
 CHUNK_FILES = 128
 #: Bytes of files per chunk (file sizes on disk): bounds a chunk's memory for large files.
 CHUNK_BYTES = 32 << 20
+#: Files of the first chunk described (at most CHUNK_FILES): with ``--n-jobs`` above 1 it is described alone,
+#: on the calling thread (:class:`_ParallelRows`), before chunks go side by side, so it is kept short.
+FIRST_CHUNK_FILES = 16
 
 
 def add_arguments(p):
@@ -179,14 +182,16 @@ def _learns_scale(est):
 
 
 def _chunks(plan):
-    """Entry indices in chunks of at most CHUNK_FILES files and (but for one large file) CHUNK_BYTES bytes."""
+    """Entry indices in chunks of at most CHUNK_FILES files (FIRST_CHUNK_FILES for the first) and (but for one
+    large file) CHUNK_BYTES bytes."""
     chunks, current, size = [], [], 0
     for k, (f, _, _) in enumerate(plan.entries):
         try:
             n_bytes = os.stat(f).st_size
         except OSError:
             n_bytes = 0  # (the reader names the problem)
-        if current and (len(current) >= CHUNK_FILES or size + n_bytes > CHUNK_BYTES):
+        most = CHUNK_FILES if chunks else min(FIRST_CHUNK_FILES, CHUNK_FILES)
+        if current and (len(current) >= most or size + n_bytes > CHUNK_BYTES):
             chunks.append(current)
             current, size = [], 0
         current.append(k)
@@ -341,7 +346,9 @@ def _stream(args, est, sampling, output, progress, cmd):
                 best = None
                 spill.flush()
                 fd = spill.fileno()
-                groups = [records[i:i + CHUNK_FILES] for i in range(0, len(records), CHUNK_FILES)]
+                first = min(FIRST_CHUNK_FILES, CHUNK_FILES)
+                groups = [records[:first]] + [records[i:i + CHUNK_FILES] for i in range(first, len(records),
+                                                                                         CHUNK_FILES)]
                 bar = _Bar(len(records), progress, "describing")
                 for clouds, files in ordered_map(lambda g: _read_back(plan, fd, g), groups, workers=1, depth=2):
                     describe(clouds, files, sink)
@@ -352,13 +359,11 @@ def _stream(args, est, sampling, output, progress, cmd):
     if output.lower().endswith(".npy"):
         with atomic_write(output) as fh:
             n_features = _write_stream(fh, run, plan, state)
-        meta = plan.objects(state["kept"], None, state["skipped"])
+        meta = _kept_meta(plan, state["kept"], None, params)
     else:
         with tempfile.TemporaryFile(prefix="eppf-describe-rows-") as rows_file:
             n_features = _write_stream(rows_file, run, plan, state)
-            objects = plan.objects(state["kept"], None, state["skipped"])
-            meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
-                         getattr(est, "scale_", None), params)
+            meta = _kept_meta(plan, state["kept"], getattr(est, "scale_", None), params)
             rows_file.seek(0)
             with atomic_write(output) as fh:
                 # np.savez's layout (stored, one .npy per array); the descriptors are copied from the rows file
@@ -369,9 +374,22 @@ def _stream(args, est, sampling, output, progress, cmd):
                         with zf.open(name + ".npy", "w", force_zip64=True) as entry:
                             np.lib.format.write_array(entry, np.asanyarray(value), allow_pickle=False)
     warn_tiny(state["tiny_clouds"], state["tiny_ids"], est, cmd, args.descriptor)
-    if not isinstance(meta, _Meta):
-        meta = _Meta(meta.ids, meta.labels, meta.class_names, meta.split, None, params)
     return len(state["kept"]), n_features, meta
+
+
+def _kept_meta(plan, kept, scale, params):
+    """The :class:`_Meta` of the entries ``kept`` (indices, in order): the ids, labels, class names and split
+    that ``plan.objects`` gives them (the same arrays), without the resolved paths it also makes (a
+    ``realpath`` per file, which describe does not save)."""
+    entries = plan.entries
+    ids = np.asarray([entries[k][0] for k in kept], dtype=str)
+    labels = split = None
+    if plan.class_names is not None:
+        index = {c: j for j, c in enumerate(plan.class_names)}
+        labels = np.asarray([index[entries[k][2][0]] for k in kept], dtype=np.int64)
+        split = np.asarray([entries[k][2][1] for k in kept], dtype=str)
+        split = split if (split != "").all() else None
+    return _Meta(ids, labels, plan.class_names, split, scale, params)
 
 
 class _ParallelRows:

@@ -289,10 +289,19 @@ class EPPFTransformer(PointCloudDescriptor):
         if not needs_normals:
             points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
             return points, np.zeros_like(points), offsets
+        from ..preprocessing._normals import estimate_normals_batch
+
+        if packed is not None:
+            # Clouds without normals validated in one block: their normals are estimated on the block in
+            # place and go to the kernel as they come (each object's normals depend on it alone, so they
+            # are those of estimating the clouds one by one), with no per-cloud copies.
+            stacked, offsets = packed[0], packed[1]
+            normals = estimate_normals_batch(
+                stacked, offsets, self.n_neighbors, self.normal_orientation, n_threads, owner=type(self).__name__
+            )
+            return stacked, normals, offsets
         missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
         if missing:
-            from ..preprocessing._normals import estimate_normals_batch
-
             sub = [clouds[k] for k in missing]
             pts, _, off = pack_point_clouds(sub)
             est = estimate_normals_batch(

@@ -76,10 +76,8 @@ def _finish_cloud(cloud, path, normals, owner, remove_nan):
     else:
         out = xyz if nrm is None else np.hstack([xyz, nrm])
     out = np.ascontiguousarray(out, dtype=np.float64)
-    if remove_nan:
-        keep = np.isfinite(out).all(axis=1)
-        if not keep.all():
-            out = out[keep]
+    if remove_nan and not np.isfinite(out).all():  # (one pass over the block; rows only when some value is not)
+        out = out[np.isfinite(out).all(axis=1)]
     if out.shape[0] == 0:
         raise FileFormatError(f"{owner}: {path!r} holds no points")
     return out

@@ -326,9 +326,39 @@ def _column(values, code, copy=True):
         return np.asarray(arr, dtype=np.float64)
 
 
+#: Vertex properties of the plain layout :func:`_plain_vertices` reads in one call.
+_PLAIN_NAMES = (("x", "y", "z"), ("x", "y", "z", "nx", "ny", "nz"),
+                ("x", "y", "z", "normal_x", "normal_y", "normal_z"))
+
+
+def _plain_vertices(data, fmt, elements, pos):
+    """The Cloud of a binary file whose only element is ``vertex`` with the scalar properties ``x y z`` (and
+    normals), all ``float`` or all ``double``: one float64 block from a single conversion, or None for any
+    other layout (read by the general path) and for a body too short for the header's count (whose error the
+    general path words). The values are those of the general path, bit for bit: the same bytes, widened
+    exactly from float32 or taken as they are."""
+    if fmt == "ascii" or len(elements) != 1:
+        return None
+    name, count, props, _ = elements[0]
+    if name != "vertex" or count == 0 or tuple(p.name for p in props) not in _PLAIN_NAMES:
+        return None
+    code = props[0].code
+    if code not in ("f4", "f8") or any(p.code != code or p.count_code is not None for p in props):
+        return None
+    width = len(props)
+    if count * width * int(code[1]) > len(data) - pos:
+        return None
+    values = np.frombuffer(data, dtype=_FORMATS[fmt] + code, count=count * width, offset=pos)
+    full = values.reshape(count, width).astype(np.float64)  # (a new C-ordered block: what _finish_cloud keeps)
+    return Cloud(full[:, :3], full[:, 3:] if width == 6 else None)
+
+
 def read_ply(path, data, owner, want_faces=True):
     """(Cloud of the vertices, faces as an int64 (n, 3) array or None without a 'face' element)."""
     fmt, elements, pos = _header(data, path, owner)
+    block = _plain_vertices(data, fmt, elements, pos)
+    if block is not None:
+        return block, None
     keep = {"vertex", "face"} if want_faces else {"vertex"}
     if fmt == "ascii":
         out = _read_ascii(data, pos, elements, path, owner, keep)

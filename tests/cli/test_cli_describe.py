@@ -101,9 +101,10 @@ def test_streamed_folder_is_bit_identical_to_fit_transform_for_any_chunking_and_
     paths = _class_folder(tmp_path / "data")
     settings = {"scaling": extra[1]} if extra else {}
     expected, objects = _reference(paths, tmp_path / "data", name, 4, **settings)
-    for chunk, n_jobs in ((3, "1"), (1, "2")):
+    for chunk, first, n_jobs in ((3, 16, "1"), (1, 16, "2"), (3, 2, "2")):  # (a first chunk shorter than others)
         monkeypatch.setattr(describe_module, "CHUNK_FILES", chunk)
-        out = tmp_path / f"d{chunk}.npz"
+        monkeypatch.setattr(describe_module, "FIRST_CHUNK_FILES", first)
+        out = tmp_path / f"d{chunk}_{first}.npz"
         status = main(["describe", str(tmp_path / "data"), "-o", str(out), "--descriptor", name, "--n-pairs", "500",
                        "--random-state", "4", "--n-jobs", n_jobs, "--no-progress", *extra])
         captured = capsys.readouterr()
@@ -344,3 +345,28 @@ def test_a_nested_generator_is_described_one_chunk_at_a_time():
         random_state=np.random.RandomState(0))
     assert describe_module._ParallelRows(est, 2).parallel
     assert not describe_module._ParallelRows(est, 1).parallel
+
+
+@pytest.mark.parametrize("layout", ["split", "classes", "loose"])
+def test_kept_meta_is_what_plan_objects_gives(tmp_path, layout):
+    """describe's own ids, labels, class names and split of the kept files are those of ``plan.objects``."""
+    from eppf.cli._common import plan_inputs
+
+    rng = np.random.default_rng(0)
+    folders = {"split": ["train/chair", "test/chair", "train/desk", "test/desk", "train/lamp"],
+               "classes": ["chair", "desk", "lamp"], "loose": ["."]}[layout]
+    for k, sub in enumerate(folders):
+        os.makedirs(tmp_path / "d" / sub, exist_ok=True)
+        for j in range(3):
+            write_point_cloud(str(tmp_path / "d" / sub / f"o{k}_{j}.xyz"), rng.normal(size=(10, 3)))
+    plan = plan_inputs([str(tmp_path / "d")], {"random_state": 0})
+    kept = [k for k in range(len(plan.entries)) if k % 4 != 1]  # some files skipped
+    want = plan.objects(kept, None, [])
+    got = describe_module._kept_meta(plan, kept, 0.5, {"a": 1})
+    assert (got.labels is None) == (want.labels is None) == (layout == "loose")
+    for name in ("ids", "labels", "class_names", "split"):
+        a, b = getattr(got, name), getattr(want, name)
+        assert (a is None) == (b is None), name
+        if a is not None:
+            assert a.dtype == b.dtype and a.shape == b.shape and (a == b).all(), name
+    assert (got.split is None) == (layout != "split") and got.scale == 0.5 and got.params == {"a": 1}

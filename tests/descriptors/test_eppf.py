@@ -559,6 +559,10 @@ def test_estimated_normals_equal_given_normals(clouds):
     a = EPPFTransformer(n_pairs=2000, n_neighbors=12, random_state=0).fit(xyz).transform(xyz)
     b = EPPFTransformer(n_pairs=2000, n_neighbors=12, random_state=0).fit(given).transform(given)
     assert_array_equal(a, b)
+    # clouds of both widths (validated one by one, normals estimated for the three-column ones only)
+    mixed = [given[k] if k % 2 else xyz[k] for k in range(len(xyz))]
+    c = EPPFTransformer(n_pairs=2000, n_neighbors=12, random_state=0).fit(mixed).transform(mixed)
+    assert_array_equal(a, c)
 
 
 def test_feature_names_and_histogram_view(clouds):

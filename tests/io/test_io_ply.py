@@ -263,3 +263,76 @@ def test_ply_header_cache_is_bounded(tmp_path):
         path.write_bytes(data)
         read_point_cloud(path)
         assert len(_ply._HEADERS) <= _ply._HEADERS_MAX
+
+
+def _binary_ply(path, props, rows, endian="<", more=b""):
+    """A binary PLY file of one vertex element with the scalar ``props`` ((type, name) pairs), then ``more``."""
+    codes = {"float": "f4", "double": "f8", "uchar": "u1", "int": "i4"}
+    fmt = "binary_little_endian" if endian == "<" else "binary_big_endian"
+    head = f"ply\nformat {fmt} 1.0\nelement vertex {len(rows)}\n" + "".join(f"property {t} {n}\n" for t, n in props)
+    rec = np.zeros(len(rows), dtype=[(n, endian + codes[t]) for t, n in props])
+    for j, (_, n) in enumerate(props):
+        rec[n] = rows[:, j]
+    path.write_bytes(head.encode() + b"end_header\n" + rec.tobytes() + more)
+    return path
+
+
+_XYZ = ("x", "y", "z")
+
+
+@pytest.mark.parametrize("endian", ["<", ">"])
+@pytest.mark.parametrize("typ", ["float", "double"])
+@pytest.mark.parametrize("names", [_XYZ, _XYZ + ("nx", "ny", "nz"), _XYZ + ("normal_x", "normal_y", "normal_z")])
+def test_ply_plain_vertex_block_is_read_as_the_general_path_reads_it(tmp_path, monkeypatch, endian, typ, names):
+    from eppf.io import _ply
+
+    rows = _cloud(300, normals=True, seed=4)[:, :len(names)] * 1e3
+    rows[5, 1], rows[9, 2] = np.nan, -np.inf  # dropped rows
+    path = _binary_ply(tmp_path / "v.ply", [(typ, n) for n in names], rows, endian, more=b"trailing bytes")
+    data = path.read_bytes()
+    assert _ply._plain_vertices(data, *_ply._header(data, str(path), "t")) is not None  # the one-call path
+    got = {normals: read_point_cloud(path, normals=normals) for normals in ("auto", False)}
+    monkeypatch.setattr(_ply, "_plain_vertices", lambda *args: None)
+    for normals, cloud in got.items():
+        want = read_point_cloud(path, normals=normals)
+        assert cloud.dtype == want.dtype == np.float64 and cloud.flags.c_contiguous and cloud.flags.writeable
+        assert cloud.shape == want.shape == (298, len(names) if normals == "auto" else 3)
+        assert cloud.tobytes() == want.tobytes()
+    # and both are the file's values, widened exactly from float32
+    ref = rows.astype(np.float32 if typ == "float" else np.float64).astype(np.float64)
+    assert_array_equal(got["auto"], ref[np.isfinite(ref).all(axis=1)])
+
+
+@pytest.mark.parametrize("props", [
+    [("float", "x"), ("double", "y"), ("float", "z")],   # mixed types
+    [("float", "y"), ("float", "x"), ("float", "z")],    # another order
+    [("float", "x"), ("float", "y"), ("float", "z"), ("uchar", "red")],
+    [("float", "x"), ("float", "y"), ("float", "z"), ("float", "nx"), ("float", "ny")],
+    [("int", "x"), ("int", "y"), ("int", "z")],
+])
+def test_ply_other_vertex_layouts_take_the_general_path(tmp_path, props):
+    from eppf.io import _ply
+
+    rows = np.arange(12 * len(props), dtype=np.float64).reshape(12, len(props))
+    path = _binary_ply(tmp_path / "o.ply", props, rows)
+    data = path.read_bytes()
+    assert _ply._plain_vertices(data, *_ply._header(data, str(path), "t")) is None
+    cols = [n for _, n in props]
+    assert_array_equal(read_point_cloud(path), rows[:, [cols.index(c) for c in _XYZ]])
+
+
+def test_ply_plain_layout_truncated_or_with_faces_is_left_to_the_general_path(tmp_path):
+    from eppf.io import _ply
+
+    rows = _cloud(50, normals=False)
+    path = _binary_ply(tmp_path / "t.ply", [("float", n) for n in _XYZ], rows)
+    path.write_bytes(path.read_bytes()[:-4])
+    data = path.read_bytes()
+    assert _ply._plain_vertices(data, *_ply._header(data, str(path), "t")) is None
+    with pytest.raises(FileFormatError, match=r"t\.ply.*truncated, or a wrong count"):
+        read_point_cloud(path)
+    mesh = tmp_path / "m.ply"
+    write_mesh(str(mesh), np.eye(3), np.array([[0, 1, 2]]))
+    data = mesh.read_bytes()
+    assert _ply._plain_vertices(data, *_ply._header(data, str(mesh), "t")) is None
+    assert read_mesh(mesh).faces.tolist() == [[0, 1, 2]]
