@@ -103,7 +103,7 @@ def _extension(pyx):
         name,
         [pyx],
         include_dirs=([np.get_include()] if uses_numpy else []) + [os.path.dirname(pyx)],
-        depends=_included_headers(pyx) + [os.path.join("eppf", "utils", "_common.pxd")],
+        depends=_included_headers(pyx) + [os.path.join("eppf", "utils", "_common.pxd"), os.path.join("eppf", "utils", "_cpu.h")],
         extra_compile_args=base_args + omp_compile,
         extra_link_args=omp_link + link_args,
         define_macros=[("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")],

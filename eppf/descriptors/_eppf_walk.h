@@ -55,6 +55,8 @@
 #include <stdint.h>
 #include <math.h>
 
+#include "../utils/_cpu.h"
+
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
 #define EPPF_WALK_SIMD 1
 #include <immintrin.h>
@@ -104,10 +106,8 @@
 static int eppf_walk_has_avx512(void)
 {
 #if EPPF_WALK_SIMD
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw")
-           && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq")
-           && __builtin_cpu_supports("avx512vbmi");
+    return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_AVX512F | EPPF_CPU_AVX512BW | EPPF_CPU_AVX512VL | EPPF_CPU_AVX512DQ
+                        | EPPF_CPU_AVX512VBMI);
 #else
     return 0;
 #endif
@@ -121,8 +121,7 @@ static int eppf_walk_has_avx512(void)
 static int eppf_walk_prefers_skips(void)
 {
 #if EPPF_WALK_SIMD
-    __builtin_cpu_init();
-    return __builtin_cpu_is("amd") != 0;
+    return eppf_cpu_has(EPPF_CPU_AMD);
 #else
     return 0;
 #endif
@@ -131,8 +130,7 @@ static int eppf_walk_prefers_skips(void)
 static int eppf_walk_has_avx2(void)
 {
 #if EPPF_WALK_SIMD
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") != 0;
+    return eppf_cpu_has(EPPF_CPU_AVX2);
 #else
     return 0;
 #endif

@@ -47,6 +47,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "../utils/_cpu.h"
+
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
 #define ESF_SIMD 1
 #include <immintrin.h>
@@ -196,8 +198,7 @@ static inline int esf_walk(const uint64_t *g3, uint64_t pos, uint64_t inc, int n
 static int esf_has_avx2(void)
 {
 #if ESF_SIMD
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi2");
+    return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_BMI2);
 #else
     return 0;
 #endif

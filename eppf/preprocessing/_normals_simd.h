@@ -26,6 +26,8 @@
 
 #include <stdint.h>
 
+#include "../utils/_cpu.h"
+
 /* Entries written past the count by one vector store. */
 #define EPPF_NRM_SLACK 8
 /* Buckets of the fast path's selection by squared distance. */
@@ -42,8 +44,7 @@
 static int eppf_nrm_has_avx512(void)
 {
 #if EPPF_NRM_SIMD
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("popcnt");
+    return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_AVX512F | EPPF_CPU_POPCNT);
 #else
     return 0;
 #endif
@@ -52,8 +53,7 @@ static int eppf_nrm_has_avx512(void)
 static int eppf_nrm_has_avx2(void)
 {
 #if EPPF_NRM_SIMD
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
+    return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_POPCNT);
 #else
     return 0;
 #endif
