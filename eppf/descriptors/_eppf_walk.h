@@ -981,6 +981,22 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * ``bits``: g^2 words, one per (x, y) row, z bits (none past z = g - 1);
  * ``work``: 4 g^2 words of scratch; 2 <= g <= 64. */
 #define EPPF_CODE_WORDS (3 * 128 * 64)
+/* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
+   inside the grid) or-ed: the y +- 1 part of a 3^2 box; 2 <= g <= 64. */
+EPPF_AVX512_FN
+static void eppf_rows_pm1(const uint64_t *in, uint64_t *out, int64_t g)
+{
+    int64_t x, y;
+    for (x = 0; x < g; x++) {
+        const uint64_t *t = in + x * g;
+        uint64_t *u = out + x * g;
+        u[0] = t[0] | t[1];
+        for (y = 1; y < g - 1; y++)
+            u[y] = t[y - 1] | t[y] | t[y + 1];
+        u[g - 1] = t[g - 2] | t[g - 1];
+    }
+}
+
 /* ``out`` = ``bits`` or the voxels whose next plane along ``axis`` meets
    ``o`` in its 3^2 box; a and b: g^2 words of scratch each. */
 EPPF_AVX512_FN
@@ -991,14 +1007,7 @@ static void eppf_cone_step(const uint64_t *bits, const uint64_t *o, uint64_t *ou
     int64_t x, y, r;
     if (axis == 2) {
         /* the 3^2 box in (x, y), then the next z (bit z + 1) */
-        for (x = 0; x < g; x++) {
-            const uint64_t *t = o + x * g;
-            uint64_t *u = b + x * g;
-            u[0] = t[0] | t[1];
-            for (y = 1; y < g - 1; y++)
-                u[y] = t[y - 1] | t[y] | t[y + 1];
-            u[g - 1] = t[g - 2] | t[g - 1];
-        }
+        eppf_rows_pm1(o, b, g);
         for (y = 0; y < g; y++)
             out[y] = bits[y] | ((b[y] | b[g + y]) >> 1);
         for (x = 1; x < g - 1; x++)
@@ -1013,14 +1022,7 @@ static void eppf_cone_step(const uint64_t *bits, const uint64_t *o, uint64_t *ou
         a[r] = (o[r] | (o[r] << 1) | (o[r] >> 1)) & gm;
     if (axis == 0) {
         /* y +- 1, then the next x */
-        for (x = 0; x < g; x++) {
-            const uint64_t *t = a + x * g;
-            uint64_t *u = b + x * g;
-            u[0] = t[0] | t[1];
-            for (y = 1; y < g - 1; y++)
-                u[y] = t[y - 1] | t[y] | t[y + 1];
-            u[g - 1] = t[g - 2] | t[g - 1];
-        }
+        eppf_rows_pm1(a, b, g);
         for (r = 0; r < (g - 1) * g; r++)
             out[r] = bits[r] | b[r + g];
         for (; r < g * g; r++)
