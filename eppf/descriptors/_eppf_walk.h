@@ -57,7 +57,7 @@
 
 #include "../utils/_cpu.h"
 
-#if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
+#if EPPF_CPU_CHECKS  /* (gcc or clang on x86-64, EPPF_NO_SIMD not defined: _cpu.h) */
 #define EPPF_WALK_SIMD 1
 #include <immintrin.h>
 #else
@@ -105,12 +105,8 @@
    cpu check reads XCR0). */
 static int eppf_walk_has_avx512(void)
 {
-#if EPPF_WALK_SIMD
     return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_AVX512F | EPPF_CPU_AVX512BW | EPPF_CPU_AVX512VL | EPPF_CPU_AVX512DQ
                         | EPPF_CPU_AVX512VBMI);
-#else
-    return 0;
-#endif
 }
 
 /* Whether the skipping AVX-512 walk (``eppf_f4_dist_avx512``) is the better of
@@ -120,20 +116,12 @@ static int eppf_walk_has_avx512(void)
    lighter steps are expected to win. Both give the same counts. */
 static int eppf_walk_prefers_skips(void)
 {
-#if EPPF_WALK_SIMD
     return eppf_cpu_has(EPPF_CPU_AMD);
-#else
-    return 0;
-#endif
 }
 
 static int eppf_walk_has_avx2(void)
 {
-#if EPPF_WALK_SIMD
     return eppf_cpu_has(EPPF_CPU_AVX2);
-#else
-    return 0;
-#endif
 }
 
 /* The rows of ``eppf_f123_batch_avx512``'s ``pn``: point k's x, y, z,
@@ -1180,7 +1168,7 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
     int64_t r;
     int axis;
 #if EPPF_WALK_SIMD
-    if (g == 64 && __builtin_cpu_supports("gfni")) {  /* the same words, in registers */
+    if (g == 64 && eppf_cpu_has(EPPF_CPU_GFNI)) {  /* the same words, in registers */
         eppf_code_grid64(bits, work, code);
         return;
     }

@@ -49,7 +49,7 @@
 
 #include "../utils/_cpu.h"
 
-#if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
+#if EPPF_CPU_CHECKS  /* (gcc or clang on x86-64, EPPF_NO_SIMD not defined: _cpu.h) */
 #define ESF_SIMD 1
 #include <immintrin.h>
 #else
@@ -197,11 +197,7 @@ static inline int esf_walk(const uint64_t *g3, uint64_t pos, uint64_t inc, int n
  * one on AMD Zen 4, whose 512-bit gathers are slow.) */
 static int esf_has_avx2(void)
 {
-#if ESF_SIMD
     return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_BMI2);
-#else
-    return 0;
-#endif
 }
 
 /* occ[q] = esf_walk(g3, pos[q], inc[q], cnt[q]) for q < n, one line after

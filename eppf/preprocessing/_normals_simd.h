@@ -33,7 +33,7 @@
 /* Buckets of the fast path's selection by squared distance. */
 #define EPPF_NRM_BUCKETS 32
 
-#if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
+#if EPPF_CPU_CHECKS  /* (gcc or clang on x86-64, EPPF_NO_SIMD not defined: _cpu.h) */
 #define EPPF_NRM_SIMD 1
 #include <immintrin.h>
 #else
@@ -43,20 +43,12 @@
 /* AVX-512 F (with the OS saving the zmm state: libgcc's cpu check reads XCR0). */
 static int eppf_nrm_has_avx512(void)
 {
-#if EPPF_NRM_SIMD
     return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_AVX512F | EPPF_CPU_POPCNT);
-#else
-    return 0;
-#endif
 }
 
 static int eppf_nrm_has_avx2(void)
 {
-#if EPPF_NRM_SIMD
     return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_POPCNT);
-#else
-    return 0;
-#endif
 }
 
 #if EPPF_NRM_SIMD

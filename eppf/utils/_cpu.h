@@ -5,7 +5,8 @@
  * supports every feature named; 0 otherwise, and always 0 where the kernels
  * are built without SIMD (another compiler or architecture, or EPPF_NO_SIMD).
  * The kernels' headers (_eppf_walk.h, _esf_kernel.h, _normals_simd.h) build
- * their run-time checks from it.
+ * their run-time checks from it, and their own SIMD switches from
+ * EPPF_CPU_CHECKS, so the condition for compiling SIMD code lives only here.
  */
 #ifndef EPPF_CPU_H
 #define EPPF_CPU_H
