@@ -78,17 +78,23 @@ cdef extern from "_eppf_walk.h":
                                double f1_density, const double* cos2, const double* cos3,
                                int32_t* B, const double* pn) noexcept nogil
     void eppf_pack_rows(int64_t n, const double* pts, int64_t ps, const double* nrm, int64_t ns,
-                        double* pn) noexcept nogil
+                        const int64_t* pv, double* pn) noexcept nogil
     void eppf_f4_batch_avx512(int m, const int32_t* I, const int32_t* J, const int64_t* pv,
                               const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                               const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
     enum:
         EPPF_LANES_WORDS
         EPPF_CODE_WORDS
+        EPPF_CODE_READ_WORDS
     void eppf_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
-    void eppf_f4_dist_avx512(int m, const int32_t* I, const int32_t* J, const int32_t* B, const int64_t* pv,
-                             const uint64_t* code, int64_t g, const int32_t* thr, int n4, const int64_t* lohi,
-                             int64_t* lanes, int drain, int32_t* counts) noexcept nogil
+    int eppf_f123q_avx512(int m, const int32_t* I, const int32_t* J, double scale, int n1, int n2, int n3, int n4,
+                          double f1_density, const double* cos2, const double* cos3, const double* pn,
+                          const int32_t* thr, const int64_t* states, int64_t* QP, int64_t* QI, int64_t* QM,
+                          int* nq_out, int32_t* counts) noexcept nogil
+    void eppf_walk_states(const int32_t* thr, int n4, int64_t g, int64_t* st) noexcept nogil
+    void eppf_f4_walkq_avx512(int nq, const int64_t* QP, const int64_t* QI, const int64_t* QM,
+                              const uint64_t* code, int64_t g, const int32_t* thr, int n4, int64_t* lanes,
+                              int drain, int32_t* counts) noexcept nogil
 
 # The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512
 # with the grouped f4 walk, 3 AVX-512 with the skipping f4 walk (f1-f3 use AVX2
@@ -120,6 +126,7 @@ cdef enum:
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
     CODE_WORDS = EPPF_CODE_WORDS  # the AVX-512 walk's three cone grids (one per axis, 2 words a row)
+    CODE_READ_WORDS = EPPF_CODE_READ_WORDS  # the words of the buffer the skipping walk may read
     # packed line walk for grids up to 64 (layout in _eppf_walk.h)
     PK_S = EPPF_PK_S
     PK_ZSHIFT = EPPF_PK_ZSHIFT
@@ -178,6 +185,7 @@ cdef struct Params:
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
     double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
     int64_t lohi[66]        # thr[T * n4 + 1] and thr[T * n4 + n4 - 1] packed as the AVX-512 walk reads them
+    int64_t wstate[65]      # the skipping walk's first state of a line of T voxels (eppf_walk_states)
     int simd                # walk f4 in AVX2 (1) or AVX-512 lanes, grouped (2) or skipping (3) (grids up to 64), 0: scalar
     int simd123             # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
 
@@ -396,11 +404,14 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
 
     Pairs go in batches through separate loops (draw, f1-f3, f4, count) so
     that the latency of one pair's square root and divisions overlaps with
-    the next pair's instead of stalling behind a voxel walk. At level 3 the
-    f4 walk counts the pairs itself, and lines still being walked at the end
-    of a batch carry over (in ``lanes``) to the next one. Unless ``pn`` is
-    NULL, the AVX-512 f1-f3 read the points and normals from a copy of them
-    there, one 64-byte row a point (``eppf_pack_rows``).
+    the next pair's instead of stalling behind a voxel walk. At level 3 one
+    pass over a batch bins f1-f3 and queues the lines (``eppf_f123q_avx512``),
+    the f4 walk counts the pairs itself, and lines still being walked at the
+    end of a batch carry over (in ``lanes``) to the next one. Unless ``pn`` is
+    NULL, the AVX-512 f1-f3 read the points, normals and packed voxels from a
+    copy of them there, one 64-byte row a point (``eppf_pack_rows``); level 3
+    needs it and, where it is NULL (objects too large for the copy), takes the
+    grouped walk of level 2 (the same counts).
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
@@ -415,15 +426,20 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef bint vec_draw = prm.simd123 == 2
     cdef int good
     cdef int64_t lanes[EPPF_LANES_WORDS]
-    cdef bint dist = prm.simd == 3 and prm.n4 > 1
+    # the level-3 queue of a batch's lines (first position, increment, state)
+    cdef int64_t QP[BATCH + 8]
+    cdef int64_t QI[BATCH + 8]
+    cdef int64_t QM[BATCH + 8]
+    cdef int nq = 0
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
     if prm.simd123 != 2:
         pn = NULL
-    if pn != NULL:
-        eppf_pack_rows(n, pts, ps, nrm, ns, pn)
+    cdef bint dist = prm.simd == 3 and prm.n4 > 1 and pn != NULL
     if prm.n4 > 1:
         _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd >= 2 else NULL)
+    if pn != NULL:
+        eppf_pack_rows(n, pts, ps, nrm, ns, pv if prm.simd >= 2 and prm.n4 > 1 else NULL, pn)
     if dist:
         eppf_code_grid(bits, prm.grid, code + CODE_WORDS, code)
         memset(lanes, 0, sizeof(lanes))
@@ -434,8 +450,12 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
             m = BATCH
         if vec_draw:
             eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
-            good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                          prm.f1_density, prm.cos2, prm.cos3, B, pn)
+            if dist:
+                good = eppf_f123q_avx512(<int>m, I, J, scale, prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density,
+                                         prm.cos2, prm.cos3, pn, prm.thr, prm.wstate, QP, QI, QM, &nq, counts)
+            else:
+                good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3,
+                                              prm.n4, prm.f1_density, prm.cos2, prm.cos3, B, pn)
             if good < m:
                 vec_draw = False
                 m = good
@@ -450,7 +470,10 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
                     return 1
                 I[t] = <int32_t>i
                 J[t] = <int32_t>j
-            if prm.simd123 == 2:
+            if dist:
+                eppf_f123q_avx512(<int>m, I, J, scale, prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density,
+                                  prm.cos2, prm.cos3, pn, prm.thr, prm.wstate, QP, QI, QM, &nq, counts)
+            elif prm.simd123 == 2:
                 eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
                                        prm.f1_density, prm.cos2, prm.cos3, B, pn)
             elif prm.simd123:
@@ -461,10 +484,10 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
                     B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
         if dist:
-            eppf_f4_dist_avx512(<int>m, I, J, B, pv, code, prm.grid, prm.thr, prm.n4, prm.lohi, lanes, 0, counts)
+            eppf_f4_walkq_avx512(nq, QP, QI, QM, code, prm.grid, prm.thr, prm.n4, lanes, 0, counts)
             continue
         if prm.n4 > 1:
-            if prm.simd == 2:
+            if prm.simd >= 2:
                 eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi, prm.recip_packed,
                                      B)
             elif prm.simd:
@@ -482,7 +505,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         for t in range(m):
             counts[B[t]] += 1
     if dist:
-        eppf_f4_dist_avx512(0, I, J, B, pv, code, prm.grid, prm.thr, prm.n4, prm.lohi, lanes, 1, counts)
+        eppf_f4_walkq_avx512(0, QP, QI, QM, code, prm.grid, prm.thr, prm.n4, lanes, 1, counts)
     return 0
 
 
@@ -504,6 +527,10 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
         prm.lohi[k] = 0
         if n4 > 1 and k <= grid + 1:
             prm.lohi[k] = ((<int64_t>thr[k * n4 + 1]) << EPPF_META_LO) | ((<int64_t>thr[k * n4 + n4 - 1]) << EPPF_META_HI)
+    for k in range(65):
+        prm.wstate[k] = 0
+    if n4 > 1:
+        eppf_walk_states(thr, n4, grid, prm.wstate)
     prm.simd123 = _simd if _simd < 2 else 2
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max
@@ -596,8 +623,10 @@ def eppf_counts(points_in, normals_in,
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
-    # the AVX-512 walk's cone grids (CODE_WORDS) and their scratch (4 g^2 words)
-    code_arr = np.zeros((num_threads, CODE_WORDS + 4 * 64 * 64 if prm.simd == 3 else 1), dtype=np.uint64)
+    # the AVX-512 walk's cone grids (CODE_WORDS) and their scratch (4 g^2 words): the walk reads any
+    # of the first CODE_READ_WORDS words
+    code_arr = np.zeros((num_threads, max(CODE_WORDS + 4 * 64 * 64, CODE_READ_WORDS) if prm.simd == 3 else 1),
+                        dtype=np.uint64)
     # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to 65,536 points,
     # larger ones are read in place)
     cdef bint rows = prm.simd123 == 2 and max_n <= 65536

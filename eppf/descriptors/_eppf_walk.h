@@ -6,18 +6,19 @@
  *   (``eppf_draw_batch_avx512``), the f1-f3 bins with the check for
  *   coinciding points (``eppf_f123_batch_avx512``) and two f4 walks: the
  *   grouped walk (``eppf_f4_batch_avx512``, level 2) and the skipping walk
- *   (``eppf_f4_dist_avx512``, level 3), which keeps every lane busy by
- *   refilling it from a queue and walks each line along its dominant axis,
- *   jumping over voxels proved empty by the cone ahead of them
- *   (``eppf_code_grid``): 1.3 gathers a pair instead of 3.0. The default is level 3 on AMD, 2 elsewhere
+ *   (``eppf_f123q_avx512`` and ``eppf_f4_walkq_avx512``, level 3), which
+ *   keeps every lane busy by refilling it from a queue and walks each line
+ *   along its dominant axis, jumping over voxels proved empty by the cone
+ *   ahead of them (``eppf_code_grid``): 1.3 look-ups of eight lanes a pair
+ *   instead of 3.0. The default is level 3 on AMD, 2 elsewhere
  *   (``eppf_walk_prefers_skips``).
  *
- * Gathers are used only for the walk's look-ups: AMD Zen 4 runs an
+ * Gathers are used only for the grouped walk's look-ups: AMD Zen 4 runs an
  * eight-element gather at about 13 cycles (0.65 ns an element measured on a
  * Zen 4 KVM guest, against about 0.4 ns a scalar load), so the AVX-512 code
- * reads the points and normals of f1-f3 with row loads and a transpose, and
- * the setup and the groups of the walks with scalar loads and in-register
- * table look-ups.
+ * reads the points, normals and voxels of f1-f3 and the walk setup with row
+ * loads and a transpose, the skipping walk's look-ups with scalar loads, and
+ * its tables by in-register look-ups.
  *
  * f1-f3: the same IEEE operations in the same order as _eppf_fast.pyx's
  * ``_bin_f123`` (no FMA: the targets are plain "avx2" / AVX-512 and the build
@@ -53,6 +54,7 @@
 #define EPPF_WALK_H
 
 #include <stdint.h>
+#include <string.h>
 #include <math.h>
 
 #include "../utils/_cpu.h"
@@ -86,10 +88,27 @@
 #define EPPF_META_LO 21
 #define EPPF_META_HI 42
 #define EPPF_META_MASK 0x1FFFFF
-/* The lane state of ``eppf_f4_dist_avx512`` between calls for one object: per
-   set of eight lanes (six sets), seven vectors of eight int64 and the mask
-   of lanes in use. */
+/* The lane state of ``eppf_f4_walkq_avx512`` between calls for one object: per
+   set of eight lanes (six sets, 64 words each), three vectors of eight int64
+   (words 0-23) and the mask of lanes in use (word 56). */
 #define EPPF_LANES_WORDS 384
+/* The skipping walk's lane state (``eppf_f4_walkq_avx512``): four signed
+   bytes R, U, O, X. */
+#define EPPF_ST(r, u, o, x) ((int64_t)(((uint64_t)(uint8_t)(r)) | ((uint64_t)(uint8_t)(u) << 8)       \
+                                       | ((uint64_t)(uint8_t)(o) << 16) | ((uint64_t)(uint8_t)(x) << 24)))
+/* st[T] = the state of a line of T voxels before its first step, T = 1..64
+   (0 for T > g + 1, past ``thr``'s rows [T, b], T = 0..g + 1, and for T = 0). */
+static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
+{
+    int T;
+    for (T = 0; T <= 64; T++) {
+        st[T] = 0;
+        if (T >= 1 && T <= g + 1) {
+            const int lo = thr[T * n4 + 1], hi = thr[T * n4 + n4 - 1];
+            st[T] = EPPF_ST(T - 3, T - lo, hi - 3, lo - 3);
+        }
+    }
+}
 /* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
 #define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
 
@@ -109,11 +128,12 @@ static int eppf_walk_has_avx512(void)
                         | EPPF_CPU_AVX512VBMI);
 }
 
-/* Whether the skipping AVX-512 walk (``eppf_f4_dist_avx512``) is the better of
+/* Whether the skipping AVX-512 walk (``eppf_f4_walkq_avx512``) is the better of
    the two AVX-512 walks here: on AMD Zen 4 an eight-element gather costs about
-   13 cycles, and the skipping walk's 1.3 gathers a pair (against 3.0) pay for
-   its extra vector work; where gathers are cheaper (Intel) the grouped walk's
-   lighter steps are expected to win. Both give the same counts. */
+   13 cycles, and the skipping walk's 1.3 look-ups a pair (by scalar loads,
+   against 3.0 gathers) pay for its extra vector work; where gathers are
+   cheaper (Intel) the grouped walk's lighter steps are expected to win. Both
+   give the same counts. */
 static int eppf_walk_prefers_skips(void)
 {
     return eppf_cpu_has(EPPF_CPU_AMD);
@@ -125,41 +145,46 @@ static int eppf_walk_has_avx2(void)
 }
 
 /* The rows of ``eppf_f123_batch_avx512``'s ``pn``: point k's x, y, z,
- * nx, ny, nz (and two unused doubles) at pn[8 k], so that one 64-byte load
- * reads a point and its normal. */
-static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns, double *pn)
+ * nx, ny, nz, its packed voxel pv[k] (the bits of the int64 in a double's
+ * place; 0 where pv is NULL) and an unused double at pn[8 k], so that one
+ * 64-byte load reads a point, its normal and its voxel. */
+static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns,
+                           const int64_t *pv, double *pn)
 {
     int64_t k;
     for (k = 0; k < n; k++) {
         double *r = pn + 8 * k;
+        const int64_t v = pv ? pv[k] : 0;
         r[0] = pts[ps * k];
         r[1] = pts[ps * k + 1];
         r[2] = pts[ps * k + 2];
         r[3] = nrm[ns * k];
         r[4] = nrm[ns * k + 1];
         r[5] = nrm[ns * k + 2];
-        r[6] = 0.0;
+        memcpy(r + 6, &v, sizeof v);
         r[7] = 0.0;
     }
 }
 
 #if EPPF_WALK_SIMD
-/* The points and normals at rows r[0..7] of ``eppf_pack_rows``'s ``pn`` as six
- * vectors v[0..5] (x, y, z, nx, ny, nz): eight loads and a transpose. */
+/* The points, normals and packed voxels at rows r[0..7] of
+ * ``eppf_pack_rows``'s ``pn`` as seven vectors v[0..6] (x, y, z, nx, ny, nz,
+ * pv): eight loads and a transpose (v[6] costs one shuffle, dropped by the
+ * compiler where it is not used). */
 __attribute__((target(EPPF_AVX512_TARGET)))
-static inline void eppf_load6x8(const double *pn, const int32_t *r, __m512d *v)
+static inline void eppf_load7x8(const double *pn, const int32_t *r, __m512d *v)
 {
     __m512d a[8], t[8], u[8];
     int k;
     for (k = 0; k < 8; k++)
         a[k] = _mm512_loadu_pd(pn + 8 * (int64_t)r[k]);
     for (k = 0; k < 4; k++) {
-        t[2 * k] = _mm512_unpacklo_pd(a[2 * k], a[2 * k + 1]);      /* x01 z01 ny01 - */
+        t[2 * k] = _mm512_unpacklo_pd(a[2 * k], a[2 * k + 1]);      /* x01 z01 ny01 pv01 */
         t[2 * k + 1] = _mm512_unpackhi_pd(a[2 * k], a[2 * k + 1]);  /* y01 nx01 nz01 - */
     }
     for (k = 0; k < 2; k++) {
         u[4 * k] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0x44);          /* x01 z01 x23 z23 */
-        u[4 * k + 1] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0xEE);      /* ny01 - ny23 - */
+        u[4 * k + 1] = _mm512_shuffle_f64x2(t[4 * k], t[4 * k + 2], 0xEE);      /* ny01 pv01 ny23 pv23 */
         u[4 * k + 2] = _mm512_shuffle_f64x2(t[4 * k + 1], t[4 * k + 3], 0x44);  /* y01 nx01 y23 nx23 */
         u[4 * k + 3] = _mm512_shuffle_f64x2(t[4 * k + 1], t[4 * k + 3], 0xEE);  /* nz01 - nz23 - */
     }
@@ -169,6 +194,7 @@ static inline void eppf_load6x8(const double *pn, const int32_t *r, __m512d *v)
     v[3] = _mm512_shuffle_f64x2(u[2], u[6], 0xDD);
     v[4] = _mm512_shuffle_f64x2(u[1], u[5], 0x88);
     v[5] = _mm512_shuffle_f64x2(u[3], u[7], 0x88);
+    v[6] = _mm512_shuffle_f64x2(u[1], u[5], 0xDD);
 }
 #endif
 
@@ -555,11 +581,79 @@ static inline void eppf_load3x8(const double *a, int64_t stride, const int32_t *
     *z = _mm512_shuffle_f64x2(v0, v1, 0x44);
 }
 
-/* ``eppf_f123_batch_avx2`` eight pairs at a time (the same IEEE operations in
- * the same order, so the same bins), which also checks the pairs as
- * ``_draw_pair`` does: returns the first t whose two points coincide (all
- * three coordinates equal), or m when none does. B[t] is written for every t.
- * Where ``pn`` is not NULL, the points and normals are read from its rows
+/* The f1-f3 bins, times n4, of eight pairs from their points p and normals
+ * n (x, y, z vectors): ``eppf_f123_batch_avx2``'s IEEE operations in the
+ * same order, so the same bins. The normals are read only where n2 > 1 or
+ * n3 > 1. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline __m256i eppf_bins123_8(const __m512d *pi, const __m512d *ni, const __m512d *pj, const __m512d *nj,
+                                     double scale, int n1, int n2, int n3, int n4, double f1_density,
+                                     const double *cos2, const double *cos3)
+{
+    const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
+    const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
+    const __m256i one32 = _mm256_set1_epi32(1);
+    const __m512d dx = _mm512_sub_pd(pj[0], pi[0]), dy = _mm512_sub_pd(pj[1], pi[1]);
+    const __m512d dz = _mm512_sub_pd(pj[2], pi[2]);
+    const __m512d dist = _mm512_sqrt_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
+                                                      _mm512_mul_pd(dz, dz)));
+    __m512d v = _mm512_mul_pd(_mm512_mul_pd(dist, vscale), vdens);
+    __m256i b1, b2 = _mm256_setzero_si256(), b3 = _mm256_setzero_si256(), b;
+    int k;
+    b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
+    if (n2 > 1) {
+        __m512d inv = _mm512_div_pd(one, dist), m1, m2;
+        m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(ni[0], dx), _mm512_mul_pd(ni[1], dy)),
+                                         _mm512_mul_pd(ni[2], dz)), inv);
+        m2 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nj[0], dx), _mm512_mul_pd(nj[1], dy)),
+                                         _mm512_mul_pd(nj[2], dz)), inv);
+        m1 = _mm512_min_pd(m2, m1);  /* m2 < m1 ? m2 : m1 */
+        for (k = 0; k < n2 - 1; k++)
+            b2 = _mm256_mask_add_epi32(b2, _mm512_cmp_pd_mask(m1, _mm512_set1_pd(cos2[k]), _CMP_LE_OQ), b2, one32);
+    }
+    if (n3 > 1) {
+        v = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(ni[0], nj[0]), _mm512_mul_pd(ni[1], nj[1])),
+                          _mm512_mul_pd(ni[2], nj[2]));
+        v = _mm512_abs_pd(v);
+        for (k = 0; k < n3 - 1; k++)
+            b3 = _mm256_mask_add_epi32(b3, _mm512_cmp_pd_mask(v, _mm512_set1_pd(cos3[k]), _CMP_LE_OQ), b3, one32);
+    }
+    b = _mm256_add_epi32(_mm256_mullo_epi32(b1, _mm256_set1_epi32(n2)), b2);
+    b = _mm256_add_epi32(_mm256_mullo_epi32(b, _mm256_set1_epi32(n3)), b3);
+    return _mm256_mullo_epi32(b, _mm256_set1_epi32(n4));
+}
+
+/* The pairs of a group of eight at t of (ii, jj), m - t of them real
+ * (``keep``): a partial last group repeats its last pair, in ri and rj. */
+static inline __mmask8 eppf_group8(int m, int t, const int32_t *ii, const int32_t *jj, int32_t *ri, int32_t *rj,
+                                   const int32_t **vi, const int32_t **vj)
+{
+    int l;
+    *vi = ii + t;
+    *vj = jj + t;
+    if (m - t >= 8)
+        return (__mmask8)0xff;
+    for (l = 0; l < 8; l++) {
+        ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+        rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+    }
+    *vi = ri;
+    *vj = rj;
+    return (__mmask8)((1u << (m - t)) - 1);
+}
+
+/* The pairs of (i8, j8) whose two points coincide (all three coordinates equal). */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline __mmask8 eppf_same8(const __m512d *pi, const __m512d *pj)
+{
+    return _mm512_cmp_pd_mask(pi[0], pj[0], _CMP_EQ_OQ) & _mm512_cmp_pd_mask(pi[1], pj[1], _CMP_EQ_OQ)
+           & _mm512_cmp_pd_mask(pi[2], pj[2], _CMP_EQ_OQ);
+}
+
+/* ``eppf_f123_batch_avx2`` eight pairs at a time (``eppf_bins123_8``), which
+ * also checks the pairs as ``_draw_pair`` does: returns the first t whose two
+ * points coincide, or m when none does. B[t] is written for every t. Where
+ * ``pn`` is not NULL, the points and normals are read from its rows
  * (``eppf_pack_rows``: the same values, one load a point). */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
@@ -567,84 +661,40 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
                                   double f1_density, const double *cos2, const double *cos3, int32_t *B,
                                   const double *pn)
 {
-    const __m512d vscale = _mm512_set1_pd(scale), vdens = _mm512_set1_pd(f1_density);
-    const __m512d top1 = _mm512_set1_pd((double)(n1 - 1)), one = _mm512_set1_pd(1.0);
-    const __m256i one32 = _mm256_set1_epi32(1);
     int32_t ri[8], rj[8];
-    int t, k, l, bad = m;
+    int t, bad = m;
     for (t = 0; t < m; t += 8) {
-        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const int32_t *vi = ii + t, *vj = jj + t;
-        __m512d pix, piy, piz, pjx, pjy, pjz, dx, dy, dz, dist, v;
-        __m256i b1, b2 = _mm256_setzero_si256(), b3 = _mm256_setzero_si256(), b;
+        const int32_t *vi, *vj;
+        const __mmask8 keep = eppf_group8(m, t, ii, jj, ri, rj, &vi, &vj);
+        __m512d a[7], b[7];
         __mmask8 same;
-        if (keep != 0xff) {  /* a partial last group repeats its last pair */
-            for (l = 0; l < 8; l++) {
-                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
-                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
-            }
-            vi = ri;
-            vj = rj;
-        }
-        __m512d vi6[6], vj6[6];
         if (pn) {
-            eppf_load6x8(pn, vi, vi6);
-            eppf_load6x8(pn, vj, vj6);
-            pix = vi6[0], piy = vi6[1], piz = vi6[2], pjx = vj6[0], pjy = vj6[1], pjz = vj6[2];
+            eppf_load7x8(pn, vi, a);
+            eppf_load7x8(pn, vj, b);
         } else {
-            eppf_load3x8(pts, ps, vi, &pix, &piy, &piz);
-            eppf_load3x8(pts, ps, vj, &pjx, &pjy, &pjz);
+            eppf_load3x8(pts, ps, vi, a, a + 1, a + 2);
+            eppf_load3x8(pts, ps, vj, b, b + 1, b + 2);
+            if (n2 > 1 || n3 > 1) {
+                eppf_load3x8(nrm, ns, vi, a + 3, a + 4, a + 5);
+                eppf_load3x8(nrm, ns, vj, b + 3, b + 4, b + 5);
+            } else {
+                a[3] = a[4] = a[5] = b[3] = b[4] = b[5] = _mm512_setzero_pd();
+            }
         }
-        same = keep & _mm512_cmp_pd_mask(pix, pjx, _CMP_EQ_OQ) & _mm512_cmp_pd_mask(piy, pjy, _CMP_EQ_OQ)
-               & _mm512_cmp_pd_mask(piz, pjz, _CMP_EQ_OQ);
+        same = keep & eppf_same8(a, b);
         if (same && bad == m)
             bad = t + __builtin_ctz(same);
-        dx = _mm512_sub_pd(pjx, pix);
-        dy = _mm512_sub_pd(pjy, piy);
-        dz = _mm512_sub_pd(pjz, piz);
-        dist = _mm512_sqrt_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy)),
-                                            _mm512_mul_pd(dz, dz)));
-        v = _mm512_mul_pd(_mm512_mul_pd(dist, vscale), vdens);
-        b1 = _mm512_cvttpd_epi32(_mm512_max_pd(_mm512_min_pd(v, top1), _mm512_setzero_pd()));
-        if (n2 > 1 || n3 > 1) {
-            __m512d nix, niy, niz, njx, njy, njz;
-            if (pn) {
-                nix = vi6[3], niy = vi6[4], niz = vi6[5], njx = vj6[3], njy = vj6[4], njz = vj6[5];
-            } else {
-                eppf_load3x8(nrm, ns, vi, &nix, &niy, &niz);
-                eppf_load3x8(nrm, ns, vj, &njx, &njy, &njz);
-            }
-            if (n2 > 1) {
-                __m512d inv = _mm512_div_pd(one, dist), m1, m2;
-                m1 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, dx), _mm512_mul_pd(niy, dy)),
-                                                 _mm512_mul_pd(niz, dz)), inv);
-                m2 = _mm512_mul_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(njx, dx), _mm512_mul_pd(njy, dy)),
-                                                 _mm512_mul_pd(njz, dz)), inv);
-                m1 = _mm512_min_pd(m2, m1);  /* m2 < m1 ? m2 : m1 */
-                for (k = 0; k < n2 - 1; k++)
-                    b2 = _mm256_mask_add_epi32(b2, _mm512_cmp_pd_mask(m1, _mm512_set1_pd(cos2[k]), _CMP_LE_OQ),
-                                               b2, one32);
-            }
-            if (n3 > 1) {
-                v = _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(nix, njx), _mm512_mul_pd(niy, njy)),
-                                  _mm512_mul_pd(niz, njz));
-                v = _mm512_abs_pd(v);
-                for (k = 0; k < n3 - 1; k++)
-                    b3 = _mm256_mask_add_epi32(b3, _mm512_cmp_pd_mask(v, _mm512_set1_pd(cos3[k]), _CMP_LE_OQ),
-                                               b3, one32);
-            }
-        }
-        b = _mm256_add_epi32(_mm256_mullo_epi32(b1, _mm256_set1_epi32(n2)), b2);
-        b = _mm256_add_epi32(_mm256_mullo_epi32(b, _mm256_set1_epi32(n3)), b3);
-        b = _mm256_mullo_epi32(b, _mm256_set1_epi32(n4));
-        _mm256_mask_storeu_epi32(B + t, keep, b);
+        _mm256_mask_storeu_epi32(B + t, keep, eppf_bins123_8(a, a + 3, b, b + 3, scale, n1, n2, n3, n4, f1_density,
+                                                             cos2, cos3));
     }
     return bad;
 }
 
-/* The walk setup of the eight pairs (i8[l], j8[l]), from ``pv``: each
- * point's voxel already in the packed walk's start form (lanes v S + S/2 + g,
- * see _eppf_fast.pyx's ``_fill_grid``). The packed difference of two such
+/* The walk setup of eight lines from voxel a[l] to voxel b[l], each already
+ * in the packed walk's start form (lanes v S + S/2 + g, see _eppf_fast.pyx's
+ * ``_fill_grid``): the first inner position P, the increment INC, L and the
+ * entry ``tab[(L + 1) & 63]``; D (unless NULL) the differences dx, dy, dz
+ * in voxels. The packed difference of two such
  * words holds the three lane differences d S exactly (each below 2**20 in
  * size), recovered by sign-extending 21-bit fields. The same integer results
  * as ``eppf_f4_setup_avx2``: the increments' scale 2**14 / L is the same
@@ -652,16 +702,13 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * lo | hi of T = L + 1 voxels is ``lohi[T]``, looked up in registers:
  * ``tab`` holds lohi[1..63] at 1..63 and lohi[64] at 0 (T >= 3 on every
  * walked line). No gathers: on CPUs with slow ones (AMD Zen 4) eight loads
- * and in-register look-ups cost a fraction of them. */
+ * and in-register look-ups cost a fraction of them. Any 65-entry table in
+ * place of lohi works the same way (the skipping walk's lane states). */
 __attribute__((target(EPPF_AVX512_TARGET)))
-static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, const int64_t *pv, const __m512i *tab,
-                                      __m512i *P, __m512i *INC, __m512i *Lout, __m512i *LOHI, __m512i *D)
+static inline void eppf_line8_avx512(__m512i a, __m512i b, const __m512i *tab, __m512i *P, __m512i *INC,
+                                     __m512i *Lout, __m512i *LOHI, __m512i *D)
 {
     const __m512i one = _mm512_set1_epi64(1);
-    const __m512i a = _mm512_set_epi64(pv[i8[7]], pv[i8[6]], pv[i8[5]], pv[i8[4]], pv[i8[3]], pv[i8[2]], pv[i8[1]],
-                                       pv[i8[0]]);
-    const __m512i b = _mm512_set_epi64(pv[j8[7]], pv[j8[6]], pv[j8[5]], pv[j8[4]], pv[j8[3]], pv[j8[2]], pv[j8[1]],
-                                       pv[j8[0]]);
     const __m512i d = _mm512_sub_epi64(b, a);
     const __m512i dzs = _mm512_srai_epi64(_mm512_slli_epi64(d, 43), 43);
     const __m512i d1 = _mm512_srai_epi64(_mm512_sub_epi64(d, dzs), EPPF_PK_YLANE);
@@ -697,6 +744,18 @@ static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, cons
     }
 }
 
+/* ``eppf_line8_avx512`` of the pairs (i8[l], j8[l]), their voxels read from pv. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline void eppf_setup8_avx512(const int32_t *i8, const int32_t *j8, const int64_t *pv, const __m512i *tab,
+                                      __m512i *P, __m512i *INC, __m512i *Lout, __m512i *LOHI)
+{
+    const __m512i a = _mm512_set_epi64(pv[i8[7]], pv[i8[6]], pv[i8[5]], pv[i8[4]], pv[i8[3]], pv[i8[2]], pv[i8[1]],
+                                       pv[i8[0]]);
+    const __m512i b = _mm512_set_epi64(pv[j8[7]], pv[j8[6]], pv[j8[5]], pv[j8[4]], pv[j8[3]], pv[j8[2]], pv[j8[1]],
+                                       pv[j8[0]]);
+    eppf_line8_avx512(a, b, tab, P, INC, Lout, LOHI, NULL);
+}
+
 /* ``tab`` of ``eppf_setup8_avx512`` from lohi[0..64]. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static inline void eppf_lohi_tab_avx512(const int64_t *lohi, __m512i *tab)
@@ -730,7 +789,7 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
             i8 = ri;
             j8 = rj;
         }
-        eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh, NULL);
+        eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh);
         _mm512_mask_storeu_epi64(P + t, keep, p);
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
         _mm256_mask_storeu_epi32(Ls + t, keep, _mm512_cvtepi64_epi32(L));
@@ -969,6 +1028,11 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * ``bits``: g^2 words, one per (x, y) row, z bits (none past z = g - 1);
  * ``work``: 4 g^2 words of scratch; 2 <= g <= 64. */
 #define EPPF_CODE_WORDS (3 * 128 * 64)
+/* The skipping walk reads ``code`` at word indices below this bound (its
+   fields masked: at most 2 (63 + 255 g) + 1 for any position, lanes past
+   their line included), so the buffer must hold this many words (the grids
+   and their scratch, EPPF_CODE_WORDS + 4 * 64 * 64, do). */
+#define EPPF_CODE_READ_WORDS (2 * (63 + 255 * 64) + 2)
 /* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
    inside the grid) or-ed: the y +- 1 part of a 3^2 box; 2 <= g <= 64. */
 EPPF_AVX512_FN
@@ -1186,225 +1250,259 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
     }
 }
 #if EPPF_WALK_SIMD
-/* The f4 walks of a batch and their counts, AVX-512: three sets of eight
- * lanes, each lane refilled from a queue as soon as its line's bin is
- * certain, each step skipping the voxels the cone grids prove empty.
+/* The skipping AVX-512 walk (level 3), in two parts per batch of pairs:
+ * ``eppf_f123q_avx512`` bins f1-f3 and sets up the lines in one pass over
+ * the pairs (the rows of ``pn`` also hold each point's packed voxel, so the
+ * setup costs no loads of its own), queueing each line with inner voxels;
+ * ``eppf_f4_walkq_avx512`` walks the queue in three pairs of eight-lane sets,
+ * each lane refilled as soon as its line's bin is certain, each step
+ * skipping the voxels the cone grids prove empty, and counts the pairs.
  *
- * The pairs (ii[t], jj[t]), t < m <= EPPF_WALK_BATCH, with f1-f3 bins B[t]
- * (already times n4): lines without inner voxels (L <= 1) are counted at
- * once; the others join a queue of (first inner voxel, increment,
- * rem | lo | hi, key) in batch order (setup of ``eppf_setup8_avx512``).
- * A line is walked along a dominant axis a (|delta_a| = L: its increment's
- * field is exactly +-2**14, so that coordinate moves by one voxel every
- * step), in the direction in which that coordinate grows: a line whose
- * delta_a is negative starts at its last inner voxel (first + (L - 2) INC)
- * and steps by -INC, which visits the same integer positions in reverse. a
- * sits in bits 62-63 of the position (above the x field, which never
- * reaches them), where the word index picks the cone grid of axis a.
+ * A queued line is (first position, increment, state) in batch order. It is
+ * walked along a dominant axis a (|delta_a| = L: its increment's field is
+ * exactly +-2**14, so that coordinate moves by one voxel every step), in the
+ * direction in which that coordinate grows: a line whose delta_a is negative
+ * starts at its last inner voxel (first + (L - 2) INC) and steps by -INC,
+ * which visits the same integer positions in reverse. a sits in bits 62-63
+ * of the position (above the x field, which never reaches them), where the
+ * word index picks the cone grid of axis a.
  *
- * A step of a lane reads c = min(C, 3) at its voxel in the grid of its
- * axis (``eppf_code_grid``). c = 0: the voxel is occupied (occ + 1), one
- * step. c > 0: the voxel and the next c - 1 of the line are empty, since
+ * A lane's state is one int64: four signed bytes R = rem - 1,
+ * U = rem + occ - lo, O = hi - 1 - occ and X = lo - 1 - occ (rem the inner
+ * voxels not yet passed, occ the occupied voxels counted, both ends
+ * included; lo and hi the thresholds of the f4 bins, ``thr``) and, in bits
+ * 32-55, the pair's f1-f3 bin B (bits 56-61: L, for n4 > 3). The bin is
+ * certain once R < 0 (the line has ended), U < 0 (occ + rem < lo: the
+ * bottom bin, whatever the rest holds) or O < 0 (occ >= hi: the top bin);
+ * the bin is then (X < 0) + (O < 0) for n4 = 3, (O < 0) for n4 = 2, and
+ * from occ = hi - 1 - O for n4 > 3 (occ is exact when the line has ended,
+ * below lo in the bottom case and at least hi in the top one). With the
+ * middle bin's early stop of the other walks left out, those are the cases.
+ *
+ * A step of a lane reads c = min(C, 3) at its voxel in the grid of its axis
+ * (``eppf_code_grid``). c = 0: the voxel is occupied (R, O, X down by one),
+ * one step. c > 0: the voxel and the next c - 1 of the line are empty, since
  * the k-th voxel after this one lies in its cone k planes on (one plane a
- * step, the other coordinates at most one voxel a step): the lane advances
- * c steps at once (P += c INC, the same integer position as that many
- * single steps), occ unchanged.
- * Every voxel is thus still counted or proved empty in line order, and occ
- * and rem mean what they mean in the scalar walk. After two steps the
- * stopping rule of ``eppf_f4_batch_avx2`` applies, with one more case for
- * n4 = 3: the middle bin is certain once lo <= occ and occ + rem < hi.
- * Walking past the point where the bin became certain (never past the
- * line's end) cannot change it. A lane whose bin is certain or whose line has
- * ended adds one to counts[B + f4 bin] and takes the next queued line.
+ * step, the other coordinates at most one voxel a step): the lane advances c
+ * steps at once (P += c INC, the same integer position as that many single
+ * steps) and R and U go down by c. One byte-wise addition of a table entry
+ * picked by c does both (bytes: no carry between the counters; each stays
+ * within -64..63). Only lanes with R >= 0 change their state; the others
+ * still look up (every word index is below EPPF_CODE_READ_WORDS, whatever
+ * the position: its fields are masked) and drift. The stopping test and the
+ * refill run after every fourth step: walking past the point where the bin
+ * became certain cannot change it (U < 0 stays so until the line ends; O
+ * and X only fall). A lane whose bin is certain adds one to
+ * counts[B + bin] and takes the next queued line.
  *
  * Lines still being walked when the queue runs dry stay in ``lanes``
  * (EPPF_LANES_WORDS int64, all zero before an object's first call) for the
  * next call; ``drain`` walks them to their end (the object's last call,
- * m = 0). A histogram is a sum, so the order in which lines finish does not
+ * nq = 0). A histogram is a sum, so the order in which lines finish does not
  * change it: the counts are the scalar kernel's.
  */
+
+/* The f1-f3 bins and the f4 walk setup of the pairs (ii[t], jj[t]),
+ * t < m <= EPPF_WALK_BATCH, with the points, normals and voxels in the rows
+ * of ``pn`` (``eppf_pack_rows``) and the lines' first states in ``states``
+ * (``eppf_walk_states``). Lines with inner voxels (L > 1) join the
+ * queue (QP, QI, QM; *nq_out of them); the others are counted at once
+ * (occ = T = L + 1, every voxel occupied). As ``eppf_f123_batch_avx512``,
+ * returns the first t whose two points coincide, or m; no pair from there
+ * on is queued or counted. */
 __attribute__((target(EPPF_AVX512_TARGET)))
-static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *B,
-                                const int64_t *pv, const uint64_t *code, int64_t g, const int32_t *thr, int n4,
-                                const int64_t *lohi, int64_t *lanes, int drain, int32_t *counts)
+static int eppf_f123q_avx512(int m, const int32_t *ii, const int32_t *jj, double scale, int n1, int n2, int n3,
+                             int n4, double f1_density, const double *cos2, const double *cos3, const double *pn,
+                             const int32_t *thr, const int64_t *states, int64_t *QP, int64_t *QI, int64_t *QM,
+                             int *nq_out, int32_t *counts)
 {
-    int64_t QP[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t QI[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t QM[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    int64_t QK[EPPF_WALK_BATCH + 8] __attribute__((aligned(64)));
-    /* finished lines: counts index (n4 <= 3), or key and occ (n4 > 3); at most 48 + m of them */
-    int64_t OK[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
-    int64_t OO[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
     const __m512i zero = _mm512_setzero_si512(), one = _mm512_set1_epi64(1), two = _mm512_set1_epi64(2);
-    const __m512i fmask = _mm512_set1_epi64(EPPF_META_MASK), three = _mm512_set1_epi64(3);
-    /* multishift fields: byte 0 <- bits 13.. (2 z and a fraction bit), byte 1 <- bit 19 (z >> 5),
-       byte 2 <- bits 35.. (y), byte 3 <- bits 56.. (x and the axis a above it); kept: 2 (z & 31), 1, 6
-       and 8 bits (x + 64 a) */
-    const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_XSHIFT << 24) | ((int64_t)EPPF_PK_YSHIFT << 16)
-                                           | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 8) | (EPPF_PK_ZSHIFT - 1));
-    const __m512i mfield = _mm512_set1_epi64(0xFF3F013E);
-    /* bytes (0, 1, 1, g): words z >> 5 and y + g (x + 64 a) (at most 16383); then (1, 2): the word
-       index 2 (y + g x) + (z >> 5) + 128 g a, in the cone grid of axis a */
-    const __m512i mul = _mm512_set1_epi64(((int64_t)g << 24) | (1 << 16) | (1 << 8));
-    const __m512i w21 = _mm512_set1_epi64(0x00020001);
-    /* steps a look-up advances by its code c (index bits 0-1; bit 2 is the next voxel's): max(c, 1) */
-    const __m512i tsteps = _mm512_set_epi64(3, 2, 1, 1, 3, 2, 1, 1);
-    const long long *cbase = (const long long *)code;
-    const int wide = n4 > 3;
-    __m512i pA, incA, remA, occA, pB, incB, remB, occB, pC, incC, remC, occC;
-    __m512i pD, incD, remD, occD, pE, incE, remE, occE, pF, incF, remF, occF;
-    __mmask8 actA, actB, actC, actD, actE, actF;
     __m512i tab[8];
     int32_t ri[8], rj[8];
-    __m512i dd[3];
-    int t, nq = 0, q = 0, nout = 0, i;
-
-    /* The queue. */
-    eppf_lohi_tab_avx512(lohi, tab);
-    for (t = 0; t < m; t += 8) {
-        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const int32_t *i8 = ii + t, *j8 = jj + t;
-        __m512i a, vinc, L, lh, vkey, meta;
-        __mmask8 walk, few;
-        if (keep != 0xff) {  /* a partial last group repeats its last pair */
-            int l;
-            for (l = 0; l < 8; l++) {
-                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
-                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
-            }
-            i8 = ri;
-            j8 = rj;
+    int t, l, bad = m, nq = 0;
+    eppf_lohi_tab_avx512(states, tab);
+    for (t = 0; t < m && bad == m; t += 8) {
+        const int32_t *vi, *vj;
+        __mmask8 keep = eppf_group8(m, t, ii, jj, ri, rj, &vi, &vj), same, walk, few;
+        __m512d a[7], b[7];
+        __m512i p, inc, L, st, key, d[3];
+        __m256i bins;
+        eppf_load7x8(pn, vi, a);
+        eppf_load7x8(pn, vj, b);
+        same = keep & eppf_same8(a, b);
+        if (same) {  /* the first pair whose points coincide ends the batch */
+            bad = t + __builtin_ctz(same);
+            keep &= (__mmask8)((1u << __builtin_ctz(same)) - 1);
         }
-        eppf_setup8_avx512(i8, j8, pv, tab, &a, &vinc, &L, &lh, dd);
+        bins = eppf_bins123_8(a, a + 3, b, b + 3, scale, n1, n2, n3, n4, f1_density, cos2, cos3);
+        eppf_line8_avx512(_mm512_castpd_si512(a[6]), _mm512_castpd_si512(b[6]), tab, &p, &inc, &L, &st, d);
         {
-            /* along the dominant axis (any of them on a tie: its coordinate moves by exactly one voxel a step,
-               the increment's field being +-2**14), in the direction in which it grows: lines whose axis
-               difference is negative are walked from their last inner voxel back (the same positions) */
-            const __mmask8 onx = _mm512_cmpeq_epi64_mask(_mm512_abs_epi64(dd[0]), L);
-            const __mmask8 ony = (__mmask8)~onx & _mm512_cmpeq_epi64_mask(_mm512_abs_epi64(dd[1]), L);
+            /* along the dominant axis (any of them on a tie), in the direction in which it grows */
+            const __mmask8 onx = _mm512_cmpeq_epi64_mask(_mm512_abs_epi64(d[0]), L);
+            const __mmask8 ony = (__mmask8)~onx & _mm512_cmpeq_epi64_mask(_mm512_abs_epi64(d[1]), L);
             const __mmask8 onz = (__mmask8)~(onx | ony);
-            const __m512i dax = _mm512_mask_blend_epi64(onz, _mm512_mask_blend_epi64(ony, dd[0], dd[1]), dd[2]);
-            const __mmask8 back = _mm512_cmplt_epi64_mask(dax, zero);
+            const __m512i da = _mm512_mask_blend_epi64(onz, _mm512_mask_blend_epi64(ony, d[0], d[1]), d[2]);
+            const __mmask8 back = _mm512_cmplt_epi64_mask(da, zero);
             const __m512i axis = _mm512_mask_blend_epi64(onz, _mm512_maskz_mov_epi64(ony, one), two);
-            a = _mm512_mask_add_epi64(a, back, a, _mm512_mullo_epi64(_mm512_sub_epi64(L, two), vinc));
-            vinc = _mm512_mask_sub_epi64(vinc, back, zero, vinc);
-            a = _mm512_add_epi64(a, _mm512_slli_epi64(axis, 62));
+            p = _mm512_mask_add_epi64(p, back, p, _mm512_mullo_epi64(_mm512_sub_epi64(L, two), inc));
+            inc = _mm512_mask_sub_epi64(inc, back, zero, inc);
+            p = _mm512_add_epi64(p, _mm512_slli_epi64(axis, 62));
         }
         walk = keep & _mm512_cmpgt_epi64_mask(L, one);
         few = keep & (__mmask8)~walk;
-        vkey = _mm512_cvtepi32_epi64(_mm256_maskz_loadu_epi32(keep, B + t));
-        if (wide)
-            vkey = _mm512_add_epi64(vkey, _mm512_slli_epi64(L, 32));
-        meta = _mm512_add_epi64(lh, _mm512_sub_epi64(L, one));  /* rem = L - 1 | lo | hi */
-        _mm512_storeu_si512(QP + nq, _mm512_maskz_compress_epi64(walk, a));
-        _mm512_storeu_si512(QI + nq, _mm512_maskz_compress_epi64(walk, vinc));
-        _mm512_storeu_si512(QM + nq, _mm512_maskz_compress_epi64(walk, meta));
-        _mm512_storeu_si512(QK + nq, _mm512_maskz_compress_epi64(walk, vkey));
+        key = _mm512_cvtepi32_epi64(bins);
+        if (n4 > 3)
+            key = _mm512_add_epi64(key, _mm512_slli_epi64(L, 24));
+        st = _mm512_add_epi64(st, _mm512_slli_epi64(key, 32));
+        _mm512_storeu_si512(QP + nq, _mm512_maskz_compress_epi64(walk, p));
+        _mm512_storeu_si512(QI + nq, _mm512_maskz_compress_epi64(walk, inc));
+        _mm512_storeu_si512(QM + nq, _mm512_maskz_compress_epi64(walk, st));
         nq += __builtin_popcount(walk);
         if (few) {
-            /* no inner voxel: occ = T = L + 1, every voxel occupied */
             int64_t Lf[8] __attribute__((aligned(64)));
-            int l;
+            int32_t Bf[8] __attribute__((aligned(32)));
             _mm512_store_si512(Lf, L);
+            _mm256_store_si256((__m256i *)Bf, bins);
             for (l = 0; l < 8; l++) {
                 if ((few >> l) & 1) {
                     const int32_t *th = thr + (Lf[l] + 1) * n4;
                     int bb = 0, j;
                     for (j = 1; j < n4; j++)
                         bb += (Lf[l] + 1) >= th[j];
-                    counts[B[t + l] + bb]++;
+                    counts[Bf[l] + bb]++;
                 }
             }
         }
     }
+    *nq_out = nq;
+    return bad;
+}
 
-/* Set S's lanes: position, increment, rem and occ in registers, lo, hi and
-   key in ``lanes`` (read only when a lane may finish). */
+/* The words tab[ix[l]], l < 8, by scalar loads: on Zen 4 (whose gathers
+ * are microcoded) cheaper than a gather, and other work overlaps them. Every
+ * index must be valid. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static inline __m512i eppf_soft_gather8(__m512i ix, const uint64_t *tab)
+{
+    uint64_t idx[8] __attribute__((aligned(64)));
+    __m128i a0, a1, a2, a3;
+    __m256i b0, b1;
+    _mm512_store_si512(idx, ix);
+    a0 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[0]]), (long long)tab[idx[1]], 1);
+    a1 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[2]]), (long long)tab[idx[3]], 1);
+    a2 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[4]]), (long long)tab[idx[5]], 1);
+    a3 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[6]]), (long long)tab[idx[7]], 1);
+    b0 = _mm256_inserti128_si256(_mm256_castsi128_si256(a0), a1, 1);
+    b1 = _mm256_inserti128_si256(_mm256_castsi128_si256(a2), a3, 1);
+    return _mm512_inserti64x4(_mm512_castsi256_si512(b0), b1, 1);
+}
+
+/* Walk the nq queued lines (and those in ``lanes``) and count the pairs whose
+ * bin becomes certain; ``code`` holds at least EPPF_CODE_READ_WORDS words. */
+__attribute__((target(EPPF_AVX512_TARGET)))
+static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, const int64_t *QM,
+                                 const uint64_t *code, int64_t g, const int32_t *thr, int n4, int64_t *lanes,
+                                 int drain, int32_t *counts)
+{
+    /* finished lines: counts index (n4 <= 3) or state (n4 > 3); at most 48 + nq of them */
+    int64_t OK[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
+    const __m512i one = _mm512_set1_epi64(1);
+    /* multishift fields: byte 0 <- bits 13.. (2 z and a fraction bit), byte 1 <- bit 19 (z >> 5),
+       byte 2 <- bits 35.. (y), byte 3 <- bits 56.. (x and the axis a above it); kept: 2 (z & 31), 1, 6
+       and 8 bits (x + 64 a) */
+    const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_XSHIFT << 24) | ((int64_t)EPPF_PK_YSHIFT << 16)
+                                           | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 8) | (EPPF_PK_ZSHIFT - 1));
+    const __m512i mfield = _mm512_set1_epi64(0xFF3F013E);
+    /* bytes (0, 1, 1, g): words z >> 5 and y + g (x + 64 a) (at most 16383 for any position); then
+       (1, 2): the word index 2 (y + g x) + (z >> 5) + 128 g a (below EPPF_CODE_READ_WORDS), in the cone
+       grid of axis a */
+    const __m512i mul = _mm512_set1_epi64(((int64_t)g << 24) | (1 << 16) | (1 << 8));
+    const __m512i w21 = _mm512_set1_epi64(0x00020001);
+    /* steps a look-up advances by its code c (index bits 0-1; bit 2 is the next voxel's): max(c, 1) */
+    const __m512i tsteps = _mm512_set_epi64(3, 2, 1, 1, 3, 2, 1, 1);
+    /* and what it adds to the state's bytes R, U, O, X (c = 0: an occupied voxel) */
+    const __m512i tdelta = _mm512_set_epi64(EPPF_ST(-3, -3, 0, 0), EPPF_ST(-2, -2, 0, 0), EPPF_ST(-1, -1, 0, 0),
+                                            EPPF_ST(-1, 0, -1, -1), EPPF_ST(-3, -3, 0, 0), EPPF_ST(-2, -2, 0, 0),
+                                            EPPF_ST(-1, -1, 0, 0), EPPF_ST(-1, 0, -1, -1));
+    /* the sign bits of R; of R, U and O; of O; of X */
+    const __m512i rsign = _mm512_set1_epi64(0x80), dsign = _mm512_set1_epi64(0x808080);
+    const __m512i osign = _mm512_set1_epi64(0x800000), xsign = _mm512_set1_epi64(0x80000000LL);
+    const int wide = n4 > 3;
+    __m512i pA, incA, stA, pB, incB, stB, pC, incC, stC;
+    __m512i pD, incD, stD, pE, incE, stE, pF, incF, stF;
+    __mmask8 actA, actB, actC, actD, actE, actF;
+    int q = 0, nout = 0, i;
+
+/* Set S's lanes (position, increment, state and the mask of lanes in use)
+   from and to ``lanes``. */
 #define EPPF_LOADL(S, o)                                                                          \
     do {                                                                                          \
         p##S = _mm512_loadu_si512(lanes + (o));                                                   \
         inc##S = _mm512_loadu_si512(lanes + (o) + 8);                                             \
-        rem##S = _mm512_loadu_si512(lanes + (o) + 16);                                            \
-        occ##S = _mm512_loadu_si512(lanes + (o) + 40);                                            \
+        st##S = _mm512_loadu_si512(lanes + (o) + 16);                                             \
         act##S = (__mmask8)lanes[(o) + 56];                                                       \
     } while (0)
 #define EPPF_SAVEL(S, o)                                                                          \
     do {                                                                                          \
         _mm512_storeu_si512(lanes + (o), p##S);                                                   \
         _mm512_storeu_si512(lanes + (o) + 8, inc##S);                                             \
-        _mm512_storeu_si512(lanes + (o) + 16, rem##S);                                            \
-        _mm512_storeu_si512(lanes + (o) + 40, occ##S);                                            \
+        _mm512_storeu_si512(lanes + (o) + 16, st##S);                                             \
         lanes[(o) + 56] = act##S;                                                                 \
     } while (0)
 /* The free lanes of set S take the next lines of the queue, in lane order. */
-#define EPPF_REFILL(S, o)                                                                         \
+#define EPPF_REFILL(S)                                                                            \
     do {                                                                                          \
         __mmask8 fill_ = (__mmask8)~act##S;                                                       \
         if (nq - q < 8) {                                                                         \
             while (__builtin_popcount(fill_) > nq - q)                                            \
                 fill_ &= (__mmask8)~(1u << (31 - __builtin_clz(fill_)));                          \
         }                                                                                         \
-        {   /* (no branch: a free lane is as likely as not) */                                    \
-            const __m512i mt_ = _mm512_maskz_expand_epi64(fill_, _mm512_loadu_si512(QM + q));     \
-            p##S = _mm512_mask_expand_epi64(p##S, fill_, _mm512_loadu_si512(QP + q));             \
-            inc##S = _mm512_mask_expand_epi64(inc##S, fill_, _mm512_loadu_si512(QI + q));         \
-            rem##S = _mm512_mask_and_epi64(rem##S, fill_, mt_, fmask);                            \
-            occ##S = _mm512_mask_mov_epi64(occ##S, fill_, two);                                   \
-            _mm512_mask_storeu_epi64(lanes + (o) + 48, fill_,                                     \
-                                     _mm512_maskz_expand_epi64(fill_, _mm512_loadu_si512(QK + q))); \
-            _mm512_mask_storeu_epi64(lanes + (o) + 24, fill_,                                     \
-                                     _mm512_and_si512(_mm512_srli_epi64(mt_, EPPF_META_LO), fmask)); \
-            _mm512_mask_storeu_epi64(lanes + (o) + 32, fill_, _mm512_srli_epi64(mt_, EPPF_META_HI)); \
-            act##S |= fill_;                                                                      \
-            q += __builtin_popcount(fill_);                                                       \
-        }                                                                                         \
+        p##S = _mm512_mask_expand_epi64(p##S, fill_, _mm512_loadu_si512(QP + q));                 \
+        inc##S = _mm512_mask_expand_epi64(inc##S, fill_, _mm512_loadu_si512(QI + q));             \
+        st##S = _mm512_mask_expand_epi64(st##S, fill_, _mm512_loadu_si512(QM + q));               \
+        act##S |= fill_;                                                                          \
+        q += __builtin_popcount(fill_);                                                           \
     } while (0)
-/* One step of set S: the lanes with voxels left (rem > 0) look up c and
-   count an occupied voxel; every lane advances max(c, 1) voxels (a lane
-   whose line ends within them has rem <= 0 after it and counts no more). A
-   lane is looked up only while rem > 0 (masked gather), i.e. at a voxel of
-   its line, whose word index is below 384 g <= EPPF_CODE_WORDS; lanes past
-   their line (rem <= 0) drift to any position, never read. The fields of
-   the word index come from one multishift, and so does the code: byte 0
-   of t_ is the code's bit offset, so multishift(t_, word) puts c in bits
-   0-1 (the next voxel's code above, ignored by the table of max(c, 1)). */
+/* One step of set S. The fields of the word index come from one
+   multishift, and so does the code: byte 0 of t_ is the code's bit offset,
+   so multishift(t_, word) puts c in bits 0-1 (the next voxel's code above,
+   ignored by the tables, which read bits 0-2 and repeat themselves). */
 #define EPPF_STEPD(S)                                                                             \
     do {                                                                                          \
-        const __mmask8 on_ = _mm512_cmpgt_epi64_mask(rem##S, zero);                              \
+        const __mmask8 on_ = _mm512_testn_epi64_mask(st##S, rsign);                               \
         const __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p##S), mfield);   \
         const __m512i wi_ = _mm512_madd_epi16(_mm512_maddubs_epi16(t_, mul), w21);               \
-        __m512i c_ = _mm512_mask_i64gather_epi64(zero, on_, wi_, cbase, 8);                      \
-        c_ = _mm512_multishift_epi64_epi8(t_, c_);                                                \
-        occ##S = _mm512_mask_add_epi64(occ##S, _mm512_mask_testn_epi64_mask(on_, c_, three), occ##S, one); \
+        __m512i c_ = _mm512_multishift_epi64_epi8(t_, eppf_soft_gather8(wi_, code));              \
+        st##S = _mm512_add_epi8(st##S, _mm512_maskz_permutexvar_epi64(on_, c_, tdelta));          \
         c_ = _mm512_permutexvar_epi64(c_, tsteps);                                                \
         p##S = _mm512_add_epi64(p##S, _mm512_mullo_epi64(c_, inc##S));                            \
-        rem##S = _mm512_sub_epi64(rem##S, c_);                                                    \
     } while (0)
-/* The lanes of set S whose bin is certain (or whose line has ended) give
-   their counts index (or key and occ) to the output and free their lane. */
-#define EPPF_DONE(S, o)                                                                           \
+/* The lanes of set S whose bin is certain give their counts index (or
+   state) to the output and free their lane (state -1: R < 0). */
+#define EPPF_DONE(S)                                                                              \
     do {                                                                                          \
-        const __m512i lo_ = _mm512_loadu_si512(lanes + (o) + 24), hi_ = _mm512_loadu_si512(lanes + (o) + 32); \
-        const __m512i key_ = _mm512_loadu_si512(lanes + (o) + 48);                                \
-        const __m512i end_ = _mm512_add_epi64(occ##S, rem##S);                                    \
-        __mmask8 done_ = _mm512_cmple_epi64_mask(rem##S, zero) | _mm512_cmpge_epi64_mask(occ##S, hi_) \
-                         | _mm512_cmplt_epi64_mask(end_, lo_);                                    \
-        if (!wide)                                                                                \
-            done_ |= _mm512_cmpge_epi64_mask(occ##S, lo_) & _mm512_cmplt_epi64_mask(end_, hi_);   \
-        done_ &= act##S;                                                                          \
+        const __mmask8 done_ = _mm512_test_epi64_mask(st##S, dsign) & act##S;                     \
         if (wide) {                                                                               \
-            _mm512_storeu_si512(OK + nout, _mm512_maskz_compress_epi64(done_, key_));             \
-            _mm512_storeu_si512(OO + nout, _mm512_maskz_compress_epi64(done_, occ##S));           \
+            _mm512_storeu_si512(OK + nout, _mm512_maskz_compress_epi64(done_, st##S));            \
         } else {                                                                                  \
-            /* the bin: how many of lo, hi (one and the same for n4 = 2) occ reaches */           \
-            __m512i bb_ = _mm512_mask_add_epi64(key_, _mm512_cmpge_epi64_mask(occ##S, lo_), key_, one); \
+            __m512i bb_ = _mm512_srli_epi64(st##S, 32);                                           \
+            bb_ = _mm512_mask_add_epi64(bb_, _mm512_test_epi64_mask(st##S, osign), bb_, one);     \
             if (n4 == 3)                                                                          \
-                bb_ = _mm512_mask_add_epi64(bb_, _mm512_cmpge_epi64_mask(occ##S, hi_), bb_, one); \
+                bb_ = _mm512_mask_add_epi64(bb_, _mm512_test_epi64_mask(st##S, xsign), bb_, one); \
             _mm512_storeu_si512(OK + nout, _mm512_maskz_compress_epi64(done_, bb_));              \
         }                                                                                         \
         nout += __builtin_popcount(done_);                                                        \
         act##S &= (__mmask8)~done_;                                                               \
-        rem##S = _mm512_mask_mov_epi64(rem##S, done_, zero);  /* a free lane looks nothing up */  \
+        st##S = _mm512_mask_mov_epi64(st##S, done_, _mm512_set1_epi64(-1));                       \
+    } while (0)
+#define EPPF_ROUND(STEP)                                                                          \
+    do {                                                                                          \
+        STEP(A);                                                                                  \
+        STEP(B);                                                                                  \
+        STEP(C);                                                                                  \
+        STEP(D);                                                                                  \
+        STEP(E);                                                                                  \
+        STEP(F);                                                                                  \
     } while (0)
 
     EPPF_LOADL(A, 0);
@@ -1414,45 +1512,15 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
     EPPF_LOADL(E, 256);
     EPPF_LOADL(F, 320);
     for (;;) {
-        EPPF_REFILL(A, 0);
-        EPPF_REFILL(B, 64);
-        EPPF_REFILL(C, 128);
-        EPPF_REFILL(D, 192);
-        EPPF_REFILL(E, 256);
-        EPPF_REFILL(F, 320);
+        EPPF_ROUND(EPPF_REFILL);
         if (drain ? (actA | actB | actC | actD | actE | actF) == 0
                   : (q >= nq && (actA & actB & actC & actD & actE & actF) != 0xff))
             break;
-        EPPF_STEPD(A);
-        EPPF_STEPD(B);
-        EPPF_STEPD(C);
-        EPPF_STEPD(D);
-        EPPF_STEPD(E);
-        EPPF_STEPD(F);
-        EPPF_STEPD(A);
-        EPPF_STEPD(B);
-        EPPF_STEPD(C);
-        EPPF_STEPD(D);
-        EPPF_STEPD(E);
-        EPPF_STEPD(F);
-        EPPF_STEPD(A);
-        EPPF_STEPD(B);
-        EPPF_STEPD(C);
-        EPPF_STEPD(D);
-        EPPF_STEPD(E);
-        EPPF_STEPD(F);
-        EPPF_STEPD(A);
-        EPPF_STEPD(B);
-        EPPF_STEPD(C);
-        EPPF_STEPD(D);
-        EPPF_STEPD(E);
-        EPPF_STEPD(F);
-        EPPF_DONE(A, 0);
-        EPPF_DONE(B, 64);
-        EPPF_DONE(C, 128);
-        EPPF_DONE(D, 192);
-        EPPF_DONE(E, 256);
-        EPPF_DONE(F, 320);
+        EPPF_ROUND(EPPF_STEPD);
+        EPPF_ROUND(EPPF_STEPD);
+        EPPF_ROUND(EPPF_STEPD);
+        EPPF_ROUND(EPPF_STEPD);
+        EPPF_ROUND(EPPF_DONE);
     }
     EPPF_SAVEL(A, 0);
     EPPF_SAVEL(B, 64);
@@ -1465,27 +1533,40 @@ static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, con
 #undef EPPF_REFILL
 #undef EPPF_STEPD
 #undef EPPF_DONE
+#undef EPPF_ROUND
 
     if (!wide) {
         for (i = 0; i < nout; i++)
             counts[OK[i]]++;
     } else {
         for (i = 0; i < nout; i++) {
-            const int32_t *th = thr + ((OK[i] >> 32) + 1) * n4;
+            const int32_t *th = thr + (((OK[i] >> 56) & 63) + 1) * n4;
+            const int occ = th[n4 - 1] - 1 - (int8_t)(OK[i] >> 16);  /* hi - 1 - O */
             int bb = 0, j;
             for (j = 1; j < n4; j++)
-                bb += OO[i] >= th[j];
-            counts[(int32_t)(OK[i] & 0xFFFFFFFF) + bb]++;
+                bb += occ >= th[j];
+            counts[(int32_t)((OK[i] >> 32) & 0xFFFFFF) + bb]++;
         }
     }
 }
 #else
-static void eppf_f4_dist_avx512(int m, const int32_t *ii, const int32_t *jj, const int32_t *B,
-                                const int64_t *pv, const uint64_t *code, int64_t g, const int32_t *thr, int n4,
-                                const int64_t *lohi, int64_t *lanes, int drain, int32_t *counts)
+static int eppf_f123q_avx512(int m, const int32_t *ii, const int32_t *jj, double scale, int n1, int n2, int n3,
+                             int n4, double f1_density, const double *cos2, const double *cos3, const double *pn,
+                             const int32_t *thr, const int64_t *states, int64_t *QP, int64_t *QI, int64_t *QM,
+                             int *nq_out, int32_t *counts)
 {
-    (void)m; (void)ii; (void)jj; (void)B; (void)pv; (void)code; (void)g; (void)thr; (void)n4; (void)lohi;
-    (void)lanes; (void)drain; (void)counts;
+    (void)states; (void)m; (void)ii; (void)jj; (void)scale; (void)n1; (void)n2; (void)n3; (void)n4; (void)f1_density;
+    (void)cos2; (void)cos3; (void)pn; (void)thr; (void)QP; (void)QI; (void)QM; (void)counts;
+    *nq_out = 0;
+    return 0;
+}
+
+static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, const int64_t *QM,
+                                 const uint64_t *code, int64_t g, const int32_t *thr, int n4, int64_t *lanes,
+                                 int drain, int32_t *counts)
+{
+    (void)nq; (void)QP; (void)QI; (void)QM; (void)code; (void)g; (void)thr; (void)n4; (void)lanes;
+    (void)drain; (void)counts;
 }
 #endif
 

@@ -378,6 +378,43 @@ def test_levels_agree_on_strided_mixed_size_objects_with_odd_normals_and_two_thr
         assert_array_equal(one, want)
 
 
+@pytest.mark.parametrize("n4", [2, 3, 4, 64])
+def test_levels_agree_on_dense_lattices_for_every_f4_bin_count(n4):
+    # Lines inside a fully occupied plane and along a full row of the 64 grid: up to
+    # 62 occupied inner voxels a line, the extremes of the skipping walk's byte
+    # counters (and, at n4 = 64, thresholds one voxel apart), for every level.
+    rng = np.random.default_rng(n4)
+    u, v = np.meshgrid(np.arange(64.0), np.arange(64.0))
+    plane = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, 31.0)])
+    row = np.column_stack([np.arange(64.0), np.full(64, 63.0), np.zeros(64)])
+    scatter = rng.uniform(0, 63, size=(200, 3))
+    cloud = np.vstack([plane, row, scatter])
+    cloud = np.hstack([cloud, np.tile([0.0, 0.0, 1.0], (len(cloud), 1))])
+    points, normals, offsets = _packed([cloud])
+    seeds = object_seeds(21, 1)
+    n_bins = (2, 1, 1, n4)
+    args = (points, normals, offsets, np.ones(1), seeds, 1500, n_bins, 64, ref.F1_MAX, 1)
+    want, _ = _counts_at(0, *args)
+    assert_array_equal(want[0], _reference_counts(cloud, seeds[0], 1500, 1.0, n_bins, 64))
+    assert want[0].reshape(-1, n4)[:, -1].sum() > 100  # many lines in the top bin
+    for level in LEVELS[1:]:
+        assert_array_equal(_counts_at(level, *args)[0], want)
+
+
+def test_levels_agree_on_an_object_too_large_for_the_row_copy():
+    # Past 65,536 points the AVX-512 f1-f3 read the points in place and the
+    # skipping walk, which needs the row copy, hands over to the grouped one.
+    rng = np.random.default_rng(7)
+    clouds = [_box(70_000, rng), _sphere(500, rng)]
+    points, normals, offsets = _packed(clouds)
+    seeds = object_seeds(3, 2)
+    args = (points, normals, offsets, np.full(2, 0.8), seeds, 700, (5, 4, 3, 3), 64, ref.F1_MAX, 1)
+    want, _ = _counts_at(0, *args)
+    assert_array_equal(want[1], _reference_counts(clouds[1], seeds[1], 700, 0.8, (5, 4, 3, 3), 64))
+    for level in LEVELS[1:]:
+        assert_array_equal(_counts_at(level, *args)[0], want)
+
+
 def test_kernel_levels_report_what_the_cpu_has():
     assert LEVELS[0] == 0 and list(LEVELS) == list(range(len(LEVELS)))
     old = _set_simd_level(99)  # capped at the best level the CPU has
