@@ -1388,6 +1388,9 @@ static inline __m512i eppf_soft_gather8(__m512i ix, const uint64_t *tab)
     __m128i a0, a1, a2, a3;
     __m256i b0, b1;
     _mm512_store_si512(idx, ix);
+    /* read the indices back from memory: the compiler would otherwise extract
+       them from the register, 2-3 vector operations each */
+    __asm__("" : "+m"(idx));
     a0 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[0]]), (long long)tab[idx[1]], 1);
     a1 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[2]]), (long long)tab[idx[3]], 1);
     a2 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[4]]), (long long)tab[idx[5]], 1);
