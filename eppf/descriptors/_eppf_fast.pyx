@@ -57,6 +57,7 @@ cdef extern from "_eppf_walk.h":
         EPPF_PK_YSHIFT
         EPPF_PK_XSHIFT
         EPPF_WALK_BATCH
+        EPPF_QUEUE_BATCH
         EPPF_META_LO
         EPPF_META_HI
     int64_t EPPF_PK_X
@@ -125,6 +126,7 @@ cdef enum:
     FIX_SHIFT = 32
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
+    QBATCH = EPPF_QUEUE_BATCH  # the pairs of a batch at level 3 (at least BATCH)
     CODE_WORDS = EPPF_CODE_WORDS  # the AVX-512 walk's three cone grids (one per axis, 2 words a row)
     CODE_READ_WORDS = EPPF_CODE_READ_WORDS  # the words of the buffer the skipping walk may read
     # packed line walk for grids up to 64 (layout in _eppf_walk.h)
@@ -415,9 +417,9 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
-    cdef int32_t I[BATCH]
-    cdef int32_t J[BATCH]
-    cdef int32_t B[BATCH]
+    cdef int32_t I[QBATCH]
+    cdef int32_t J[QBATCH]
+    cdef int32_t B[QBATCH]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
     # AVX-512: draw a batch's candidate pairs eight at a time; the f1-f3 pass
@@ -427,9 +429,9 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int good
     cdef int64_t lanes[EPPF_LANES_WORDS]
     # the level-3 queue of a batch's lines (first position, increment, state)
-    cdef int64_t QP[BATCH + 8]
-    cdef int64_t QI[BATCH + 8]
-    cdef int64_t QM[BATCH + 8]
+    cdef int64_t QP[QBATCH + 8]
+    cdef int64_t QI[QBATCH + 8]
+    cdef int64_t QM[QBATCH + 8]
     cdef int nq = 0
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
@@ -446,8 +448,8 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     base = 0
     while base < n_pairs:
         m = n_pairs - base
-        if m > BATCH:
-            m = BATCH
+        if m > (QBATCH if dist else BATCH):
+            m = QBATCH if dist else BATCH
         if vec_draw:
             eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
             if dist:

@@ -82,6 +82,9 @@
 /* Pairs per batch (the walks sort a batch by line length: a longer batch
    groups the lanes better, up to about this size). */
 #define EPPF_WALK_BATCH 256
+/* Pairs per batch of the skipping walk (level 3), which needs no sorting:
+   fewer, longer calls (its lanes carry over between them). */
+#define EPPF_QUEUE_BATCH 1024
 /* A walk's counters in one int64 for the AVX-512 walk: rem (inner voxels) in
    bits 0-20, the f4 thresholds lo from bit 21 and hi from bit 42 (all below
    2**21); ``lohi[T]`` holds lo and hi of T voxels in place (_eppf_fast.pyx). */
@@ -1303,7 +1306,7 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
  */
 
 /* The f1-f3 bins and the f4 walk setup of the pairs (ii[t], jj[t]),
- * t < m <= EPPF_WALK_BATCH, with the points, normals and voxels in the rows
+ * t < m <= EPPF_QUEUE_BATCH, with the points, normals and voxels in the rows
  * of ``pn`` (``eppf_pack_rows``) and the lines' first states in ``states``
  * (``eppf_walk_states``). Lines with inner voxels (L > 1) join the
  * queue (QP, QI, QM; *nq_out of them); the others are counted at once
@@ -1408,14 +1411,14 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
                                  int drain, int32_t *counts)
 {
     /* finished lines: counts index (n4 <= 3) or state (n4 > 3); at most 48 + nq of them */
-    int64_t OK[EPPF_WALK_BATCH + 64] __attribute__((aligned(64)));
+    int64_t OK[EPPF_QUEUE_BATCH + 64] __attribute__((aligned(64)));
     const __m512i one = _mm512_set1_epi64(1);
     /* multishift fields: byte 0 <- bits 13.. (2 z and a fraction bit), byte 1 <- bit 19 (z >> 5),
        byte 2 <- bits 35.. (y), byte 3 <- bits 56.. (x and the axis a above it); kept: 2 (z & 31), 1, 6
        and 8 bits (x + 64 a) */
     const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_XSHIFT << 24) | ((int64_t)EPPF_PK_YSHIFT << 16)
                                            | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 8) | (EPPF_PK_ZSHIFT - 1));
-    const __m512i mfield = _mm512_set1_epi64(0xFF3F013E);
+    const __m512i mfield = _mm512_set1_epi64(0xFF3F013E), offset = _mm512_set1_epi64(0x3E);
     /* bytes (0, 1, 1, g): words z >> 5 and y + g (x + 64 a) (at most 16383 for any position); then
        (1, 2): the word index 2 (y + g x) + (z >> 5) + 128 g a (below EPPF_CODE_READ_WORDS), in the cone
        grid of axis a */
@@ -1467,15 +1470,16 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
         q += __builtin_popcount(fill_);                                                           \
     } while (0)
 /* One step of set S. The fields of the word index come from one
-   multishift, and so does the code: byte 0 of t_ is the code's bit offset,
-   so multishift(t_, word) puts c in bits 0-1 (the next voxel's code above,
-   ignored by the tables, which read bits 0-2 and repeat themselves). */
+   multishift; byte 0 of t_ is the code's bit offset, so word >> (t_ & 0x3E)
+   puts c in bits 0-1 (the next voxel's code above, ignored by the tables,
+   which read bits 0-2 and repeat themselves; a variable shift, not a second
+   multishift: the shuffle units are the busier). */
 #define EPPF_STEPD(S)                                                                             \
     do {                                                                                          \
         const __mmask8 on_ = _mm512_testn_epi64_mask(st##S, rsign);                               \
         const __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p##S), mfield);   \
         const __m512i wi_ = _mm512_madd_epi16(_mm512_maddubs_epi16(t_, mul), w21);               \
-        __m512i c_ = _mm512_multishift_epi64_epi8(t_, eppf_soft_gather8(wi_, code));              \
+        __m512i c_ = _mm512_srlv_epi64(eppf_soft_gather8(wi_, code), _mm512_and_si512(t_, offset)); \
         st##S = _mm512_add_epi8(st##S, _mm512_maskz_permutexvar_epi64(on_, c_, tdelta));          \
         c_ = _mm512_permutexvar_epi64(c_, tsteps);                                                \
         p##S = _mm512_add_epi64(p##S, _mm512_mullo_epi64(c_, inc##S));                            \

@@ -123,9 +123,10 @@ def _counts_at(level, *args):
 
 
 # Grids 64 and <= 64 take the SIMD walks (where the CPU has them), 100 the generic
-# walk; odd pair counts leave partial batches of 256 and partial groups of 4 and 8 lanes.
+# walk; odd pair counts leave partial batches of 256 (1,024 for the skipping walk) and
+# partial groups of 4 and 8 lanes.
 @pytest.mark.parametrize("grid, n_bins, n_pairs", [
-    (64, (20, 4, 5, 3), 1001), (64, (3, 2, 2, 2), 67), (64, (2, 1, 1, 7), 1),
+    (64, (20, 4, 5, 3), 1001), (64, (20, 4, 5, 3), 2100), (64, (3, 2, 2, 2), 67), (64, (2, 1, 1, 7), 1),
     (8, (7, 5, 2, 6), 130), (17, (15, 3, 4, 3), 999), (100, (20, 4, 5, 3), 515), (2, (3, 1, 1, 3), 66),
 ])
 def test_counts_match_reference_on_every_walk(clouds, grid, n_bins, n_pairs):
@@ -292,7 +293,7 @@ def _first_coinciding_draw(points, seed, n_draws):
     return None
 
 
-@pytest.mark.parametrize("n_pairs", [1, 9, 300, 2001])
+@pytest.mark.parametrize("n_pairs", [1, 9, 300, 2001, 6000])
 def test_draws_past_coinciding_points_match_reference_at_every_level(n_pairs):
     # The AVX-512 draws skip the check for coinciding points and leave the rest
     # of the object to the scalar draw (with its redraws) from the first such
@@ -304,12 +305,16 @@ def test_draws_past_coinciding_points_match_reference_at_every_level(n_pairs):
     late[59] = late[0]  # one repeated point: for 2001 pairs, the first coinciding candidate comes after batch one
     heavy = _sphere(30, rng)
     heavy[2:] = heavy[0]  # 29 of 30 points equal: most draws are redrawn
-    clouds = [early, late, _sphere(2, rng), _sphere(500, rng), heavy]
+    later = _sphere(120, rng)
+    later[119] = later[0]  # for 6000 pairs, the first coinciding candidate comes after the first 1,024
+    clouds = [early, late, _sphere(2, rng), _sphere(500, rng), heavy, later]
     seeds = object_seeds(n_pairs, len(clouds))
     if n_pairs == 2001:
         assert _first_coinciding_draw(early[:, :3], seeds[0], n_pairs) < 256
         assert 256 < _first_coinciding_draw(late[:, :3], seeds[1], n_pairs) < n_pairs
         assert _first_coinciding_draw(clouds[3][:, :3], seeds[3], n_pairs) is None
+    if n_pairs == 6000:
+        assert 1024 < _first_coinciding_draw(later[:, :3], seeds[5], n_pairs) < n_pairs
     points, normals, offsets = _packed(clouds)
     args = (points, normals, offsets, np.full(len(clouds), 0.4), seeds, n_pairs, (6, 3, 2, 3), 64, ref.F1_MAX, 2)
     want = [_reference_counts(c, seeds[k], n_pairs, 0.4, (6, 3, 2, 3), 64) for k, c in enumerate(clouds)]
