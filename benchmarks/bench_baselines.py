@@ -23,25 +23,26 @@ walk; the row marked "default" is the one the kernel picks here), passes
 alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
 ModelNet10; every level's output is checked equal to the scalar kernel's).
 ``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
-guest, shared with other jobs (load average about 1.3), CPU ms per object,
+guest, shared with other jobs (load average about 0.7), CPU ms per object,
 one thread, normals given, the paper's settings:
 
 ================================================  ======  =========  ================  ==============  ==================
 descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
 ================================================  ======  =========  ================  ==============  ==================
-EPPF, scalar kernel                               1.376   1.425      17.6              13.7            6-7x
-EPPF, AVX2 kernel                                 0.666   0.711      8.8               6.8             12-15x
-EPPF, AVX-512, grouped walk                       0.460   0.503      6.2               4.8             17-22x
-EPPF, AVX-512, skipping walk (default here)       0.361   0.399      4.9               3.8             22-28x
-GASD (ours)                                       -       0.081      1.0               0.78
-VFH (ours)                                        -       0.104      1.28              1.0
+EPPF, scalar kernel                               1.555   1.516      17.7              14.3            5-6x
+EPPF, AVX2 kernel                                 0.704   0.803      9.3               7.6             11-14x
+EPPF, AVX-512, grouped walk                       0.464   0.520      6.1               4.9             17-22x
+EPPF, AVX-512, skipping walk (default here)       0.283   0.338      3.9               3.2             28-35x
+GASD (ours)                                       -       0.086      1.0               0.81
+VFH (ours)                                        -       0.106      1.23              1.0
 ================================================  ======  =========  ================  ==============  ==================
 
 (PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
 VFH 0.41-0.62. The skipping walk walks each line along its dominant axis
-and skips by the empty cone ahead; run beside the kernel before that change
-it took 0.81-0.86 of its time.) The 0.3 ms of 30x ESF is not reached; where
-the kernel's time goes is in the performance page of the docs.
+and skips by the empty cone ahead, with f1-f3 and its setup in one pass and
+look-ups by scalar loads.) The kernel is under 0.3 ms per object here; 30x
+ESF holds for ESF at 8.5 ms or more. Where the kernel's time goes is in the
+performance page of the docs.
 
 Usage::
 

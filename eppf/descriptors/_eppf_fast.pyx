@@ -23,13 +23,15 @@ Conventions (the user guide's reading of the paper):
   bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
 - A bin count of 1 switches a function off (its value is never computed).
 
-Where the CPU has them (checked at import), batches of 256 pairs go through
-the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F, BW, VL, DQ, VBMI) the
-draws, the f1-f3 bins and the f4 walks of grids up to 64 run eight pairs at
-a time (level 2: walks grouped by line length; level 3: lanes refilled from
-a queue, each line walked along its dominant axis, skipping voxels proved
-empty by the empty cone ahead of them; level 3 is the default on AMD, where gathers are slow); with
-AVX2 only, f1-f3 and the walks run four at a time (level 1). f1-f3 use the
+Where the CPU has them (checked at import), batches of pairs (256; 1,024 at
+level 3) go through the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F,
+BW, VL, DQ, VBMI) the draws, the f1-f3 bins and the f4 walks of grids up to
+64 run eight pairs at a time (level 2: walks grouped by line length;
+level 3: f1-f3 and the walk setup in one pass, lanes refilled from a queue,
+each line walked along its dominant axis, skipping voxels proved empty by
+the empty cone ahead of them, look-ups by scalar loads; level 3 is the
+default on AMD, where gathers are slow); with AVX2 only, f1-f3 and the
+walks run four at a time (level 1). f1-f3 use the
 same IEEE operations in the same order, the walks visit the same voxels or
 prove them empty. Their bins and draws are bit-identical to the scalar code
 here, which every other case uses; ``_set_simd(False)`` forces it and
