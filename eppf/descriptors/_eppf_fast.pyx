@@ -531,10 +531,10 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
         prm.lohi[k] = 0
         if n4 > 1 and k <= grid + 1:
             prm.lohi[k] = ((<int64_t>thr[k * n4 + 1]) << EPPF_META_LO) | ((<int64_t>thr[k * n4 + n4 - 1]) << EPPF_META_HI)
-    for k in range(65):
-        prm.wstate[k] = 0
     if n4 > 1:
-        eppf_walk_states(thr, n4, grid, prm.wstate)
+        eppf_walk_states(thr, n4, grid, prm.wstate)  # (every entry; unused where n4 = 1)
+    else:
+        memset(prm.wstate, 0, sizeof(prm.wstate))
     prm.simd123 = _simd if _simd < 2 else 2
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max

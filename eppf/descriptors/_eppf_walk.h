@@ -381,20 +381,24 @@ static int eppf_f4_order(int m, const int32_t *Ls, int *order)
     return n_walk;
 }
 
+/* The f4 bin of occ occupied voxels on a line of T voxels: how many of the
+   thresholds thr[T n4 + b], b = 1..n4-1, occ reaches. */
+static inline int eppf_f4_bin(const int32_t *thr, int n4, int64_t T, int64_t occ)
+{
+    const int32_t *th = thr + T * n4;
+    int b = 0, j;
+    for (j = 1; j < n4; j++)
+        b += occ >= th[j];
+    return b;
+}
+
 /* f4 bins of the lines without inner voxels (L <= 1): occ = T = L + 1, all voxels occupied. */
 static void eppf_f4_short_lines(int m, const int32_t *Ls, const int32_t *thr, int n4, int32_t *B)
 {
     int t;
-    for (t = 0; t < m; t++) {
-        int64_t L = Ls[t];
-        if (L <= 1) {
-            const int32_t *th = thr + (L + 1) * n4;
-            int b = 0, j;
-            for (j = 1; j < n4; j++)
-                b += (L + 1) >= th[j];
-            B[t] += b;
-        }
-    }
+    for (t = 0; t < m; t++)
+        if (Ls[t] <= 1)
+            B[t] += eppf_f4_bin(thr, n4, Ls[t] + 1, Ls[t] + 1);
 }
 
 /* Add to ``B[t]`` the f4 bin of pair (ii[t], jj[t]) for t < m <= EPPF_WALK_BATCH.
@@ -645,7 +649,7 @@ static inline __mmask8 eppf_group8(int m, int t, const int32_t *ii, const int32_
     return (__mmask8)((1u << (m - t)) - 1);
 }
 
-/* The pairs of (i8, j8) whose two points coincide (all three coordinates equal). */
+/* The lanes whose points pi and pj (x, y, z vectors) coincide: all three coordinates equal. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static inline __mmask8 eppf_same8(const __m512d *pi, const __m512d *pj)
 {
@@ -777,21 +781,13 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
 {
     __m512i tab[8];
     int32_t ri[8], rj[8];
-    int t, l;
+    int t;
     (void)recip_packed;
     eppf_lohi_tab_avx512(lohi, tab);
     for (t = 0; t < m; t += 8) {
-        const __mmask8 keep = m - t >= 8 ? (__mmask8)0xff : (__mmask8)((1u << (m - t)) - 1);
-        const int32_t *i8 = ii + t, *j8 = jj + t;
+        const int32_t *i8, *j8;
+        const __mmask8 keep = eppf_group8(m, t, ii, jj, ri, rj, &i8, &j8);
         __m512i p, inc, L, lh;
-        if (keep != 0xff) {  /* a partial last group repeats its last pair */
-            for (l = 0; l < 8; l++) {
-                ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
-                rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
-            }
-            i8 = ri;
-            j8 = rj;
-        }
         eppf_setup8_avx512(i8, j8, pv, tab, &p, &inc, &L, &lh);
         _mm512_mask_storeu_epi64(P + t, keep, p);
         _mm512_mask_storeu_epi64(INC + t, keep, inc);
@@ -1257,8 +1253,8 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
  * ``eppf_f123q_avx512`` bins f1-f3 and sets up the lines in one pass over
  * the pairs (the rows of ``pn`` also hold each point's packed voxel, so the
  * setup costs no loads of its own), queueing each line with inner voxels;
- * ``eppf_f4_walkq_avx512`` walks the queue in three pairs of eight-lane sets,
- * each lane refilled as soon as its line's bin is certain, each step
+ * ``eppf_f4_walkq_avx512`` walks the queue in six sets of eight lanes, each
+ * lane refilled as soon as its line's bin is certain, each step
  * skipping the voxels the cone grids prove empty, and counts the pairs.
  *
  * A queued line is (first position, increment, state) in batch order. It is
@@ -1366,15 +1362,9 @@ static int eppf_f123q_avx512(int m, const int32_t *ii, const int32_t *jj, double
             int32_t Bf[8] __attribute__((aligned(32)));
             _mm512_store_si512(Lf, L);
             _mm256_store_si256((__m256i *)Bf, bins);
-            for (l = 0; l < 8; l++) {
-                if ((few >> l) & 1) {
-                    const int32_t *th = thr + (Lf[l] + 1) * n4;
-                    int bb = 0, j;
-                    for (j = 1; j < n4; j++)
-                        bb += (Lf[l] + 1) >= th[j];
-                    counts[Bf[l] + bb]++;
-                }
-            }
+            for (l = 0; l < 8; l++)
+                if ((few >> l) & 1)  /* no inner voxel: occ = T = L + 1 */
+                    counts[Bf[l] + eppf_f4_bin(thr, n4, Lf[l] + 1, Lf[l] + 1)]++;
         }
     }
     *nq_out = nq;
@@ -1547,12 +1537,9 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
             counts[OK[i]]++;
     } else {
         for (i = 0; i < nout; i++) {
-            const int32_t *th = thr + (((OK[i] >> 56) & 63) + 1) * n4;
-            const int occ = th[n4 - 1] - 1 - (int8_t)(OK[i] >> 16);  /* hi - 1 - O */
-            int bb = 0, j;
-            for (j = 1; j < n4; j++)
-                bb += occ >= th[j];
-            counts[(int32_t)((OK[i] >> 32) & 0xFFFFFF) + bb]++;
+            const int64_t T = ((OK[i] >> 56) & 63) + 1;
+            const int occ = thr[T * n4 + n4 - 1] - 1 - (int8_t)(OK[i] >> 16);  /* hi - 1 - O */
+            counts[(int32_t)((OK[i] >> 32) & 0xFFFFFF) + eppf_f4_bin(thr, n4, T, occ)]++;
         }
     }
 }
