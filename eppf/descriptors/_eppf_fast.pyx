@@ -76,6 +76,8 @@ cdef extern from "_eppf_walk.h":
                             const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
                             const double* recip_packed, int32_t* B) noexcept nogil
     void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
+    void eppf_fill_grid_avx512(const double* pts, int64_t ps, int64_t n, int64_t g, uint64_t* bits,
+                               int64_t* pv) noexcept nogil
     int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                                const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                                double f1_density, const double* cos2, const double* cos3,
@@ -213,13 +215,18 @@ cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, 
                             int32_t* vox, int64_t* pv) noexcept nogil:
     """Voxelise ``n`` points on a grid over their bounding cube.
 
-    Writes each point's voxel coordinates to ``vox`` (n, 3) and sets the
-    occupied voxels in the bit grid ``bits``: row (x, y) is ``_row_words``
-    64-bit words of z bits, so a 64^3 grid is one word per row (32 KiB).
-    Unless ``pv`` is NULL (grids up to 64 only), each voxel also goes to
-    ``pv`` (n,) as the packed walk's start word: lanes v * S + S/2 + g.
+    Sets the occupied voxels in the bit grid ``bits`` (row (x, y) is
+    ``_row_words`` 64-bit words of z bits, so a 64^3 grid is one word per
+    row, 32 KiB) and writes each point's voxel coordinates to ``vox`` (n, 3)
+    or, unless ``pv`` is NULL (grids up to 64 with the AVX-512 kernels, which
+    read no ``vox``), to ``pv`` (n,) as the packed walk's start word, lanes
+    v * S + S/2 + g: ``eppf_fill_grid_avx512``, the same voxels eight points
+    at a time.
     """
     cdef int64_t i, idx
+    if pv != NULL:
+        eppf_fill_grid_avx512(pts, ps, n, grid, bits, pv)
+        return
     cdef double mnx = pts[0], mny = pts[1], mnz = pts[2]
     cdef double mxx = mnx, mxy = mny, mxz = mnz
     cdef double side, inv
@@ -241,9 +248,6 @@ cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, 
         vox[3 * i + 2] = _voxel(pts[ps * i + 2], mnz, inv, grid)
         idx = ((<int64_t>vox[3 * i] * grid) + vox[3 * i + 1]) * _row_words(grid) + (vox[3 * i + 2] >> 6)
         bits[idx] |= (<uint64_t>1) << (vox[3 * i + 2] & 63)
-        if pv != NULL:
-            pv[i] = ((vox[3 * i] * PK_S + PK_S // 2 + grid) * PK_X + (vox[3 * i + 1] * PK_S + PK_S // 2 + grid) * PK_Y
-                     + vox[3 * i + 2] * PK_S + PK_S // 2 + grid)
 
 
 cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* prm,

@@ -355,6 +355,41 @@ def test_every_level_counts_every_pair_of_non_finite_clouds(grid):
             assert_array_equal(_counts_at(level, *args)[0], want)
 
 
+def test_levels_agree_on_the_voxel_grid_of_edge_case_clouds():
+    # The AVX-512 levels voxelise eight points at a time (bounding box lane by lane,
+    # then across lanes): objects shorter than eight points or one past a multiple of
+    # it, a NaN first point (the scalar loop's box keeps it), box extremes that are
+    # +0 and -0 in either order, flat objects (two zero extents) and points on the
+    # voxel boundaries must give every level the scalar kernel's counts.
+    rng = np.random.default_rng(44)
+    normal = np.array([0.0, 0.0, 1.0])
+
+    def cloud(p):
+        return np.hstack([p, np.tile(normal, (len(p), 1))])
+
+    zeros = rng.normal(size=(40, 3))
+    zeros[[3, 20], 0] = [-0.0, 0.0]
+    zeros[:, 0] = np.abs(zeros[:, 0])  # the x minimum is a zero (+0 and -0 both present)
+    zeros2 = zeros.copy()
+    zeros2[[3, 20], 0] = [0.0, -0.0]
+    first_nan = rng.normal(size=(25, 3))
+    first_nan[0, 1] = np.nan
+    flat = np.column_stack([rng.normal(size=33), np.zeros(33), np.zeros(33)])
+    lattice = np.stack(np.meshgrid(*[np.arange(5.0)] * 3), axis=-1).reshape(-1, 3) / 4.0
+    clouds = [cloud(rng.normal(size=(n, 3))) for n in (2, 3, 7, 8, 9, 15, 17)]
+    clouds += [cloud(zeros), cloud(zeros2), cloud(first_nan), cloud(flat), cloud(lattice)]
+    points, normals, offsets = _packed(clouds)
+    seeds = object_seeds(8, len(clouds))
+    for grid in (2, 17, 64):
+        args = (points, normals, offsets, np.ones(len(clouds)), seeds, 900, (5, 4, 3, 3), grid, ref.F1_MAX, 1)
+        want, status = _counts_at(0, *args)
+        assert not status.any()
+        for k in (0, 4, 5, 11):  # finite clouds against the NumPy reference
+            assert_array_equal(want[k], _reference_counts(clouds[k], seeds[k], 900, 1.0, (5, 4, 3, 3), grid))
+        for level in LEVELS[1:]:
+            assert_array_equal(_counts_at(level, *args)[0], want)
+
+
 def test_levels_agree_on_strided_mixed_size_objects_with_odd_normals_and_two_threads():
     # The AVX-512 f1-f3 read every point with its normal from a per-object,
     # per-thread copy in 64-byte rows built from strided input: objects of very
