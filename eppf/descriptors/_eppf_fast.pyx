@@ -91,6 +91,8 @@ cdef extern from "_eppf_walk.h":
         EPPF_LANES_WORDS
         EPPF_CODE_WORDS
         EPPF_CODE_READ_WORDS
+        EPPF_CODE_HALF
+        EPPF_CODE_SCRATCH
     void eppf_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
     int eppf_f123q_avx512(int m, const int32_t* I, const int32_t* J, double scale, int n1, int n2, int n3, int n4,
                           double f1_density, const double* cos2, const double* cos3, const double* pn,
@@ -131,7 +133,9 @@ cdef enum:
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
     QBATCH = EPPF_QUEUE_BATCH  # the pairs of a batch at level 3 (at least BATCH)
-    CODE_WORDS = EPPF_CODE_WORDS  # the AVX-512 walk's three cone grids (one per axis, 2 words a row)
+    CODE_WORDS = EPPF_CODE_WORDS  # the words the AVX-512 walk's three cone grids span (two halves)
+    CODE_HALF = EPPF_CODE_HALF  # where their z >= 32 halves start
+    CODE_SCRATCH = EPPF_CODE_SCRATCH  # where the grids' scratch goes (between the halves)
     CODE_READ_WORDS = EPPF_CODE_READ_WORDS  # the words of the buffer the skipping walk may read
     # packed line walk for grids up to 64 (layout in _eppf_walk.h)
     PK_S = EPPF_PK_S
@@ -449,7 +453,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     if pn != NULL:
         eppf_pack_rows(n, pts, ps, nrm, ns, pv if prm.simd >= 2 and prm.n4 > 1 else NULL, pn)
     if dist:
-        eppf_code_grid(bits, prm.grid, code + CODE_WORDS, code)
+        eppf_code_grid(bits, prm.grid, code + CODE_SCRATCH, code)
         memset(lanes, 0, sizeof(lanes))
     base = 0
     while base < n_pairs:
@@ -631,9 +635,9 @@ def eppf_counts(points_in, normals_in,
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
-    # the AVX-512 walk's cone grids (CODE_WORDS) and their scratch (4 g^2 words): the walk reads any
+    # the AVX-512 walk's cone grids and their scratch (between the grids' halves): the walk reads any
     # of the first CODE_READ_WORDS words
-    code_arr = np.zeros((num_threads, max(CODE_WORDS + 4 * 64 * 64, CODE_READ_WORDS) if prm.simd == 3 else 1),
+    code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.simd == 3 else 1),
                         dtype=np.uint64)
     # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to 65,536 points,
     # larger ones are read in place)
@@ -743,9 +747,11 @@ def _cone_codes(occupied):
     packed = np.zeros((g, g, 8), dtype=np.uint8)
     packed[:, :, : (g + 7) // 8] = np.packbits(occ, axis=2, bitorder="little")
     cdef uint64_t[::1] bits = np.ascontiguousarray(packed.reshape(-1).view(np.uint64))
-    code_arr = np.zeros(CODE_WORDS + 4 * 64 * 64, dtype=np.uint64)
+    code_arr = np.zeros(CODE_READ_WORDS, dtype=np.uint64)
     cdef uint64_t[::1] code = code_arr
-    eppf_code_grid(&bits[0], g, &code[CODE_WORDS], &code[0])
-    words = code_arr[: 3 * 128 * g].reshape(3, 128 * g)[:, : 2 * g * g].reshape(3, g, g, 2)
+    eppf_code_grid(&bits[0], g, &code[CODE_SCRATCH], &code[0])
+    # word 4096 a + 64 x + y holds z < 32, the same word CODE_HALF on z >= 32
+    halves = [code_arr[h : h + 3 * 4096].reshape(3, 64, 64)[:, :g, :g] for h in (0, CODE_HALF)]
+    words = np.stack(halves, axis=-1)
     z = np.arange(g)
     return ((words[..., z >> 5] >> (2 * (z & 31)).astype(np.uint64)) & 3).astype(np.uint8)

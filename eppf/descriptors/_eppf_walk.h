@@ -1123,22 +1123,30 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * by exactly one voxel a step and every other coordinate by at most one, so
  * its j-th voxel after v lies in the cone of v: the 3^2 box of half side j in
  * the plane j voxels further along a. ``code`` holds three grids, one per
- * axis (x, y, z), at word 128 g a (EPPF_CODE_WORDS in all; rows of 2 words,
- * the first 2 g^2 of each grid written): for every voxel v, c = min(C, 3),
- * C the number of cone planes from v on (v's own first) with no occupied
- * voxel, i.e. C = 0 where v is occupied, else 1 + the smallest C of the 3^2
- * voxels of the next plane (planes past the grid's face count as empty).
- * c is bits 2 (z & 31) and 2 (z & 31) + 1 of word 128 g a + 2 row + (z >> 5).
- * The sets O_m of voxels with C < m: O_1 the occupied ones, O_{m+1} = O_1
- * or the voxels whose next plane's 3^2 box meets O_m (``eppf_cone_step``).
- * ``bits``: g^2 words, one per (x, y) row, z bits (none past z = g - 1);
- * ``work``: 4 g^2 words of scratch; 2 <= g <= 64. */
-#define EPPF_CODE_WORDS (3 * 128 * 64)
+ * axis (x, y, z): for every voxel v, c = min(C, 3), C the number of cone
+ * planes from v on (v's own first) with no occupied voxel, i.e. C = 0 where
+ * v is occupied, else 1 + the smallest C of the 3^2 voxels of the next plane
+ * (planes past the grid's face count as empty). c is bits 2 (z & 31) and
+ * 2 (z & 31) + 1 of word 4096 a + 64 x + y + EPPF_CODE_HALF (z >> 5): each
+ * grid is 64 x 64 words a half (rows of 64 whatever g), the z < 32 halves
+ * of the three grids first, the z >= 32 ones EPPF_CODE_HALF words on (the
+ * walk's word index then comes from one multiply-add of bytes, see
+ * ``eppf_f4_walkq_avx512``). The sets O_m of voxels with C < m: O_1 the
+ * occupied ones, O_{m+1} = O_1 or the voxels whose next plane's 3^2 box
+ * meets O_m (``eppf_cone_step``). ``bits``: g^2 words, one per (x, y) row,
+ * z bits (none past z = g - 1); ``work``: 4 g^2 words of scratch, which may
+ * be ``code + EPPF_CODE_SCRATCH`` (between the two halves); 2 <= g <= 64. */
+#define EPPF_CODE_HALF 65536
+#define EPPF_CODE_WORDS (EPPF_CODE_HALF + 3 * 4096)
+#define EPPF_CODE_SCRATCH (3 * 4096)
 /* The skipping walk reads ``code`` at word indices below this bound (its
-   fields masked: at most 2 (63 + 255 g) + 1 for any position, lanes past
-   their line included), so the buffer must hold this many words (the grids
-   and their scratch, EPPF_CODE_WORDS + 4 * 64 * 64, do). */
-#define EPPF_CODE_READ_WORDS (2 * (63 + 255 * 64) + 2)
+   fields masked: y + 64 (x + 64 a) + EPPF_CODE_HALF (z >> 5) with y, x < 64,
+   a < 4, for any position, lanes past their line included), so the buffer
+   must hold this many words (it holds the grids and the scratch). */
+#define EPPF_CODE_READ_WORDS (EPPF_CODE_HALF + 4 * 4096)
+#if EPPF_CODE_SCRATCH + 4 * 4096 > EPPF_CODE_HALF || EPPF_CODE_WORDS > EPPF_CODE_READ_WORDS
+#error "the cone grids' scratch must fit between their halves, the grids inside the read bound"
+#endif
 /* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
    inside the grid) or-ed: the y +- 1 part of a 3^2 box; 2 <= g <= 64. */
 EPPF_AVX512_FN
@@ -1300,15 +1308,16 @@ static inline void eppf_code_rows8(__m512i b0, __m512i b1, uint64_t *out)
     /* nibble bytes: lo = low nibbles (b0 | b1 << 4), hi = high nibbles (b0 >> 4 | b1 & 0xF0) */
     const __m512i lo = _mm512_ternarylogic_epi64(m4, b0, _mm512_slli_epi64(b1, 4), 0xCA);
     const __m512i hi = _mm512_ternarylogic_epi64(m4, _mm512_srli_epi64(b0, 4), b1, 0xCA);
-    /* output byte 16 R + 2 k + e (row R, source byte k) from lo (e = 0) or hi (e = 1) byte 8 R + k */
-    const __m512i i03 = _mm512_set_epi8(
-        95, 31, 94, 30, 93, 29, 92, 28, 91, 27, 90, 26, 89, 25, 88, 24,
-        87, 23, 86, 22, 85, 21, 84, 20, 83, 19, 82, 18, 81, 17, 80, 16,
-        79, 15, 78, 14, 77, 13, 76, 12, 75, 11, 74, 10, 73, 9, 72, 8,
-        71, 7, 70, 6, 69, 5, 68, 4, 67, 3, 66, 2, 65, 1, 64, 0);
-    const __m512i i47 = _mm512_add_epi8(i03, _mm512_set1_epi8(32));
-    _mm512_storeu_si512(out, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i03, hi), spread, 0));
-    _mm512_storeu_si512(out + 8, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i47, hi), spread, 0));
+    /* word R of the first output (z < 32): bytes 8 R + 2 k + e (k < 4) from lo (e = 0) or hi (e = 1)
+       byte 8 R + k; of the second (z >= 32): from byte 8 R + 4 + k */
+    const __m512i i0 = _mm512_set_epi8(
+        123, 59, 122, 58, 121, 57, 120, 56, 115, 51, 114, 50, 113, 49, 112, 48,
+        107, 43, 106, 42, 105, 41, 104, 40, 99, 35, 98, 34, 97, 33, 96, 32,
+        91, 27, 90, 26, 89, 25, 88, 24, 83, 19, 82, 18, 81, 17, 80, 16,
+        75, 11, 74, 10, 73, 9, 72, 8, 67, 3, 66, 2, 65, 1, 64, 0);
+    const __m512i i1 = _mm512_add_epi8(i0, _mm512_set1_epi8(4));
+    _mm512_storeu_si512(out, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i0, hi), spread, 0));
+    _mm512_storeu_si512(out + EPPF_CODE_HALF, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i1, hi), spread, 0));
 }
 __attribute__((target(EPPF_AVX512_TARGET ",gfni")))
 static void eppf_code_grid64(const uint64_t *bits, uint64_t *work, uint64_t *code)
@@ -1316,7 +1325,7 @@ static void eppf_code_grid64(const uint64_t *bits, uint64_t *work, uint64_t *cod
     uint64_t *o2 = work, *o3 = work + 4096, *a = work + 2 * 4096;
     int axis, r;
     for (axis = 0; axis < 3; axis++) {
-        uint64_t *c = code + 128 * 64 * axis;
+        uint64_t *c = code + 4096 * axis;
         eppf_cone_step64(bits, bits, o2, a, axis);
         eppf_cone_step64(bits, o2, o3, a, axis);
         for (r = 0; r < 4096; r += 8) {
@@ -1324,7 +1333,7 @@ static void eppf_code_grid64(const uint64_t *bits, uint64_t *work, uint64_t *cod
             const __m512i u3 = _mm512_loadu_si512(o3 + r);
             const __m512i b0 = _mm512_ternarylogic_epi64(u2, b, u3, 0x75);  /* (u2 & ~b) | ~u3: c = 1 or 3 */
             const __m512i b1 = _mm512_ternarylogic_epi64(u2, u2, u2, 0x55); /* ~u2: c = 2 or 3 */
-            eppf_code_rows8(b0, b1, c + 2 * r);
+            eppf_code_rows8(b0, b1, c + r);
         }
     }
 }
@@ -1344,14 +1353,15 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
     }
 #endif
     for (axis = 0; axis < 3; axis++) {
-        uint64_t *c = code + 128 * g * axis;
+        uint64_t *c = code + 4096 * axis;
         eppf_cone_step(bits, bits, o2, a, b, g, axis);
         eppf_cone_step(bits, o2, o3, a, b, g, axis);
         for (r = 0; r < g * g; r++) {
             const uint64_t b0 = (o2[r] & ~bits[r]) | ~o3[r];  /* c = 1 or 3 */
             const uint64_t b1 = ~o2[r];                       /* c = 2 or 3 */
-            c[2 * r] = eppf_spread32(b0) | (eppf_spread32(b1) << 1);
-            c[2 * r + 1] = eppf_spread32(b0 >> 32) | (eppf_spread32(b1 >> 32) << 1);
+            const int64_t w = 64 * (r / g) + r % g;
+            c[w] = eppf_spread32(b0) | (eppf_spread32(b1) << 1);
+            c[w + EPPF_CODE_HALF] = eppf_spread32(b0 >> 32) | (eppf_spread32(b1 >> 32) << 1);
         }
     }
 }
@@ -1480,23 +1490,25 @@ static int eppf_f123q_avx512(int m, const int32_t *ii, const int32_t *jj, double
     return bad;
 }
 
-/* The words tab[ix[l]], l < 8, by scalar loads: on Zen 4 (whose gathers
- * are microcoded) cheaper than a gather, and other work overlaps them. Every
- * index must be valid. */
+/* The words tab[k_l], l < 8, k_l the high half of lane l of ix, by scalar
+ * loads: on Zen 4 (whose gathers are microcoded) cheaper than a gather, and
+ * other work overlaps them. Every index must be valid. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static inline __m512i eppf_soft_gather8(__m512i ix, const uint64_t *tab)
 {
-    uint64_t idx[8] __attribute__((aligned(64)));
+    uint32_t idx[16] __attribute__((aligned(64)));
     __m128i a0, a1, a2, a3;
     __m256i b0, b1;
     _mm512_store_si512(idx, ix);
     /* read the indices back from memory: the compiler would otherwise extract
        them from the register, 2-3 vector operations each */
     __asm__("" : "+m"(idx));
-    a0 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[0]]), (long long)tab[idx[1]], 1);
-    a1 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[2]]), (long long)tab[idx[3]], 1);
-    a2 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[4]]), (long long)tab[idx[5]], 1);
-    a3 = _mm_insert_epi64(_mm_cvtsi64_si128((long long)tab[idx[6]]), (long long)tab[idx[7]], 1);
+#define EPPF_W(k) ((long long)tab[idx[2 * (k) + 1]])
+    a0 = _mm_insert_epi64(_mm_cvtsi64_si128(EPPF_W(0)), EPPF_W(1), 1);
+    a1 = _mm_insert_epi64(_mm_cvtsi64_si128(EPPF_W(2)), EPPF_W(3), 1);
+    a2 = _mm_insert_epi64(_mm_cvtsi64_si128(EPPF_W(4)), EPPF_W(5), 1);
+    a3 = _mm_insert_epi64(_mm_cvtsi64_si128(EPPF_W(6)), EPPF_W(7), 1);
+#undef EPPF_W
     b0 = _mm256_inserti128_si256(_mm256_castsi128_si256(a0), a1, 1);
     b1 = _mm256_inserti128_si256(_mm256_castsi128_si256(a2), a3, 1);
     return _mm512_inserti64x4(_mm512_castsi256_si512(b0), b1, 1);
@@ -1512,17 +1524,16 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
     /* the states of the finished lines (at most 48 + nq of them), then their counts indices (n4 <= 3) */
     int64_t OK[EPPF_QUEUE_BATCH + 64] __attribute__((aligned(64)));
     const __m512i one = _mm512_set1_epi64(1);
-    /* multishift fields: byte 0 <- bits 13.. (2 z and a fraction bit), byte 1 <- bit 19 (z >> 5),
-       byte 2 <- bits 35.. (y), byte 3 <- bits 56.. (x and the axis a above it); kept: 2 (z & 31), 1, 6
-       and 8 bits (x + 64 a) */
-    const __m512i ctrl = _mm512_set1_epi64(((int64_t)EPPF_PK_XSHIFT << 24) | ((int64_t)EPPF_PK_YSHIFT << 16)
-                                           | ((int64_t)(EPPF_PK_ZSHIFT + 5) << 8) | (EPPF_PK_ZSHIFT - 1));
-    const __m512i mfield = _mm512_set1_epi64(0xFF3F013E), offset = _mm512_set1_epi64(0x3E);
-    /* bytes (0, 1, 1, g): words z >> 5 and y + g (x + 64 a) (at most 16383 for any position); then
-       (1, 2): the word index 2 (y + g x) + (z >> 5) + 128 g a (below EPPF_CODE_READ_WORDS), in the cone
-       grid of axis a */
-    const __m512i mul = _mm512_set1_epi64(((int64_t)g << 24) | (1 << 16) | (1 << 8));
-    const __m512i w21 = _mm512_set1_epi64(0x00020001);
+    /* multishift fields: byte 0 <- bits 13.. (2 z and a fraction bit), byte 4 <- bits 35.. (y),
+       byte 5 <- bits 56.. (x and the axis a above it), byte 6 <- bit 19 (z >> 5); kept: 2 (z & 31),
+       6, 8 bits and 1 bit */
+    const __m512i ctrl = _mm512_set1_epi64(((int64_t)(EPPF_PK_ZSHIFT + 5) << 48) | ((int64_t)EPPF_PK_XSHIFT << 40)
+                                           | ((int64_t)EPPF_PK_YSHIFT << 32) | (EPPF_PK_ZSHIFT - 1));
+    const __m512i mfield = _mm512_set1_epi64(0x0001FF3F0000003ELL), offset = _mm512_set1_epi64(0x3E);
+    /* bytes 4, 5, 6 times 1, 64, 1 and added in pairs: the lane's high half is the word index
+       y + 64 (x + 64 a) + EPPF_CODE_HALF (z >> 5) (the cone grid of axis a; below EPPF_CODE_READ_WORDS
+       for any position) */
+    const __m512i wdot = _mm512_set1_epi64(0x0001400100000000LL);
     /* steps a look-up advances by its code c (index bits 0-1; bit 2 is the next voxel's): max(c, 1) */
     const __m512i tsteps = _mm512_set_epi64(3, 2, 1, 1, 3, 2, 1, 1);
     /* and what it adds to the state's bytes R, U, O, X (c = 0: an occupied voxel) */
@@ -1569,7 +1580,8 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
         q += __builtin_popcount(fill_);                                                           \
     } while (0)
 /* One step of set S. The fields of the word index come from one
-   multishift; byte 0 of t_ is the code's bit offset, so word >> (t_ & 0x3E)
+   multishift and one multiply-add of bytes (no multiply by g: the grids'
+   rows are 64 words whatever g); byte 0 of t_ is the code's bit offset, so word >> (t_ & 0x3E)
    puts c in bits 0-1 (the next voxel's code above, ignored by the tables,
    which read bits 0-2 and repeat themselves; a variable shift, not a second
    multishift: the shuffle units are the busier). */
@@ -1577,7 +1589,7 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
     do {                                                                                          \
         const __mmask8 on_ = _mm512_testn_epi64_mask(st##S, rsign);                               \
         const __m512i t_ = _mm512_and_si512(_mm512_multishift_epi64_epi8(ctrl, p##S), mfield);   \
-        const __m512i wi_ = _mm512_madd_epi16(_mm512_maddubs_epi16(t_, mul), w21);               \
+        const __m512i wi_ = _mm512_maddubs_epi16(t_, wdot);                                      \
         __m512i c_ = _mm512_srlv_epi64(eppf_soft_gather8(wi_, code), _mm512_and_si512(t_, offset)); \
         st##S = _mm512_add_epi8(st##S, _mm512_maskz_permutexvar_epi64(on_, c_, tdelta));          \
         c_ = _mm512_permutexvar_epi64(c_, tsteps);                                                \
@@ -1603,6 +1615,7 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
         STEP(F);                                                                                  \
     } while (0)
 
+    (void)g;  /* the grids' layout is the same for every g */
     EPPF_LOADL(A, 0);
     EPPF_LOADL(B, 64);
     EPPF_LOADL(C, 128);
