@@ -1247,53 +1247,6 @@ static inline __m512i eppf_zdil(__m512i w)
 {
     return _mm512_ternarylogic_epi64(w, _mm512_slli_epi64(w, 1), _mm512_srli_epi64(w, 1), 0xFE);
 }
-/* out = bits | D_axis(o) for g = 64 (``eppf_cone_step``); a: 4096 words of scratch */
-__attribute__((target(EPPF_AVX512_TARGET)))
-static void eppf_cone_step64(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a, int axis)
-{
-    __m512i v[8];
-    int x, k;
-    if (axis == 0) {
-        /* a slab's y +- 1 and z +- 1 box, then the slab before it */
-        for (x = 0; x < 64; x++) {
-            if (x < 63) {
-                EPPF_SLAB_LOAD(v, o + (x + 1) * 64);
-                for (k = 0; k < 8; k++)
-                    v[k] = eppf_zdil(v[k]);
-                for (k = 0; k < 8; k++) {
-                    const __m512i r = _mm512_ternarylogic_epi64(v[k], eppf_yprev(v, k), eppf_ynext(v, k), 0xFE);
-                    _mm512_storeu_si512(out + x * 64 + 8 * k, _mm512_or_si512(r, _mm512_loadu_si512(bits + x * 64 + 8 * k)));
-                }
-            } else {
-                for (k = 0; k < 8; k++)
-                    _mm512_storeu_si512(out + x * 64 + 8 * k, _mm512_loadu_si512(bits + x * 64 + 8 * k));
-            }
-        }
-        return;
-    }
-    /* a = the slab's own box: z +- 1 (axis 1) or y +- 1 (axis 2) */
-    for (x = 0; x < 64; x++) {
-        EPPF_SLAB_LOAD(v, o + x * 64);
-        for (k = 0; k < 8; k++)
-            _mm512_storeu_si512(a + x * 64 + 8 * k, axis == 1 ? eppf_zdil(v[k])
-                                : _mm512_ternarylogic_epi64(v[k], eppf_yprev(v, k), eppf_ynext(v, k), 0xFE));
-    }
-    /* x +- 1, then the next y (axis 1) or the next z (axis 2) */
-    for (x = 0; x < 64; x++) {
-        for (k = 0; k < 8; k++) {
-            __m512i r = _mm512_loadu_si512(a + x * 64 + 8 * k);
-            if (x > 0)
-                r = _mm512_or_si512(r, _mm512_loadu_si512(a + (x - 1) * 64 + 8 * k));
-            if (x < 63)
-                r = _mm512_or_si512(r, _mm512_loadu_si512(a + (x + 1) * 64 + 8 * k));
-            v[k] = r;
-        }
-        for (k = 0; k < 8; k++) {
-            const __m512i r = axis == 1 ? eppf_ynext(v, k) : _mm512_srli_epi64(v[k], 1);
-            _mm512_storeu_si512(out + x * 64 + 8 * k, _mm512_or_si512(r, _mm512_loadu_si512(bits + x * 64 + 8 * k)));
-        }
-    }
-}
 /* The code words of eight rows from their bit planes b0 (code bit 0) and
    b1 (code bit 1), z bits each: word 2 r + h holds z = 32 h + i at bits
    2 i (b0) and 2 i + 1 (b1). Bytes pairing a nibble of b0 with the same
@@ -1319,22 +1272,81 @@ static inline void eppf_code_rows8(__m512i b0, __m512i b1, uint64_t *out)
     _mm512_storeu_si512(out, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i0, hi), spread, 0));
     _mm512_storeu_si512(out + EPPF_CODE_HALF, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i1, hi), spread, 0));
 }
+/* Words w..w+7 of a cone step's result, r or-ed with bits: stored to out,
+   or (where code is not NULL: the second step, o the first one's result)
+   made into the code words of their eight rows. */
+__attribute__((target(EPPF_AVX512_TARGET ",gfni")))
+static inline void eppf_cone_emit8(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *code, int w,
+                                   __m512i r)
+{
+    const __m512i b = _mm512_loadu_si512(bits + w), u3 = _mm512_or_si512(r, b);
+    if (code) {
+        const __m512i u2 = _mm512_loadu_si512(o + w);
+        const __m512i b0 = _mm512_ternarylogic_epi64(u2, b, u3, 0x75);  /* (u2 & ~b) | ~u3: c = 1 or 3 */
+        const __m512i b1 = _mm512_ternarylogic_epi64(u2, u2, u2, 0x55); /* ~u2: c = 2 or 3 */
+        eppf_code_rows8(b0, b1, code + w);
+    } else {
+        _mm512_storeu_si512(out + w, u3);
+    }
+}
+/* out = bits | D_axis(o) for g = 64 (``eppf_cone_step``), or its code words
+   (code not NULL, o = O_2: see eppf_cone_emit8); a: 192 words of scratch */
+__attribute__((target(EPPF_AVX512_TARGET ",gfni")))
+static void eppf_cone_step64(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a, int axis,
+                             uint64_t *code)
+{
+    __m512i v[8];
+    int x, k;
+    if (axis == 0) {
+        /* a slab's y +- 1 and z +- 1 box, then the slab before it */
+        for (x = 0; x < 64; x++) {
+            if (x < 63) {
+                EPPF_SLAB_LOAD(v, o + (x + 1) * 64);
+                for (k = 0; k < 8; k++)
+                    v[k] = eppf_zdil(v[k]);
+                for (k = 0; k < 8; k++)
+                    eppf_cone_emit8(bits, o, out, code, x * 64 + 8 * k,
+                                    _mm512_ternarylogic_epi64(v[k], eppf_yprev(v, k), eppf_ynext(v, k), 0xFE));
+            } else {
+                for (k = 0; k < 8; k++)
+                    eppf_cone_emit8(bits, o, out, code, x * 64 + 8 * k, _mm512_setzero_si512());
+            }
+        }
+        return;
+    }
+    /* the slabs' own boxes, z +- 1 (axis 1) or y +- 1 (axis 2), in a ring of three slabs in a
+       (kept in the L1 cache), or-ed over x +- 1, then the next y (axis 1) or the next z (axis 2) */
+    for (x = -1; x < 64; x++) {
+        if (x < 63) {
+            uint64_t *box = a + 64 * ((x + 1) % 3);
+            EPPF_SLAB_LOAD(v, o + (x + 1) * 64);
+            for (k = 0; k < 8; k++)
+                _mm512_storeu_si512(box + 8 * k, axis == 1 ? eppf_zdil(v[k])
+                                    : _mm512_ternarylogic_epi64(v[k], eppf_yprev(v, k), eppf_ynext(v, k), 0xFE));
+        }
+        if (x < 0)
+            continue;
+        for (k = 0; k < 8; k++) {
+            __m512i r = _mm512_loadu_si512(a + 64 * (x % 3) + 8 * k);
+            if (x > 0)
+                r = _mm512_or_si512(r, _mm512_loadu_si512(a + 64 * ((x + 2) % 3) + 8 * k));
+            if (x < 63)
+                r = _mm512_or_si512(r, _mm512_loadu_si512(a + 64 * ((x + 1) % 3) + 8 * k));
+            v[k] = r;
+        }
+        for (k = 0; k < 8; k++)
+            eppf_cone_emit8(bits, o, out, code, x * 64 + 8 * k,
+                            axis == 1 ? eppf_ynext(v, k) : _mm512_srli_epi64(v[k], 1));
+    }
+}
 __attribute__((target(EPPF_AVX512_TARGET ",gfni")))
 static void eppf_code_grid64(const uint64_t *bits, uint64_t *work, uint64_t *code)
 {
-    uint64_t *o2 = work, *o3 = work + 4096, *a = work + 2 * 4096;
-    int axis, r;
+    uint64_t *o2 = work, *a = work + 4096;
+    int axis;
     for (axis = 0; axis < 3; axis++) {
-        uint64_t *c = code + 4096 * axis;
-        eppf_cone_step64(bits, bits, o2, a, axis);
-        eppf_cone_step64(bits, o2, o3, a, axis);
-        for (r = 0; r < 4096; r += 8) {
-            const __m512i b = _mm512_loadu_si512(bits + r), u2 = _mm512_loadu_si512(o2 + r);
-            const __m512i u3 = _mm512_loadu_si512(o3 + r);
-            const __m512i b0 = _mm512_ternarylogic_epi64(u2, b, u3, 0x75);  /* (u2 & ~b) | ~u3: c = 1 or 3 */
-            const __m512i b1 = _mm512_ternarylogic_epi64(u2, u2, u2, 0x55); /* ~u2: c = 2 or 3 */
-            eppf_code_rows8(b0, b1, c + r);
-        }
+        eppf_cone_step64(bits, bits, o2, a, axis, NULL);
+        eppf_cone_step64(bits, o2, NULL, a, axis, code + 4096 * axis);
     }
 }
 #undef EPPF_SLAB_LOAD
