@@ -23,26 +23,26 @@ walk; the row marked "default" is the one the kernel picks here), passes
 alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
 ModelNet10; every level's output is checked equal to the scalar kernel's).
 ``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
-guest, shared with other jobs (load average about 0.7), CPU ms per object,
+guest, shared with other jobs (load average about 0.5), CPU ms per object,
 one thread, normals given, the paper's settings:
 
 ================================================  ======  =========  ================  ==============  ==================
 descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
 ================================================  ======  =========  ================  ==============  ==================
-EPPF, scalar kernel                               1.555   1.516      17.7              14.3            5-6x
-EPPF, AVX2 kernel                                 0.704   0.803      9.3               7.6             11-14x
-EPPF, AVX-512, grouped walk                       0.464   0.520      6.1               4.9             17-22x
-EPPF, AVX-512, skipping walk (default here)       0.283   0.338      3.9               3.2             28-35x
-GASD (ours)                                       -       0.086      1.0               0.81
-VFH (ours)                                        -       0.106      1.23              1.0
+EPPF, scalar kernel                               1.388   1.449      18.0              14.2            6-7x
+EPPF, AVX2 kernel                                 0.680   0.745      9.3               7.3             12-15x
+EPPF, AVX-512, grouped walk                       0.460   0.496      6.2               4.9             17-22x
+EPPF, AVX-512, skipping walk (default here)       0.258   0.295      3.7               2.9             31-39x
+GASD (ours)                                       -       0.080      1.0               0.79
+VFH (ours)                                        -       0.102      1.27              1.0
 ================================================  ======  =========  ================  ==============  ==================
 
 (PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
 VFH 0.41-0.62. The skipping walk walks each line along its dominant axis
 and skips by the empty cone ahead, with f1-f3 and its setup in one pass and
-look-ups by scalar loads.) The kernel is under 0.3 ms per object here; 30x
-ESF holds for ESF at 8.5 ms or more. Where the kernel's time goes is in the
-performance page of the docs.
+look-ups by scalar loads.) The kernel is under 0.3 ms per object here, and
+30x ESF at its 8 ms low end needs 0.267 ms: two other runs gave 0.256 and
+0.269. Where the kernel's time goes is in the performance page of the docs.
 
 Usage::
 
