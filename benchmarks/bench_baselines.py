@@ -41,8 +41,8 @@ VFH (ours)                                        -       0.102      1.27       
 VFH 0.41-0.62. The skipping walk walks each line along its dominant axis
 and skips by the empty cone ahead, with f1-f3 and its setup in one pass and
 look-ups by scalar loads.) The kernel is under 0.3 ms per object here, and
-30x ESF at its 8 ms low end needs 0.267 ms: two other runs gave 0.256 and
-0.269. Where the kernel's time goes is in the performance page of the docs.
+30x ESF at its 8 ms low end needs 0.267 ms: three other runs gave 0.256,
+0.261 and 0.269. Where the kernel's time goes is in the performance page of the docs.
 
 Usage::
 
