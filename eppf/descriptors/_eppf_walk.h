@@ -1247,9 +1247,9 @@ static inline __m512i eppf_zdil(__m512i w)
 {
     return _mm512_ternarylogic_epi64(w, _mm512_slli_epi64(w, 1), _mm512_srli_epi64(w, 1), 0xFE);
 }
-/* The code words of eight rows from their bit planes b0 (code bit 0) and
-   b1 (code bit 1), z bits each: word 2 r + h holds z = 32 h + i at bits
-   2 i (b0) and 2 i + 1 (b1). Bytes pairing a nibble of b0 with the same
+/* The code words of eight rows r from their bit planes b0 (code bit 0) and
+   b1 (code bit 1), z bits each: out[r] holds z = i and out[r +
+   EPPF_CODE_HALF] z = 32 + i, at bits 2 i (b0) and 2 i + 1 (b1). Bytes pairing a nibble of b0 with the same
    nibble of b1 (lo: the low nibbles of each byte, hi: the high ones), put in
    order by a byte permutation, and spread by one GF(2) affine map (bit i to
    2 i, bit 4 + i to 2 i + 1). */
