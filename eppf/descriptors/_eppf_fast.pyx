@@ -89,7 +89,6 @@ cdef extern from "_eppf_walk.h":
                               const int64_t* lohi, const double* recip_packed, int32_t* B) noexcept nogil
     enum:
         EPPF_LANES_WORDS
-        EPPF_CODE_WORDS
         EPPF_CODE_READ_WORDS
         EPPF_CODE_HALF
         EPPF_CODE_SCRATCH
@@ -133,7 +132,6 @@ cdef enum:
     MAX_GRID = 1023
     BATCH = EPPF_WALK_BATCH
     QBATCH = EPPF_QUEUE_BATCH  # the pairs of a batch at level 3 (at least BATCH)
-    CODE_WORDS = EPPF_CODE_WORDS  # the words the AVX-512 walk's three cone grids span (two halves)
     CODE_HALF = EPPF_CODE_HALF  # where their z >= 32 halves start
     CODE_SCRATCH = EPPF_CODE_SCRATCH  # where the grids' scratch goes (between the halves)
     CODE_READ_WORDS = EPPF_CODE_READ_WORDS  # the words of the buffer the skipping walk may read

@@ -594,19 +594,29 @@ static inline void eppf_load3x8(const double *a, int64_t stride, const int32_t *
     *z = _mm512_shuffle_f64x2(v0, v1, 0x44);
 }
 
-/* floor(t) clipped to [0, n - 1], NaN to 0: _common.pxd's ``clamp_floor``. */
-static inline int eppf_clamp_floor(double t, int n)
+/* The pairs of a group of eight at t of (ii, jj), m - t of them real
+ * (``keep``): a partial last group repeats its last pair, in ri and rj. */
+static inline __mmask8 eppf_group8(int m, int t, const int32_t *ii, const int32_t *jj, int32_t *ri, int32_t *rj,
+                                   const int32_t **vi, const int32_t **vj)
 {
-    if (!(t > 0.0))
-        return 0;
-    if (t >= n)
-        return n - 1;
-    return (int)t;
+    int l;
+    *vi = ii + t;
+    *vj = jj + t;
+    if (m - t >= 8)
+        return (__mmask8)0xff;
+    for (l = 0; l < 8; l++) {
+        ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
+        rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
+    }
+    *vi = ri;
+    *vj = rj;
+    return (__mmask8)((1u << (m - t)) - 1);
 }
 
 /* _eppf_fast.pyx's ``_fill_grid`` with ``pv`` for g <= 64 (one word a row),
- * eight points at a time: the bounding box, each point's voxel (the same
- * IEEE operations and clamping, so the same voxels) as its packed start word
+ * eight points at a time (a partial last group repeats its last point,
+ * ``eppf_group8``): the bounding box, each point's voxel (the same IEEE
+ * operations and clamping, so the same voxels) as its packed start word
  * ``pv``, and the occupied voxels in ``bits`` (g^2 words). The box's minima
  * and maxima are taken lane by lane, then across the lanes, each step the
  * scalar loop's comparison (x < lo takes x, so a NaN is never taken and a
@@ -616,16 +626,20 @@ static inline int eppf_clamp_floor(double t, int n)
 __attribute__((target(EPPF_AVX512_TARGET)))
 static void eppf_fill_grid_avx512(const double *pts, int64_t ps, int64_t n, int64_t g, uint64_t *bits, int64_t *pv)
 {
-    static const int32_t rows[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+    static const int32_t seq[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+    const int32_t gi = (int32_t)g;
+    int32_t ri[8], rj[8];
+    const int32_t *rows = seq, *unused;
     double lo[3], hi[3], side, inv, acc[8];
     __m512d mn[3], mx[3], x[3];
     int64_t i, a;
     int k;
-    const int32_t gi = (int32_t)g;
     for (a = 0; a < 3; a++) {
         mn[a] = mx[a] = _mm512_set1_pd(pts[a]);
     }
-    for (i = 0; i + 8 <= n; i += 8) {
+    for (i = 0; i < n; i += 8) {
+        if (n - i < 8)
+            eppf_group8((int)(n - i), 0, seq, seq, ri, rj, &rows, &unused);
         eppf_load3x8(pts + ps * i, ps, rows, x, x + 1, x + 2);
         for (a = 0; a < 3; a++) {
             mn[a] = _mm512_min_pd(x[a], mn[a]);  /* x < mn ? x : mn */
@@ -644,13 +658,6 @@ static void eppf_fill_grid_avx512(const double *pts, int64_t ps, int64_t n, int6
             if (acc[k] > hi[a])
                 hi[a] = acc[k];
     }
-    for (; i < n; i++)
-        for (a = 0; a < 3; a++) {
-            if (pts[ps * i + a] < lo[a])
-                lo[a] = pts[ps * i + a];
-            if (pts[ps * i + a] > hi[a])
-                hi[a] = pts[ps * i + a];
-        }
     side = hi[0] - lo[0];
     if (hi[1] - lo[1] > side)
         side = hi[1] - lo[1];
@@ -661,7 +668,10 @@ static void eppf_fill_grid_avx512(const double *pts, int64_t ps, int64_t n, int6
     {
         const __m512d vinv = _mm512_set1_pd(inv), zero = _mm512_setzero_pd(), top = _mm512_set1_pd((double)(g - 1));
         const __m512i half = _mm512_set1_epi64(EPPF_PK_S / 2 + g);
-        for (i = 0; i + 8 <= n; i += 8) {
+        rows = seq;
+        for (i = 0; i < n; i += 8) {
+            const int m8 = n - i < 8 ? (int)(n - i) : 8;
+            const __mmask8 keep = m8 < 8 ? eppf_group8(m8, 0, seq, seq, ri, rj, &rows, &unused) : (__mmask8)0xff;
             int32_t vx[8], vy[8], vz[8];
             __m512i w[3];
             eppf_load3x8(pts + ps * i, ps, rows, x, x + 1, x + 2);
@@ -672,20 +682,12 @@ static void eppf_fill_grid_avx512(const double *pts, int64_t ps, int64_t n, int6
                 _mm256_storeu_si256((__m256i *)(a == 0 ? vx : a == 1 ? vy : vz), v);
                 w[a] = _mm512_add_epi64(_mm512_slli_epi64(_mm512_cvtepi32_epi64(v), EPPF_PK_FRAC), half);
             }
-            _mm512_storeu_si512(pv + i, _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(w[0], EPPF_PK_XLANE),
-                                                                          _mm512_slli_epi64(w[1], EPPF_PK_YLANE)),
-                                                         w[2]));
-            for (k = 0; k < 8; k++)
+            _mm512_mask_storeu_epi64(pv + i, keep,
+                                     _mm512_add_epi64(_mm512_add_epi64(_mm512_slli_epi64(w[0], EPPF_PK_XLANE),
+                                                                       _mm512_slli_epi64(w[1], EPPF_PK_YLANE)),
+                                                      w[2]));
+            for (k = 0; k < 8; k++)  /* (a repeated last point sets its bit again) */
                 bits[vx[k] * gi + vy[k]] |= (uint64_t)1 << vz[k];
-        }
-        for (; i < n; i++) {
-            const int vx = eppf_clamp_floor((pts[ps * i] - lo[0]) * inv, gi);
-            const int vy = eppf_clamp_floor((pts[ps * i + 1] - lo[1]) * inv, gi);
-            const int vz = eppf_clamp_floor((pts[ps * i + 2] - lo[2]) * inv, gi);
-            bits[vx * gi + vy] |= (uint64_t)1 << vz;
-            pv[i] = (((int64_t)vx * EPPF_PK_S + EPPF_PK_S / 2 + g) << EPPF_PK_XLANE)
-                    + (((int64_t)vy * EPPF_PK_S + EPPF_PK_S / 2 + g) << EPPF_PK_YLANE)
-                    + (int64_t)vz * EPPF_PK_S + EPPF_PK_S / 2 + g;
         }
     }
 }
@@ -730,25 +732,6 @@ static inline __m256i eppf_bins123_8(const __m512d *pi, const __m512d *ni, const
     b = _mm256_add_epi32(_mm256_mullo_epi32(b1, _mm256_set1_epi32(n2)), b2);
     b = _mm256_add_epi32(_mm256_mullo_epi32(b, _mm256_set1_epi32(n3)), b3);
     return _mm256_mullo_epi32(b, _mm256_set1_epi32(n4));
-}
-
-/* The pairs of a group of eight at t of (ii, jj), m - t of them real
- * (``keep``): a partial last group repeats its last pair, in ri and rj. */
-static inline __mmask8 eppf_group8(int m, int t, const int32_t *ii, const int32_t *jj, int32_t *ri, int32_t *rj,
-                                   const int32_t **vi, const int32_t **vj)
-{
-    int l;
-    *vi = ii + t;
-    *vj = jj + t;
-    if (m - t >= 8)
-        return (__mmask8)0xff;
-    for (l = 0; l < 8; l++) {
-        ri[l] = ii[t + (l < m - t ? l : m - t - 1)];
-        rj[l] = jj[t + (l < m - t ? l : m - t - 1)];
-    }
-    *vi = ri;
-    *vj = rj;
-    return (__mmask8)((1u << (m - t)) - 1);
 }
 
 /* The lanes whose points pi and pj (x, y, z vectors) coincide: all three coordinates equal. */
@@ -1249,10 +1232,10 @@ static inline __m512i eppf_zdil(__m512i w)
 }
 /* The code words of eight rows r from their bit planes b0 (code bit 0) and
    b1 (code bit 1), z bits each: out[r] holds z = i and out[r +
-   EPPF_CODE_HALF] z = 32 + i, at bits 2 i (b0) and 2 i + 1 (b1). Bytes pairing a nibble of b0 with the same
-   nibble of b1 (lo: the low nibbles of each byte, hi: the high ones), put in
-   order by a byte permutation, and spread by one GF(2) affine map (bit i to
-   2 i, bit 4 + i to 2 i + 1). */
+   EPPF_CODE_HALF] z = 32 + i, at bits 2 i (b0) and 2 i + 1 (b1). Bytes
+   pairing a nibble of b0 with the same nibble of b1 (lo: the low nibbles of
+   each byte, hi: the high ones), put in order by a byte permutation, and
+   spread by one GF(2) affine map (bit i to 2 i, bit 4 + i to 2 i + 1). */
 __attribute__((target(EPPF_AVX512_TARGET ",gfni")))
 static inline void eppf_code_rows8(__m512i b0, __m512i b1, uint64_t *out)
 {
@@ -1270,7 +1253,8 @@ static inline void eppf_code_rows8(__m512i b0, __m512i b1, uint64_t *out)
         75, 11, 74, 10, 73, 9, 72, 8, 67, 3, 66, 2, 65, 1, 64, 0);
     const __m512i i1 = _mm512_add_epi8(i0, _mm512_set1_epi8(4));
     _mm512_storeu_si512(out, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i0, hi), spread, 0));
-    _mm512_storeu_si512(out + EPPF_CODE_HALF, _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i1, hi), spread, 0));
+    _mm512_storeu_si512(out + EPPF_CODE_HALF,
+                        _mm512_gf2p8affine_epi64_epi8(_mm512_permutex2var_epi8(lo, i1, hi), spread, 0));
 }
 /* Words w..w+7 of a cone step's result, r or-ed with bits: stored to out,
    or (where code is not NULL: the second step, o the first one's result)
@@ -1593,10 +1577,11 @@ static void eppf_f4_walkq_avx512(int nq, const int64_t *QP, const int64_t *QI, c
     } while (0)
 /* One step of set S. The fields of the word index come from one
    multishift and one multiply-add of bytes (no multiply by g: the grids'
-   rows are 64 words whatever g); byte 0 of t_ is the code's bit offset, so word >> (t_ & 0x3E)
-   puts c in bits 0-1 (the next voxel's code above, ignored by the tables,
-   which read bits 0-2 and repeat themselves; a variable shift, not a second
-   multishift: the shuffle units are the busier). */
+   rows are 64 words whatever g); byte 0 of t_ is the code's bit offset, so
+   word >> (t_ & 0x3E) puts c in bits 0-1 (the next voxel's code above,
+   ignored by the tables, which read bits 0-2 and repeat themselves; a
+   variable shift, not a second multishift: the shuffle units are the
+   busier). */
 #define EPPF_STEPD(S)                                                                             \
     do {                                                                                          \
         const __mmask8 on_ = _mm512_testn_epi64_mask(st##S, rsign);                               \
