@@ -161,14 +161,16 @@ def test_scaled_sphere_gives_the_unit_sphere_descriptor(est):
     for f in (1e-307, 1e-310, 1e155, 1e-200):
         X = est.fit_transform([s * f])
         assert np.isfinite(X).all() and np.isclose(X.sum(), 1.0)
-        # OUR-CVFH's clusters make it sensitive: a 1e-13 relative jitter, or a
-        # scale of 3, moves about 0.1 of its mass (L1); the others do not move
-        tol = 0.25 if isinstance(est, OURCVFHTransformer) else 0.02
-        assert np.abs(X - ref).sum() < tol, f
-        if f != 1e-310:  # (subnormal coordinates are not those of a rescaled sphere)
-            # exactly what the same numbers give once brought to a sane scale
-            sane = np.ldexp(s * f, -int(np.frexp(f)[1]))
-            assert np.array_equal(X, est.fit_transform([sane])), f
+        # exactly what the same numbers give once brought to a sane scale (a
+        # power of two: exact, subnormal coordinates included, on every CPU)
+        sane = np.ldexp(s * f, -int(np.frexp(f)[1]))
+        assert np.array_equal(X, est.fit_transform([sane])), f
+        # near the unit sphere's descriptor: s * f rounds each coordinate (to 44
+        # bits at 1e-310). OUR-CVFH's clusters are chaotic under such jitter (a
+        # 1e-13 relative change moves 0.1-0.35 of its mass, by CPU, since its
+        # curvature comes from LAPACK), so the bound is for the others only.
+        if not isinstance(est, OURCVFHTransformer):
+            assert np.abs(X - ref).sum() < 0.02, f
 
 
 def test_estimate_normals_of_scaled_spheres():
