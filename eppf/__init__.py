@@ -7,6 +7,10 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 
 __version__ = "0.1.0"
 
+from .utils._simd import simd_cap as _simd_cap
+
+_simd_cap()  # a wrong EPPF_SIMD is an error before any kernel reads it
+
 from .descriptors import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
 from .descriptors import CVFHTransformer, GASDTransformer, GRSDTransformer, VFHTransformer
 from .descriptors import descriptor_pool
@@ -15,6 +19,7 @@ from .classifiers import EPPF4DClassifier, PointNetClassifier
 from .preprocessing import estimate_normals
 
 from ._persist import load_model, save_model
+from ._simd import simd_levels
 
 __all__ = [
     "CVFHTransformer",
@@ -33,5 +38,6 @@ __all__ = [
     "estimate_normals",
     "load_model",
     "save_model",
+    "simd_levels",
     "symmetric_kl_distances",
 ]

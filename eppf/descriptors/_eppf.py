@@ -354,3 +354,10 @@ def _weight_and_normalise(counts, kernel_bins, c, weighted):
     out = hist.reshape(counts.shape[0], -1)
     out /= out.sum(axis=1, keepdims=True)
     return out
+
+
+# the SIMD code this module's kernel runs, for eppf.simd_levels()
+from . import _eppf_fast  # noqa: E402
+from ..utils._simd import register_kernel  # noqa: E402
+
+register_kernel("eppf", lambda: ("scalar", "avx2", "avx512-grouped", "avx512-skipping")[_eppf_fast._simd_level()])

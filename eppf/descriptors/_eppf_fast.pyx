@@ -167,6 +167,11 @@ def _simd_levels():
     return tuple(range(_max_level() + 1))
 
 
+def _simd_level():
+    """The kernel level in use: 0 scalar, 1 AVX2, 2 AVX-512 grouped walk, 3 AVX-512 skipping walk."""
+    return _simd
+
+
 def _default_simd_level():
     """The kernel level used unless ``_set_simd_level`` says otherwise."""
     return _default_level()

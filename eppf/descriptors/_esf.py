@@ -155,3 +155,10 @@ class ESFTransformer(PointCloudDescriptor):
         self._raise_for_status(status, first_index, {
             1: "has no triangles of non-zero area (all points collinear or nearly so); ESF needs a surface"})
         return out
+
+
+# the SIMD code this module's kernel runs, for eppf.simd_levels()
+from . import _esf_fast  # noqa: E402
+from ..utils._simd import register_kernel  # noqa: E402
+
+register_kernel("esf", lambda: "avx2" if _esf_fast._simd_enabled() else "scalar")

@@ -360,3 +360,10 @@ default="centroid"
             a, b = off[j], off[j + 1]
             _orient_towards(pts[a:b], out[a:b], _scaled_viewpoint(viewpoint, exps[j]))
     return out
+
+
+# the SIMD code this module's kernel runs, for eppf.simd_levels()
+from . import _normals_fast  # noqa: E402
+from ..utils._simd import register_kernel  # noqa: E402
+
+register_kernel("normals", lambda: ("scalar", "avx2", "avx512")[_normals_fast._simd_level()])

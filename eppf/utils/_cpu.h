@@ -7,9 +7,18 @@
  * The kernels' headers (_eppf_walk.h, _esf_kernel.h, _normals_simd.h) build
  * their run-time checks from it, and their own SIMD switches from
  * EPPF_CPU_CHECKS, so the condition for compiling SIMD code lives only here.
+ *
+ * The environment variable EPPF_SIMD caps what the kernels may use, so that
+ * one machine can run the code paths of others: "scalar" (the portable C
+ * code, as on ARM64), "avx2" (no AVX-512) or "avx512" (everything, the same
+ * as unset). eppf checks the value when it is imported (eppf/utils/_simd.py)
+ * and refuses anything else; here an unknown value caps nothing.
  */
 #ifndef EPPF_CPU_H
 #define EPPF_CPU_H
+
+#include <stdlib.h>
+#include <string.h>
 
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(EPPF_NO_SIMD)
 #define EPPF_CPU_CHECKS 1
@@ -30,10 +39,27 @@ enum {
     EPPF_CPU_AMD = 1 << 9 /* the vendor, not a feature: AMD's gathers are slow */
 };
 
-/* Every flag above that this CPU has. */
+/* The flags EPPF_SIMD allows (all of them when it is unset or unknown). */
+static int eppf_cpu_allowed(void)
+{
+    const char* cap = getenv("EPPF_SIMD");
+    const int avx512 = EPPF_CPU_AVX512F | EPPF_CPU_AVX512BW | EPPF_CPU_AVX512VL | EPPF_CPU_AVX512DQ
+        | EPPF_CPU_AVX512VBMI | EPPF_CPU_GFNI;
+    if (cap == NULL) return ~0;
+    if (strcmp(cap, "scalar") == 0) return EPPF_CPU_AMD;
+    if (strcmp(cap, "avx2") == 0) return ~avx512;
+    return ~0;
+}
+
+/* Every flag above that this CPU has and EPPF_SIMD allows. Worked out once:
+ * the first call comes from the module's import (its default level), on the
+ * importing thread, before any kernel thread reads the cached value; later
+ * calls (one an object in some kernels) cost a load, not getenv. */
 static int eppf_cpu_features(void)
 {
+    static int cached = -1;
     int f = 0;
+    if (cached >= 0) return cached;
 #if EPPF_CPU_CHECKS
     __builtin_cpu_init();
     if (__builtin_cpu_supports("avx2")) f |= EPPF_CPU_AVX2;
@@ -47,7 +73,8 @@ static int eppf_cpu_features(void)
     if (__builtin_cpu_supports("gfni")) f |= EPPF_CPU_GFNI;
     if (__builtin_cpu_is("amd")) f |= EPPF_CPU_AMD;
 #endif
-    return f;
+    cached = f & eppf_cpu_allowed();
+    return cached;
 }
 
 static int eppf_cpu_has(int wanted)
