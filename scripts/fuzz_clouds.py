@@ -39,6 +39,7 @@ address space than 4 GiB)::
 """
 
 import argparse
+import faulthandler
 import json
 import os
 import resource
@@ -274,6 +275,7 @@ def run_case(seed, i, timeout):
         pid = os.fork()
         if pid == 0:
             os.close(rfd)
+            faulthandler.disable()  # a crash is reported by the parent, not by a traceback
             try:
                 _child(seed, i, start, wfd)
             finally:

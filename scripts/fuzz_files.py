@@ -27,6 +27,7 @@ A table per format is printed; the exit status is 1 if anything failed.
 """
 
 import argparse
+import faulthandler
 import io
 import json
 import os
@@ -228,6 +229,9 @@ def read_in_child(path, timeout):
     pid = os.fork()
     if pid == 0:  # pragma: no cover - the child
         os.close(r)
+        # a crash is an outcome the parent reports ("killed by signal ..."): no
+        # fault handler's traceback (pytest's, inherited by the fork) on stderr
+        faulthandler.disable()
         _child(path, w)
     os.close(w)
     chunks, deadline = [], time.monotonic() + timeout

@@ -81,3 +81,22 @@ def test_fuzz_harness_classifies_failures(tmp_path, monkeypatch):
         monkeypatch.setattr(eppf.io, "read_point_cloud", reader(behaviour))
         result = fuzz.read_in_child(path, timeout=0.5 if behaviour == "hang" else 30.0)
         assert result["cls"] == cls and why in result["why"], (behaviour, result)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the harness forks a child per file")
+def test_a_child_crashed_on_purpose_prints_no_fault_handler_banner(tmp_path):
+    """A crash is an outcome the parent reports: no "Fatal Python error" on stderr, fault handler on or not."""
+    path = tmp_path / "f.xyz"
+    path.write_text("1 2 3\n")
+    code = (
+        "import faulthandler, os, signal, sys\n"
+        "faulthandler.enable()\n"
+        f"sys.path.insert(0, {os.path.dirname(SCRIPT)!r})\n"
+        "import fuzz_files, eppf.io\n"
+        "eppf.io.read_point_cloud = lambda p, **k: os.kill(os.getpid(), signal.SIGSEGV)\n"
+        f"print(fuzz_files.read_in_child({str(path)!r}, timeout=30.0)['why'])\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert "SIGSEGV" in run.stdout
+    assert "Fatal Python error" not in run.stderr and "Segmentation fault" not in run.stderr
