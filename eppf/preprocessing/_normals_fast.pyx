@@ -32,7 +32,7 @@ thread that computed it or on the order in which points were visited, so the
 output is bit-identical for any thread count.
 """
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, log, pow, INFINITY
+from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, log, pow, INFINITY
 from libc.float cimport DBL_EPSILON
 from libc.stdint cimport int64_t
 from libc.stdlib cimport malloc, free
@@ -99,7 +99,6 @@ cdef enum:
 # Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
 # the closed-form eigenvector is replaced by Jacobi's.
 cdef double _GAP_RATIO = 1e-3
-cdef double _PI = 3.141592653589793
 # Grid cell size over the estimated radius of a k-neighbourhood.
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
@@ -196,6 +195,20 @@ cdef inline int64_t _cell_coord(double x, double lo, double inv_h, int64_t res) 
     return clamp_floor64((x - lo) * inv_h, res)
 
 
+cdef inline double _snap_cell(double h) noexcept nogil:
+    """``h`` rounded down to m 2^e with m in {1, 1.25, 1.5, 1.75} (exactly).
+
+    The cell size is estimated with the C library's cbrt, log and pow, whose
+    last bit may differ between libraries and CPUs; the grid's order decides
+    the order of each covariance's sum and of ties at the k-th distance, so
+    the normals' bits would follow it. Rounded, the size changes only where
+    such a last bit straddles one of these values.
+    """
+    cdef int e
+    cdef double m = frexp(h, &e)
+    return ldexp(floor(m * 8.0) / 8.0, e)
+
+
 cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap) noexcept nogil:
     """Cells per axis for cell size ``h`` (grown until at most ``cap`` cells)."""
     cdef int64_t prod, r
@@ -203,6 +216,7 @@ cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap)
     cdef int a
     if not (h > 0.0):
         h = 1.0
+    h = _snap_cell(h)
     while True:
         prod = 1
         for a in range(3):
@@ -739,18 +753,57 @@ cdef void _jacobi_smallest(const double* cov, double* out) noexcept nogil:
         out[i] = v[i][j] / nrm
 
 
+cdef inline void _cubic_roots(double r, double* x1, double* x3) noexcept nogil:
+    """The roots of 4 x^3 - 3 x = r (r in [-1, 1]) in [1/2, 1] (``x1``) and in
+    [-1, -1/2] (``x3``), by Newton's method, both in one loop.
+
+    On [1/2, 1] the cubic rises and is convex, on [-1, -1/2] it rises and is
+    concave, so from a start on the right of ``x1`` and one on the left of
+    ``x3`` every step moves towards the root and none passes it; each stops
+    when a step no longer moves it (at most 200 steps; the slow case, a double
+    root at r = +-1, is one the caller hands to Jacobi). The starts are the
+    tangents at r = 0 of cos(acos(r) / 3) and of its mirror -cos(acos(-r) / 3),
+    which lie on those sides since the first is concave in r. Only +, -, *, /
+    (correctly rounded, no contraction): the same bits on every CPU.
+    """
+    cdef double a = 0.8661 + r / 6.0, b = -0.8661 + r / 6.0, na, nb, fa, fb
+    cdef bint moving_a = True, moving_b = True
+    cdef int step
+    if a > 1.0:
+        a = 1.0
+    if b < -1.0:
+        b = -1.0
+    for step in range(200):
+        if moving_a:
+            fa = 12.0 * a * a - 3.0
+            na = a - ((4.0 * a * a - 3.0) * a - r) / fa if fa > 0.0 else a
+            moving_a = na < a
+            if moving_a:
+                a = na
+        if moving_b:
+            fb = 12.0 * b * b - 3.0
+            nb = b - ((4.0 * b * b - 3.0) * b - r) / fb if fb > 0.0 else b
+            moving_b = nb > b
+            if moving_b:
+                b = nb
+        if not (moving_a or moving_b):
+            break
+    x1[0] = a
+    x3[0] = b
+
+
 cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
     """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix
     (row-major ``a``).
 
-    The eigenvalues come in closed form (trigonometric solution of the
-    characteristic cubic); the eigenvector is the longest cross product of two
+    The eigenvalues come from the characteristic cubic, normalised to
+    4 x^3 - 3 x = r and solved by Newton's method (``_cubic_roots``); the eigenvector is the longest cross product of two
     rows of ``a - lambda_min I``, which spans its null space. When the two
     smallest eigenvalues are within a factor ``_GAP_RATIO`` of the spread
     (nearly collinear or isotropic neighbourhoods, where that construction
     loses accuracy), cyclic Jacobi takes over.
     """
-    cdef double q, p1, p2, p, d0, d1, d2, b00, b11, b22, b01, b02, b12, r, phi, sphi, lam
+    cdef double q, p1, p2, p, d0, d1, d2, b00, b11, b22, b01, b02, b12, r, x1, x2, x3, lam
     cdef double m00, m01, m02, m11, m12, m22
     cdef double c0x, c0y, c0z, c1x, c1y, c1z, c2x, c2y, c2z, n0, n1, n2, nrm
     q = (a[0] + a[4] + a[8]) / 3.0
@@ -775,19 +828,17 @@ cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
         r = -1.0
     elif r > 1.0:
         r = 1.0
-    phi = acos(r) / 3.0
-    # lambda_mid - lambda_min = 2 sqrt(3) p sin(phi) and
-    # lambda_max - lambda_min = 2 sqrt(3) p sin(phi + pi/3). Jacobi takes
-    # over when sin(phi) < _GAP_RATIO * sin(phi + pi/3). Since
-    # sin(phi + pi/3) <= 1 and sin(phi) > 0.999 phi >= _GAP_RATIO for
-    # phi >= 1.002 * _GAP_RATIO (far beyond the sines' rounding), the sines
-    # are only evaluated below that: the same decision, mostly without them.
-    if phi < 1.002 * _GAP_RATIO:
-        sphi = sin(phi)
-        if sphi < _GAP_RATIO and sphi < _GAP_RATIO * sin(phi + _PI / 3.0):
-            _jacobi_smallest(a, out)
-            return
-    lam = q + 2.0 * p * cos(phi + 2.0 * _PI / 3.0)
+    # The eigenvalues of (a - q I) / p are 2 x for the three roots x of
+    # 4 x^3 - 3 x = r (the trigonometric solution's cos(acos(r) / 3 + 2 pi k / 3)),
+    # found without the C library's acos, cos and sin, whose last bit differs
+    # between libraries and CPUs: x1 in [1/2, 1], x3 in [-1, -1/2], x2 = -x1 - x3.
+    _cubic_roots(r, &x1, &x3)
+    x2 = -(x1 + x3)
+    # Jacobi takes over when lambda_mid - lambda_min < _GAP_RATIO * (lambda_max - lambda_min).
+    if x2 - x3 < _GAP_RATIO * (x1 - x3):
+        _jacobi_smallest(a, out)
+        return
+    lam = q + 2.0 * p * x3
     m00 = a[0] - lam
     m11 = a[4] - lam
     m22 = a[8] - lam
