@@ -276,7 +276,8 @@ def _filter_responses(classifier, descriptor, layers, owner):
     for index in layers:
 
         def hook(mod, args, output, index=index):
-            recorded[index] = torch.relu(output).detach().cpu().numpy()[0]
+            # float(): a bfloat16 network (precision_) records bfloat16, which NumPy lacks
+            recorded[index] = torch.relu(output).detach().float().cpu().numpy()[0]
 
         handles.append(convs[index].register_forward_hook(hook))
     was_training = module.training
