@@ -18,7 +18,7 @@ def test_recommended_parts_are_the_documented_recipe():
     assert [type(t) for _, t in union.transformer_list] == [EPPFTransformer, GASDTransformer, ProportionTransformer]
     assert isinstance(clf, EPPF4DClassifier) and clf.conv == "4d" and clf.n_bins == (15, 3, 4, 3)
     assert clf.n_side_features == "auto" and clf.filters == RECIPE["filters"] and clf.n_hidden == RECIPE["n_hidden"]
-    assert clf.lr_schedule == "plateau" and clf.precision == "bfloat16" and clf.max_epochs == 7
+    assert clf.lr_schedule == "plateau" and clf.precision == "auto" and clf.max_epochs == 7
     assert clf.n_iter_no_change == RECIPE["min_patience"]  # at least 8 epochs of patience
     assert clf.n_estimators == RECIPE["n_estimators"] == 3  # an ensemble of three networks
     assert clf.label_smoothing == RECIPE["label_smoothing"] == 0.1
