@@ -131,9 +131,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
         validation split and the choice of descriptor draws. With an int,
         results on CPU are reproducible (the global torch RNG is left as it
         was).
-    verbose : int, default=0
-        1 or more prints one line per epoch (epoch, training loss,
-        validation loss and accuracy, seconds) and why training stopped.
+    verbose : int, default=1
+        1 or more (the default, as in skorch) prints one line per epoch
+        (epoch, training loss, validation loss and accuracy, seconds) and why
+        training stopped; 0 prints nothing. With an ensemble, a line
+        announces each network ("network 1 of 3 of the ensemble").
 
     Attributes
     ----------
@@ -228,7 +230,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     >>> X = rng.dirichlet(np.ones(12), size=40)
     >>> y = np.where(X[:, 0] > X[:, 1], "a", "b")
     >>> clf = EPPF4DClassifier(n_bins=(2, 2, 3, 1), max_epochs=2, n_hidden=8,
-    ...                        early_stopping=False, random_state=0).fit(X, y)
+    ...                        early_stopping=False, random_state=0, verbose=0).fit(X, y)
     >>> clf.predict(X[:3]).shape
     (3,)
     """
@@ -260,7 +262,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         device="cpu",
         n_jobs=None,
         random_state=None,
-        verbose=0,
+        verbose=1,
     ):
         self.n_bins = n_bins
         self.conv = conv

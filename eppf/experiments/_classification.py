@@ -213,8 +213,9 @@ class TrainingSettings:
         """An unfitted classifier for a model key (None for the KL 1-NN)."""
         from .. import EPPF4DClassifier, KLNearestNeighbors, PointNetClassifier
 
+        # verbose=0: the experiment's own log reports each fit (the classifiers' default prints every epoch)
         common = dict(early_stopping=True, validation_fraction=self.validation_fraction,
-                      n_iter_no_change=self.patience, n_jobs=self.n_jobs, random_state=self.random_state)
+                      n_iter_no_change=self.patience, n_jobs=self.n_jobs, random_state=self.random_state, verbose=0)
         if key == "pointnet":
             return PointNetClassifier(n_points=self.pointnet_points, max_epochs=self.pointnet_epochs, **common)
         if key in ("2d", "3d", "4d"):

@@ -368,7 +368,7 @@ def test_verbose_prints_epochs(capsys):
     EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, verbose=1, **SMALL).fit(X, y)
     out = capsys.readouterr().out
     assert "train_loss" in out and "valid_loss" in out
-    EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, **SMALL).fit(X, y)
+    EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, verbose=0, **SMALL).fit(X, y)
     assert capsys.readouterr().out == ""
 
 

@@ -26,8 +26,9 @@ def test_recommended_parts_are_the_documented_recipe():
     assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2 and quick_clf.n_estimators == 1
 
 
-def test_classification_experiment_trains_4d_plus_on_pools(tmp_path):
+def test_classification_experiment_trains_4d_plus_on_pools(tmp_path, capsys):
     result = run_classification("builtin", quick=True, models=["4d+"], n_jobs=1, out=str(tmp_path), verbose=False)
+    assert capsys.readouterr().out == ""  # verbose=False: the networks' epochs are not printed either
     (row,) = result["rows"]
     assert row["model"] == "EPPF 4D+" and row["n_test"] == 20 and 0 <= row["total_accuracy"] <= 1
     report = (tmp_path / "classification.md").read_text()

@@ -297,7 +297,7 @@ def test_bad_npz_is_one_line_error(tmp_path, capsys):
     assert "lacks the arrays" in err and len(err.splitlines()) == 1
 
 
-def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path):
+def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path, capsys):
     from eppf.experiments._classification import TrainingSettings
     from eppf.experiments._cli import build_parser
 
@@ -319,6 +319,7 @@ def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path):
     assert args.precision == "bfloat16"
     result = run_classification("builtin", quick=True, models=["4d"], n_jobs=1, out=str(tmp_path), verbose=False,
                                 precision="bfloat16")
+    assert capsys.readouterr().out == ""  # verbose=False: silent, the networks' epochs included
     assert result["rows"][0]["model"] == "EPPF 4D"
     assert "precision='bfloat16'" in (tmp_path / "classification.md").read_text()
 
