@@ -253,7 +253,7 @@ def filter_responses(classifier, descriptor, *, layers=(0, 1)):
     >>> X = np.random.default_rng(0).dirichlet(np.ones(24), size=20)
     >>> y = np.repeat(["a", "b"], 10)
     >>> clf = EPPF4DClassifier(n_bins=(6, 2, 2, 1), filters=(4, 5, 3), n_hidden=8, max_epochs=1,
-    ...                        early_stopping=False, random_state=0).fit(X, y)
+    ...                        early_stopping=False, random_state=0, verbose=0).fit(X, y)
     >>> [r.shape for r in filter_responses(clf, X[0])]
     [(4, 6, 2, 2, 1), (5, 6, 2, 2, 1)]
     """
@@ -276,7 +276,8 @@ def _filter_responses(classifier, descriptor, layers, owner):
     for index in layers:
 
         def hook(mod, args, output, index=index):
-            recorded[index] = torch.relu(output).detach().cpu().numpy()[0]
+            # float(): a bfloat16 network (precision_) records bfloat16, which NumPy lacks
+            recorded[index] = torch.relu(output).detach().float().cpu().numpy()[0]
 
         handles.append(convs[index].register_forward_hook(hook))
     was_training = module.training
@@ -368,7 +369,7 @@ def plot_filter_responses(classifier, descriptor, *, layers=(0, 1), n_filters=8,
     >>> X = np.random.default_rng(0).dirichlet(np.ones(24), size=20)
     >>> y = np.repeat(["a", "b"], 10)
     >>> clf = EPPF4DClassifier(n_bins=(6, 2, 2, 1), filters=(4, 5, 3), n_hidden=8, max_epochs=1,
-    ...                        early_stopping=False, random_state=0).fit(X, y)
+    ...                        early_stopping=False, random_state=0, verbose=0).fit(X, y)
     >>> fig = plot_filter_responses(clf, X[0], n_filters=3)
     >>> len(fig.axes)  # 2 layers x 3 filters and 2 colour bars
     8

@@ -226,13 +226,16 @@ def network_fingerprints():
     X = eppf.EPPFTransformer(n_pairs=3000, random_state=0).fit_transform(clouds)
     out = {}
     for conv in ("2d", "3d", "4d"):
+        # float32 explicitly: the default "auto" trains in bfloat16 on CPUs that have it
         clf = eppf.EPPF4DClassifier(conv=conv, max_epochs=2, early_stopping=False, n_hidden=32,
-                                    filters=(4, 4, 4), n_jobs=1, random_state=0, precision="float32")
+                                    filters=(4, 4, 4), precision="float32", n_jobs=1, random_state=0,
+                                    verbose=0)
         clf.fit(X[:40], y[:40])
         proba = clf.predict_proba(X[40:])
         out[f"cnn_{conv}_labels"] = _digest(clf.predict(X[40:]))
         out[f"cnn_{conv}_proba"] = _approx(proba)
-    pn = eppf.PointNetClassifier(n_points=128, max_epochs=1, early_stopping=False, n_jobs=1, random_state=0)
+    pn = eppf.PointNetClassifier(n_points=128, max_epochs=1, early_stopping=False, n_jobs=1, random_state=0,
+                                 verbose=0)
     pn.fit(clouds[:30], y[:30])
     out["pointnet_labels"] = _digest(pn.predict(clouds[30:40]))
     out["pointnet_proba"] = _approx(pn.predict_proba(clouds[30:40]))

@@ -56,7 +56,6 @@ SKIP = {
     "eppf.nn.EPPFNet3D.forward": ("PR01", "RT01"),
     "eppf.nn.EPPFNet4D.forward": ("PR01", "RT01"),
     "eppf.nn.check_n_bins": ("RT03", "SA01"),
-    "eppf.nn.check_precision": ("RT03", "SA01"),
     "eppf.nn.conv4d": ("SA01",),
     "eppf.nn.count_parameters": ("PR07", "RT03", "SA01"),
     "eppf.nn.plane_shape": ("RT03", "SA01"),

@@ -141,6 +141,55 @@ def test_eppf4d_classifier_round_trip_predicts_identically(tmp_path):
     assert_array_equal(back.input_mean_, clf.input_mean_)
 
 
+def _cpu_with_native_bfloat16(monkeypatch, native):
+    from eppf.nn import _precision
+
+    monkeypatch.setattr(_precision, "native_bfloat16", lambda device="cpu", **kw: native)
+
+
+@pytest.mark.parametrize("native", [False, True])
+def test_eppf4d_classifier_keeps_its_precision_across_save_and_load(tmp_path, monkeypatch, native):
+    # "auto" is resolved once, in fit; the model loads in that precision on any machine.
+    X, y = _descriptors(n=12, bins=6 * 2 * 2 * 2)
+    _cpu_with_native_bfloat16(monkeypatch, native)
+    clf = EPPF4DClassifier(n_bins=(6, 2, 2, 2), max_epochs=2, n_hidden=8, filters=(2, 2, 2), batch_size=4,
+                           early_stopping=False, random_state=0).fit(X, y)
+    assert clf.precision_ == ("bfloat16" if native else "float32")
+    _cpu_with_native_bfloat16(monkeypatch, not native)  # loaded where "auto" would choose the other
+    back = _round_trip(clf, tmp_path)
+    assert back.precision == "auto" and back.precision_ == clf.precision_
+    assert back.net_.module_.precision == clf.precision_
+    assert_array_equal(back.predict_proba(X), clf.predict_proba(X))
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_eppf4d_classifier_saved_before_precision_existed_still_loads(tmp_path, precision):
+    # Files written before precision_ existed hold an explicit precision ("auto" did not exist either).
+    X, y = _descriptors(n=12, bins=6 * 2 * 2 * 2)
+    clf = EPPF4DClassifier(n_bins=(6, 2, 2, 2), max_epochs=2, n_hidden=8, filters=(2, 2, 2), batch_size=4,
+                           early_stopping=False, precision=precision, random_state=0).fit(X, y)
+    path = tmp_path / "old.eppf"
+    save_model(clf, path)
+
+    def drop(m):
+        del m["root"]["attributes"]["precision_"]
+        return m
+
+    _rewrite(path, manifest=drop)
+    from eppf.nn import BFloat16EmulationWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", BFloat16EmulationWarning)  # should this CPU emulate it
+        back = load_model(path)
+    assert not hasattr(back, "precision_")
+    assert back.net_.module_.precision == precision
+    assert_array_equal(back.predict_proba(X), clf.predict_proba(X))
+    # a trusted pickle of such a model too
+    del clf.precision_
+    joblib.dump(clf, tmp_path / "old.joblib")
+    assert_array_equal(load_model(tmp_path / "old.joblib", trust=True).predict_proba(X), back.predict_proba(X))
+
+
 def test_pointnet_classifier_round_trip_predicts_identically(tmp_path, shapes):
     X, y = shapes
     clf = PointNetClassifier(n_points=32, max_epochs=1, batch_size=8, early_stopping=False, random_state=0)

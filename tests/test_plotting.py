@@ -47,7 +47,8 @@ def _toy(n, rng, n_bins=N_BINS):
 @pytest.fixture(scope="module")
 def fitted():
     X, y = _toy(24, np.random.default_rng(0))
-    clf = EPPF4DClassifier(N_BINS, max_epochs=2, validation_fraction=0.25, **TINY).fit(X, y)
+    # float32: the responses are compared with a float64 forward pass
+    clf = EPPF4DClassifier(N_BINS, max_epochs=2, validation_fraction=0.25, precision="float32", **TINY).fit(X, y)
     return clf, X, y
 
 
@@ -139,6 +140,18 @@ def test_filter_responses_match_a_numpy_forward_pass(fitted):
     # the module is left as it was: fast route on, no hooks, same mode
     assert module.folded is True
     assert not module.conv1._forward_hooks and not module.conv2._forward_hooks
+
+
+def test_filter_responses_of_a_bfloat16_network_are_float32(fitted):
+    # A network trained in bfloat16 (precision="bfloat16", or "auto" on a CPU that has it) records
+    # bfloat16 responses; they come back as float32 arrays, equal to the float32 ones up to rounding.
+    clf, X, y = fitted
+    mixed = EPPF4DClassifier(N_BINS, max_epochs=2, validation_fraction=0.25, precision="float32", **TINY).fit(X, y)
+    mixed.net_.module_.precision = "bfloat16"  # the same weights, run in mixed precision
+    for r, ref in zip(filter_responses(mixed, X[3]), filter_responses(clf, X[3])):
+        assert r.dtype == np.float32 and r.shape == ref.shape
+        assert not np.array_equal(r, ref)
+        assert_allclose(r, ref, rtol=0.05, atol=0.05 * np.abs(ref).max())
 
 
 def test_filter_responses_leave_predictions_unchanged(fitted):

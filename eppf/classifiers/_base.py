@@ -293,6 +293,9 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             train_idx, valid_idx = _validation_split(
                 y_enc, n_classes, self.validation_fraction, seeds["split"], self._owner
             )
+        n_members = int(getattr(self, "n_estimators", 1))
+        if n_members > 1:
+            self._sink()(f"network 1 of {n_members} of the ensemble")
         self.net_ = self._train_member(X, y_enc, train_idx, valid_idx, seeds, n_classes)
         history = self.net_.history
         self.n_epochs_ = len(history)
@@ -305,7 +308,6 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         # minibatch order and draws, seeded after member 0 so that member 0
         # is the network a single-model fit trains.
         self.ensemble_nets_ = []
-        n_members = int(getattr(self, "n_estimators", 1))
         for m in range(1, n_members):
             self._sink()(f"network {m + 1} of {n_members} of the ensemble")
             member = dict(zip(self._seed_names, (int(s) for s in rng.randint(0, 2**31 - 1, size=len(self._seed_names)))))

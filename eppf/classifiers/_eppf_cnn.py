@@ -99,17 +99,26 @@ class EPPF4DClassifier(SkorchClassifierBase):
         trains), and ``predict_proba`` averages the members' probabilities.
         ``fit`` and prediction take ``n_estimators`` times as long;
         ``max_time`` is a budget per member.
-    precision : {"float32", "bfloat16"}, default="float32"
+    precision : {"auto", "float32", "bfloat16"}, default="auto"
         Arithmetic of the network. ``"bfloat16"`` trains and predicts in
         mixed precision (:func:`torch.autocast`): convolutions and dense
         layers multiply in bfloat16, while weights, gradients, Adam's state,
         the loss and the returned probabilities stay float32. On CPUs with
-        native bfloat16 (AVX512_BF16 or AMX: AMD Zen 4 and later, Intel
-        Cooper Lake, Sapphire Rapids and later) an epoch of the 4D network
-        takes about 0.6 times as long as in float32 (see the documentation's
-        Performance page); elsewhere PyTorch emulates bfloat16 and it is
-        slower. Accuracy is unchanged within run-to-run spread on our
-        benchmarks, but predictions are not bit-identical to float32 ones.
+        native bfloat16 (AVX512_BF16 or AMX-BF16 on x86: AMD Zen 4 and later,
+        Intel Cooper Lake, Sapphire Rapids and later; BF16 on ARM) an epoch
+        of the 4D network takes about 0.6 times as long as in float32 (see
+        the documentation's Performance page); on other CPUs PyTorch
+        emulates bfloat16 and an epoch takes several times as long, so
+        asking for it there warns (:class:`eppf.nn.BFloat16EmulationWarning`,
+        once per process). ``"auto"`` chooses bfloat16 where the device
+        computes it natively (such a CPU, or a CUDA GPU of compute
+        capability 8.0 or later) and float32 elsewhere
+        (:func:`eppf.nn.resolve_precision`); the choice is ``precision_``.
+        Accuracy is unchanged within run-to-run spread on our benchmarks,
+        but bfloat16 predictions are not bit-identical to float32 ones, so
+        with ``"auto"`` one seed gives other bits on machines that choose
+        differently; pass ``"float32"`` for results that do not depend on
+        the hardware.
     device : str, default="cpu"
         Torch device.
     n_jobs : int, default=None
@@ -122,9 +131,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
         validation split and the choice of descriptor draws. With an int,
         results on CPU are reproducible (the global torch RNG is left as it
         was).
-    verbose : int, default=0
-        1 or more prints one line per epoch (epoch, training loss,
-        validation loss and accuracy, seconds) and why training stopped.
+    verbose : int, default=1
+        1 or more (the default, as in skorch) prints one line per epoch
+        (epoch, training loss, validation loss and accuracy, seconds) and why
+        training stopped; 0 prints nothing. With an ensemble, a line
+        announces each network ("network 1 of 3 of the ensemble").
 
     Attributes
     ----------
@@ -140,6 +151,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
         Divides the centred side features.
     n_draws_fit_ : int
         Descriptor draws per object seen in ``fit`` (1 for a 2D ``X``).
+    precision_ : {"float32", "bfloat16"}
+        The arithmetic the network was trained in and predicts in:
+        ``precision`` with ``"auto"`` resolved for ``device``. Saved with the
+        model; models saved before it existed lack it and run in their
+        ``precision``.
     input_mean_ : ndarray of shape (1,) or (n_features,)
         Subtracted from the descriptors.
     input_scale_ : ndarray of shape (1,) or (n_features,)
@@ -214,7 +230,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     >>> X = rng.dirichlet(np.ones(12), size=40)
     >>> y = np.where(X[:, 0] > X[:, 1], "a", "b")
     >>> clf = EPPF4DClassifier(n_bins=(2, 2, 3, 1), max_epochs=2, n_hidden=8,
-    ...                        early_stopping=False, random_state=0).fit(X, y)
+    ...                        early_stopping=False, random_state=0, verbose=0).fit(X, y)
     >>> clf.predict(X[:3]).shape
     (3,)
     """
@@ -242,11 +258,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
         batch_norm=False,
         label_smoothing=0.0,
         n_estimators=1,
-        precision="float32",
+        precision="auto",
         device="cpu",
         n_jobs=None,
         random_state=None,
-        verbose=0,
+        verbose=1,
     ):
         self.n_bins = n_bins
         self.conv = conv
@@ -283,7 +299,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         "n_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
         "filters": [Satisfies(positive_int_tuple(3), "a tuple of 3 positive ints")],
         "input_scaling": [StrOptions(["global", "bin", "none"])],
-        "precision": [StrOptions(["float32", "bfloat16"])],
+        "precision": [StrOptions(["auto", "float32", "bfloat16"])],
         "n_side_features": [Interval(numbers.Integral, 0, None, closed="left"), StrOptions(["auto"])],
         "side_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
         "batch_norm": [Options(bool)],
@@ -337,11 +353,14 @@ class EPPF4DClassifier(SkorchClassifierBase):
         return arr
 
     def _fit_inputs(self, X, seeds):
+        from ..nn import resolve_precision
+
         n_bins = math.prod(self._n_bins)
         X = self._validate_X(X, n_bins, self.n_side_features)
         self.n_side_features_ = X.shape[2] - n_bins
         self.n_features_in_ = X.shape[2]
         self.n_draws_fit_ = X.shape[1]
+        self.precision_ = resolve_precision(self.precision, self.device, owner=self._owner)
         return X
 
     def _check_X(self, X):
@@ -402,7 +421,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
             module__dropout=float(self.dropout),
             module__n_hidden=int(self.n_hidden),
             module__filters=tuple(int(f) for f in self.filters),
-            module__precision=self.precision,
+            module__precision=self._precision_in_use(),
             module__n_side=int(getattr(self, "n_side_features_", 0)),
             module__side_hidden=int(self.side_hidden),
             module__batch_norm=bool(self.batch_norm),
@@ -414,6 +433,15 @@ class EPPF4DClassifier(SkorchClassifierBase):
             # parameters: the same Adam update, 8x faster on CPU.
             optimizer__fused=torch.device(self.device).type in ("cpu", "cuda"),
         )
+
+    def _precision_in_use(self):
+        """``precision_`` once fitted (or loaded); a model saved before it existed runs in its ``precision``."""
+        precision = getattr(self, "precision_", None)
+        if precision is None:
+            from ..nn import resolve_precision
+
+            precision = resolve_precision(self.precision, self.device, owner=self._owner)
+        return precision
 
     def _predict_proba(self, X):
         X = self._check_X(X)

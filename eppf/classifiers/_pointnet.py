@@ -123,9 +123,10 @@ class PointNetClassifier(SkorchClassifierBase):
         validation split, point resampling and augmentation. With an int,
         results on CPU are reproducible (the global torch RNG is left as it
         was).
-    verbose : int, default=0
-        1 or more prints one line per epoch (epoch, training loss,
-        validation loss and accuracy, seconds) and why training stopped.
+    verbose : int, default=1
+        1 or more (the default, as in skorch) prints one line per epoch
+        (epoch, training loss, validation loss and accuracy, seconds) and why
+        training stopped; 0 prints nothing.
 
     Attributes
     ----------
@@ -172,7 +173,7 @@ class PointNetClassifier(SkorchClassifierBase):
     >>> X = [rng.normal(size=(50, 3)) * [1, 1, 1 + 3 * (i % 2)] for i in range(8)]
     >>> y = ["ball", "stick"] * 4
     >>> clf = PointNetClassifier(n_points=32, max_epochs=1, early_stopping=False,
-    ...                          random_state=0).fit(X, y)
+    ...                          random_state=0, verbose=0).fit(X, y)
     >>> clf.predict(X[:3]).shape
     (3,)
     """
@@ -197,7 +198,7 @@ class PointNetClassifier(SkorchClassifierBase):
         device="cpu",
         n_jobs=None,
         random_state=None,
-        verbose=0,
+        verbose=1,
     ):
         self.n_points = n_points
         self.max_epochs = max_epochs

@@ -38,12 +38,12 @@ def add_arguments(p):
                    help="how the 2d/3d/4d CNNs are trained: 'recommended' (default) describes every object 8 "
                         "times (stretched copies, a fresh draw every epoch, predictions averaged over copies), adds "
                         "GASD and 6 proportion ratios as side features, uses a smaller 4D network, halves the "
-                        "learning rate on plateaus and computes in bfloat16 by default; 'paper' is the network of "
-                        "Table I on one EPPF descriptor per object, in float32 by default")
-    p.add_argument("--precision", choices=["float32", "bfloat16"], default=None,
+                        "learning rate on plateaus and computes in bfloat16 where the CPU does so natively; 'paper' "
+                        "is the network of Table I on one EPPF descriptor per object, in float32 by default")
+    p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default=None,
                    help="CNN arithmetic: 'bfloat16' is mixed precision, faster on CPUs with native bfloat16 "
-                        "(AVX512_BF16 or AMX), slower elsewhere (default: bfloat16 with --recipe recommended, "
-                        "float32 with --recipe paper)")
+                        "(AVX512_BF16, AMX or ARM BF16), slower elsewhere; 'auto' chooses it only there (default: "
+                        "auto with --recipe recommended, float32 with --recipe paper)")
     p.add_argument("--test-size", type=float, default=0.25,
                    help="fraction held out (stratified) to score the model when the data has no train/test "
                         "split; 0 trains on every object (default: 0.25)")

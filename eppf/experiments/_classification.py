@@ -32,7 +32,7 @@ DEFAULT_MODELS = ("pointnet", "2d", "3d", "4d", "4d+", "kl")
 
 #: The recommended recipe beyond the paper ("4d+"): see :func:`recommended_pipeline_parts`.
 RECIPE = dict(n_draws=8, stretch=(0.8, 1.25), filters=(16, 32, 24), n_hidden=256, min_patience=8,
-              precision="bfloat16", n_estimators=3,
+              precision="auto", n_estimators=3,
               label_smoothing=0.1)
 
 
@@ -49,7 +49,8 @@ def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=Non
     :class:`~eppf.descriptors.ProportionTransformer` ratios as side features;
     the 4D network with filters (16, 32, 24) and a 256-unit dense layer, the
     side features through a 128-unit branch into that layer, Adam halved on
-    validation plateaus, bfloat16 mixed precision, label smoothing 0.1, and an ensemble of three
+    validation plateaus, bfloat16 mixed precision where the hardware computes it natively (float32
+    elsewhere: ``precision="auto"``), label smoothing 0.1, and an ensemble of three
     such networks (``n_estimators=3``, one network with ``quick``) whose
     probabilities are averaged.
 
@@ -110,8 +111,9 @@ class TrainingOptions:
         Share of the training objects held out for early stopping.
     patience : int, default=None
         Early-stopping patience (5, or 2 with ``quick``).
-    precision : {"float32", "bfloat16"}, default="float32"
-        Arithmetic of the EPPF networks (see :class:`eppf.classifiers.EPPF4DClassifier`).
+    precision : {"float32", "bfloat16", "auto"}, default="float32"
+        Arithmetic of the paper's EPPF networks ("2d", "3d", "4d"; see
+        :class:`eppf.classifiers.EPPF4DClassifier`); "4d+" follows its recipe.
     train_per_class : int, default=None
         Train on at most this many objects per class (seeded), to fit a CPU
         budget; None uses the whole training split.
@@ -202,8 +204,8 @@ class TrainingSettings:
         patience = check_positive_int(patience if patience is not None else (1 if quick else 5), "--patience")
         if not (isinstance(validation_fraction, (int, float)) and 0 < validation_fraction < 1):
             raise ExperimentError(f"--validation-fraction must lie in (0, 1), got {validation_fraction!r}")
-        if precision not in ("float32", "bfloat16"):
-            raise ExperimentError(f"--precision must be 'float32' or 'bfloat16', got {precision!r}")
+        if precision not in ("float32", "bfloat16", "auto"):
+            raise ExperimentError(f"--precision must be 'float32', 'bfloat16' or 'auto', got {precision!r}")
         return cls(epochs, pointnet_epochs, pointnet_points, float(validation_fraction), patience, scaling, quick,
                    n_jobs, random_state, precision)
 
@@ -211,8 +213,9 @@ class TrainingSettings:
         """An unfitted classifier for a model key (None for the KL 1-NN)."""
         from .. import EPPF4DClassifier, KLNearestNeighbors, PointNetClassifier
 
+        # verbose=0: the experiment's own log reports each fit (the classifiers' default prints every epoch)
         common = dict(early_stopping=True, validation_fraction=self.validation_fraction,
-                      n_iter_no_change=self.patience, n_jobs=self.n_jobs, random_state=self.random_state)
+                      n_iter_no_change=self.patience, n_jobs=self.n_jobs, random_state=self.random_state, verbose=0)
         if key == "pointnet":
             return PointNetClassifier(n_points=self.pointnet_points, max_epochs=self.pointnet_epochs, **common)
         if key in ("2d", "3d", "4d"):
@@ -264,6 +267,11 @@ class TrainingSettings:
             + (f", {self.recommended()[1].n_iter_no_change} for EPPF 4D+" if "4d+" in models else "")
             + "; the weights of the best validation epoch are kept). "
             "The test split is used once, for the scores below; no setting was tuned on it")
+        if "4d+" in models or (cnns and self.precision == "auto"):
+            from ..nn import resolve_precision
+
+            lines["precision 'auto'"] = (f"{resolve_precision('auto')} on this machine (bfloat16 only where the CPU "
+                                         "computes it natively)")
         lines["seeds"] = f"random_state={self.random_state} (weights, batches, validation split, descriptor draw)"
         lines["threads (n_jobs)"] = self.n_jobs
         return lines

@@ -53,9 +53,10 @@ def _add_training(p, models, default_models):
     p.add_argument("--validation-fraction", type=float, default=0.1,
                    help="share of the training objects held out for early stopping (default 0.1)")
     p.add_argument("--patience", type=int, default=None, help="early-stopping patience in epochs (default 5, 1 with --quick)")
-    p.add_argument("--precision", choices=["float32", "bfloat16"], default="float32",
-                   help="arithmetic of the EPPF CNNs: 'bfloat16' is mixed precision, faster on CPUs with native "
-                        "bfloat16 (AVX512_BF16 or AMX), slower elsewhere (default float32)")
+    p.add_argument("--precision", choices=["float32", "bfloat16", "auto"], default="float32",
+                   help="arithmetic of the paper's EPPF CNNs: 'bfloat16' is mixed precision, faster on CPUs with "
+                        "native bfloat16 (AVX512_BF16, AMX or ARM BF16), slower elsewhere; 'auto' chooses it only "
+                        "there (default float32; 4d+ always uses 'auto')")
     p.add_argument("--train-per-class", type=int, default=None,
                    help="use at most this many training objects per class (seeded; default: all)")
     p.add_argument("--test-per-class", type=int, default=None,

@@ -24,14 +24,15 @@ from ._networks import (
     EPPFNet3D,
     EPPFNet4D,
     check_n_bins,
-    check_precision,
     count_parameters,
     plane_shape,
 )
 from ._pointnet import PointNet, PointNetLoss, TNet, orthogonality_penalty
+from ._precision import BFloat16EmulationWarning, check_precision, native_bfloat16, resolve_precision
 
 __all__ = [
     "AugmentedPointClouds",
+    "BFloat16EmulationWarning",
     "Conv4d",
     "DescriptorPoolDataset",
     "EPPFNet2D",
@@ -44,7 +45,9 @@ __all__ = [
     "check_precision",
     "conv4d",
     "count_parameters",
+    "native_bfloat16",
     "orthogonality_penalty",
     "plane_shape",
+    "resolve_precision",
     "same_padding",
 ]

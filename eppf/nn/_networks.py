@@ -33,11 +33,12 @@ Every network takes ``precision="float32"`` (default) or ``"bfloat16"``. The
 latter runs the forward pass under :func:`torch.autocast` with bfloat16:
 convolutions and dense layers multiply in bfloat16 (and their backward
 passes follow), while the parameters, their gradients, the optimizer state
-and the returned logits stay float32 ("mixed precision"). On CPUs with
-native bfloat16 arithmetic (AVX512_BF16 or AMX: AMD Zen 4 and later, Intel
-Cooper Lake, Sapphire Rapids and later) it trains markedly faster; on others
-PyTorch emulates it and it is slower. Results differ from float32 by
-bfloat16's rounding (8 significant bits).
+and the returned logits stay float32 ("mixed precision"). On hardware with
+native bfloat16 arithmetic (see :func:`native_bfloat16`) it trains markedly
+faster; elsewhere PyTorch emulates it and it is slower. Results differ from
+float32 by bfloat16's rounding (8 significant bits). The estimators'
+``precision="auto"`` picks one of the two by :func:`resolve_precision`; a
+network itself needs a concrete precision.
 """
 
 import math
@@ -47,6 +48,7 @@ import torch
 from torch import nn
 
 from ._conv4d import Conv4d, same_padding
+from ._precision import check_precision
 
 __all__ = [
     "EPPFNet2D",
@@ -121,41 +123,6 @@ def plane_shape(n_features):
         raise ValueError(f"plane_shape: n_features must be positive, got {n_features!r}")
     cols = max(d for d in range(1, math.isqrt(n) + 1) if n % d == 0)
     return n // cols, cols
-
-
-_PRECISIONS = ("float32", "bfloat16")
-
-
-def check_precision(precision, *, owner=None):
-    """Validate a network precision: ``"float32"`` or ``"bfloat16"``.
-
-    Parameters
-    ----------
-    precision : str
-        ``"float32"`` computes in single precision; ``"bfloat16"`` runs the
-        forward pass under :func:`torch.autocast` with bfloat16 (mixed
-        precision: parameters, gradients and logits stay float32).
-    owner : str, default=None
-        Name used in error messages.
-
-    Returns
-    -------
-    precision : str
-
-    Examples
-    --------
-    >>> from eppf.nn import check_precision
-    >>> check_precision("bfloat16")
-    'bfloat16'
-    >>> check_precision("fp16", owner="MyNet")
-    Traceback (most recent call last):
-        ...
-    ValueError: MyNet: precision must be 'float32' or 'bfloat16', got 'fp16'
-    """
-    if not isinstance(precision, str) or precision not in _PRECISIONS:
-        pre = f"{owner}: " if owner else ""
-        raise ValueError(f"{pre}precision must be 'float32' or 'bfloat16', got {precision!r}")
-    return precision
 
 
 def count_parameters(module):

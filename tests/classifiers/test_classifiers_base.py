@@ -86,10 +86,10 @@ def test_time_budget_is_a_skorch_callback_that_stops_after_the_deadline(monkeypa
 
 @pytest.mark.parametrize("kind, early_stopping", [("eppf", False), ("eppf", True), ("pointnet", True)])
 def test_time_budget_ends_fit_after_first_epoch(kind, early_stopping, capsys):
-    clf, X, y = _make(kind, max_epochs=6, max_time=1e-9, early_stopping=early_stopping, random_state=0)
+    clf, X, y = _make(kind, max_epochs=6, max_time=1e-9, early_stopping=early_stopping, random_state=0, verbose=0)
     clf.fit(X, y)
     assert clf.n_epochs_ == 1 and clf.best_epoch_ == 1
-    assert capsys.readouterr().out == ""  # quiet by default
+    assert capsys.readouterr().out == ""  # verbose=0: not even the budget's message
     names = [name for name, _ in clf.net_.callbacks]
     assert "time_budget" in names and ("early_stopping" in names) == early_stopping
     if kind == "eppf":
@@ -124,6 +124,40 @@ def test_verbose_prints_one_line_per_epoch(kind, capsys):
     if kind == "eppf":
         clf.set_params(verbose=0).fit(X, y)
         assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_default_verbosity_prints_each_epoch_and_verbose_0_nothing(kind, capsys):
+    # As skorch: a fit that runs for minutes says how it goes unless asked not to.
+    clf, X, y = _make(kind, max_epochs=3, early_stopping=False, random_state=0)
+    assert clf.get_params()["verbose"] == 1
+    clf.fit(X, y)
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == clf.n_epochs_ == 3
+    assert [ln.split("  ")[0] for ln in lines] == ["epoch 1/3", "epoch 2/3", "epoch 3/3"]
+    assert all(re.search(r"  train_loss \d+\.\d{4}  \d+\.\d\d s$", ln) for ln in lines), lines
+    clf.set_params(verbose=0).fit(X, y)
+    assert capsys.readouterr().out == ""
+
+
+@pytest.mark.parametrize("verbose", [0, 1])
+def test_ensemble_numbers_its_networks_from_one(verbose, capsys):
+    clf, X, y = _make("eppf", max_epochs=2, early_stopping=False, n_estimators=3, random_state=0, verbose=verbose)
+    clf.fit(X, y)
+    out = capsys.readouterr().out
+    if not verbose:
+        assert out == ""
+        return
+    lines = out.splitlines()
+    # each network announced before its own epochs
+    assert lines == [
+        "network 1 of 3 of the ensemble", lines[1], lines[2],
+        "network 2 of 3 of the ensemble", lines[4], lines[5],
+        "network 3 of 3 of the ensemble", lines[7], lines[8],
+    ]
+    assert [ln.split("  ")[0] for k, ln in enumerate(lines) if k % 3] == ["epoch 1/2", "epoch 2/2"] * 3
+    clf.set_params(n_estimators=1).fit(X, y)  # a single network is not called an ensemble
+    assert "network" not in capsys.readouterr().out
 
 
 def test_epoch_log_without_validation():

@@ -2,6 +2,7 @@ import copy
 import math
 import pickle
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -169,6 +170,62 @@ def test_bfloat16_classifier_learns_and_is_deterministic():
     assert_array_equal(make().fit(X, y).predict_proba(X_test), proba)
 
 
+def _native(monkeypatch, native):
+    """Make "auto" see a CPU with (True) or without (False) native bfloat16."""
+    from eppf.nn import _precision
+
+    monkeypatch.setattr(_precision, "native_bfloat16", lambda device="cpu", **kw: native)
+    monkeypatch.setattr(_precision, "_warned_emulation", False)
+
+
+@pytest.mark.parametrize("native", [False, True])
+def test_auto_precision_is_chosen_in_fit_and_kept_as_precision_(monkeypatch, native):
+    _native(monkeypatch, native)
+    expected = "bfloat16" if native else "float32"
+    X, y = _toy(48, np.random.default_rng(6))
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, early_stopping=False, n_estimators=2, random_state=0, **SMALL)
+    assert clf.get_params()["precision"] == "auto"  # the default
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # "auto" never warns
+        clf.fit(X, y)
+    assert clf.precision == "auto" and clf.precision_ == expected
+    assert clf.net_.module_.precision == expected
+    assert [net.module_.precision for net in clf.ensemble_nets_] == [expected]
+    explicit = EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, early_stopping=False, n_estimators=2, random_state=0,
+                                precision=expected, **SMALL).fit(X, y)
+    assert explicit.precision_ == expected
+    assert_array_equal(explicit.predict_proba(X), clf.predict_proba(X))
+
+
+def test_refit_resolves_precision_again(monkeypatch):
+    X, y = _toy(30, np.random.default_rng(7))
+    clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=False, random_state=0, **SMALL)
+    _native(monkeypatch, True)
+    assert clf.fit(X, y).precision_ == "bfloat16"
+    _native(monkeypatch, False)
+    assert clf.fit(X, y).precision_ == "float32"
+    from eppf.nn import BFloat16EmulationWarning
+
+    with pytest.warns(BFloat16EmulationWarning):
+        assert clf.set_params(precision="bfloat16").fit(X, y).net_.module_.precision == "bfloat16"
+
+
+def test_explicit_bfloat16_on_an_emulating_cpu_warns_once_per_process(monkeypatch):
+    from eppf.nn import BFloat16EmulationWarning
+
+    _native(monkeypatch, False)
+    X, y = _toy(30, np.random.default_rng(8))
+    make = lambda: EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=False, precision="bfloat16",  # noqa: E731
+                                    random_state=0, **SMALL)
+    with pytest.warns(BFloat16EmulationWarning, match=r"EPPF4DClassifier: precision='bfloat16' on a CPU without "
+                                                       r"native bfloat16 .* 3\.6 times as long as in float32"):
+        clf = make().fit(X, y)
+    assert clf.precision_ == "bfloat16"  # asked for explicitly: kept, only warned of
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make().fit(X, y)  # the second fit in the process is silent
+
+
 def test_deterministic_under_random_state():
     rng = np.random.default_rng(1)
     X, y = _toy(60, rng)
@@ -311,7 +368,7 @@ def test_verbose_prints_epochs(capsys):
     EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, verbose=1, **SMALL).fit(X, y)
     out = capsys.readouterr().out
     assert "train_loss" in out and "valid_loss" in out
-    EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, **SMALL).fit(X, y)
+    EPPF4DClassifier(n_bins=N_BINS, max_epochs=2, random_state=0, verbose=0, **SMALL).fit(X, y)
     assert capsys.readouterr().out == ""
 
 
@@ -404,7 +461,7 @@ def test_pipeline_with_eppf_transformer():
         ({"max_time": 0}, ValueError, "EPPF4DClassifier: max_time must be None or a float in (0.0, inf), got 0"),
         ({"max_time": "1h"}, TypeError, "EPPF4DClassifier: max_time must be None or a float in (0.0, inf), got '1h'"),
         ({"input_scaling": "minmax"}, ValueError, "EPPF4DClassifier: input_scaling must be one of 'global', 'bin', 'none', got 'minmax'"),
-        ({"precision": "half"}, ValueError, "EPPF4DClassifier: precision must be 'float32' or 'bfloat16', got 'half'"),
+        ({"precision": "half"}, ValueError, "EPPF4DClassifier: precision must be one of 'auto', 'float32', 'bfloat16', got 'half'"),
         ({"device": None}, ValueError, "EPPF4DClassifier: device must be a str such as 'cpu' or 'cuda', got None"),
         ({"n_jobs": 0}, ValueError, "EPPF4DClassifier: n_jobs must be None or a non-zero int, got 0"),
         ({"verbose": -1}, ValueError, "EPPF4DClassifier: verbose must be an int >= 0, got -1"),

@@ -387,7 +387,7 @@ def test_experiment_subcommand_forwards_to_the_experiments(capsys):
 
 def test_train_passes_precision_to_the_cnn():
     base = ["train", "--data", "x.npz", "-o", "m.joblib", "--classifier", "cnn"]
-    assert make_pipeline_from_args(build_parser().parse_args(base))[-1].precision == "bfloat16"  # recommended
+    assert make_pipeline_from_args(build_parser().parse_args(base))[-1].precision == "auto"  # recommended
     assert make_pipeline_from_args(build_parser().parse_args(base + ["--precision", "float32"]))[-1].precision \
         == "float32"
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == 3  # an ensemble
@@ -396,5 +396,7 @@ def test_train_passes_precision_to_the_cnn():
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == 1  # Table I's one network
     args = build_parser().parse_args(base + ["--precision", "bfloat16"])
     assert make_pipeline_from_args(args)[-1].precision == "bfloat16"
+    args = build_parser().parse_args(base + ["--precision", "auto"])
+    assert make_pipeline_from_args(args)[-1].precision == "auto"
     with pytest.raises(SystemExit):
         build_parser().parse_args(base + ["--precision", "half"])

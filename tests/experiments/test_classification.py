@@ -18,7 +18,7 @@ def test_recommended_parts_are_the_documented_recipe():
     assert [type(t) for _, t in union.transformer_list] == [EPPFTransformer, GASDTransformer, ProportionTransformer]
     assert isinstance(clf, EPPF4DClassifier) and clf.conv == "4d" and clf.n_bins == (15, 3, 4, 3)
     assert clf.n_side_features == "auto" and clf.filters == RECIPE["filters"] and clf.n_hidden == RECIPE["n_hidden"]
-    assert clf.lr_schedule == "plateau" and clf.precision == "bfloat16" and clf.max_epochs == 7
+    assert clf.lr_schedule == "plateau" and clf.precision == "auto" and clf.max_epochs == 7
     assert clf.n_iter_no_change == RECIPE["min_patience"]  # at least 8 epochs of patience
     assert clf.n_estimators == RECIPE["n_estimators"] == 3  # an ensemble of three networks
     assert clf.label_smoothing == RECIPE["label_smoothing"] == 0.1
@@ -26,8 +26,9 @@ def test_recommended_parts_are_the_documented_recipe():
     assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2 and quick_clf.n_estimators == 1
 
 
-def test_classification_experiment_trains_4d_plus_on_pools(tmp_path):
+def test_classification_experiment_trains_4d_plus_on_pools(tmp_path, capsys):
     result = run_classification("builtin", quick=True, models=["4d+"], n_jobs=1, out=str(tmp_path), verbose=False)
+    assert capsys.readouterr().out == ""  # verbose=False: the networks' epochs are not printed either
     (row,) = result["rows"]
     assert row["model"] == "EPPF 4D+" and row["n_test"] == 20 and 0 <= row["total_accuracy"] <= 1
     report = (tmp_path / "classification.md").read_text()

@@ -297,7 +297,7 @@ def test_bad_npz_is_one_line_error(tmp_path, capsys):
     assert "lacks the arrays" in err and len(err.splitlines()) == 1
 
 
-def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path):
+def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path, capsys):
     from eppf.experiments._classification import TrainingSettings
     from eppf.experiments._cli import build_parser
 
@@ -305,12 +305,21 @@ def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path):
                   scaling="fit", quick=True, n_jobs=1, random_state=0)
     assert TrainingSettings.resolve(**common).make_model("4d").precision == "float32"
     assert TrainingSettings.resolve(**common, precision="bfloat16").make_model("2d").precision == "bfloat16"
-    with pytest.raises(ExperimentError, match="--precision must be 'float32' or 'bfloat16', got 'half'"):
+    with pytest.raises(ExperimentError, match="--precision must be 'float32', 'bfloat16' or 'auto', got 'half'"):
         TrainingSettings.resolve(**common, precision="half")
+    auto = TrainingSettings.resolve(**common, precision="auto")
+    assert auto.make_model("4d").precision == "auto"
+    from eppf.nn import resolve_precision
+
+    # the report says what "auto" chose on the machine that ran it
+    assert auto.protocol(["4d"])["precision 'auto'"].startswith(f"{resolve_precision('auto')} on this machine")
+    assert "precision 'auto'" not in TrainingSettings.resolve(**common).protocol(["4d"])
+    assert "precision 'auto'" in TrainingSettings.resolve(**common).protocol(["4d+"])  # the recipe's "auto"
     args = build_parser().parse_args(["noise", "--precision", "bfloat16"])
     assert args.precision == "bfloat16"
     result = run_classification("builtin", quick=True, models=["4d"], n_jobs=1, out=str(tmp_path), verbose=False,
                                 precision="bfloat16")
+    assert capsys.readouterr().out == ""  # verbose=False: silent, the networks' epochs included
     assert result["rows"][0]["model"] == "EPPF 4D"
     assert "precision='bfloat16'" in (tmp_path / "classification.md").read_text()
 
