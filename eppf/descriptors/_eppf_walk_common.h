@@ -30,6 +30,9 @@
 #define EPPF_PK_S (1 << EPPF_PK_FRAC)
 #define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
 #define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
+/* The largest grid the packed walks serve: one 64-bit word of z bits per (x, y)
+   row, and voxel coordinates that fit the 21-bit lanes. */
+#define EPPF_WALK_MAX_GRID 64
 /* Pairs per batch (the walks sort a batch by line length: a longer batch
    groups the lanes better, up to about this size). */
 #define EPPF_WALK_BATCH 256
@@ -71,15 +74,15 @@ static int eppf_walk_has_avx2(void)
    ``order``; returns their number. */
 static int eppf_f4_order(int m, const int32_t *Ls, int *order)
 {
-    int count[65], start[65];
+    int count[EPPF_WALK_MAX_GRID + 1], start[EPPF_WALK_MAX_GRID + 1];
     int t, k, n_walk;
-    for (k = 0; k < 65; k++)
+    for (k = 0; k <= EPPF_WALK_MAX_GRID; k++)
         count[k] = 0;
     for (t = 0; t < m; t++)
         count[Ls[t]]++;
     {
         int s = 0;
-        for (k = 64; k >= 2; k--) {
+        for (k = EPPF_WALK_MAX_GRID; k >= 2; k--) {
             start[k] = s;
             s += count[k];
         }

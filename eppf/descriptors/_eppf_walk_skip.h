@@ -24,7 +24,7 @@
 static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
 {
     int T;
-    for (T = 0; T <= 64; T++) {
+    for (T = 0; T <= EPPF_WALK_MAX_GRID; T++) {
         st[T] = 0;
         if (T >= 1 && T <= g + 1) {
             const int lo = thr[T * n4 + 1], hi = thr[T * n4 + n4 - 1];
@@ -51,15 +51,19 @@ static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
  * meets O_m (``eppf_cone_step``). ``bits``: g^2 words, one per (x, y) row,
  * z bits (none past z = g - 1); ``work``: 4 g^2 words of scratch, which may
  * be ``code + EPPF_CODE_SCRATCH`` (between the two halves); 2 <= g <= 64. */
+/* The words of one half of one axis's grid: 64 rows (x) of 64 words (y), whatever g. */
+#define EPPF_CODE_AXIS_WORDS 4096
+/* Where the z >= 32 halves start: 2**16, since the skipping walk's word index
+   takes z >> 5 as its upper 16-bit field. */
 #define EPPF_CODE_HALF 65536
-#define EPPF_CODE_WORDS (EPPF_CODE_HALF + 3 * 4096)
-#define EPPF_CODE_SCRATCH (3 * 4096)
+#define EPPF_CODE_WORDS (EPPF_CODE_HALF + 3 * EPPF_CODE_AXIS_WORDS)
+#define EPPF_CODE_SCRATCH (3 * EPPF_CODE_AXIS_WORDS)
 /* The skipping walk reads ``code`` at word indices below this bound (its
    fields masked: y + 64 (x + 64 a) + EPPF_CODE_HALF (z >> 5) with y, x < 64,
    a < 4, for any position, lanes past their line included), so the buffer
    must hold this many words (it holds the grids and the scratch). */
-#define EPPF_CODE_READ_WORDS (EPPF_CODE_HALF + 4 * 4096)
-#if EPPF_CODE_SCRATCH + 4 * 4096 > EPPF_CODE_HALF || EPPF_CODE_WORDS > EPPF_CODE_READ_WORDS
+#define EPPF_CODE_READ_WORDS (EPPF_CODE_HALF + 4 * EPPF_CODE_AXIS_WORDS)
+#if EPPF_CODE_SCRATCH + 4 * EPPF_CODE_AXIS_WORDS > EPPF_CODE_HALF || EPPF_CODE_WORDS > EPPF_CODE_READ_WORDS
 #error "the cone grids' scratch must fit between their halves, the grids inside the read bound"
 #endif
 /* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
@@ -258,11 +262,11 @@ static void eppf_cone_step64(const uint64_t *bits, const uint64_t *o, uint64_t *
 __attribute__((target(EPPF_AVX512_TARGET ",gfni")))
 static void eppf_code_grid64(const uint64_t *bits, uint64_t *work, uint64_t *code)
 {
-    uint64_t *o2 = work, *a = work + 4096;
+    uint64_t *o2 = work, *a = work + EPPF_CODE_AXIS_WORDS;
     int axis;
     for (axis = 0; axis < 3; axis++) {
         eppf_cone_step64(bits, bits, o2, a, axis, NULL);
-        eppf_cone_step64(bits, o2, NULL, a, axis, code + 4096 * axis);
+        eppf_cone_step64(bits, o2, NULL, a, axis, code + EPPF_CODE_AXIS_WORDS * axis);
     }
 }
 #undef EPPF_SLAB_LOAD
@@ -281,7 +285,7 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
     }
 #endif
     for (axis = 0; axis < 3; axis++) {
-        uint64_t *c = code + 4096 * axis;
+        uint64_t *c = code + EPPF_CODE_AXIS_WORDS * axis;
         eppf_cone_step(bits, bits, o2, a, b, g, axis);
         eppf_cone_step(bits, o2, o3, a, b, g, axis);
         for (r = 0; r < g * g; r++) {
