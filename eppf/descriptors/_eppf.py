@@ -9,7 +9,7 @@ from ..utils import check_n_jobs, object_seeds, pack_point_clouds
 from ..utils._validation import _bounding_sides, _stacked_view
 from ..utils._param_validation import Interval, IntTuple, Satisfies, StrOptions
 from ._base import N_JOBS, NORMAL_ORIENTATION, RANDOM_STATE, VERBOSE, PointCloudDescriptor
-from ._eppf_fast import eppf_counts
+from ._eppf_fast import MAX_GRID_SIZE, MAX_N_BINS, MAX_N_PAIRS, MIN_GRID_SIZE, MIN_N_BINS, eppf_counts
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
 
@@ -177,11 +177,12 @@ class EPPFTransformer(PointCloudDescriptor):
         self.verbose = verbose
 
     _parameter_constraints = {
-        "n_bins": [IntTuple(4, 1, 64, description="a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4)")],
-        "n_pairs": [Interval(numbers.Integral, 1, 2**31 - 1, closed="both")],
+        "n_bins": [IntTuple(4, MIN_N_BINS, MAX_N_BINS,
+                            description=f"a tuple of 4 ints in [{MIN_N_BINS}, {MAX_N_BINS}] (bins of f1, f2, f3, f4)")],
+        "n_pairs": [Interval(numbers.Integral, 1, MAX_N_PAIRS, closed="both")],
         "c": [Interval(numbers.Real, 1, None, closed="neither",
                        description="a finite float > 1 (so that ln(i/N + c) > 0)")],
-        "grid_size": [Interval(numbers.Integral, 2, 1023, closed="both")],
+        "grid_size": [Interval(numbers.Integral, MIN_GRID_SIZE, MAX_GRID_SIZE, closed="both")],
         "functions": [Satisfies(_is_function_list, f"a non-empty sequence of distinct names from {FUNCTIONS}")],
         "scaling": [StrOptions(list(_SCALINGS))],
         "n_neighbors": [Interval(numbers.Integral, 3, 10**6, closed="both")],
