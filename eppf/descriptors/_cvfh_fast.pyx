@@ -9,7 +9,7 @@ pair features (f1, f2, f3) between the reference and every point, the
 distance histogram (f4 over the largest distance) and 128 viewpoint bins.
 """
 
-from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf
+from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf, M_PI
 from libc.stdint cimport int32_t, int64_t
 
 import numpy as np
@@ -23,7 +23,7 @@ cdef enum:
     NV = 128      # viewpoint bins
     NSIG = 308
 
-cdef double PI = 3.141592653589793
+cdef double PI = M_PI
 
 
 cdef inline float _dot4(float a0, float a1, float a2, float b0, float b1, float b2) noexcept nogil:

@@ -24,14 +24,14 @@ object only, and no state is shared between points, so the output is
 bit-identical for any thread count or chunking.
 """
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, fabs, floor, sin, cos
+from libc.math cimport sqrt, fabs, floor, sin, cos, M_PI
 from libc.stdint cimport int64_t, int32_t, uint64_t, uint32_t
 
 from eppf.utils._common cimport splitmix64, rand_below
 
 import numpy as np
 
-cdef double _PI = 3.141592653589793
+cdef double _PI = M_PI
 # Triplets whose cross product is below this fraction of the product of its
 # two edge lengths are treated as collinear and do not vote.
 cdef double _COLLINEAR = 1e-10

@@ -32,7 +32,7 @@ thread that computed it or on the order in which points were visited, so the
 output is bit-identical for any thread count.
 """
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, log, pow, INFINITY
+from libc.math cimport sqrt, fabs, floor, frexp, ldexp, cbrt, acos, cos, sin, log, pow, INFINITY, M_PI
 from libc.float cimport DBL_EPSILON
 from libc.stdint cimport int64_t
 from libc.stdlib cimport malloc, free
@@ -99,7 +99,7 @@ cdef enum:
 # Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
 # the closed-form eigenvector is replaced by Jacobi's.
 cdef double _GAP_RATIO = 1e-3
-cdef double _PI = 3.141592653589793
+cdef double _PI = M_PI
 # Grid cell size over the estimated radius of a k-neighbourhood.
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
