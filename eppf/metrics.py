@@ -97,9 +97,9 @@ def retrieval_scores(y_true, y_pred):
     different "mean recall"; in 11 of its 15 retrieval cells that column is
     the larger of the two, and leave-one-out 1-NN on unbalanced data
     typically gives macro precision above macro recall (large classes absorb
-    wrong matches: their precision drops, small classes' recall drops; on
-    ModelNet10 with PCL's ESF descriptors we measured 74.7% against 73.2%),
-    so the paper's "mean recall" is most plausibly macro precision. We
+    wrong matches: their precision drops, small classes' recall drops; a
+    measured case: :ref:`api-figures-macro-precision`), so the paper's
+    "mean recall" is most plausibly macro precision. We
     report both under their standard names.
 
     Examples

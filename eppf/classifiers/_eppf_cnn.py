@@ -106,9 +106,9 @@ class EPPF4DClassifier(SkorchClassifierBase):
         the loss and the returned probabilities stay float32. On CPUs with
         native bfloat16 (AVX512_BF16 or AMX: AMD Zen 4 and later, Intel
         Cooper Lake, Sapphire Rapids and later) an epoch of the 4D network
-        takes about 0.6 times as long as in float32 (see the documentation's
-        Performance page); elsewhere PyTorch emulates bfloat16 and it is
-        slower. Accuracy is unchanged within run-to-run spread on our
+        is markedly faster than in float32 (timings: the documentation's
+        Performance page, "CNN training"); elsewhere PyTorch emulates
+        bfloat16 and it is slower. Accuracy is unchanged within run-to-run spread on our
         benchmarks, but predictions are not bit-identical to float32 ones.
     device : str, default="cpu"
         Torch device.
@@ -171,30 +171,28 @@ class EPPF4DClassifier(SkorchClassifierBase):
     (test-time averaging). Pools whose training draws describe slightly
     stretched copies of the clouds (``descriptor_pool(...,
     augment=RandomScaling())``, see :class:`eppf.preprocessing.RandomScaling`)
-    generalise better still: on ModelNet10 pools of plain draws lifted the
-    4D network's test accuracy from about 81 to 83-85%, pools of stretched
-    draws to 85-87% (``benchmarks/bench_cnn.py``).
+    generalise better still (test accuracies on ModelNet10: the
+    documentation's Performance page, "CNN training").
 
     Side features (beyond the paper): the EPPF histogram is scaled per
     object and rotation invariant, so it hardly sees an object's size and
     proportions, which tell ModelNet10's dresser from night stand and table
     from desk. Rows of EPPF followed by GASD and six proportion ratios,
     drawn per pool member from the same stretched cloud, with a smaller
-    network (``filters=(16, 32, 24), n_hidden=256``), lifted validation
-    accuracy from 88 to 94% and test accuracy from 83.7 to 87.9% at the same
-    training time (87.8 +- 0.3% over three seeds); this is the recommended
-    recipe for such objects ("EPPF 4D+" of ``eppf experiment
-    classification``, ``eppf train --recipe recommended``). On the small,
-    data-set scaled DALES objects one such network scored 88% test
-    accuracy against 96% for the paper's network and the KL 1-NN.
+    network (``filters=(16, 32, 24), n_hidden=256``), classify ModelNet10
+    better at the same training time; this is the recommended recipe for
+    such objects ("EPPF 4D+" of ``eppf experiment classification``, ``eppf
+    train --recipe recommended``). On small, data-set scaled objects such
+    as DALES's a single such network can do worse than the paper's network
+    and the KL 1-NN.
 
-    Ensembles and label smoothing (beyond the paper): on a stratified
-    quarter of DALES's training objects (88 objects, the rest for
-    training), three seeds of that network scored 95.5, 96.6 and 94.3%, the
-    three averaged (``n_estimators=3``) 96.6%, each seed with
-    ``label_smoothing=0.1`` 97.7%, the KL 1-NN and the paper's network
-    93.2%; ``batch_norm=True`` scored 92.0% (seed 0). The recommended
-    recipe therefore trains three networks with label smoothing 0.1.
+    Ensembles and label smoothing (beyond the paper): averaging networks of
+    different seeds (``n_estimators``) and ``label_smoothing=0.1`` each made
+    that network more accurate on DALES objects, ``batch_norm=True`` did
+    not; the recommended recipe therefore trains three networks with label
+    smoothing 0.1. The figures of both paragraphs are in the documentation's
+    "Reproducing the paper" page ("Classification beyond the paper: EPPF
+    4D+").
 
     The Table I reading (same padding, layer sizes, dense input of 14,400
     for 1,200 bins) is documented in ``eppf.nn``.

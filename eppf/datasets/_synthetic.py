@@ -355,10 +355,11 @@ def make_shapes(
        ``[1 - size_variation, 1 + size_variation]``, so size alone does not
        tell the classes apart.
     3. It is rotated (points and normals) as ``rotate`` says.
-    4. A random viewing direction is drawn and the far side is removed with
-       :func:`eppf.preprocessing._perturb.occlude`, leaving exactly ``n_points`` points.
+    4. A random viewing direction is drawn and the far side is removed by a
+       plane cut (as :class:`eppf.preprocessing.Occlusion` does), leaving
+       exactly ``n_points`` points.
     5. Gaussian noise of standard deviation ``noise`` is added to the
-       coordinates with :func:`eppf.preprocessing._perturb.add_gaussian_noise`.
+       coordinates (as :class:`eppf.preprocessing.GaussianNoise` does).
 
     Parameters
     ----------

@@ -135,10 +135,9 @@ class CVFHTransformer(PointCloudDescriptor):
     centroid and mean normal: three angle histograms, the shape distribution
     component (distances to the centroid) and the viewpoint component, 308
     bins (PCL's ``VFHSignature308``). ``aggregate`` turns an object's
-    signatures into one row. On the PCL reference runs the first signature
-    is identical to PCL's row for 99.9% of the ModelNet10 objects (where no
-    region forms) and, with ``region_growing="pcl"``, 92% of the DALES
-    objects (86% with the default region growing).
+    signatures into one row. How often the first signature equals PCL's row
+    on the PCL reference runs is in :ref:`api-figures-pcl` of the
+    documentation.
 
     Read more in the paper's baseline section (Bobkov et al. 2018).
 
@@ -248,9 +247,8 @@ class CVFHTransformer(PointCloudDescriptor):
     order, so a true neighbour is sometimes skipped and PCL's regions can be
     smaller or split. ``region_growing="components"`` (the default) links
     every such pair; ``"pcl"`` rebuilds FLANN's tree to skip the same points
-    as PCL. On the DALES reference objects with regions (55 of 499), the
-    first signature matches PCL's exactly for 64% of them with ``"pcl"``
-    and 5% with ``"components"``; leave-one-out accuracy is the same. The
+    as PCL, and so reproduces PCL's regions more often (figures:
+    :ref:`api-figures-pcl`). The
     second normals are computed in double precision (PCL: single). No
     randomness: the output is deterministic.
 

@@ -68,12 +68,8 @@ class EPPFTransformer(PointCloudDescriptor):
     n_neighbors : int, default=20
         Neighbours for PCA normal estimation of clouds given without normals
         (see :func:`eppf.preprocessing.estimate_normals`). Clouds of shape (n, 6) carry their
-        own normals and are not re-estimated. Chosen by measurement: on noisy
-        synthetic shapes (noise 0.03, occlusion 0.4) leave-one-out accuracy
-        was 70.3 / 85.8 / 91.5% for 10 / 20 / 30 neighbours, on ModelNet10
-        83.3 / 84.6 / 85.5%, on sparse aerial LiDAR objects (DALES, median
-        413 points) 97.0 / 97.0 / 95.2%; 20 gains most where normals are noisy
-        without blurring sparse clouds, and stays under 1 ms per 1,024 points.
+        own normals and are not re-estimated. The default is a measured
+        choice (see :ref:`api-figures-eppf-neighbors` in the documentation).
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         How estimated normals are oriented: away from the object's centroid,
         towards the origin (a sensor at the origin), or not at all.

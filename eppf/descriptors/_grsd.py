@@ -32,10 +32,10 @@ class GRSDTransformer(PointCloudDescriptor):
     cylinder, sphere, edge or noise), and the descriptor counts the classes
     of neighbouring voxel pairs, empty neighbours included: 21 bins (PCL's
     ``GRSDSignature21``). The computation follows PCL 1.13's
-    ``pcl::GRSDEstimation`` step by step, in single precision (see Notes):
-    on the PCL reference runs the rows are identical to PCL's for every
-    ModelNet10 object and 98.8% of the DALES objects (the others differ in
-    a voxel or two, through rounding in the normals).
+    ``pcl::GRSDEstimation`` step by step, in single precision (see Notes),
+    so the rows equal PCL's but where rounding in the normals moves a voxel
+    (how often, on the PCL reference runs: :ref:`api-figures-pcl` in the
+    documentation).
 
     Read more in the paper's baseline section (Bobkov et al. 2018).
 

@@ -94,10 +94,10 @@ class ProportionTransformer(PointCloudDescriptor):
 
     Notes
     -----
-    Meant as a side input, not a descriptor on its own: on ModelNet10 a
-    logistic regression on these six numbers names 67% of held-out training
-    objects, and they add to EPPF what the classifier confuses most (dresser
-    and night stand, table and desk: classes told apart by proportions).
+    Meant as a side input, not a descriptor on its own (six numbers tell
+    few classes apart by themselves: :ref:`api-figures-side-features`), but
+    they add to EPPF what the classifier confuses most (dresser and night
+    stand, table and desk: classes told apart by proportions).
 
     Examples
     --------

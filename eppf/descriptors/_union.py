@@ -493,7 +493,7 @@ class EPPFGASDTransformer(DescriptorUnion):
     grid in the object's PCA frame), each L1-normalised, weighted
     ``eppf_weight`` and ``1 - eppf_weight``. The two fail on different
     objects, so their weighted symmetric KL divergence retrieves better than
-    either alone (figures in Notes). EPPF's own defaults are unchanged; only
+    either alone (see Notes). EPPF's own defaults are unchanged; only
     the settings below are exposed.
 
     Parameters
@@ -531,28 +531,12 @@ class EPPFGASDTransformer(DescriptorUnion):
 
     Notes
     -----
-    Measured with ``scripts/combine_descriptors.py`` (two EPPF draws, mean;
-    1-NN by symmetric KL divergence, floor ``"auto"``), as leave-one-out
-    total accuracy over the whole set (the paper's protocol) and as
-    train -> test accuracy on the official or seeded split:
-
-    =====================  ===================  ===================
-    data set               EPPF+GASD, w = 0.8   best alone
-    =====================  ===================  ===================
-    ModelNet10 (object)    89.83% / 83.26%      GASD 88.75% / 82.16%
-    DALES objects (fit)    95.79% / 96.33%      EPPF 97.09% / 96.00%
-    =====================  ===================  ===================
-
-    PCL 1.13's best global descriptor reaches 88.73% (GASD, symmetric KL)
-    on ModelNet10 and 90.78% (GASD, L1) on DALES objects, so the preset is
-    above it on both; on DALES EPPF alone is better still (its rotation
-    invariance suits LiDAR segments, while GASD's PCA alignment suits
-    consistently oriented CAD models). Protocol: the weight was chosen on
-    the training split only (a seeded stratified quarter of the training
-    objects queried against the rest, ``w`` in 0.1, ..., 0.9): ModelNet10
-    chose 0.8 and 0.6 in the two draws, DALES 0.9 twice; 0.8 is the first
-    ModelNet10 choice, never tuned on test objects. Measured on a 2-vCPU
-    Zen 4 VM with other jobs running alongside.
+    The weight 0.8 was chosen on training splits only, never tuned on test
+    objects. EPPF's rotation invariance suits LiDAR segments, GASD's PCA
+    alignment consistently oriented CAD models; on data of the first kind
+    EPPF alone may retrieve better. The retrieval figures of the preset
+    against either block alone and against PCL's descriptors, with their
+    protocol, are in :ref:`api-figures-eppf-gasd` of the documentation.
 
     Examples
     --------

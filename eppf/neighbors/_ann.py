@@ -139,17 +139,17 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
         cells of which a query scans the ``n_probe`` nearest; quick to build.
         ``"hnsw"``: faiss's ``IndexHNSWFlat``, a navigable small-world graph
         walked with ``ef_search`` entries; faster queries at equal recall on
-        large databases, but about 20 times slower to build (one thread,
-        so that the graph is the same on every run).
+        large databases, but much slower to build (one thread, so that the
+        graph is the same on every run).
     n_lists : int or "auto", default="auto"
         Inverted lists (k-means cells) of the index. ``"auto"`` uses about
         ``4 * sqrt(n_samples)`` (4,000 for a million), with at least 39
         training rows per list.
     n_probe : int, default=128
         Lists scanned per query (capped at ``n_lists``; ``"ivf"`` only).
-        More lists: higher recall, slower queries. On a million EPPF-like
-        descriptors, 64 lists gave recall@1 0.988 and 128 gave 0.998 at
-        1,657 queries per second on two cores.
+        More lists: higher recall, slower queries (recall and speed on a
+        million EPPF-like descriptors: the documentation's Performance page,
+        "Approximate retrieval").
     hnsw_m : int, default=16
         Links per node of the HNSW graph (``"hnsw"`` only).
     ef_search : int, default=64

@@ -145,7 +145,7 @@ default="centroid"
     method : {"pca", "hough"}, default="pca"
         ``"pca"``: local PCA (below). ``"hough"``: Boulch and Marlet's
         randomized Hough transform, the estimator of the paper, which keeps
-        edges sharp (see :func:`eppf.preprocessing._hough.estimate_normals_hough`).
+        edges sharp.
     random_state : int, RandomState instance or None, default=0
         Seeds the ``"hough"`` estimator (unused by ``"pca"``).
     method_params : dict, default=None
@@ -190,12 +190,10 @@ default="centroid"
     ``2**100``) is first rescaled by an exact power of two, and a viewpoint
     with it, so any finite coordinates give the normals of a sane scale. The search's
     distance scan runs on AVX-512 or AVX2 where the CPU has them, with the
-    same normals bit for bit. About 0.55 ms of CPU for 1,024 points and 7 ms
-    for 10,000 with ``n_neighbors=20`` on one core of an AVX-512 CPU, 3.4 to
-    4.5 times less than Open3D's ``estimate_normals`` (see
-    ``benchmarks/bench_normals.py``). The grid's cost grows with the square
-    of the number of points that share one cell, so tens of thousands of
-    exact duplicates of one point are slow (seconds), though still exact.
+    same normals bit for bit (timings against Open3D: the documentation's
+    Performance page, "Normal estimation"). The grid's cost grows with the
+    square of the number of points that share one cell, so tens of thousands
+    of exact duplicates of one point are slow, though still exact.
 
     References
     ----------

@@ -506,7 +506,6 @@ def check_int(value, name, owner, low, high=None):
 
     See Also
     --------
-    eppf.utils._param_validation.validate_params : The declarative checks estimators use.
     check_n_jobs : The check of ``n_jobs``.
 
     Examples
