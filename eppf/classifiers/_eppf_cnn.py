@@ -19,7 +19,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     comparison variants on flat EPPF histograms, with Adam as in the paper.
     The network is a :mod:`skorch` ``NeuralNetClassifier`` built in ``fit``
     (wrapped, not subclassed); this class adds label encoding, input
-    standardisation, a validation split taken from the training data for
+    standardization, a validation split taken from the training data for
     early stopping, a time budget, seeding and thread control (the parts
     shared with :class:`PointNetClassifier` live in one base class).
 
@@ -70,30 +70,30 @@ class EPPF4DClassifier(SkorchClassifierBase):
         number of epochs then depends on the machine's speed, so a run with
         a budget is reproducible only as far as it trains the same epochs.
     input_scaling : {"global", "bin", "none"}, default="global"
-        Standardisation learned in ``fit``. EPPF histograms sum to 1, so their
+        Standardization learned in ``fit``. EPPF histograms sum to 1, so their
         values are tiny (mean ``1 / prod(n_bins)``). ``"global"`` subtracts the
         mean and divides by the standard deviation of all training values
         (one pair of numbers, so the histogram's shape is kept); ``"bin"``
-        standardises every bin on its own (as sklearn's ``StandardScaler``;
+        standardizes every bin on its own (as sklearn's ``StandardScaler``;
         amplifies rarely filled bins); ``"none"`` feeds values as they are.
     n_side_features : int or "auto", default=0
         Side features after the ``prod(n_bins)`` bins of every row (beyond
         the paper): e.g. GASD and :class:`eppf.descriptors.ProportionTransformer`
         columns of a :class:`eppf.descriptors.DescriptorUnion` that starts
-        with EPPF. They are standardised column by column and pass a dense
+        with EPPF. They are standardized column by column and pass a dense
         branch of ``side_hidden`` ReLU units that joins the flattened
         convolution features at the first dense layer. ``"auto"`` takes
         every column after the bins; 0 (Table I) refuses extra columns.
     side_hidden : int, default=128
         Units of the side branch.
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU.
+        Batch normalization between every convolution and its ReLU.
     label_smoothing : float, default=0.0
         Label smoothing of the cross-entropy loss, in [0, 1).
     n_estimators : int, default=1
         Networks trained (beyond the paper): with more than one, ``fit``
         trains a small ensemble, every member on the same validation
-        hold-out and standardisation but with its own weight initialisation,
+        hold-out and standardization but with its own weight initialization,
         minibatch order and descriptor draws (seeded from ``random_state``
         after the first member, which is the network a single-model fit
         trains), and ``predict_proba`` averages the members' probabilities.
@@ -118,7 +118,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         ``OMP_NUM_THREADS``; joblib sets that variable in its workers, so
         ``GridSearchCV(n_jobs=k)`` does not oversubscribe.
     random_state : int, RandomState instance or None, default=None
-        Seeds weight initialisation, dropout, minibatch order, the
+        Seeds weight initialization, dropout, minibatch order, the
         validation split and the choice of descriptor draws. With an int,
         results on CPU are reproducible (the global torch RNG is left as it
         was).
@@ -137,13 +137,13 @@ class EPPF4DClassifier(SkorchClassifierBase):
     side_mean_ : ndarray of shape (``n_side_features_``,)
         Subtracted from the side features.
     side_scale_ : ndarray of shape (``n_side_features_``,)
-        Divides the centred side features.
+        Divides the centered side features.
     n_draws_fit_ : int
         Descriptor draws per object seen in ``fit`` (1 for a 2D ``X``).
     input_mean_ : ndarray of shape (1,) or (n_features,)
         Subtracted from the descriptors.
     input_scale_ : ndarray of shape (1,) or (n_features,)
-        Divides the centred descriptors.
+        Divides the centered descriptors.
     net_ : skorch.NeuralNetClassifier
         The trained network (the first member of an ensemble);
         ``net_.history`` holds the per-epoch record.
@@ -171,7 +171,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     (test-time averaging). Pools whose training draws describe slightly
     stretched copies of the clouds (``descriptor_pool(...,
     augment=RandomScaling())``, see :class:`eppf.preprocessing.RandomScaling`)
-    generalise better still (test accuracies on ModelNet10: the
+    generalize better still (test accuracies on ModelNet10: the
     documentation's Performance page, "CNN training").
 
     Side features (beyond the paper): the EPPF histogram is scaled per
@@ -362,7 +362,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
 
         n_side = self.n_side_features_
         n_features = self.n_features_in_ - n_side
-        # Side features are standardised column by column whatever input_scaling says.
+        # Side features are standardized column by column whatever input_scaling says.
         side = X[train_idx][..., n_features:].reshape(-1, max(n_side, 1)).astype(np.float64)
         self.side_mean_ = side.mean(axis=0).astype(np.float32) if n_side else np.zeros(0, np.float32)
         self.side_scale_ = side.std(axis=0).astype(np.float32) if n_side else np.ones(0, np.float32)

@@ -45,7 +45,7 @@ cdef void _vfh_one(const float* p, const float* nrm, int64_t n, const float* c, 
     cdef double pf, d_pi, alpha
     cdef int b, k
     memset(hist, 0, NSIG * sizeof(float))
-    # distance normalisation: the point farthest from the centroid (Vector3f norm)
+    # distance normalization: the point farthest from the centroid (Vector3f norm)
     for i in range(n):
         dx = c[0] - p[3 * i]
         dy = c[1] - p[3 * i + 1]
@@ -162,9 +162,9 @@ def pcl_region_growing(const int32_t[::1] neighbors, const int64_t[::1] offsets,
                        int64_t[::1] labels):
     """PCL's ``extractEuclideanClustersSmooth``, seed by seed.
 
-    Point ``i``'s radius neighbours are ``neighbors[offsets[i]:offsets[i + 1]]``
+    Point ``i``'s radius neighbors are ``neighbors[offsets[i]:offsets[i + 1]]``
     in the search's order; as PCL, the first one is skipped (taken to be the
-    query itself) and an unprocessed neighbour joins when
+    query itself) and an unprocessed neighbor joins when
     ``acos(n_s . n_j) < eps_angle`` for the point ``s`` being expanded
     (single-precision dot products; NaN normals join nothing). Regions of at
     least ``min_points`` points are numbered in seed order into ``labels``

@@ -34,7 +34,7 @@ class EPPFTransformer(PointCloudDescriptor):
     f1, the maximum angle between the connecting line and the two tangent
     planes f2, the angle between the two normals f3 and the ratio of occupied
     voxels on the line between the points f4. Their joint 4D histogram is
-    weighted by ``ln(i / N1 + c)`` along the distance axis and normalised.
+    weighted by ``ln(i / N1 + c)`` along the distance axis and normalized.
 
     Parameters
     ----------
@@ -66,7 +66,7 @@ class EPPFTransformer(PointCloudDescriptor):
         by its inverse); with ``"fit"``, a largest training side whose inverse
         is not a finite positive float64 is a ``ValueError``.
     n_neighbors : int, default=20
-        Neighbours for PCA normal estimation of clouds given without normals
+        Neighbors for PCA normal estimation of clouds given without normals
         (see :func:`eppf.preprocessing.estimate_normals`). Clouds of shape (n, 6) carry their
         own normals and are not re-estimated. The default is a measured
         choice (see :ref:`api-figures-eppf-neighbors` in the documentation).
@@ -234,8 +234,8 @@ class EPPFTransformer(PointCloudDescriptor):
         ----------
         X : list of array-like of shape (n_i, 3) or (n_i, 6)
             Point clouds; columns 3-5, when present, are normals (any length
-            but zero; they are normalised). Clouds without normals get PCA
-            normals from ``n_neighbors`` neighbours when f2 or f3 is used.
+            but zero; they are normalized). Clouds without normals get PCA
+            normals from ``n_neighbors`` neighbors when f2 or f3 is used.
 
         Returns
         -------
@@ -342,7 +342,7 @@ class EPPFTransformer(PointCloudDescriptor):
         return X.reshape(X.shape[:-1] + self.histogram_shape_)
 
 def _weight_and_normalise(counts, kernel_bins, c, weighted):
-    """Apply ``ln(i / N1 + c)`` along f1 and L1-normalise each row."""
+    """Apply ``ln(i / N1 + c)`` along f1 and L1-normalize each row."""
     hist = counts.astype(np.float64).reshape((counts.shape[0],) + tuple(kernel_bins))
     if weighted:
         n1 = kernel_bins[0]

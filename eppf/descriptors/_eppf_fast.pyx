@@ -241,7 +241,7 @@ cdef inline int64_t _grid_words(int grid) noexcept nogil:
 
 cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, uint64_t* bits,
                             int32_t* vox, int64_t* pv) noexcept nogil:
-    """Voxelise ``n`` points on a grid over their bounding cube.
+    """Voxelize ``n`` points on a grid over their bounding cube.
 
     Sets the occupied voxels in the bit grid ``bits`` (row (x, y) is
     ``_row_words`` 64-bit words of z bits, so a 64^3 grid is one word per

@@ -62,7 +62,7 @@ def proportions(points, up_axis=2, coverage=0.96):
 class ProportionTransformer(PointCloudDescriptor):
     """Six scale-invariant proportions of every point cloud, as log ratios.
 
-    From the centred points: the principal spreads ``s1 >= s2 >= s3`` (square
+    From the centered points: the principal spreads ``s1 >= s2 >= s3`` (square
     roots of the covariance's eigenvalues), the horizontal spreads ``h1 >=
     h2`` (the same in the plane orthogonal to ``up_axis``), the vertical
     spread ``u`` and the robust extents ``e1, e2, e3`` along the principal

@@ -4,7 +4,7 @@
 ``FeatureUnion`` is to tabular data: every block (a descriptor transformer)
 describes the same clouds and the rows are placed side by side. Because the
 symmetric Kullback-Leibler divergence compares probability distributions,
-each block is by default L1-normalised and multiplied by its weight, the
+each block is by default L1-normalized and multiplied by its weight, the
 weights summing to 1. The concatenated row is then a distribution itself, and
 its divergence to another such row is exactly the weighted sum of the blocks'
 divergences (see the class Notes), so a union is matched by
@@ -84,7 +84,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
     transformers_ : list of (str, transformer) tuples
         The fitted clones of the blocks, in order.
     weights_ : ndarray of shape (n_blocks,)
-        The normalised weights, in block order (they sum to 1).
+        The normalized weights, in block order (they sum to 1).
     feature_slices_ : dict of str to slice
         Columns of each block in the output.
     n_features_out_ : int
@@ -240,7 +240,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         return out
 
     def _combine(self, blocks, weights, normalize, n_objects):
-        """Check, normalise and weight the block rows; concatenate them."""
+        """Check, normalize and weight the block rows; concatenate them."""
         owner = type(self).__name__
         out = np.empty((n_objects, sum(B.shape[1] for _, B in blocks)))
         col = 0
@@ -490,7 +490,7 @@ class EPPFGASDTransformer(DescriptorUnion):
 
     A :class:`DescriptorUnion` of :class:`EPPFTransformer` (rotation-invariant
     point-pair statistics) and :class:`GASDTransformer` (a spatial occupancy
-    grid in the object's PCA frame), each L1-normalised, weighted
+    grid in the object's PCA frame), each L1-normalized, weighted
     ``eppf_weight`` and ``1 - eppf_weight``. The two fail on different
     objects, so their weighted symmetric KL divergence retrieves better than
     either alone (see Notes). EPPF's own defaults are unchanged; only
@@ -505,9 +505,9 @@ class EPPFGASDTransformer(DescriptorUnion):
     scaling : {"fit", "object", "none"}, default="fit"
         EPPF's scaling (``"object"`` for data whose objects differ in units,
         such as raw CAD models; ``"fit"`` for data in one unit, such as
-        LiDAR in metres). GASD normalises each object itself.
+        LiDAR in meters). GASD normalizes each object itself.
     n_neighbors : int, default=20
-        Neighbours of EPPF's PCA normals.
+        Neighbors of EPPF's PCA normals.
     random_state : int, RandomState instance or None, default=None
         Seeds EPPF's pair sampling (GASD is deterministic).
     n_jobs : int, default=None

@@ -78,7 +78,7 @@ def plane_shape(n_features):
     """Most nearly square (rows, cols) with rows * cols == n_features, rows >= cols.
 
     The paper reshapes its 1,200 bins to (40, 30); this rule gives that plane
-    and generalises it to other bin counts (540 -> (27, 20)).
+    and generalizes it to other bin counts (540 -> (27, 20)).
 
     Parameters
     ----------
@@ -199,9 +199,9 @@ def _check_options(owner, n_side, side_hidden, batch_norm):
 
 
 class _ChannelNorm(nn.BatchNorm1d):
-    """Batch normalisation over dimension 1 of a tensor of any rank >= 2.
+    """Batch normalization over dimension 1 of a tensor of any rank >= 2.
 
-    ``torch.nn.functional.batch_norm`` normalises every channel over all
+    ``torch.nn.functional.batch_norm`` normalizes every channel over all
     other axes whatever the rank; only the rank check of ``BatchNorm1d`` is
     relaxed, so the 4D network's (batch, C, n1, n2, n3) tensors need no copy.
     """
@@ -225,7 +225,7 @@ class _EPPFNetBase(nn.Module):
             self.norms = nn.ModuleList(_ChannelNorm(f) for f in filters)
 
     def _act(self, x, i):
-        """ReLU after convolution ``i``, batch-normalised first when ``batch_norm``."""
+        """ReLU after convolution ``i``, batch-normalized first when ``batch_norm``."""
         if getattr(self, "batch_norm", False):
             x = self.norms[i](x)
         return torch.relu(x)
@@ -305,7 +305,7 @@ class EPPFNet4D(_EPPFNetBase):
     side_hidden : int, default=128
         Units of the side branch (unused when ``n_side == 0``).
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU (beyond
+        Batch normalization between every convolution and its ReLU (beyond
         the paper).
 
     Attributes
@@ -413,7 +413,7 @@ class EPPFNet2D(_EPPFNetBase):
     side_hidden : int, default=128
         Units of the side branch (unused when ``n_side == 0``).
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU (beyond
+        Batch normalization between every convolution and its ReLU (beyond
         the paper).
 
     Attributes
@@ -503,7 +503,7 @@ class EPPFNet3D(_EPPFNetBase):
     side_hidden : int, default=128
         Units of the side branch (unused when ``n_side == 0``).
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU (beyond
+        Batch normalization between every convolution and its ReLU (beyond
         the paper).
 
     Attributes
