@@ -88,11 +88,19 @@ if debug and sys.platform != "win32":
 
 
 def _included_headers(pyx):
-    """The C headers of the pyx's own folder that it names in ``cdef extern from``."""
+    """The C headers of the pyx's own folder that it names in ``cdef extern from``, and
+    those they name in turn in ``#include "..."`` (a header split into parts)."""
     folder = os.path.dirname(pyx)
-    with open(pyx) as fh:
-        text = fh.read()
-    return [h for h in sorted(glob.glob(os.path.join(folder, "*.h"))) if '"%s"' % os.path.basename(h) in text]
+    headers = sorted(glob.glob(os.path.join(folder, "*.h")))
+    found, texts = [], [pyx]
+    while texts:
+        with open(texts.pop()) as fh:
+            text = fh.read()
+        for h in headers:
+            if h not in found and '"%s"' % os.path.basename(h) in text:
+                found.append(h)
+                texts.append(h)
+    return sorted(found)
 
 
 def _extension(pyx):

@@ -403,7 +403,7 @@ class _Decoder:
             tensors[entry["name"]] = torch.from_numpy(arr).to(getattr(torch, entry["dtype"]))
         history = self.decode(node.get("history"), f"{where}.history")
         try:
-            with torch.random.fork_rng(devices=[]):  # initialising draws random weights
+            with torch.random.fork_rng(devices=[]):  # initializing draws random weights
                 net = est._untrained_net(len(est.classes_))
                 net.module_.load_state_dict(tensors, strict=True)
         except (RuntimeError, ValueError, TypeError, AttributeError, KeyError) as exc:

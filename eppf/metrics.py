@@ -97,9 +97,9 @@ def retrieval_scores(y_true, y_pred):
     different "mean recall"; in 11 of its 15 retrieval cells that column is
     the larger of the two, and leave-one-out 1-NN on unbalanced data
     typically gives macro precision above macro recall (large classes absorb
-    wrong matches: their precision drops, small classes' recall drops; on
-    ModelNet10 with PCL's ESF descriptors we measured 74.7% against 73.2%),
-    so the paper's "mean recall" is most plausibly macro precision. We
+    wrong matches: their precision drops, small classes' recall drops; a
+    measured case: :ref:`api-figures-macro-precision`), so the paper's
+    "mean recall" is most plausibly macro precision. We
     report both under their standard names.
 
     Examples
@@ -168,14 +168,14 @@ def leave_one_out_retrieval(
         block's matrix products run on one BLAS thread, so the result is
         bit-identical for any value.
     return_indices : bool, default=False
-        Whether to return the index of each query's nearest neighbour too.
+        Whether to return the index of each query's nearest neighbor too.
 
     Returns
     -------
     y_pred : ndarray of shape (n_samples,)
         Label of each descriptor's nearest other descriptor.
     indices : ndarray of shape (n_samples,)
-        Index of that neighbour; only returned if ``return_indices=True``.
+        Index of that neighbor; only returned if ``return_indices=True``.
 
     See Also
     --------
@@ -187,7 +187,7 @@ def leave_one_out_retrieval(
     The distance matrix is symmetric, so only the blocks on and above its
     diagonal are computed, each serving its rows and its columns: half the
     work of ``KLNearestNeighbors().fit(X, y).kneighbors()``, whose answer it
-    matches except for neighbours tied to within rounding (here ties go to
+    matches except for neighbors tied to within rounding (here ties go to
     the lowest index, with ``d(i, j)`` and ``d(j, i)`` bitwise equal).
 
     Examples

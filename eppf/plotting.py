@@ -145,7 +145,7 @@ def plot_descriptor(descriptor, n_bins=(20, 4, 5, 3), *, fig=None, log=False, cm
     per (f3, f4) bin pair, ``n4`` rows (f4 bins, top row bin 0) by ``n3``
     columns (f3 bins), each panel an image of the f1 x f2 slice with f1 bins
     along x and f2 bins along y (origin lower left). All panels share one
-    colour scale and one colour bar.
+    color scale and one color bar.
 
     Parameters
     ----------
@@ -157,9 +157,9 @@ def plot_descriptor(descriptor, n_bins=(20, 4, 5, 3), *, fig=None, log=False, cm
     fig : matplotlib.figure.Figure, default=None
         Figure to draw into (it should be empty); a new one if None.
     log : bool, default=False
-        Logarithmic colour scale; empty bins are left blank.
+        Logarithmic color scale; empty bins are left blank.
     cmap : str or matplotlib.colors.Colormap, default="viridis"
-        Colour map.
+        Color map.
     title : str, default=None
         Figure title.
 
@@ -168,7 +168,7 @@ def plot_descriptor(descriptor, n_bins=(20, 4, 5, 3), *, fig=None, log=False, cm
     fig : matplotlib.figure.Figure
         The figure; ``fig.axes[:n3 * n4]`` are the panels in row-major order
         (panel ``i4 * n3 + i3`` shows ``hist[:, :, i3, i4].T``), the last axes
-        is the colour bar.
+        is the color bar.
 
     Raises
     ------
@@ -238,7 +238,7 @@ def filter_responses(classifier, descriptor, *, layers=(0, 1)):
     -------
     responses : list of ndarray of shape (n_filters, n1, n2, n3, n4)
         One per entry of ``layers``: the layer's output after its ReLU, the
-        input standardised as ``predict`` does, recorded by forward hooks.
+        input standardized as ``predict`` does, recorded by forward hooks.
 
     See Also
     --------
@@ -319,10 +319,10 @@ def plot_filter_responses(classifier, descriptor, *, layers=(0, 1), n_filters=8,
     For each of the chosen 4D convolution layers of a fitted
     :class:`eppf.classifiers.EPPF4DClassifier` (``conv="4d"``), the responses (after the
     ReLU) of the first ``n_filters`` filters are recorded with forward hooks,
-    the input standardised exactly as ``predict`` does. Each response is a 4D
+    the input standardized exactly as ``predict`` does. Each response is a 4D
     array over the (f1, f2, f3, f4) bins; a panel shows it reduced over
     (f3, f4) (``reduce``) as an image with f1 bins along x and f2 bins along
-    y. Rows are layers, columns filters, each row with its own colour bar.
+    y. Rows are layers, columns filters, each row with its own color bar.
 
     Parameters
     ----------
@@ -345,7 +345,7 @@ def plot_filter_responses(classifier, descriptor, *, layers=(0, 1), n_filters=8,
     fig : matplotlib.figure.Figure
         Panel ``row * k + j`` of ``fig.axes`` (``k`` filters shown) shows
         ``reduce(response[j], axis=(2, 3)).T`` of layer ``layers[row]``; the
-        colour bars come after the panels.
+        color bars come after the panels.
 
     Raises
     ------
@@ -437,7 +437,7 @@ def plot_confusion_matrix(
     ax : matplotlib.axes.Axes, default=None
         Axes to draw on; a new figure if None.
     cmap : str or matplotlib.colors.Colormap, default="Blues"
-        Colour map.
+        Color map.
     values : bool, default=True
         Write each cell's value into it.
     display_labels : array-like of shape (n_classes,), default=None

@@ -304,7 +304,7 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         else:
             self.best_epoch_ = self.n_epochs_
         # Further members of an ensemble (``n_estimators`` > 1): the same
-        # validation hold-out and standardisation, their own weights,
+        # validation hold-out and standardization, their own weights,
         # minibatch order and draws, seeded after member 0 so that member 0
         # is the network a single-model fit trains.
         self.ensemble_nets_ = []
@@ -346,7 +346,7 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         return net
 
     def _untrained_net(self, n_classes):
-        """The skorch network ``fit`` builds for ``n_classes``, initialised but untrained and without
+        """The skorch network ``fit`` builds for ``n_classes``, initialized but untrained and without
         training callbacks or validation data: what a saved model's weights are loaded into."""
         from skorch import NeuralNetClassifier
 

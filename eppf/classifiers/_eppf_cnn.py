@@ -19,7 +19,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     comparison variants on flat EPPF histograms, with Adam as in the paper.
     The network is a :mod:`skorch` ``NeuralNetClassifier`` built in ``fit``
     (wrapped, not subclassed); this class adds label encoding, input
-    standardisation, a validation split taken from the training data for
+    standardization, a validation split taken from the training data for
     early stopping, a time budget, seeding and thread control (the parts
     shared with :class:`PointNetClassifier` live in one base class).
 
@@ -70,30 +70,30 @@ class EPPF4DClassifier(SkorchClassifierBase):
         number of epochs then depends on the machine's speed, so a run with
         a budget is reproducible only as far as it trains the same epochs.
     input_scaling : {"global", "bin", "none"}, default="global"
-        Standardisation learned in ``fit``. EPPF histograms sum to 1, so their
+        Standardization learned in ``fit``. EPPF histograms sum to 1, so their
         values are tiny (mean ``1 / prod(n_bins)``). ``"global"`` subtracts the
         mean and divides by the standard deviation of all training values
         (one pair of numbers, so the histogram's shape is kept); ``"bin"``
-        standardises every bin on its own (as sklearn's ``StandardScaler``;
+        standardizes every bin on its own (as sklearn's ``StandardScaler``;
         amplifies rarely filled bins); ``"none"`` feeds values as they are.
     n_side_features : int or "auto", default=0
         Side features after the ``prod(n_bins)`` bins of every row (beyond
         the paper): e.g. GASD and :class:`eppf.descriptors.ProportionTransformer`
         columns of a :class:`eppf.descriptors.DescriptorUnion` that starts
-        with EPPF. They are standardised column by column and pass a dense
+        with EPPF. They are standardized column by column and pass a dense
         branch of ``side_hidden`` ReLU units that joins the flattened
         convolution features at the first dense layer. ``"auto"`` takes
         every column after the bins; 0 (Table I) refuses extra columns.
     side_hidden : int, default=128
         Units of the side branch.
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU.
+        Batch normalization between every convolution and its ReLU.
     label_smoothing : float, default=0.0
         Label smoothing of the cross-entropy loss, in [0, 1).
     n_estimators : int, default=1
         Networks trained (beyond the paper): with more than one, ``fit``
         trains a small ensemble, every member on the same validation
-        hold-out and standardisation but with its own weight initialisation,
+        hold-out and standardization but with its own weight initialization,
         minibatch order and descriptor draws (seeded from ``random_state``
         after the first member, which is the network a single-model fit
         trains), and ``predict_proba`` averages the members' probabilities.
@@ -106,9 +106,9 @@ class EPPF4DClassifier(SkorchClassifierBase):
         the loss and the returned probabilities stay float32. On CPUs with
         native bfloat16 (AVX512_BF16 or AMX-BF16 on x86: AMD Zen 4 and later,
         Intel Cooper Lake, Sapphire Rapids and later; BF16 on ARM) an epoch
-        of the 4D network takes about 0.6 times as long as in float32 (see
-        the documentation's Performance page); on other CPUs PyTorch
-        emulates bfloat16 and an epoch takes several times as long, so
+        of the 4D network is faster than in float32 (timings: the
+        documentation's Performance page, "CNN training"); on other CPUs
+        PyTorch emulates bfloat16 and an epoch takes several times as long, so
         asking for it there warns (:class:`eppf.nn.BFloat16EmulationWarning`,
         once per process). ``"auto"`` chooses bfloat16 where the device
         computes it natively (such a CPU, or a CUDA GPU of compute
@@ -127,7 +127,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         ``OMP_NUM_THREADS``; joblib sets that variable in its workers, so
         ``GridSearchCV(n_jobs=k)`` does not oversubscribe.
     random_state : int, RandomState instance or None, default=None
-        Seeds weight initialisation, dropout, minibatch order, the
+        Seeds weight initialization, dropout, minibatch order, the
         validation split and the choice of descriptor draws. With an int,
         results on CPU are reproducible (the global torch RNG is left as it
         was).
@@ -148,7 +148,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     side_mean_ : ndarray of shape (``n_side_features_``,)
         Subtracted from the side features.
     side_scale_ : ndarray of shape (``n_side_features_``,)
-        Divides the centred side features.
+        Divides the centered side features.
     n_draws_fit_ : int
         Descriptor draws per object seen in ``fit`` (1 for a 2D ``X``).
     precision_ : {"float32", "bfloat16"}
@@ -159,7 +159,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
     input_mean_ : ndarray of shape (1,) or (n_features,)
         Subtracted from the descriptors.
     input_scale_ : ndarray of shape (1,) or (n_features,)
-        Divides the centred descriptors.
+        Divides the centered descriptors.
     net_ : skorch.NeuralNetClassifier
         The trained network (the first member of an ensemble);
         ``net_.history`` holds the per-epoch record.
@@ -187,30 +187,28 @@ class EPPF4DClassifier(SkorchClassifierBase):
     (test-time averaging). Pools whose training draws describe slightly
     stretched copies of the clouds (``descriptor_pool(...,
     augment=RandomScaling())``, see :class:`eppf.preprocessing.RandomScaling`)
-    generalise better still: on ModelNet10 pools of plain draws lifted the
-    4D network's test accuracy from about 81 to 83-85%, pools of stretched
-    draws to 85-87% (``benchmarks/bench_cnn.py``).
+    generalize better still (test accuracies on ModelNet10: the
+    documentation's Performance page, "CNN training").
 
     Side features (beyond the paper): the EPPF histogram is scaled per
     object and rotation invariant, so it hardly sees an object's size and
     proportions, which tell ModelNet10's dresser from night stand and table
     from desk. Rows of EPPF followed by GASD and six proportion ratios,
     drawn per pool member from the same stretched cloud, with a smaller
-    network (``filters=(16, 32, 24), n_hidden=256``), lifted validation
-    accuracy from 88 to 94% and test accuracy from 83.7 to 87.9% at the same
-    training time (87.8 +- 0.3% over three seeds); this is the recommended
-    recipe for such objects ("EPPF 4D+" of ``eppf experiment
-    classification``, ``eppf train --recipe recommended``). On the small,
-    data-set scaled DALES objects one such network scored 88% test
-    accuracy against 96% for the paper's network and the KL 1-NN.
+    network (``filters=(16, 32, 24), n_hidden=256``), classify ModelNet10
+    better at the same training time; this is the recommended recipe for
+    such objects ("EPPF 4D+" of ``eppf experiment classification``, ``eppf
+    train --recipe recommended``). On small, data-set scaled objects such
+    as DALES's a single such network can do worse than the paper's network
+    and the KL 1-NN.
 
-    Ensembles and label smoothing (beyond the paper): on a stratified
-    quarter of DALES's training objects (88 objects, the rest for
-    training), three seeds of that network scored 95.5, 96.6 and 94.3%, the
-    three averaged (``n_estimators=3``) 96.6%, each seed with
-    ``label_smoothing=0.1`` 97.7%, the KL 1-NN and the paper's network
-    93.2%; ``batch_norm=True`` scored 92.0% (seed 0). The recommended
-    recipe therefore trains three networks with label smoothing 0.1.
+    Ensembles and label smoothing (beyond the paper): averaging networks of
+    different seeds (``n_estimators``) and ``label_smoothing=0.1`` each made
+    that network more accurate on DALES objects, ``batch_norm=True`` did
+    not; the recommended recipe therefore trains three networks with label
+    smoothing 0.1. The figures of both paragraphs are in the documentation's
+    "Reproducing the paper" page ("Classification beyond the paper: EPPF
+    4D+").
 
     The Table I reading (same padding, layer sizes, dense input of 14,400
     for 1,200 bins) is documented in ``eppf.nn``.
@@ -383,7 +381,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
 
         n_side = self.n_side_features_
         n_features = self.n_features_in_ - n_side
-        # Side features are standardised column by column whatever input_scaling says.
+        # Side features are standardized column by column whatever input_scaling says.
         side = X[train_idx][..., n_features:].reshape(-1, max(n_side, 1)).astype(np.float64)
         self.side_mean_ = side.mean(axis=0).astype(np.float32) if n_side else np.zeros(0, np.float32)
         self.side_scale_ = side.std(axis=0).astype(np.float32) if n_side else np.ones(0, np.float32)

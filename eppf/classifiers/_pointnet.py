@@ -19,7 +19,7 @@ def _softmax(logits):
 
 # ------------------------------------------------------------------ preprocess
 def _normalise_and_sample(clouds, n_points, seeds):
-    """Centre on the bbox centre, scale by the largest bbox side, resample.
+    """Center on the bbox center, scale by the largest bbox side, resample.
 
     Clouds with more than ``n_points`` points are subsampled without
     replacement, smaller ones are topped up with replacement (all points kept
@@ -55,7 +55,7 @@ class PointNetClassifier(SkorchClassifierBase):
 
     The classification network of Qi et al. [1]_: a learned 3 x 3 input
     transform, a shared MLP (64, 64), a learned 64 x 64 feature transform
-    regularised towards orthogonality, a shared MLP (64, 128, 1024), a global
+    regularized towards orthogonality, a shared MLP (64, 128, 1024), a global
     max-pool and a dense head 512-256-classes with batch norm and dropout,
     trained with Adam. Used by the paper [2]_ as the raw-point baseline.
     The network is a :mod:`skorch` ``NeuralNetClassifier`` built in ``fit``
@@ -68,8 +68,8 @@ class PointNetClassifier(SkorchClassifierBase):
     ----------
     n_points : int, default=2048
         Points fed to the network per object (the paper's value). Every
-        object is normalised to the unit cube (centred on its bounding-box
-        centre and divided by the bounding box's largest side), then
+        object is normalized to the unit cube (centered on its bounding-box
+        center and divided by the bounding box's largest side), then
         subsampled without replacement when larger, or topped up with points
         drawn with replacement when smaller.
     max_epochs : int, default=100
@@ -87,7 +87,7 @@ class PointNetClassifier(SkorchClassifierBase):
         Dropout probability before the last dense layer (keep probability
         0.7, the value of the authors' code).
     reg_weight : float, default=0.001
-        Weight of the feature-transform regulariser
+        Weight of the feature-transform regularizer
         ``||I - A A^T||_F^2`` added to the cross-entropy.
     augment_rotation : {"z", None}, default="z"
         During training, rotate every object by a random angle about the up
@@ -119,7 +119,7 @@ class PointNetClassifier(SkorchClassifierBase):
         Torch threads during ``fit`` and ``predict`` (joblib's meaning: -1 is
         all cores). None leaves torch's setting alone.
     random_state : int, RandomState instance or None, default=None
-        Seeds weight initialisation, dropout, minibatch order, the
+        Seeds weight initialization, dropout, minibatch order, the
         validation split, point resampling and augmentation. With an int,
         results on CPU are reproducible (the global torch RNG is left as it
         was).
@@ -147,7 +147,7 @@ class PointNetClassifier(SkorchClassifierBase):
     Notes
     -----
     Only the xyz columns are used; six-column clouds have their normals
-    ignored. The orthogonality regulariser is added through the loss module
+    ignored. The orthogonality regularizer is added through the loss module
     (:class:`eppf.nn.PointNetLoss`) that receives the network's
     ``(logits, feature_transform)`` output, so skorch is used unchanged.
     The T-Nets start at the identity transform (their last layer has zero

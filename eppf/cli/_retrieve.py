@@ -1,4 +1,4 @@
-"""``eppf retrieve``: top-k database neighbours by the descriptor's metric."""
+"""``eppf retrieve``: top-k database neighbors by the descriptor's metric."""
 
 import json
 import sys
@@ -52,7 +52,7 @@ def _named_labels(data, n, path):
 
 
 def run_retrieve(args, out=None):
-    """Run ``eppf retrieve``: top-k database neighbours of each query.
+    """Run ``eppf retrieve``: top-k database neighbors of each query.
 
     Parameters
     ----------

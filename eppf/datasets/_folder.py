@@ -1,4 +1,4 @@
-"""A labelled data set from a folder of point cloud or mesh files, one
+"""A labeled data set from a folder of point cloud or mesh files, one
 subfolder per class: the layout most users already have for their own scans."""
 
 import glob
@@ -37,9 +37,9 @@ def _subfolders(folder):
 
 def load_folder(path, *, classes=None, subset="all", n_points=None, normals="auto", on_error="raise",
                 n_jobs=None, random_state=0, return_X_y=False):
-    """Load a labelled data set from a folder with one subfolder per class.
+    """Load a labeled data set from a folder with one subfolder per class.
 
-    Three layouts are recognised, the class of an object being the name of
+    Three layouts are recognized, the class of an object being the name of
     its class folder:
 
     - ``<class>/<object file>`` (files may sit in deeper subfolders): no split;

@@ -231,7 +231,7 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
                   on_error="raise", n_jobs=None, random_state=0, return_X_y=False):
     """Load ModelNet10 or ModelNet40 from a local folder.
 
-    Three published layouts are recognised (in ``path`` or its
+    Three published layouts are recognized (in ``path`` or its
     ``ModelNet40``/``ModelNet10`` subfolder):
 
     - ``official``: Princeton's ``<class>/<train|test>/<class>_<k>.off``
@@ -450,7 +450,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
         are resampled to it (see :func:`eppf.preprocessing.Resampler`).
     resolution : float, default=0.01
         Voxel size for sampling meshes when ``n_points`` is None (the paper's
-        1 cm, in metres).
+        1 cm, in meters).
     normals : {"auto", True, False}, default="auto"
         Whether to return normals (columns 3 to 5) when the files have them.
     on_error : {"raise", "skip"}, default="raise"
@@ -553,7 +553,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     """Load the object instances of the Stanford indoor data set (S3DIS).
 
     Reads the ``Area_<n>/<room>/Annotations/<class>_<k>.txt`` files of
-    ``Stanford3dDataset_v1.2`` (rows ``x y z r g b``; colours are dropped).
+    ``Stanford3dDataset_v1.2`` (rows ``x y z r g b``; colors are dropped).
     The paper keeps 10 classes, leaving out *clutter* and the planar *floor*,
     *ceiling* and *wall*, and, since the official split by building leaves
     some classes out of one side, splits each class's instances 60/40 at

@@ -67,7 +67,7 @@ def _sample_boxes(centers, halves, k, rng):
 
 
 def _disk(z, radius, sign):
-    """Horizontal disk at height ``z`` centred on the z axis, normal ``(0, 0, sign)``."""
+    """Horizontal disk at height ``z`` centered on the z axis, normal ``(0, 0, sign)``."""
     normal = np.array([0.0, 0.0, sign])
 
     def sample(k, rng):
@@ -107,7 +107,7 @@ def _cone_mantle(radius, z0, height):
 
 
 def _sphere(radius, z=0.0, half=0):
-    """Sphere centred at ``(0, 0, z)``; ``half=+1``/``-1`` keeps the upper/lower hemisphere."""
+    """Sphere centered at ``(0, 0, z)``; ``half=+1``/``-1`` keeps the upper/lower hemisphere."""
 
     def sample(k, rng):
         d = rng.normal(size=(k, 3))
@@ -351,14 +351,15 @@ def make_shapes(
        (aspect ratios vary) and ``m = ceil(n_points / (1 - occlusion))``
        points are drawn uniformly over its outer surface area, each with the
        exact outward unit normal.
-    2. It is centred on its bounding-box centre and scaled by a factor from
+    2. It is centered on its bounding-box center and scaled by a factor from
        ``[1 - size_variation, 1 + size_variation]``, so size alone does not
        tell the classes apart.
     3. It is rotated (points and normals) as ``rotate`` says.
-    4. A random viewing direction is drawn and the far side is removed with
-       :func:`eppf.preprocessing._perturb.occlude`, leaving exactly ``n_points`` points.
+    4. A random viewing direction is drawn and the far side is removed by a
+       plane cut (as :class:`eppf.preprocessing.Occlusion` does), leaving
+       exactly ``n_points`` points.
     5. Gaussian noise of standard deviation ``noise`` is added to the
-       coordinates with :func:`eppf.preprocessing._perturb.add_gaussian_noise`.
+       coordinates (as :class:`eppf.preprocessing.GaussianNoise` does).
 
     Parameters
     ----------

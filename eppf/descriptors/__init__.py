@@ -14,7 +14,7 @@ its own module with its compiled kernel beside it (``_esf.py`` over
 - :class:`CVFHTransformer`: Clustered VFH (Aldoma et al. 2011);
 - :class:`GRSDTransformer`: Global Radius-based Surface Descriptor (Marton et al. 2010);
 - :class:`GASDTransformer`, :class:`GASDColorTransformer`: Globally Aligned
-  Spatial Distribution (Lima & Teichrieb 2016), shape and shape + colour;
+  Spatial Distribution (Lima & Teichrieb 2016), shape and shape + color;
 - :class:`DescriptorUnion`: several descriptors weighted into one row;
   :class:`EPPFGASDTransformer`, its measured EPPF + GASD preset;
 - :func:`descriptor_pool`: several seeded draws of one descriptor per object;

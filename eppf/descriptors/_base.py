@@ -17,13 +17,13 @@ the same way is written here once:
   (:func:`eppf.utils.transform_in_chunks`), so results never depend on threads,
   chunk sizes or where a chunk runs;
 - clouds may carry extra per-point columns after the coordinates (and
-  normals), such as GASD colour's RGB: ``_extra_columns`` says how many, and
+  normals), such as GASD color's RGB: ``_extra_columns`` says how many, and
   :meth:`PointCloudDescriptor._check_extra_columns` checks and converts them;
   they reach ``_describe`` as its last per-object argument;
 - kernel status codes become a ``ValueError`` naming the estimator and the
   object (:meth:`PointCloudDescriptor._raise_for_status`);
 - packing clouds with their normals (estimated where missing), optionally
-  centred and scaled per object (:meth:`PointCloudDescriptor._centred_points_and_normals`);
+  centered and scaled per object (:meth:`PointCloudDescriptor._centred_points_and_normals`);
 - tags for ragged (non-tabular) input and ``get_feature_names_out``.
 
 A subclass declares ``_parameter_constraints`` and provides
@@ -93,7 +93,7 @@ VERBOSE = [Interval(numbers.Integral, 0, None, closed="left"), Options(bool)]
 NORMAL_ORIENTATION = [StrOptions(["centroid", "origin"], description="'centroid', 'origin'"), None]
 #: ``n_neighbors`` of PCA normals (a plane needs three points).
 N_NEIGHBORS = [Interval(numbers.Integral, 3, None, closed="left")]
-#: ``scaling`` of the descriptors that centre each object and scale it to a unit box.
+#: ``scaling`` of the descriptors that center each object and scale it to a unit box.
 SCALING = [StrOptions(["object", "fit", "none"])]
 
 
@@ -204,7 +204,7 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """Pack validated clouds into ``points``, ``normals`` (N, 3) and ``offsets``.
 
         Clouds given with normals keep them; the others get PCA normals from
-        ``n_neighbors`` neighbours (:func:`eppf.preprocessing.estimate_normals`),
+        ``n_neighbors`` neighbors (:func:`eppf.preprocessing.estimate_normals`),
         oriented by ``orientation``.
         """
         from ..preprocessing._normals import estimate_normals_batch
@@ -278,9 +278,9 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
     _compensates_scale = False
 
     def _centred_points_and_normals(self, clouds, n_neighbors, n_threads):
-        """:meth:`_points_and_normals` (oriented by ``normal_orientation``), each object centred.
+        """:meth:`_points_and_normals` (oriented by ``normal_orientation``), each object centered.
 
-        Each object's points (a copy) are centred on their mean, then divided
+        Each object's points (a copy) are centered on their mean, then divided
         by their largest bounding-box side (``scaling="object"``) or
         multiplied by ``scale_`` (``scaling="fit"``).
         """

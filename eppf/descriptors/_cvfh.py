@@ -18,7 +18,7 @@ N_VIEW_BINS = 128
 #: A length in the scaled cloud's units.
 _LENGTH = [Interval(numbers.Real, 1e-15, 1e15, closed="both", description="a float in [1e-15, 1e+15]")]
 N_FEATURES = 4 * N_ANGLE_BINS + N_VIEW_BINS  # 308, PCL's VFHSignature308
-#: Most neighbour pairs the radius searches of one object may hold in memory.
+#: Most neighbor pairs the radius searches of one object may hold in memory.
 MAX_PAIRS = 5_000_000
 
 
@@ -64,7 +64,7 @@ def _radius_normals(points, radius):
 
 def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_tolerance, radius_normals,
                   min_points, n_neighbors, region_growing="components", **_):
-    """Stable regions of one centred, scaled object and their references.
+    """Stable regions of one centered, scaled object and their references.
 
     Returns ``(clusters, centroids, ref_normals)``: the regions as arrays of
     point indices in PCL's order (by lowest index), and float32 (m, 3)
@@ -106,13 +106,13 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
     for cl in clusters:
         cents.append(_f32_mean(sub[cl]))
         avg = _f32_mean(rn[cl])
-        # Eigen's Vector4f normalisation: |v|^2 summed as (x^2 + z^2) + y^2
+        # Eigen's Vector4f normalization: |v|^2 summed as (x^2 + z^2) + y^2
         refs.append(avg / np.sqrt(np.float32(avg[0] * avg[0] + avg[2] * avg[2]) + np.float32(avg[1] * avg[1])))
     return [keep[cl] for cl in clusters], np.asarray(cents, np.float32), np.asarray(refs, np.float32)
 
 
 def _cvfh_object(points, normals, **params):
-    """CVFH signatures of one centred, scaled object.
+    """CVFH signatures of one centered, scaled object.
 
     Returns ``(signatures, sizes)``: an (m, 308) array, one row per stable
     region in PCL's order, and the regions' point counts; without any
@@ -135,10 +135,9 @@ class CVFHTransformer(PointCloudDescriptor):
     centroid and mean normal: three angle histograms, the shape distribution
     component (distances to the centroid) and the viewpoint component, 308
     bins (PCL's ``VFHSignature308``). ``aggregate`` turns an object's
-    signatures into one row. On the PCL reference runs the first signature
-    is identical to PCL's row for 99.9% of the ModelNet10 objects (where no
-    region forms) and, with ``region_growing="pcl"``, 92% of the DALES
-    objects (86% with the default region growing).
+    signatures into one row. How often the first signature equals PCL's row
+    on the PCL reference runs is in :ref:`api-figures-pcl` of the
+    documentation.
 
     Read more in the paper's baseline section (Bobkov et al. 2018).
 
@@ -150,20 +149,20 @@ class CVFHTransformer(PointCloudDescriptor):
         region met first in point order, as the PCL reference runs keep), or
         the mean of all signatures.
     scaling : {"object", "fit", "none"}, default="object"
-        Every object is centred on its mean; then scaled so its largest
+        Every object is centered on its mean; then scaled so its largest
         bounding-box side is 1 (``"object"``, as PCL's reference runs), by
         one factor learnt in ``fit`` so the largest training object's side
         is 1 (``"fit"``), or not at all. Distances below are in these units
-        (PCL's defaults are metres).
+        (PCL's defaults are meters).
     eps_angle : float, default=0.125
-        Largest angle in radians between the normals of neighbouring points
+        Largest angle in radians between the normals of neighboring points
         of one region (PCL's default; the reference runs used 5 degrees).
     curvature_threshold : float, default=0.03
         Points whose surface variation ``lambda_min / sum(lambda)`` over
-        ``n_neighbors`` neighbours exceeds it are left out of the regions
+        ``n_neighbors`` neighbors exceeds it are left out of the regions
         (PCL's default; the reference runs used 1.0, which keeps every point).
     cluster_tolerance : float, default=0.015
-        Points strictly closer than this are neighbours in region growing
+        Points strictly closer than this are neighbors in region growing
         (PCL's default, three times its 5 mm leaf size).
     radius_normals : float, default=0.015
         Radius of the second normal estimate that region growing uses
@@ -185,7 +184,7 @@ class CVFHTransformer(PointCloudDescriptor):
         Divide each row by its sum (needed for KL matching); False with
         ``normalize_bins=False`` keeps PCL's raw counts.
     n_neighbors : int, default=10
-        Neighbourhood size for PCA normals (of clouds given without normals)
+        Neighborhood size for PCA normals (of clouds given without normals)
         and for the curvature.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         Sign of estimated normals: away from the object's centroid, towards
@@ -214,7 +213,7 @@ class CVFHTransformer(PointCloudDescriptor):
     than ``cluster_tolerance`` with normals less than ``eps_angle`` apart,
     and the regions are the connected components (the same region growing
     as :class:`eppf.OURCVFHTransformer`). Region ``r`` has centroid ``c_r``
-    and normal ``n_r``, the normalised mean of its (second) normals.
+    and normal ``n_r``, the normalized mean of its (second) normals.
 
     Signature of a region, over all ``n`` points ``p_i`` with their input
     normals ``n_i``: PCL's pair features of ``(c_r, n_r)`` and ``(p_i,
@@ -230,7 +229,7 @@ class CVFHTransformer(PointCloudDescriptor):
     f4 (45 bins each), viewpoint (128).
 
     Without any region PCL describes the whole object: its centroid and its
-    *unnormalised* mean input normal. After centring that centroid is a
+    *unnormalised* mean input normal. After centering that centroid is a
     rounding residue, so its direction to the origin, and with it the
     viewpoint component, is arbitrary: we reproduce PCL's single-precision
     arithmetic to match its rows, but that component is then neither
@@ -241,16 +240,15 @@ class CVFHTransformer(PointCloudDescriptor):
     ``cluster_tolerance`` do.
 
     Region growing: PCL grows a region from each unassigned seed in point
-    order, adding the unassigned neighbours (radius search) of each member
+    order, adding the unassigned neighbors (radius search) of each member
     whose normal is within ``eps_angle`` of that member's. It skips the
     first point each search returns, assuming it is the query itself; but
     PCL's k-d tree search is unsorted and returns points in its depth-first
-    order, so a true neighbour is sometimes skipped and PCL's regions can be
+    order, so a true neighbor is sometimes skipped and PCL's regions can be
     smaller or split. ``region_growing="components"`` (the default) links
     every such pair; ``"pcl"`` rebuilds FLANN's tree to skip the same points
-    as PCL. On the DALES reference objects with regions (55 of 499), the
-    first signature matches PCL's exactly for 64% of them with ``"pcl"``
-    and 5% with ``"components"``; leave-one-out accuracy is the same. The
+    as PCL, and so reproduces PCL's regions more often (figures:
+    :ref:`api-figures-pcl`). The
     second normals are computed in double precision (PCL: single). No
     randomness: the output is deterministic.
 

@@ -9,7 +9,7 @@ pair features (f1, f2, f3) between the reference and every point, the
 distance histogram (f4 over the largest distance) and 128 viewpoint bins.
 """
 
-from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf
+from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf, M_PI
 from libc.stdint cimport int32_t, int64_t
 
 import numpy as np
@@ -23,7 +23,7 @@ cdef enum:
     NV = 128      # viewpoint bins
     NSIG = 308
 
-cdef double PI = 3.141592653589793
+cdef double PI = M_PI
 
 
 cdef inline float _dot4(float a0, float a1, float a2, float b0, float b1, float b2) noexcept nogil:
@@ -45,7 +45,7 @@ cdef void _vfh_one(const float* p, const float* nrm, int64_t n, const float* c, 
     cdef double pf, d_pi, alpha
     cdef int b, k
     memset(hist, 0, NSIG * sizeof(float))
-    # distance normalisation: the point farthest from the centroid (Vector3f norm)
+    # distance normalization: the point farthest from the centroid (Vector3f norm)
     for i in range(n):
         dx = c[0] - p[3 * i]
         dy = c[1] - p[3 * i + 1]
@@ -162,9 +162,9 @@ def pcl_region_growing(const int32_t[::1] neighbors, const int64_t[::1] offsets,
                        int64_t[::1] labels):
     """PCL's ``extractEuclideanClustersSmooth``, seed by seed.
 
-    Point ``i``'s radius neighbours are ``neighbors[offsets[i]:offsets[i + 1]]``
+    Point ``i``'s radius neighbors are ``neighbors[offsets[i]:offsets[i + 1]]``
     in the search's order; as PCL, the first one is skipped (taken to be the
-    query itself) and an unprocessed neighbour joins when
+    query itself) and an unprocessed neighbor joins when
     ``acos(n_s . n_j) < eps_angle`` for the point ``s`` being expanded
     (single-precision dot products; NaN normals join nothing). Regions of at
     least ``min_points`` points are numbered in seed order into ``labels``

@@ -9,7 +9,7 @@ from ..utils import check_n_jobs, object_seeds, pack_point_clouds
 from ..utils._validation import _bounding_sides, _stacked_view
 from ..utils._param_validation import Interval, IntTuple, Satisfies, StrOptions
 from ._base import N_JOBS, NORMAL_ORIENTATION, RANDOM_STATE, VERBOSE, PointCloudDescriptor
-from ._eppf_fast import eppf_counts
+from ._eppf_fast import MAX_GRID_SIZE, MAX_N_BINS, MAX_N_PAIRS, MIN_GRID_SIZE, MIN_N_BINS, eppf_counts
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
 
@@ -34,7 +34,7 @@ class EPPFTransformer(PointCloudDescriptor):
     f1, the maximum angle between the connecting line and the two tangent
     planes f2, the angle between the two normals f3 and the ratio of occupied
     voxels on the line between the points f4. Their joint 4D histogram is
-    weighted by ``ln(i / N1 + c)`` along the distance axis and normalised.
+    weighted by ``ln(i / N1 + c)`` along the distance axis and normalized.
 
     Parameters
     ----------
@@ -66,14 +66,10 @@ class EPPFTransformer(PointCloudDescriptor):
         by its inverse); with ``"fit"``, a largest training side whose inverse
         is not a finite positive float64 is a ``ValueError``.
     n_neighbors : int, default=20
-        Neighbours for PCA normal estimation of clouds given without normals
+        Neighbors for PCA normal estimation of clouds given without normals
         (see :func:`eppf.preprocessing.estimate_normals`). Clouds of shape (n, 6) carry their
-        own normals and are not re-estimated. Chosen by measurement: on noisy
-        synthetic shapes (noise 0.03, occlusion 0.4) leave-one-out accuracy
-        was 70.3 / 85.8 / 91.5% for 10 / 20 / 30 neighbours, on ModelNet10
-        83.3 / 84.6 / 85.5%, on sparse aerial LiDAR objects (DALES, median
-        413 points) 97.0 / 97.0 / 95.2%; 20 gains most where normals are noisy
-        without blurring sparse clouds, and stays under 1 ms per 1,024 points.
+        own normals and are not re-estimated. The default is a measured
+        choice (see :ref:`api-figures-eppf-neighbors` in the documentation).
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         How estimated normals are oriented: away from the object's centroid,
         towards the origin (a sensor at the origin), or not at all.
@@ -177,11 +173,12 @@ class EPPFTransformer(PointCloudDescriptor):
         self.verbose = verbose
 
     _parameter_constraints = {
-        "n_bins": [IntTuple(4, 1, 64, description="a tuple of 4 ints in [1, 64] (bins of f1, f2, f3, f4)")],
-        "n_pairs": [Interval(numbers.Integral, 1, 2**31 - 1, closed="both")],
+        "n_bins": [IntTuple(4, MIN_N_BINS, MAX_N_BINS,
+                            description=f"a tuple of 4 ints in [{MIN_N_BINS}, {MAX_N_BINS}] (bins of f1, f2, f3, f4)")],
+        "n_pairs": [Interval(numbers.Integral, 1, MAX_N_PAIRS, closed="both")],
         "c": [Interval(numbers.Real, 1, None, closed="neither",
                        description="a finite float > 1 (so that ln(i/N + c) > 0)")],
-        "grid_size": [Interval(numbers.Integral, 2, 1023, closed="both")],
+        "grid_size": [Interval(numbers.Integral, MIN_GRID_SIZE, MAX_GRID_SIZE, closed="both")],
         "functions": [Satisfies(_is_function_list, f"a non-empty sequence of distinct names from {FUNCTIONS}")],
         "scaling": [StrOptions(list(_SCALINGS))],
         "n_neighbors": [Interval(numbers.Integral, 3, 10**6, closed="both")],
@@ -237,8 +234,8 @@ class EPPFTransformer(PointCloudDescriptor):
         ----------
         X : list of array-like of shape (n_i, 3) or (n_i, 6)
             Point clouds; columns 3-5, when present, are normals (any length
-            but zero; they are normalised). Clouds without normals get PCA
-            normals from ``n_neighbors`` neighbours when f2 or f3 is used.
+            but zero; they are normalized). Clouds without normals get PCA
+            normals from ``n_neighbors`` neighbors when f2 or f3 is used.
 
         Returns
         -------
@@ -345,7 +342,7 @@ class EPPFTransformer(PointCloudDescriptor):
         return X.reshape(X.shape[:-1] + self.histogram_shape_)
 
 def _weight_and_normalise(counts, kernel_bins, c, weighted):
-    """Apply ``ln(i / N1 + c)`` along f1 and L1-normalise each row."""
+    """Apply ``ln(i / N1 + c)`` along f1 and L1-normalize each row."""
     hist = counts.astype(np.float64).reshape((counts.shape[0],) + tuple(kernel_bins))
     if weighted:
         n1 = kernel_bins[0]

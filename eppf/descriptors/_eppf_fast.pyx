@@ -62,6 +62,7 @@ cdef extern from "_eppf_walk.h":
         EPPF_QUEUE_BATCH
         EPPF_META_LO
         EPPF_META_HI
+        EPPF_WALK_MAX_GRID
     int64_t EPPF_PK_X
     uint64_t EPPF_SM_GAMMA
     int64_t EPPF_PK_Y
@@ -92,6 +93,7 @@ cdef extern from "_eppf_walk.h":
         EPPF_CODE_READ_WORDS
         EPPF_CODE_HALF
         EPPF_CODE_SCRATCH
+        EPPF_CODE_AXIS_WORDS
     void eppf_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
     int eppf_f123q_avx512(int m, const int32_t* I, const int32_t* J, double scale, int n1, int n2, int n3, int n4,
                           double f1_density, const double* cos2, const double* cos3, const double* pn,
@@ -122,20 +124,32 @@ cdef int _default_level():
     return best
 
 
-cdef int _simd = _default_level()
+cdef int _level = _default_level()
 
-# Consecutive zero-length pairs after which an object is declared degenerate.
 cdef enum:
+    # Consecutive zero-length pairs after which an object is declared degenerate.
     MAX_REDRAWS = 10000
+    # The parameters' limits (``MIN_N_BINS`` ... ``MAX_GRID_SIZE`` below): bins per
+    # function (1 switches it off), and grid sizes for which the 32.32 fixed-point
+    # walk of ``_line_bin`` is exact (below 1024).
+    MIN_BINS = 1
     MAX_BINS = 64
-    FIX_SHIFT = 32
+    MIN_GRID = 2
     MAX_GRID = 1023
+    FIX_SHIFT = 32
+    # Grids up to this size are walked in the packed form (one 64-bit word a row),
+    # and only they by the SIMD walks.
+    PACKED_GRID = EPPF_WALK_MAX_GRID
+    # Objects up to this many points get the AVX-512 f1-f3's copy of their rows;
+    # larger ones are read in place.
+    ROWS_MAX_POINTS = 65536
     BATCH = EPPF_WALK_BATCH
     QBATCH = EPPF_QUEUE_BATCH  # the pairs of a batch at level 3 (at least BATCH)
     CODE_HALF = EPPF_CODE_HALF  # where their z >= 32 halves start
     CODE_SCRATCH = EPPF_CODE_SCRATCH  # where the grids' scratch goes (between the halves)
     CODE_READ_WORDS = EPPF_CODE_READ_WORDS  # the words of the buffer the skipping walk may read
-    # packed line walk for grids up to 64 (layout in _eppf_walk.h)
+    CODE_AXIS_WORDS = EPPF_CODE_AXIS_WORDS  # one half of one axis's grid: 64 rows of 64 words
+    # packed line walk for grids up to 64 (layout in _eppf_walk_common.h)
     PK_S = EPPF_PK_S
     PK_ZSHIFT = EPPF_PK_ZSHIFT
     PK_YSHIFT = EPPF_PK_YSHIFT
@@ -146,18 +160,27 @@ cdef int64_t PK_X = EPPF_PK_X
 
 cdef uint64_t LOW32 = 0xFFFFFFFF
 
+# The limits of ``eppf_counts``' parameters, for the estimator's parameter checks:
+# each of the four bin counts in [MIN_N_BINS, MAX_N_BINS], grid_size in
+# [MIN_GRID_SIZE, MAX_GRID_SIZE], n_pairs at most MAX_N_PAIRS (a C int).
+MIN_N_BINS = MIN_BINS
+MAX_N_BINS = MAX_BINS
+MIN_GRID_SIZE = MIN_GRID
+MAX_GRID_SIZE = MAX_GRID
+MAX_N_PAIRS = 2**31 - 1
+
 
 def _simd_enabled():
     """Whether the SIMD kernels of ``_eppf_walk.h`` are in use."""
-    return _simd > 0
+    return _level > 0
 
 
 def _set_simd(enabled):
     """Use the default SIMD kernels for this CPU when ``enabled``, the scalar
     code otherwise; return the previous setting (True or False)."""
-    global _simd
-    old = _simd > 0
-    _simd = _default_level() if enabled else 0
+    global _level
+    old = _level > 0
+    _level = _default_level() if enabled else 0
     return old
 
 
@@ -181,9 +204,9 @@ def _set_simd_level(int level):
     """Use kernel level ``level`` (0 scalar, 1 AVX2, 2 AVX-512 with the grouped
     walk, 3 AVX-512 with the skipping walk; capped at what the CPU has);
     return the previous level."""
-    global _simd
-    old = _simd
-    _simd = max(0, min(level, _max_level()))
+    global _level
+    old = _level
+    _level = max(0, min(level, _max_level()))
     return old
 
 
@@ -196,11 +219,14 @@ cdef struct Params:
     double cos3[MAX_BINS]   # inner edges of f3 on the cosine scale, k = 1..n3-1
     const int64_t* recip    # recip[L] = floor(2**32 / L) for the line walk
     const int32_t* thr      # thr[T * n4 + b] = ceil(b * T / n4): f4 thresholds for T voxels
-    double recip_packed[64] # 2**14 / L for the packed walk (grids up to 64)
-    int64_t lohi[66]        # thr[T * n4 + 1] and thr[T * n4 + n4 - 1] packed as the AVX-512 walk reads them
-    int64_t wstate[65]      # the skipping walk's first state of a line of T voxels (eppf_walk_states)
-    int simd                # walk f4 in AVX2 (1) or AVX-512 lanes, grouped (2) or skipping (3) (grids up to 64), 0: scalar
-    int simd123             # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
+    # 2**14 / L for the packed walk, L = 0..PACKED_GRID - 1
+    double recip_packed[PACKED_GRID]
+    # thr[T * n4 + 1] and thr[T * n4 + n4 - 1], T = 0..PACKED_GRID + 1, packed as the AVX-512 walk reads them
+    int64_t lohi[PACKED_GRID + 2]
+    # the skipping walk's first state of a line of T voxels (eppf_walk_states), T = 0..PACKED_GRID
+    int64_t first_states[PACKED_GRID + 1]
+    int walk_level          # f4 walks: AVX2 (1), AVX-512 grouped (2) or skipping (3) (grids up to 64), scalar (0)
+    int f123_level          # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -220,7 +246,7 @@ cdef inline int64_t _grid_words(int grid) noexcept nogil:
 
 cdef inline void _fill_grid(const double* pts, int64_t ps, int64_t n, int grid, uint64_t* bits,
                             int32_t* vox, int64_t* pv) noexcept nogil:
-    """Voxelise ``n`` points on a grid over their bounding cube.
+    """Voxelize ``n`` points on a grid over their bounding cube.
 
     Sets the occupied voxels in the bit grid ``bits`` (row (x, y) is
     ``_row_words`` 64-bit words of z bits, so a 64^3 grid is one word per
@@ -297,7 +323,7 @@ cdef inline int _line_bin(const int32_t* va, const int32_t* vb, const Params* pr
     # bin is certain once occ + L - 1 - k < lo; that needs k >= L + 2 - lo,
     # and steps before it are walked without checks.
     quiet = L - 1 if not early else min(L - 1, L + 1 - lo)
-    if L > 1 and g <= 64:
+    if L > 1 and g <= PACKED_GRID:
         # Packed walk: x, y, z in three 21-bit lanes of one integer, each in
         # fixed point with S = 2**14 and increments round(delta * S / L), so a
         # step is one addition. The accumulated rounding error stays below
@@ -430,50 +456,51 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
-    cdef int32_t I[QBATCH]
-    cdef int32_t J[QBATCH]
-    cdef int32_t B[QBATCH]
+    cdef int32_t pair_i[QBATCH]
+    cdef int32_t pair_j[QBATCH]
+    cdef int32_t pair_bins[QBATCH]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
     # AVX-512: draw a batch's candidate pairs eight at a time; the f1-f3 pass
     # then finds the first pair whose points coincide, if any, and from there
     # on the scalar draw (with its redraws) takes over for the rest of the object.
-    cdef bint vec_draw = prm.simd123 == 2
-    cdef int good
+    cdef bint vec_draw = prm.f123_level == 2
+    cdef int first_same
     cdef int64_t lanes[EPPF_LANES_WORDS]
     # the level-3 queue of a batch's lines (first position, increment, state)
-    cdef int64_t QP[QBATCH + 8]
-    cdef int64_t QI[QBATCH + 8]
-    cdef int64_t QM[QBATCH + 8]
-    cdef int nq = 0
+    cdef int64_t queue_pos[QBATCH + 8]
+    cdef int64_t queue_inc[QBATCH + 8]
+    cdef int64_t queue_state[QBATCH + 8]
+    cdef int n_queued = 0
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
-    if prm.simd123 != 2:
+    if prm.f123_level != 2:
         pn = NULL
-    cdef bint dist = prm.simd == 3 and prm.n4 > 1 and pn != NULL
+    cdef bint skipping = prm.walk_level == 3 and prm.n4 > 1 and pn != NULL  # f4 by the skipping walk (level 3)
     if prm.n4 > 1:
-        _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.simd >= 2 else NULL)
+        _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.walk_level >= 2 else NULL)
     if pn != NULL:
-        eppf_pack_rows(n, pts, ps, nrm, ns, pv if prm.simd >= 2 and prm.n4 > 1 else NULL, pn)
-    if dist:
+        eppf_pack_rows(n, pts, ps, nrm, ns, pv if prm.walk_level >= 2 and prm.n4 > 1 else NULL, pn)
+    if skipping:
         eppf_code_grid(bits, prm.grid, code + CODE_SCRATCH, code)
         memset(lanes, 0, sizeof(lanes))
     base = 0
     while base < n_pairs:
         m = n_pairs - base
-        if m > (QBATCH if dist else BATCH):
-            m = QBATCH if dist else BATCH
+        if m > (QBATCH if skipping else BATCH):
+            m = QBATCH if skipping else BATCH
         if vec_draw:
-            eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, I, J)
-            if dist:
-                good = eppf_f123q_avx512(<int>m, I, J, scale, prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density,
-                                         prm.cos2, prm.cos3, pn, prm.thr, prm.wstate, QP, QI, QM, &nq, counts)
+            eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, pair_i, pair_j)
+            if skipping:
+                first_same = eppf_f123q_avx512(<int>m, pair_i, pair_j, scale, prm.n1, prm.n2, prm.n3, prm.n4,
+                                               prm.f1_density, prm.cos2, prm.cos3, pn, prm.thr, prm.first_states,
+                                               queue_pos, queue_inc, queue_state, &n_queued, counts)
             else:
-                good = eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3,
-                                              prm.n4, prm.f1_density, prm.cos2, prm.cos3, B, pn)
-            if good < m:
+                first_same = eppf_f123_batch_avx512(<int>m, pair_i, pair_j, pts, ps, nrm, ns, scale, prm.n1, prm.n2,
+                                                    prm.n3, prm.n4, prm.f1_density, prm.cos2, prm.cos3, pair_bins, pn)
+            if first_same < m:
                 vec_draw = False
-                m = good
+                m = first_same
             state += <uint64_t>m * EPPF_SM_GAMMA
             base += m
             if m == 0:
@@ -483,44 +510,50 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
             for t in range(m):
                 if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
                     return 1
-                I[t] = <int32_t>i
-                J[t] = <int32_t>j
-            if dist:
-                eppf_f123q_avx512(<int>m, I, J, scale, prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density,
-                                  prm.cos2, prm.cos3, pn, prm.thr, prm.wstate, QP, QI, QM, &nq, counts)
-            elif prm.simd123 == 2:
-                eppf_f123_batch_avx512(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                       prm.f1_density, prm.cos2, prm.cos3, B, pn)
-            elif prm.simd123:
-                eppf_f123_batch_avx2(<int>m, I, J, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3, prm.n4,
-                                     prm.f1_density, prm.cos2, prm.cos3, B)
+                pair_i[t] = <int32_t>i
+                pair_j[t] = <int32_t>j
+            if skipping:
+                eppf_f123q_avx512(<int>m, pair_i, pair_j, scale, prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density,
+                                  prm.cos2, prm.cos3, pn, prm.thr, prm.first_states, queue_pos, queue_inc,
+                                  queue_state, &n_queued, counts)
+            elif prm.f123_level == 2:
+                eppf_f123_batch_avx512(<int>m, pair_i, pair_j, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3,
+                                       prm.n4, prm.f1_density, prm.cos2, prm.cos3, pair_bins, pn)
+            elif prm.f123_level:
+                eppf_f123_batch_avx2(<int>m, pair_i, pair_j, pts, ps, nrm, ns, scale, prm.n1, prm.n2, prm.n3,
+                                     prm.n4, prm.f1_density, prm.cos2, prm.cos3, pair_bins)
             else:
                 for t in range(m):
-                    B[t] = _bin_f123(pts, ps, nrm, ns, I[t], J[t], scale, prm, NULL) * prm.n4
+                    pair_bins[t] = _bin_f123(pts, ps, nrm, ns, pair_i[t], pair_j[t], scale, prm, NULL) * prm.n4
         # Literal grid sizes let the compiler turn the index arithmetic into shifts.
-        if dist:
-            eppf_f4_walkq_avx512(nq, QP, QI, QM, code, prm.grid, prm.thr, prm.n4, lanes, 0, counts)
+        if skipping:
+            eppf_f4_walkq_avx512(n_queued, queue_pos, queue_inc, queue_state, code, prm.grid, prm.thr, prm.n4,
+                                 lanes, 0, counts)
             continue
         if prm.n4 > 1:
-            if prm.simd >= 2:
-                eppf_f4_batch_avx512(<int>m, I, J, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi, prm.recip_packed,
-                                     B)
-            elif prm.simd:
-                eppf_f4_batch_avx2(<int>m, I, J, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed, B)
-            elif prm.grid == 64:
+            if prm.walk_level >= 2:
+                eppf_f4_batch_avx512(<int>m, pair_i, pair_j, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi,
+                                     prm.recip_packed, pair_bins)
+            elif prm.walk_level:
+                eppf_f4_batch_avx2(<int>m, pair_i, pair_j, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed,
+                                   pair_bins)
+            elif prm.grid == PACKED_GRID:
                 for t in range(m):
-                    B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, 64, 1, True, &occ, &total)
+                    pair_bins[t] += _line_bin(vox + 3 * pair_i[t], vox + 3 * pair_j[t], prm, bits, PACKED_GRID, 1,
+                                              True, &occ, &total)
             elif row_words == 1:
                 for t in range(m):
-                    B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, prm.grid, 1, True, &occ, &total)
+                    pair_bins[t] += _line_bin(vox + 3 * pair_i[t], vox + 3 * pair_j[t], prm, bits, prm.grid, 1,
+                                              True, &occ, &total)
             else:
                 for t in range(m):
-                    B[t] += _line_bin(vox + 3 * I[t], vox + 3 * J[t], prm, bits, prm.grid, row_words, True,
-                                      &occ, &total)
+                    pair_bins[t] += _line_bin(vox + 3 * pair_i[t], vox + 3 * pair_j[t], prm, bits, prm.grid,
+                                              row_words, True, &occ, &total)
         for t in range(m):
-            counts[B[t]] += 1
-    if dist:
-        eppf_f4_walkq_avx512(0, QP, QI, QM, code, prm.grid, prm.thr, prm.n4, lanes, 1, counts)
+            counts[pair_bins[t]] += 1
+    if skipping:
+        eppf_f4_walkq_avx512(0, queue_pos, queue_inc, queue_state, code, prm.grid, prm.thr, prm.n4, lanes, 1,
+                             counts)
     return 0
 
 
@@ -530,23 +563,23 @@ cdef void _init_params(Params* prm, int n1, int n2, int n3, int n4, int grid, do
     prm.recip = recip
     prm.thr = thr
     prm.recip_packed[0] = 0.0
-    for k in range(1, 64):
+    for k in range(1, PACKED_GRID):
         prm.recip_packed[k] = (<double>PK_S) / k
     prm.n1 = n1
     prm.n2 = n2
     prm.n3 = n3
     prm.n4 = n4
     prm.grid = grid
-    prm.simd = _simd if grid <= 64 else 0
-    for k in range(66):
+    prm.walk_level = _level if grid <= PACKED_GRID else 0
+    for k in range(PACKED_GRID + 2):
         prm.lohi[k] = 0
         if n4 > 1 and k <= grid + 1:
             prm.lohi[k] = ((<int64_t>thr[k * n4 + 1]) << EPPF_META_LO) | ((<int64_t>thr[k * n4 + n4 - 1]) << EPPF_META_HI)
     if n4 > 1:
-        eppf_walk_states(thr, n4, grid, prm.wstate)  # (every entry; unused where n4 = 1)
+        eppf_walk_states(thr, n4, grid, prm.first_states)  # (every entry; unused where n4 = 1)
     else:
-        memset(prm.wstate, 0, sizeof(prm.wstate))
-    prm.simd123 = _simd if _simd < 2 else 2
+        memset(prm.first_states, 0, sizeof(prm.first_states))
+    prm.f123_level = _level if _level < 2 else 2
     prm.f1_max = f1_max
     prm.f1_density = n1 / f1_max
     for k in range(1, n2):
@@ -559,10 +592,10 @@ def _check_bins(n_bins, int grid):
     if len(n_bins) != 4:
         raise ValueError("n_bins must have four entries")
     for b in n_bins:
-        if not 1 <= b <= MAX_BINS:
-            raise ValueError(f"each bin count must lie in [1, {MAX_BINS}]")
-    if not 2 <= grid <= MAX_GRID:
-        raise ValueError(f"grid_size must lie in [2, {MAX_GRID}]")
+        if not MIN_BINS <= b <= MAX_BINS:
+            raise ValueError(f"each bin count must lie in [{MIN_BINS}, {MAX_BINS}]")
+    if not MIN_GRID <= grid <= MAX_GRID:
+        raise ValueError(f"grid_size must lie in [{MIN_GRID}, {MAX_GRID}]")
 
 
 def _tables(int grid, int n4):
@@ -637,18 +670,18 @@ def eppf_counts(points_in, normals_in,
     cdef int64_t max_n = np.max(np.diff(offsets))
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
     vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
-    pv_arr = np.zeros((num_threads, max_n if prm.simd >= 2 else 1), dtype=np.int64)
+    pv_arr = np.zeros((num_threads, max_n if prm.walk_level >= 2 else 1), dtype=np.int64)
     # the AVX-512 walk's cone grids and their scratch (between the grids' halves): the walk reads any
     # of the first CODE_READ_WORDS words
-    code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.simd == 3 else 1),
+    code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.walk_level == 3 else 1),
                         dtype=np.uint64)
-    # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to 65,536 points,
-    # larger ones are read in place)
-    cdef bint rows = prm.simd123 == 2 and max_n <= 65536
+    # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to ROWS_MAX_POINTS
+    # points, larger ones are read in place)
+    cdef bint use_rows = prm.f123_level == 2 and max_n <= ROWS_MAX_POINTS
     # (each thread's rows start on a 64-byte boundary, so that no row straddles two cache lines)
-    pn_buf = np.zeros(num_threads * (8 * max_n + 8) + 8 if rows else 8, dtype=np.float64)
+    pn_buf = np.zeros(num_threads * (8 * max_n + 8) + 8 if use_rows else 8, dtype=np.float64)
     cdef Py_ssize_t pn_skip = (-(pn_buf.ctypes.data // 8)) % 8
-    pn_arr = pn_buf[pn_skip : pn_skip + num_threads * (8 * max_n + 8)].reshape(num_threads, -1) if rows \
+    pn_arr = pn_buf[pn_skip : pn_skip + num_threads * (8 * max_n + 8)].reshape(num_threads, -1) if use_rows \
         else pn_buf[:8].reshape(1, 8)
     cdef int32_t[:, ::1] counts = counts_arr
     cdef int32_t[::1] status = status_arr
@@ -666,7 +699,7 @@ def eppf_counts(points_in, normals_in,
             status[k] = _object_counts(&points[start, 0], ps, &normals[start, 0], ns,
                                        offsets[k + 1] - start, scales[k], seeds[k], n_pairs,
                                        &prm, &grids[tid, 0], &vox[tid, 0], &pv[tid, 0], &code[tid, 0],
-                                       &pn[tid, 0] if rows else NULL, &counts[k, 0])
+                                       &pn[tid, 0] if use_rows else NULL, &counts[k, 0])
     return counts_arr, status_arr
 
 
@@ -738,12 +771,13 @@ def _cone_codes(occupied):
     ``occupied``: (g, g, g) booleans, 2 <= g <= 64, indexed [x, y, z].
     Returns a (3, g, g, g) uint8 array: entry [a, x, y, z] is min(C, 3), C
     the number of planes of the cone along axis a from voxel (x, y, z) on
-    with no occupied voxel (``eppf_code_grid`` in ``_eppf_walk.h``). Needs
+    with no occupied voxel (``eppf_code_grid`` in ``_eppf_walk_skip.h``). Needs
     the AVX-512 kernels (level 3).
     """
     occ = np.asarray(occupied, dtype=bool)
-    if occ.ndim != 3 or occ.shape[0] != occ.shape[1] or occ.shape[0] != occ.shape[2] or not 2 <= occ.shape[0] <= 64:
-        raise ValueError("occupied must be a (g, g, g) grid with 2 <= g <= 64")
+    if (occ.ndim != 3 or occ.shape[0] != occ.shape[1] or occ.shape[0] != occ.shape[2]
+            or not MIN_GRID <= occ.shape[0] <= PACKED_GRID):
+        raise ValueError(f"occupied must be a (g, g, g) grid with {MIN_GRID} <= g <= {PACKED_GRID}")
     if _max_level() < 3:
         raise ValueError("the cone codes need the AVX-512 kernels, which this CPU lacks")
     cdef int g = occ.shape[0]
@@ -753,8 +787,8 @@ def _cone_codes(occupied):
     code_arr = np.zeros(CODE_READ_WORDS, dtype=np.uint64)
     cdef uint64_t[::1] code = code_arr
     eppf_code_grid(&bits[0], g, &code[CODE_SCRATCH], &code[0])
-    # word 4096 a + 64 x + y holds z < 32, the same word CODE_HALF on z >= 32
-    halves = [code_arr[h : h + 3 * 4096].reshape(3, 64, 64)[:, :g, :g] for h in (0, CODE_HALF)]
+    # word CODE_AXIS_WORDS a + 64 x + y holds z < 32, the same word CODE_HALF on z >= 32
+    halves = [code_arr[h : h + 3 * CODE_AXIS_WORDS].reshape(3, 64, 64)[:, :g, :g] for h in (0, CODE_HALF)]
     words = np.stack(halves, axis=-1)
     z = np.arange(g)
     return ((words[..., z >> 5] >> (2 * (z & 31)).astype(np.uint64)) & 3).astype(np.uint8)

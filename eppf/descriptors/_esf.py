@@ -68,11 +68,11 @@ class ESFTransformer(PointCloudDescriptor):
     -----
     Per object, as PCL does:
 
-    1. Centre the points on their mean and scale them so the farthest point
+    1. Center the points on their mean and scale them so the farthest point
        lies at distance ``grid_size / 2``; voxel of a coordinate ``v``:
        ``floor(v) + grid_size/2`` for ``v < 0``, else
        ``ceil(v) + grid_size/2 - 1``. A voxel is occupied when a point lies in
-       it or in one of its 26 neighbours (PCL's 3x3x3 dilation).
+       it or in one of its 26 neighbors (PCL's 3x3x3 dilation).
     2. Draw triplets of distinct points; redraw when Heron's product
        ``s(s-a)(s-b)(s-c) <= 0.001`` (voxel units).
     3. A3: the three angles folded to ``[0, pi/2]`` as ``arccos(|cos|)``,
@@ -94,7 +94,7 @@ class ESFTransformer(PointCloudDescriptor):
     d2_mix, d2_ratio]``, ``n_bins`` each, as PCL's ``ESFSignature640``. Six
     columns (normals) are accepted and ignored. ESF is invariant to the
     cloud's position and scale by construction; rotation changes only the
-    voxelisation.
+    voxelization.
 
     References
     ----------

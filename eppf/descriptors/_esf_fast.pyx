@@ -104,7 +104,7 @@ cdef enum:
 
 
 cdef inline int _pcl_cell(double v, int half, int grid) noexcept nogil:
-    """PCL's voxel of a coordinate in grid units centred on ``half``.
+    """PCL's voxel of a coordinate in grid units centered on ``half``.
 
     Values at or below ``-half`` (and NaN) give 0, values at or above
     ``grid`` give ``grid - 1``, before any conversion to int, so every
@@ -244,7 +244,7 @@ cdef inline double _abs_cos(double ax, double ay, double az,
 
 cdef void _esf_centre(const double* points, int64_t start, int64_t n, int grid,
                       double* pts, int32_t* cells) noexcept nogil:
-    """Centre on the mean, scale the farthest point to radius grid / 2, voxels."""
+    """Center on the mean, scale the farthest point to radius grid / 2, voxels."""
     cdef int64_t i
     cdef int half = grid // 2
     cdef double cx = 0.0, cy = 0.0, cz = 0.0, r2, rmax = 0.0, sc
@@ -335,7 +335,7 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
     cdef int t = 0
     cdef double weights[10]
     _esf_centre(points, start, n, grid, pts, cells)
-    # Occupancy: every point's voxel and its 26 neighbours (PCL's voxelize9).
+    # Occupancy: every point's voxel and its 26 neighbors (PCL's voxelize9).
     n_words = (<int64_t>grid * grid * grid + 63) // 64
     memset(bits, 0, n_words * sizeof(uint64_t))
     for i in range(n):

@@ -5,7 +5,7 @@
  * batch goes through separate loops (geometry of every candidate, then the
  * accepted ones in draw order, their line set-up, the line walks, the
  * histogram updates), so the latencies of one triplet's square roots,
- * divisions and voxel walks overlap with its neighbours' instead of stalling
+ * divisions and voxel walks overlap with its neighbors' instead of stalling
  * one after the other. The output is the same as a triplet-by-triplet loop.
  *
  * The occupancy grid is kept three times, once with each axis as the outer
@@ -79,7 +79,7 @@ typedef struct {
 } esf_const;
 
 typedef struct {
-    const double *pts;     /* centred, scaled points (3 n) */
+    const double *pts;     /* centered, scaled points (3 n) */
     const int32_t *cells;  /* their voxels (3 n) */
     const uint64_t *g3;    /* the three grid layouts, 3 * 4096 words */
     int64_t *acc;          /* 19 * n_bins integer counts (A3: in 32nds): the
@@ -102,7 +102,7 @@ static const int esf_vax[3] = {1, 0, 0};
 static const int esf_wax[3] = {2, 2, 1};
 
 /* Fill the three layouts from the voxels of the points and their 26
- * neighbours (PCL's voxelize9). */
+ * neighbors (PCL's voxelize9). */
 static void esf_fill_layouts(const int32_t *cells, int64_t n, int grid, uint64_t *g3)
 {
     int64_t i;
@@ -134,7 +134,7 @@ static void esf_fill_layouts(const int32_t *cells, int64_t n, int grid, uint64_t
  * without data-dependent branches or indexed loads but the two tables
  * (rs[L] = floor(S / L), st[L] = (L - 1) floor(rs[L] / 2) + L**2 + 2), in
  * 32-bit integers up to the packing (every intermediate is below 2**30), so
- * that a loop over lines vectorises. Returns the number of voxels PCL
+ * that a loop over lines vectorizes. Returns the number of voxels PCL
  * visits, max(L, 1). L = 1 and L = 0 come out right from the same formulas
  * (one step from the start voxel). */
 static inline int esf_line_setup(int32_t a0, int32_t a1, int32_t a2, int32_t b0, int32_t b1,
@@ -169,7 +169,7 @@ static inline int esf_line_setup(int32_t a0, int32_t a1, int32_t a2, int32_t b0,
 }
 
 /* esf_line_setup over n lines given as coordinate arrays. (An AVX2 clone of
- * this loop, vectorised with gathers for the two tables, was slower here.) */
+ * this loop, vectorized with gathers for the two tables, was slower here.) */
 static void esf_setup_lines(int n, const int32_t *ax, const int32_t *ay, const int32_t *az,
                             const int32_t *bx, const int32_t *by, const int32_t *bz,
                             const int32_t *rs, const int32_t *st, uint64_t *pos, uint64_t *inc,
@@ -344,7 +344,7 @@ static void esf_fill_ratio_bins(int n_bins, int16_t *ratio_bin)
 
 /* acc[cls[i] * n_bins + esf_scaled_bin(v[i], vmax, scale, n_bins)] += 1 for
  * i < n, in blocks: the bins of a block first, in a loop without branches
- * that the compiler vectorises, with the values near a rounding boundary
+ * that the compiler vectorizes, with the values near a rounding boundary
  * (which take esf_scaled_bin's division) redone one by one, then the
  * counts. The values are lengths, never negative. */
 static inline __attribute__((always_inline)) void
@@ -461,7 +461,7 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
         c2[j] = fabs(v23x * v31x + v23y * v31y + v23z * v31z);
         c3[j] = fabs(v23x * v21x + v23y * v21y + v23z * v21z);
     }
-    /* ... then the square roots and divisions, element-wise (vectorised) */
+    /* ... then the square roots and divisions, element-wise (vectorized) */
     for (j = 0; j < n_cand; j++) {
         double a = sqrt(A[j]), b = sqrt(B[j]), c = sqrt(C[j]);
         double hs = (a + b + c) * 0.5, x;

@@ -53,7 +53,7 @@ class GASDTransformer(PointCloudDescriptor):
     Aligns each cloud with its principal axes (a PCA reference frame at the
     centroid), then counts the aligned points in a regular
     ``(2 h)^3`` grid over the cube ``[-m, m]^3`` that just holds them, with
-    trilinear interpolation between cell centres: ``8^3 = 512`` values by
+    trilinear interpolation between cell centers: ``8^3 = 512`` values by
     default, PCL 1.13's ``GASDEstimation`` (``GASDSignature512``) step by
     step, including its scaling (see Notes).
 
@@ -71,7 +71,7 @@ class GASDTransformer(PointCloudDescriptor):
         distance to the centroid.
     interpolation : {"trilinear", "none", "quadrilinear"}, default="trilinear"
         How a point is shared between cells: by trilinear weights between
-        the 8 nearest cell centres (PCL's default), not at all (the cell it
+        the 8 nearest cell centers (PCL's default), not at all (the cell it
         falls in), or trilinearly in space and linearly between the two
         nearest distance bins.
     view_direction : array-like of shape (3,), default=(0, 0, 1)
@@ -85,7 +85,7 @@ class GASDTransformer(PointCloudDescriptor):
         consistently oriented CAD models). ``"majority"``: x and z each point
         to the side of the centroid that holds more points (ties: the side
         of positive third moment), which makes the descriptor invariant to
-        rotations of the input (not PCL's behaviour).
+        rotations of the input (not PCL's behavior).
     n_jobs : int, default=None
         Number of OpenMP threads over objects, with joblib's meaning
         (``None``: OpenMP's default; ``-1``: all cores). The output does not
@@ -128,7 +128,7 @@ class GASDTransformer(PointCloudDescriptor):
 
     Layout: cell ``(i, j, k)`` (along x, y, z), histogram bin ``b`` at
     column ``((i * 2h + j) * 2h + k) * hists_size + b``, PCL's order.
-    Normals (six columns) are accepted and ignored. PCL's colour variant
+    Normals (six columns) are accepted and ignored. PCL's color variant
     (``GASDColorEstimation``, hue histograms) is :class:`GASDColorTransformer`.
 
     References
@@ -226,7 +226,7 @@ def _cell_names(half, hs, prefix="gasd"):
 
 
 def _gasd_compute(est, clouds, params, first_index, hues=None):
-    """GASD rows and alignment transforms of validated clouds (with ``hues``: the colour grid too)."""
+    """GASD rows and alignment transforms of validated clouds (with ``hues``: the color grid too)."""
     half, hs, interp, sign, view, n_threads, *color = params
     points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
     width = (2 * half) ** 3 * hs
@@ -292,7 +292,7 @@ def gasd_alignment(cloud, *, view_direction=(0.0, 0.0, 1.0), sign_convention="pc
 
 
 def _hue(rgb):
-    """PCL's hue of 8-bit colours, in float32 as PCL computes it, divided by 360."""
+    """PCL's hue of 8-bit colors, in float32 as PCL computes it, divided by 360."""
     rgb = rgb.astype(np.int32)
     r, g, b = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     mx, mn = rgb.max(axis=1), rgb.min(axis=1)
@@ -310,7 +310,7 @@ def _hue(rgb):
 
 
 class GASDColorTransformer(PointCloudDescriptor):
-    """GASD with colour: a shape grid and a grid of hue histograms.
+    """GASD with color: a shape grid and a grid of hue histograms.
 
     PCL 1.13's ``GASDColorEstimation`` (``GASDSignature984``): the cloud is
     aligned as by :class:`GASDTransformer`; a ``(2 h_s)^3`` shape grid
@@ -321,18 +321,18 @@ class GASDColorTransformer(PointCloudDescriptor):
     Parameters
     ----------
     shape_half_grid_size : int, default=3
-        Half the side of the shape grid (PCL's colour default: 3).
+        Half the side of the shape grid (PCL's color default: 3).
     shape_hists_size : int, default=1
         Bins of each shape cell's distance histogram (PCL: 1).
     color_half_grid_size : int, default=2
-        Half the side of the colour grid (PCL: 2).
+        Half the side of the color grid (PCL: 2).
     color_hists_size : int, default=12
-        Hue bins of each colour cell (PCL: 12, 30 degrees each).
+        Hue bins of each color cell (PCL: 12, 30 degrees each).
     shape_interpolation : {"none", "trilinear", "quadrilinear"}, default="none"
-        As ``interpolation`` of :class:`GASDTransformer` (PCL's colour
+        As ``interpolation`` of :class:`GASDTransformer` (PCL's color
         default: none).
     color_interpolation : {"none", "trilinear", "quadrilinear"}, default="none"
-        The same for the colour grid; the hue histogram is circular, so the
+        The same for the color grid; the hue histogram is circular, so the
         bins beyond its ends wrap around (PCL's reading).
     view_direction : array-like of shape (3,), default=(0, 0, 1)
         As in :class:`GASDTransformer`.
@@ -354,15 +354,15 @@ class GASDColorTransformer(PointCloudDescriptor):
     Notes
     -----
     Input clouds are ``(n, 6)`` arrays of coordinates and RGB, or
-    ``(n, 9)`` arrays of coordinates, normals (ignored) and RGB. Colours are
+    ``(n, 9)`` arrays of coordinates, normals (ignored) and RGB. Colors are
     8-bit values in ``[0, 255]``, rounded to the nearest integer as PCL
     stores them. The hue is PCL's (in degrees, in single precision:
     ``60 (g - b) / (max - min)`` when red is largest, ``60 (2 + (b - r) /
     (max - min))`` for green, ``60 (4 + (r - g) / (max - min))`` for blue,
-    plus 360 when negative; 0 for greys); its histogram coordinate is
+    plus 360 when negative; 0 for grays); its histogram coordinate is
     ``hue / 360 * color_hists_size``. Each point adds ``100 / (n - 1)`` to
     each grid, shared by the interpolation weights. Layout: the shape grid
-    as in :class:`GASDTransformer`, then colour cell ``(i, j, k)``, hue bin
+    as in :class:`GASDTransformer`, then color cell ``(i, j, k)``, hue bin
     ``b`` at ``shape_size + ((i * 2h_c + j) * 2h_c + k) * color_hists_size
     + b``.
 
@@ -444,5 +444,5 @@ class GASDColorTransformer(PointCloudDescriptor):
         return cells
 
     def _describe(self, clouds, params, hues, *, first_index):
-        """Colour GASD rows of one chunk of validated clouds (``hues``: one array per cloud)."""
+        """Color GASD rows of one chunk of validated clouds (``hues``: one array per cloud)."""
         return _gasd_compute(self, clouds, params, first_index, list(hues))[0]

@@ -89,7 +89,7 @@ cdef inline double _sq(const double* a) noexcept nogil:
 
 
 cdef double _null_vector(const double* m, double lam, double* out) noexcept nogil:
-    """Largest cross product of two rows of ``m - lam I``, normalised; returns its squared length.
+    """Largest cross product of two rows of ``m - lam I``, normalized; returns its squared length.
 
     PCL's rule: rows (0, 1), then (0, 2), then (1, 2), the first one that is
     at least as long as the others.
@@ -421,7 +421,7 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
                 b[j] = _clamp_index(s[j], -1, g + 1)
             _add(out, g, hs, b[0], b[1], b[2], _clamp_index(hbin, -1, hs), incr)
             continue
-        # interpolation: bin centres carry full weight
+        # interpolation: bin centers carry full weight
         for j in range(3):
             s[j] -= 0.5
             b[j] = _clamp_index(s[j], -2, g + 1)
@@ -475,7 +475,7 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
                         _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, hb + 1, w * ft)
     if hue != NULL:
         # GASDColorEstimation: the same aligned points, cube and weights, a
-        # circular histogram of hue bins in each cell of the colour grid
+        # circular histogram of hue bins in each cell of the color grid
         for i in range(n):
             _local(rot, c, &pts[3 * i], sc, q)
             _add_sample(cout, q, max_coord, chalf, chs, cinterp, hue[i] * <double>chs, incr, True)
@@ -491,7 +491,7 @@ def gasd_batch(const double[:, ::1] points, const int64_t[::1] offsets, const do
     ``out`` (n_objects, (2 half)^3 hs [+ (2 chalf)^3 chs]) must be zeroed;
     ``transforms`` receives each object's 4x4 alignment; ``status[k] = 1``
     marks an object whose frame is undefined (no spread). With ``hue``
-    (one value in [0, 1) per point: hue / 360) the colour grid follows the
+    (one value in [0, 1) per point: hue / 360) the color grid follows the
     shape grid in each row.
     """
     cdef Py_ssize_t n_objects = offsets.shape[0] - 1

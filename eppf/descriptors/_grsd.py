@@ -27,15 +27,15 @@ _MAX_CELL_INDEX = 2**30
 class GRSDTransformer(PointCloudDescriptor):
     """Global Radius-based Surface Descriptor (GRSD) of point clouds.
 
-    The cloud is voxelised; every occupied voxel gets a surface class from
-    the radius-based surface descriptor (RSD) of its neighbourhood (plane,
+    The cloud is voxelized; every occupied voxel gets a surface class from
+    the radius-based surface descriptor (RSD) of its neighborhood (plane,
     cylinder, sphere, edge or noise), and the descriptor counts the classes
-    of neighbouring voxel pairs, empty neighbours included: 21 bins (PCL's
+    of neighboring voxel pairs, empty neighbors included: 21 bins (PCL's
     ``GRSDSignature21``). The computation follows PCL 1.13's
-    ``pcl::GRSDEstimation`` step by step, in single precision (see Notes):
-    on the PCL reference runs the rows are identical to PCL's for every
-    ModelNet10 object and 98.8% of the DALES objects (the others differ in
-    a voxel or two, through rounding in the normals).
+    ``pcl::GRSDEstimation`` step by step, in single precision (see Notes),
+    so the rows equal PCL's but where rounding in the normals moves a voxel
+    (how often, on the PCL reference runs: :ref:`api-figures-pcl` in the
+    documentation).
 
     Read more in the paper's baseline section (Bobkov et al. 2018).
 
@@ -47,11 +47,11 @@ class GRSDTransformer(PointCloudDescriptor):
         default object scaling, a twentieth of the object's largest side
         (the PCL reference runs used 0.05 on scaled objects).
     scaling : {"object", "fit", "none"}, default="object"
-        Every object is centred on its mean; then scaled so its largest
+        Every object is centered on its mean; then scaled so its largest
         bounding-box side is 1 (``"object"``, as the PCL reference runs), by
         one factor learnt in ``fit`` so the largest training object's side
         is 1 (``"fit"``), or not at all (``"none"``: ``radius`` and the
-        class thresholds are then in the cloud's own units, metres for PCL).
+        class thresholds are then in the cloud's own units, meters for PCL).
     n_subdivisions : int, default=5
         Distance bins of the RSD fit (PCL's default).
     plane_radius : float, default=0.2
@@ -61,7 +61,7 @@ class GRSDTransformer(PointCloudDescriptor):
         Divide each row by its sum (needed for KL matching); False keeps
         PCL's raw counts.
     n_neighbors : int, default=10
-        Neighbourhood size for PCA normals of clouds given without normals.
+        Neighborhood size for PCA normals of clouds given without normals.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         Sign of estimated normals (irrelevant to GRSD, which ignores normal
         signs, but kept for a common interface).
@@ -91,42 +91,42 @@ class GRSDTransformer(PointCloudDescriptor):
        is represented by the mean of its points.
     2. RSD at each voxel mean ``c`` (PCL's ``RSDEstimation`` with the whole
        cloud as search surface and radius ``max(w, sqrt(3) w / 2) = w``):
-       the neighbours within ``w`` of ``c`` are found with a k-d tree; the
-       *first* neighbour the tree returns is the reference, and for every
-       other neighbour ``i`` the angle ``a_i = arccos(n_i . n_ref)`` folded
+       the neighbors within ``w`` of ``c`` are found with a k-d tree; the
+       *first* neighbor the tree returns is the reference, and for every
+       other neighbor ``i`` the angle ``a_i = arccos(n_i . n_ref)`` folded
        to ``[0, pi/2]`` is put in distance bin
        ``floor(n_subdivisions |p_i - c| / w)``. With the smallest and
        largest angle per bin (``m_b``, ``M_b``; bin 0 also holds 0) and bin
-       centres ``f_b``, the radii are the least-squares slopes
+       centers ``f_b``, the radii are the least-squares slopes
        ``r = sum(a_b f_b) / sum(a_b^2)`` of the min and max lines, capped at
        ``plane_radius`` (``plane_radius`` when the sum is 0), times 1.1 and
-       0.9, and ordered so ``r_min <= r_max``. Fewer than two neighbours
+       0.9, and ordered so ``r_min <= r_max``. Fewer than two neighbors
        give ``r_min = r_max = 0``.
     3. Class (PCL's ``getSimpleType``): plane if ``r_min > 0.1``, else
        cylinder if ``r_max > 0.175``, else noise if ``r_min < 0.015``,
        else sphere if ``r_max - r_min < 0.05``, else edge.
-    4. For every occupied voxel and each of its 26 neighbour cells, count
-       the pair (voxel class, neighbour class), an empty or out-of-grid
+    4. For every occupied voxel and each of its 26 neighbor cells, count
+       the pair (voxel class, neighbor class), an empty or out-of-grid
        cell being class "empty": a 6 x 6 matrix ``T``. The descriptor is
        ``T[i, j] + T[j, i]`` for ``i <= j`` in PCL's order (noise, plane,
        cylinder, sphere, edge, empty), so pairs of occupied voxels count
        twice and the (empty, empty) bin is always 0.
 
-    PCL's reference neighbour is the first one of an *unsorted* radius
+    PCL's reference neighbor is the first one of an *unsorted* radius
     search (the tree PCL builds internally is unsorted), i.e. the first hit
     in the depth-first order of FLANN's single k-d tree. The kernel builds
     that tree (FLANN 1.9's middle split, leaf size 15) and searches it in
     the same order, which is what makes the rows match PCL's; the paper's
-    RSD instead fits each point's own neighbourhood.
+    RSD instead fits each point's own neighborhood.
 
     Rotation: the voxel grid is axis-aligned, so GRSD is not rotation
     invariant. A rotation by a multiple of 90 degrees about a coordinate
     axis maps the grid onto itself, leaving the occupied cells (hence the
-    sum of the "empty" bins, the number of occupied-empty neighbour pairs)
+    sum of the "empty" bins, the number of occupied-empty neighbor pairs)
     unchanged up to points on cell faces; the classes may still change
-    through the reference neighbour, which depends on the k-d tree. Other rotations
-    change the voxelisation itself. The descriptor is invariant to
-    translation (objects are centred) and, with ``scaling="object"``, to
+    through the reference neighbor, which depends on the k-d tree. Other rotations
+    change the voxelization itself. The descriptor is invariant to
+    translation (objects are centered) and, with ``scaling="object"``, to
     uniform scaling. No randomness: the output is deterministic.
 
     References

@@ -3,17 +3,17 @@
 
 Per object, in single precision as PCL 1.13 computes it:
 
-1. voxelise on an axis-aligned grid of width ``w`` anchored at multiples of
+1. voxelize on an axis-aligned grid of width ``w`` anchored at multiples of
    ``w`` (PCL's ``VoxelGrid``); each occupied voxel is represented by the
    mean of its points;
 2. build a k-d tree over the object's points with the splitting rule and
    leaf size of FLANN's single-index tree (the tree PCL's ``KdTree`` wraps),
-   because PCL's RSD takes the normal of the *first* neighbour the tree
+   because PCL's RSD takes the normal of the *first* neighbor the tree
    returns as the reference normal, and an unsorted radius search returns
-   neighbours in the tree's depth-first order;
+   neighbors in the tree's depth-first order;
 3. radius search (radius ``w``) around each voxel centroid, RSD radii from
    the min/max normal angle per distance bin, surface class;
-4. count, for every occupied voxel, the classes of its 26 neighbour cells
+4. count, for every occupied voxel, the classes of its 26 neighbor cells
    (empty cells are class 5) and fold the 6 x 6 matrix to its 21 upper
    triangular entries, ``T[i, j] + T[j, i]``.
 
@@ -615,13 +615,13 @@ def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double 
 
 
 def radius_neighbors_flann(const float[:, ::1] points, double radius):
-    """Every point's neighbours in the order PCL's unsorted radius search gives.
+    """Every point's neighbors in the order PCL's unsorted radius search gives.
 
-    Neighbours are the points whose single-precision squared distance is
+    Neighbors are the points whose single-precision squared distance is
     below ``float(radius**2)`` (the point itself included), listed in the
     depth-first order of FLANN's single k-d tree, as PCL's
     ``search::KdTree(false)`` returns them. Returns ``(indices, offsets)``:
-    point ``i``'s neighbours are ``indices[offsets[i]:offsets[i + 1]]``.
+    point ``i``'s neighbors are ``indices[offsets[i]:offsets[i + 1]]``.
     """
     cdef int64_t n = points.shape[0], i, total = 0, m
     cdef int d

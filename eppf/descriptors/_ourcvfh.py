@@ -87,7 +87,7 @@ def _octant_hist(local, sigma):
 def _ourcvfh_object(points, normals, *, n_neighbors=10, curvature_threshold=0.03, eps_angle=0.125,
                     cluster_tolerance=None, min_points=50, refine=1.0, axis_ratio=0.8,
                     min_axis_value=0.925, sigma=0.01):
-    """OUR-CVFH signatures of one centred, scaled object.
+    """OUR-CVFH signatures of one centered, scaled object.
 
     Returns ``(signatures, clusters)``: a list of 308-bin arrays (one per
     cluster and reference frame, clusters in order) with the cluster index of
@@ -160,7 +160,7 @@ class OURCVFHTransformer(PointCloudDescriptor):
         first signature (the cluster met first in point order), or the mean
         of all signatures.
     scaling : {"object", "fit", "none"}, default="object"
-        Every object is centred on its mean; then scaled so its largest
+        Every object is centered on its mean; then scaled so its largest
         bounding-box side is 1 (``"object"``, as PCL's reference runs), by
         one factor learnt in ``fit`` so the largest training object's side
         is 1 (``"fit"``), or not at all. Distances below are in these units.
@@ -174,12 +174,12 @@ class OURCVFHTransformer(PointCloudDescriptor):
         ``n_neighbors`` exceeds it are left out of the clusters (PCL's
         default; 1.0 switches the filter off).
     eps_angle : float, default=0.125
-        Largest angle in radians between the normals of neighbouring points
+        Largest angle in radians between the normals of neighboring points
         of one region, and between a member's normal and the region's mean
         normal (PCL's default).
     cluster_tolerance : float or None, default=None
-        Largest distance between neighbouring points of one region; None:
-        five times the object's median nearest-neighbour distance.
+        Largest distance between neighboring points of one region; None:
+        five times the object's median nearest-neighbor distance.
     min_points : int, default=50
         Smallest region kept (PCL's default).
     axis_ratio : float, default=0.8
@@ -192,7 +192,7 @@ class OURCVFHTransformer(PointCloudDescriptor):
         Divide each row by its sum (needed for KL matching); False keeps
         PCL's raw counts.
     n_neighbors : int, default=10
-        Neighbourhood size for PCA normals (of clouds given without normals)
+        Neighborhood size for PCA normals (of clouds given without normals)
         and for the curvature.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
         Sign of estimated normals: away from the object's centroid, towards

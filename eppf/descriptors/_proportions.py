@@ -62,7 +62,7 @@ def proportions(points, up_axis=2, coverage=0.96):
 class ProportionTransformer(PointCloudDescriptor):
     """Six scale-invariant proportions of every point cloud, as log ratios.
 
-    From the centred points: the principal spreads ``s1 >= s2 >= s3`` (square
+    From the centered points: the principal spreads ``s1 >= s2 >= s3`` (square
     roots of the covariance's eigenvalues), the horizontal spreads ``h1 >=
     h2`` (the same in the plane orthogonal to ``up_axis``), the vertical
     spread ``u`` and the robust extents ``e1, e2, e3`` along the principal
@@ -94,10 +94,10 @@ class ProportionTransformer(PointCloudDescriptor):
 
     Notes
     -----
-    Meant as a side input, not a descriptor on its own: on ModelNet10 a
-    logistic regression on these six numbers names 67% of held-out training
-    objects, and they add to EPPF what the classifier confuses most (dresser
-    and night stand, table and desk: classes told apart by proportions).
+    Meant as a side input, not a descriptor on its own (six numbers tell
+    few classes apart by themselves: :ref:`api-figures-side-features`), but
+    they add to EPPF what the classifier confuses most (dresser and night
+    stand, table and desk: classes told apart by proportions).
 
     Examples
     --------

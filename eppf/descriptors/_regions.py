@@ -2,7 +2,7 @@
 
 The shared module of :class:`eppf.OURCVFHTransformer` and
 :class:`eppf.CVFHTransformer` (its functions are public within the package
-for that reason): the surface variation of a point's neighbourhood
+for that reason): the surface variation of a point's neighborhood
 (:func:`curvature`, for the curvature filter), the smooth regions grown from
 the points that pass it (:func:`smooth_clusters`), PCL's pair features of a
 reference point (a region's centroid and mean normal) against every point of
@@ -22,7 +22,7 @@ __all__ = ["curvature", "pair_features", "radius_neighbors_flann", "smooth_clust
 
 
 def curvature(points, k):
-    """Surface variation lambda_min / sum(lambda) of the k nearest neighbours."""
+    """Surface variation lambda_min / sum(lambda) of the k nearest neighbors."""
     n = points.shape[0]
     k = min(k, n)
     _, idx = cKDTree(points).query(points, k=k)

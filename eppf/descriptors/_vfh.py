@@ -41,7 +41,7 @@ class VFHTransformer(PointCloudDescriptor):
     ----------
     viewpoint : array-like of shape (3,), default=(0, 0, 0)
         The viewpoint (PCL's default: the origin), in the clouds' units.
-        On clouds centred at the origin the direction to it is undefined;
+        On clouds centered at the origin the direction to it is undefined;
         see ``pcl_homogeneous``.
     normalize_bins : bool, default=True
         Each angle-feature pair adds ``100 / (n - 1)`` and each viewpoint
@@ -55,24 +55,24 @@ class VFHTransformer(PointCloudDescriptor):
         zero.
     pcl_homogeneous : bool, default=True
         Reproduce PCL 1.13's arithmetic with the centroid as a homogeneous
-        4-vector (w = 1): it normalises ``(v - c, -1)`` rather than ``v - c``
+        4-vector (w = 1): it normalizes ``(v - c, -1)`` rather than ``v - c``
         and divides distances by ``sqrt(d_max^2 + 1)`` rather than ``d_max``.
         So the cosine of the viewpoint component is scaled by
-        ``|v - c| / sqrt(|v - c|^2 + 1)``: on a centred cloud with the
+        ``|v - c| / sqrt(|v - c|^2 + 1)``: on a centered cloud with the
         viewpoint at the origin all normals fall in bins 63-64, as in PCL's
         output. False gives the paper's unit direction and ``d_max``.
     pcl_centroid : bool, default=True
         For the viewpoint direction, compute the centroid as PCL does: the
         coordinates (and the viewpoint) rounded to single precision and
         summed in single precision. It matters only when the centroid is
-        within rounding of the viewpoint, as for centred clouds viewed from
+        within rounding of the viewpoint, as for centered clouds viewed from
         the origin: PCL's rounding noise then decides between bins 63 and 64,
         and True reproduces PCL's rows exactly; False uses the
         double-precision centroid (such normals then all fall in bin 64).
         Clouds whose largest coordinate is outside ``[1e-30, 1e30]``, or
         viewpoints beyond ``1e30``, use the double centroid either way.
     n_neighbors : int, default=10
-        Neighbourhood size for PCA normals of clouds given without normals
+        Neighborhood size for PCA normals of clouds given without normals
         (see :func:`eppf.estimate_normals`); six-column clouds use their own
         normals.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"
@@ -96,7 +96,7 @@ class VFHTransformer(PointCloudDescriptor):
     Notes
     -----
     With the centroid :math:`c`, the mean normal :math:`\\bar n` (not
-    normalised, as in PCL) and, for every point :math:`p` with normal
+    normalized, as in PCL) and, for every point :math:`p` with normal
     :math:`n` and :math:`d = p - c \\neq 0`, PCL's pair features: the source
     is the surflet whose normal is more parallel to :math:`d`
     (:math:`|n \\cdot d| > |\\bar n \\cdot d|` makes :math:`(p, n)` the

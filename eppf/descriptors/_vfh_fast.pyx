@@ -153,7 +153,7 @@ cdef void _vfh_object(const double* pts, const double* nrm, Py_ssize_t n, const 
             dv[j] /= big  # |v - c| = 2 big |dv| without overflow
         m = dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]
         if homogeneous:
-            # PCL normalises the 4-vector (v - c, -1): the centroid's w = 1 is left in
+            # PCL normalizes the 4-vector (v - c, -1): the centroid's w = 1 is left in
             m = m + ((1.0 if single else 0.5) / big) * ((1.0 if single else 0.5) / big)
         m = sqrt(m)
         for j in range(3):

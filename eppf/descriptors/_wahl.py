@@ -35,7 +35,7 @@ class WahlTransformer(PointCloudDescriptor):
         perpendicular to the connecting line (smaller ``|n . d|``, our reading
         of Wahl et al.), or the more parallel one (PCL's PFH rule).
     n_neighbors : int, default=10
-        Neighbourhood size for PCA normals of clouds given without normals
+        Neighborhood size for PCA normals of clouds given without normals
         (see :func:`eppf.preprocessing.estimate_normals`); clouds with six columns use
         their own normals.
     normal_orientation : {"centroid", "origin"} or None, default="centroid"

@@ -612,7 +612,7 @@ def resolve_scaling(scaling, data):
     The built-in shapes share one unit (``"fit"``, the paper's data-set
     scaling); files may hold raw CAD units spanning orders of magnitude, so
     they default to per-object scaling (``"object"``). Pass ``"fit"`` for a
-    file in one physical unit (e.g. metres) to keep size information.
+    file in one physical unit (e.g. meters) to keep size information.
     """
     if scaling not in SCALINGS:
         raise ExperimentError(f"--scaling must be one of {SCALINGS}, got {scaling!r}")

@@ -11,7 +11,7 @@ extensions              kind    notes
 ``.xyz .txt .csv``      cloud   rows ``x y z [nx ny nz | more]``, one header line allowed
 ``.pts``                cloud   Open3D; the same rows, after an optional count line
 ``.xyzn``               cloud   Open3D; ``x y z nx ny nz``
-``.xyzrgb``             cloud   Open3D; ``x y z r g b`` (colour ignored)
+``.xyzrgb``             cloud   Open3D; ``x y z r g b`` (color ignored)
 ``.npy .npz``           cloud   NumPy arrays of shape (n, 3) or (n, 6)
 ``.off``                mesh    including ModelNet's ``OFF490 518 0`` first line
 ``.obj``                mesh    Wavefront; polygons split into triangles

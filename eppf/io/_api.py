@@ -160,7 +160,7 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         mesh. True requires them; False drops them.
     remove_nan : bool, default=True
         Drop points with a NaN or infinite value (PCL marks invalid points of
-        organised clouds with NaN).
+        organized clouds with NaN).
     mesh : {"sample", "vertices"}, default="sample"
         What a mesh file (OFF, OBJ, STL, PLY with faces) gives: points drawn
         uniformly over its surface (area-weighted, with

@@ -3,7 +3,7 @@ where ``OFF`` is glued to the counts (``OFF490 518 0``), ``COFF``/``NOFF``
 variants (extra vertex columns ignored), ``#`` comments and polygons.
 
 Three readers, fastest first, each giving up (None) on what it does not
-handle: a compiled parser of the plain all-triangle body, a vectorised NumPy
+handle: a compiled parser of the plain all-triangle body, a vectorized NumPy
 one, and the line-by-line reader that reads everything else or names the line
 at fault. The counts are checked against the file's size before the compiled
 parser allocates: a vertex line takes at least 6 bytes (``0 0 0`` and a line
@@ -60,7 +60,7 @@ def _read_off_compiled(data):
 
 
 def _read_off_fast(text):
-    """Vectorised reader for the common OFF file: no comments, triangles only.
+    """Vectorized reader for the common OFF file: no comments, triangles only.
 
     Returns None whenever the file is anything else (or malformed), and the
     line-by-line reader then reads it or reports the error.

@@ -3,7 +3,7 @@
 
 Only the common form is handled here: each vertex line holds exactly three
 numbers and each face line is ``3 i j k``; blank lines are skipped. Anything
-else (comments, colours, polygons, bad numbers, a short file) makes the
+else (comments, colors, polygons, bad numbers, a short file) makes the
 parser return None, and :mod:`eppf.io._off` falls back to its line-by-line
 reader, which reads the file or names the line at fault.
 """

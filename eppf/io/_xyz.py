@@ -5,10 +5,10 @@
   line of names; columns 4 to 6 are normals when every row there has unit
   length (so ``x y z r g b`` files are not mistaken).
 - ``.pts`` (Open3D): the same rows, optionally after a first line holding
-  only the number of points; extra columns are intensity and colour, read as
+  only the number of points; extra columns are intensity and color, read as
   in ``.xyz``.
 - ``.xyzn`` (Open3D): ``x y z nx ny nz``, normals always.
-- ``.xyzrgb`` (Open3D): ``x y z r g b``, the colour is ignored.
+- ``.xyzrgb`` (Open3D): ``x y z r g b``, the color is ignored.
 """
 
 import numpy as np
@@ -122,7 +122,7 @@ def read_xyzn(path, data, owner, want_normals="auto"):
 
 
 def read_xyzrgb(path, data, owner, want_normals="auto"):
-    """Open3D's ``.xyzrgb``: ``x y z r g b`` rows; the colour is dropped."""
+    """Open3D's ``.xyzrgb``: ``x y z r g b`` rows; the color is dropped."""
     arr = _fixed(path, data, owner, "xyzrgb")
     return Cloud(arr[:, :3], None)
 

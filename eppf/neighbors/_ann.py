@@ -9,8 +9,8 @@ each divided by its sum: ``e(x) = sqrt(h / sum h)`` with ``h = max(x,
 floor)``. For nearby distributions ``p`` and ``q`` the symmetric KL
 divergence and four times the squared Hellinger distance,
 ``4 * sum (sqrt p_i - sqrt q_i)**2``, agree to second order (both are
-``sum (p_i - q_i)**2 / p_i`` up to third-order terms), so near neighbours in
-one are near neighbours in the other. The embedded vectors are optionally
+``sum (p_i - q_i)**2 / p_i`` up to third-order terms), so near neighbors in
+one are near neighbors in the other. The embedded vectors are optionally
 projected onto their leading principal components to make the index
 smaller and its scans faster.
 """
@@ -101,24 +101,24 @@ def _drop_own(cand, start):
 
 
 class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
-    """Approximate nearest neighbours by symmetric KL divergence, for millions of histograms.
+    """Approximate nearest neighbors by symmetric KL divergence, for millions of histograms.
 
-    A fast index proposes ``n_candidates`` neighbours per query in the
+    A fast index proposes ``n_candidates`` neighbors per query in the
     Hellinger embedding of the histograms (square roots of the floored,
-    normalised bins, optionally reduced by PCA), searched by faiss's
+    normalized bins, optionally reduced by PCA), searched by faiss's
     inverted-file index; the candidates are then ranked by the exact
     symmetric KL divergence of :class:`KLNearestNeighbors`, so every
-    returned distance is exact and only a neighbour missed by the index
+    returned distance is exact and only a neighbor missed by the index
     can make a result differ from exact search.
 
     Parameters
     ----------
     n_neighbors : int, default=1
-        Number of neighbours used by :meth:`predict` and
+        Number of neighbors used by :meth:`predict` and
         :meth:`predict_proba`.
     weights : {"uniform", "distance"}, default="uniform"
-        ``"uniform"``: every neighbour votes equally. ``"distance"``: votes
-        are weighted by the inverse distance; neighbours at distance zero,
+        ``"uniform"``: every neighbor votes equally. ``"distance"``: votes
+        are weighted by the inverse distance; neighbors at distance zero,
         when there are any, take all the weight.
     floor : "auto" or float, default="auto"
         Bins below ``floor`` are raised to it before taking logarithms (and
@@ -126,7 +126,7 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
         half the smallest positive value of the training ``X``.
     renormalize : bool, default=False
         Whether floored histograms are divided by their sum in the exact
-        divergence (the embedding always normalises).
+        divergence (the embedding always normalizes).
     n_candidates : int, default=32
         Candidates proposed by the index and re-ranked exactly per query;
         at least ``n_neighbors``. More candidates: higher recall, slower
@@ -139,17 +139,17 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
         cells of which a query scans the ``n_probe`` nearest; quick to build.
         ``"hnsw"``: faiss's ``IndexHNSWFlat``, a navigable small-world graph
         walked with ``ef_search`` entries; faster queries at equal recall on
-        large databases, but about 20 times slower to build (one thread,
-        so that the graph is the same on every run).
+        large databases, but much slower to build (one thread, so that the
+        graph is the same on every run).
     n_lists : int or "auto", default="auto"
         Inverted lists (k-means cells) of the index. ``"auto"`` uses about
         ``4 * sqrt(n_samples)`` (4,000 for a million), with at least 39
         training rows per list.
     n_probe : int, default=128
         Lists scanned per query (capped at ``n_lists``; ``"ivf"`` only).
-        More lists: higher recall, slower queries. On a million EPPF-like
-        descriptors, 64 lists gave recall@1 0.988 and 128 gave 0.998 at
-        1,657 queries per second on two cores.
+        More lists: higher recall, slower queries (recall and speed on a
+        million EPPF-like descriptors: the documentation's Performance page,
+        "Approximate retrieval").
     hnsw_m : int, default=16
         Links per node of the HNSW graph (``"hnsw"`` only).
     ef_search : int, default=64
@@ -185,13 +185,13 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
     n_samples_fit_ : int
         Number of training histograms.
     mean_ : ndarray of shape (n_bins,)
-        Mean embedded training vector (the PCA's centre), or None without PCA.
+        Mean embedded training vector (the PCA's center), or None without PCA.
     components_ : ndarray of shape (n_components, n_bins)
         Principal axes of the embedding, or None without PCA.
     n_lists_ : int or None
         Inverted lists of the index (None for ``"hnsw"``).
     index_ : faiss.IndexIVFFlat or faiss.IndexHNSWFlat
-        The candidate index (serialised to bytes when pickled).
+        The candidate index (serialized to bytes when pickled).
 
     See Also
     --------
@@ -219,7 +219,7 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
     index, as in :class:`KLNearestNeighbors`; with ``n_candidates`` and
     ``n_probe`` at their maxima the search is exhaustive and the results
     are those of :class:`KLNearestNeighbors`. :meth:`kneighbors` without
-    ``X`` excludes each training row from its own neighbours.
+    ``X`` excludes each training row from its own neighbors.
 
     The default index, faiss's ``IndexIVFFlat`` (inverted file, vectors
     stored uncompressed), is deterministic and quick to build, exact within
@@ -460,7 +460,7 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
     # ------------------------------------------------------------ queries
 
     def _search_block(self, faiss, rows, m, k, n_probe, loo_start):
-        """Exact-re-ranked neighbours of a block of raw query rows.
+        """Exact-re-ranked neighbors of a block of raw query rows.
 
         ``loo_start`` is the training index of the first row when the
         queries are the training rows themselves (leave-one-out), else None.
@@ -498,9 +498,9 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
         ----------
         X : array-like of shape (n_queries, n_bins), default=None
             Query histograms. ``None`` queries the training histograms, each
-            one excluded from its own neighbours (leave-one-out).
+            one excluded from its own neighbors (leave-one-out).
         n_neighbors : int, default=None
-            Number of neighbours; ``None`` uses the ``n_neighbors``
+            Number of neighbors; ``None`` uses the ``n_neighbors``
             parameter. At most ``n_candidates``.
         return_distance : bool, default=True
             Whether to return the distances too.
@@ -508,10 +508,10 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
         Returns
         -------
         neigh_dist : ndarray of shape (n_queries, n_neighbors)
-            Exact symmetric KL distances to the neighbours found, increasing
+            Exact symmetric KL distances to the neighbors found, increasing
             along each row. Only returned if ``return_distance=True``.
         neigh_ind : ndarray of shape (n_queries, n_neighbors)
-            Indices of the neighbours in the training set.
+            Indices of the neighbors in the training set.
         """
         check_is_fitted(self)
         name = type(self).__name__

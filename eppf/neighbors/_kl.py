@@ -370,7 +370,7 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
 
     See Also
     --------
-    KLNearestNeighbors : Nearest-neighbour classification with this distance.
+    KLNearestNeighbors : Nearest-neighbor classification with this distance.
 
     Notes
     -----
@@ -379,7 +379,7 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
     products, chunk by chunk. The cancellation between these terms limits
     the absolute accuracy to a small multiple of machine precision times
     the size of the terms (``sum |x ln y|``), e.g. about ``1e-13`` for
-    normalised histograms of 1,200 bins, however small ``d`` is.
+    normalized histograms of 1,200 bins, however small ``d`` is.
 
     References
     ----------
@@ -487,7 +487,7 @@ def _loo_block_task(i0, i1, j0, j1, *arrays):
 
 
 def _loo_nearest(P, block=None, n_threads=1):
-    """Leave-one-out nearest neighbour of every row of ``P`` among the others.
+    """Leave-one-out nearest neighbor of every row of ``P`` among the others.
 
     Uses the symmetry of the distance: only blocks on or above the block
     diagonal are computed, each serving both its rows and its columns, so
@@ -524,13 +524,13 @@ def _loo_nearest(P, block=None, n_threads=1):
 class NeighbourVotesMixin:
     """``predict_proba`` and ``predict`` from the votes of ``kneighbors``.
 
-    For the symmetric-KL neighbour classifiers of this package: they set
+    For the symmetric-KL neighbor classifiers of this package: they set
     ``classes_``, ``weights`` and ``_y`` (training labels as indices into
     ``classes_``) in ``fit`` and implement ``kneighbors``.
     """
 
     def predict_proba(self, X):
-        """Class probabilities from the votes of the nearest neighbours.
+        """Class probabilities from the votes of the nearest neighbors.
 
         Parameters
         ----------
@@ -567,7 +567,7 @@ class NeighbourVotesMixin:
 
 
 class KLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
-    """Nearest-neighbour classifier on histograms with symmetric KL divergence.
+    """Nearest-neighbor classifier on histograms with symmetric KL divergence.
 
     The paper's retrieval matcher: descriptors are compared with the
     symmetric Kullback-Leibler divergence after raising empty bins to a
@@ -577,11 +577,11 @@ class KLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
     Parameters
     ----------
     n_neighbors : int, default=1
-        Number of neighbours used by :meth:`predict` and
+        Number of neighbors used by :meth:`predict` and
         :meth:`predict_proba`.
     weights : {"uniform", "distance"}, default="uniform"
-        ``"uniform"``: every neighbour votes equally. ``"distance"``: votes
-        are weighted by the inverse distance; neighbours at distance zero,
+        ``"uniform"``: every neighbor votes equally. ``"distance"``: votes
+        are weighted by the inverse distance; neighbors at distance zero,
         when there are any, take all the weight.
     floor : "auto" or float, default="auto"
         Bins below ``floor`` (in particular empty bins) are raised to it
@@ -594,7 +594,7 @@ class KLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
     chunk_size : int, default=None
         Query rows handled per block; memory beyond the training data is two
         blocks of ``chunk_size * n_samples_fit`` floats. ``None`` picks blocks
-        of about 64 MiB. Neighbours do not depend on it (near-ties within
+        of about 64 MiB. Neighbors do not depend on it (near-ties within
         rounding go to the lowest index); distances only in the last bits.
     n_jobs : int, default=None
         Threads over blocks of distances (joblib's meaning; ``None``
@@ -633,15 +633,15 @@ class KLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
     It is computed as two matrix products per block of query rows. Equal
     distances, and distances closer than the rounding error of that
     computation (about ``1e-12`` relative to the summed terms), are resolved
-    in favour of the training sample with the lowest index, so exact
+    in favor of the training sample with the lowest index, so exact
     duplicates in the training set give the same answer whatever the
     chunking. Equal votes go to the first class in ``classes_``.
     :meth:`kneighbors` without ``X`` excludes each training point from its
-    own neighbours, which gives leave-one-out retrieval.
+    own neighbors, which gives leave-one-out retrieval.
 
     The divergence compares distributions: histograms of raw counts with
     different totals (e.g. OUR-CVFH over clouds of different sizes) should be
-    L1-normalised first, e.g. with
+    L1-normalized first, e.g. with
     ``sklearn.preprocessing.Normalizer(norm="l1")`` in a pipeline. EPPF
     descriptors already are. Flooring adds a little mass to sparse
     histograms; ``renormalize=True`` removes it again.
@@ -737,19 +737,19 @@ class KLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
         ----------
         X : array-like of shape (n_queries, n_bins), default=None
             Query histograms. ``None`` queries the training histograms, each
-            one excluded from its own neighbours (leave-one-out).
+            one excluded from its own neighbors (leave-one-out).
         n_neighbors : int, default=None
-            Number of neighbours; ``None`` uses the ``n_neighbors`` parameter.
+            Number of neighbors; ``None`` uses the ``n_neighbors`` parameter.
         return_distance : bool, default=True
             Whether to return the distances too.
 
         Returns
         -------
         neigh_dist : ndarray of shape (n_queries, n_neighbors)
-            Symmetric KL distances to the neighbours, increasing along each
+            Symmetric KL distances to the neighbors, increasing along each
             row. Only returned if ``return_distance=True``.
         neigh_ind : ndarray of shape (n_queries, n_neighbors)
-            Indices of the neighbours in the training set.
+            Indices of the neighbors in the training set.
         """
         check_is_fitted(self)
         name = type(self).__name__
@@ -933,7 +933,7 @@ def prepare_histograms(X, floor, renormalize, owner):
 
 
 def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
-    """Exact symmetric KL re-ranking of candidate neighbours.
+    """Exact symmetric KL re-ranking of candidate neighbors.
 
     Parameters
     ----------
@@ -946,7 +946,7 @@ def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
         Candidate database indices per query; ``-1`` marks no candidate.
         Each row must hold at least ``k`` valid, distinct indices.
     k : int
-        Neighbours kept per query.
+        Neighbors kept per query.
     floor : float
         Positive floor.
     renormalize : bool
@@ -987,20 +987,20 @@ def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
 
 
 def neighbour_votes(dist, ind, labels, n_classes, weights):
-    """Class probabilities from the (weighted) votes of neighbours.
+    """Class probabilities from the (weighted) votes of neighbors.
 
     Parameters
     ----------
     dist : ndarray of shape (n_queries, k)
-        Distances to the neighbours.
+        Distances to the neighbors.
     ind : ndarray of shape (n_queries, k)
-        Indices of the neighbours in the training set.
+        Indices of the neighbors in the training set.
     labels : ndarray of shape (n_samples_fit,)
         Encoded training labels (indices into ``classes_``).
     n_classes : int
         Number of classes.
     weights : {"uniform", "distance"}
-        Voting rule: equal votes, or inverse-distance votes where neighbours
+        Voting rule: equal votes, or inverse-distance votes where neighbors
         at distance zero, when there are any, take all the weight.
 
     Returns
@@ -1053,7 +1053,7 @@ def rerank_sparse_candidates(P, support, row_terms, candidates, k, floor):
     candidates : ndarray of shape (n_queries, n_candidates)
         Candidate database indices per query; ``-1`` marks no candidate.
     k : int
-        Neighbours kept per query.
+        Neighbors kept per query.
     floor : float
         Positive floor.
 

@@ -2,8 +2,30 @@
 
 Importing this subpackage imports torch (``import eppf`` does not).
 
-Parameter counts for 10 classes (dense layer of 1,024 units; how Table I is
-read is documented in ``eppf.nn._networks``):
+How we read Table I
+-------------------
+* Convolutions use stride 1 and zero "same" padding (TensorFlow's convention,
+  the extra zero after for even kernels), each followed by a ReLU.
+* 4D network: two :class:`Conv4d` layers (32 and 64 filters, kernel
+  (5, 2, 2, 1)) on the (N1, N2, N3, N4) histogram; each channel's 4D
+  response is then reshaped in C order to the plane that the 2D network
+  uses (see :func:`plane_shape`; (40, 30) for 1,200 bins), followed by a 5x5
+  2D convolution of 48 filters.
+* 2D network: the flat descriptor reshaped in C order to :func:`plane_shape`,
+  three 5x5 convolutions of 32, 64 and 48 filters.
+* 3D network: the descriptor reshaped to (N1, N2, N3 * N4) ((20, 4, 15) for
+  the default bins), three convolutions of kernel (5, 5, 1).
+* One 2x2 max-pool of stride 2 over the first two spatial axes (for the 3D
+  network the third is left alone), rounding up as TensorFlow's "same"
+  pooling does, so no bin row is dropped for odd sizes.
+* Dense layer of ``n_hidden=1024`` units (ReLU), dropout, dense to the
+  classes. The dense layer's input size is computed: with the sizes above it
+  is 48 * 20 * 15 = 14,400 for every variant on 1,200 bins. Table I prints
+  "(192, 1024)", which no consistent reading of the table reproduces, and the
+  authors' public code flattens 30 x 40 x 48 = 57,600 values; we keep the
+  table's layers and let the size follow from them.
+
+Parameter counts for 10 classes (dense layer of 1,024 units):
 
 =================  ============  ==================  ===========
 bins               variant       dense-layer input   parameters

@@ -203,7 +203,7 @@ class Conv4d(nn.Module):
     Attributes
     ----------
     weight : torch.nn.Parameter of shape (out_channels, in_channels, k1, k2, k3, k4)
-        Filters, initialised as ``torch.nn.Conv3d`` initialises its own
+        Filters, initialized as ``torch.nn.Conv3d`` initializes its own
         (Kaiming uniform over the fan-in ``in_channels * k1 * k2 * k3 * k4``).
     bias : torch.nn.Parameter of shape (out_channels,) or None
         Per-filter bias.
@@ -241,7 +241,7 @@ class Conv4d(nn.Module):
         self.reset_parameters()
 
     def reset_parameters(self):
-        """Initialise weight and bias as ``torch.nn.Conv3d`` does."""
+        """Initialize weight and bias as ``torch.nn.Conv3d`` does."""
         nn.init.kaiming_uniform_(self.weight, a=math.sqrt(5))
         if self.bias is not None:
             fan_in = self.in_channels * math.prod(self.kernel_size)

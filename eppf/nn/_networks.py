@@ -4,28 +4,7 @@ All three take a batch of flat descriptors of length ``prod(n_bins)`` in C
 order over (f1, f2, f3, f4), f4 fastest, and return class logits. Layer sizes
 follow from ``n_bins``; nothing is hard-coded to the (20, 4, 5, 3) histogram.
 
-How we read Table I
--------------------
-* Convolutions use stride 1 and zero "same" padding (TensorFlow's convention,
-  the extra zero after for even kernels), each followed by a ReLU.
-* 4D network: two :class:`Conv4d` layers (32 and 64 filters, kernel
-  (5, 2, 2, 1)) on the (N1, N2, N3, N4) histogram; each channel's 4D
-  response is then reshaped in C order to the plane that the 2D network
-  uses (see :func:`plane_shape`; (40, 30) for 1,200 bins), followed by a 5x5
-  2D convolution of 48 filters.
-* 2D network: the flat descriptor reshaped in C order to :func:`plane_shape`,
-  three 5x5 convolutions of 32, 64 and 48 filters.
-* 3D network: the descriptor reshaped to (N1, N2, N3 * N4) ((20, 4, 15) for
-  the default bins), three convolutions of kernel (5, 5, 1).
-* One 2x2 max-pool of stride 2 over the first two spatial axes (for the 3D
-  network the third is left alone), rounding up as TensorFlow's "same"
-  pooling does, so no bin row is dropped for odd sizes.
-* Dense layer of ``n_hidden=1024`` units (ReLU), dropout, dense to the
-  classes. The dense layer's input size is computed: with the sizes above it
-  is 48 * 20 * 15 = 14,400 for every variant on 1,200 bins. Table I prints
-  "(192, 1024)", which no consistent reading of the table reproduces, and the
-  authors' public code flattens 30 x 40 x 48 = 57,600 values; we keep the
-  table's layers and let the size follow from them.
+How Table I is read is documented in :mod:`eppf.nn`.
 
 Precision
 ---------
@@ -101,7 +80,7 @@ def plane_shape(n_features):
     """Most nearly square (rows, cols) with rows * cols == n_features, rows >= cols.
 
     The paper reshapes its 1,200 bins to (40, 30); this rule gives that plane
-    and generalises it to other bin counts (540 -> (27, 20)).
+    and generalizes it to other bin counts (540 -> (27, 20)).
 
     Parameters
     ----------
@@ -187,9 +166,9 @@ def _check_options(owner, n_side, side_hidden, batch_norm):
 
 
 class _ChannelNorm(nn.BatchNorm1d):
-    """Batch normalisation over dimension 1 of a tensor of any rank >= 2.
+    """Batch normalization over dimension 1 of a tensor of any rank >= 2.
 
-    ``torch.nn.functional.batch_norm`` normalises every channel over all
+    ``torch.nn.functional.batch_norm`` normalizes every channel over all
     other axes whatever the rank; only the rank check of ``BatchNorm1d`` is
     relaxed, so the 4D network's (batch, C, n1, n2, n3) tensors need no copy.
     """
@@ -213,7 +192,7 @@ class _EPPFNetBase(nn.Module):
             self.norms = nn.ModuleList(_ChannelNorm(f) for f in filters)
 
     def _act(self, x, i):
-        """ReLU after convolution ``i``, batch-normalised first when ``batch_norm``."""
+        """ReLU after convolution ``i``, batch-normalized first when ``batch_norm``."""
         if getattr(self, "batch_norm", False):
             x = self.norms[i](x)
         return torch.relu(x)
@@ -293,7 +272,7 @@ class EPPFNet4D(_EPPFNetBase):
     side_hidden : int, default=128
         Units of the side branch (unused when ``n_side == 0``).
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU (beyond
+        Batch normalization between every convolution and its ReLU (beyond
         the paper).
 
     Attributes
@@ -309,7 +288,7 @@ class EPPFNet4D(_EPPFNetBase):
 
     Notes
     -----
-    The module docstring of ``eppf.nn._networks`` says how Table I is read.
+    How Table I is read is documented in :mod:`eppf.nn`.
     With the default arguments the network has 14,875,418 parameters for 10
     classes; the dense layer (14,400 x 1,024) holds 99% of them.
 
@@ -401,7 +380,7 @@ class EPPFNet2D(_EPPFNetBase):
     side_hidden : int, default=128
         Units of the side branch (unused when ``n_side == 0``).
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU (beyond
+        Batch normalization between every convolution and its ReLU (beyond
         the paper).
 
     Attributes
@@ -491,7 +470,7 @@ class EPPFNet3D(_EPPFNetBase):
     side_hidden : int, default=128
         Units of the side branch (unused when ``n_side == 0``).
     batch_norm : bool, default=False
-        Batch normalisation between every convolution and its ReLU (beyond
+        Batch normalization between every convolution and its ReLU (beyond
         the paper).
 
     Attributes

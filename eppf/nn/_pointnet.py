@@ -15,7 +15,7 @@ class TNet(nn.Module):
 
     Shared MLP (64, 128, 1024), max-pool, dense 512-256-k*k with batch norm.
     The last layer starts with zero weights and the identity as bias, so the
-    predicted transform is exactly the identity at initialisation.
+    predicted transform is exactly the identity at initialization.
 
     Parameters
     ----------
@@ -26,7 +26,7 @@ class TNet(nn.Module):
     See Also
     --------
     PointNet : The network that uses two of them.
-    orthogonality_penalty : The regulariser of the predicted transforms.
+    orthogonality_penalty : The regularizer of the predicted transforms.
 
     Examples
     --------
@@ -94,7 +94,7 @@ class PointNet(nn.Module):
     -----
     The forward pass returns ``(logits, feature_transform)``: the logits of
     shape (batch, n_classes) and the 64 x 64 feature transform of shape
-    (batch, 64, 64) that the orthogonality regulariser needs (see
+    (batch, 64, 64) that the orthogonality regularizer needs (see
     :class:`PointNetLoss`).
 
     References
@@ -144,7 +144,7 @@ class PointNet(nn.Module):
         logits : torch.Tensor of shape (batch, n_classes)
             Class scores.
         feature_transform : torch.Tensor of shape (batch, 64, 64)
-            The learned feature transform, for the regulariser.
+            The learned feature transform, for the regularizer.
         """
         x = X.transpose(1, 2)  # (batch, 3, n_points)
         x = torch.bmm(self.input_tnet(x), x)
@@ -188,18 +188,18 @@ class PointNetLoss(nn.Module):
     """Cross-entropy plus ``reg_weight * mean ||I - A A^T||_F^2``.
 
     Takes the network's ``(logits, feature_transform)`` pair as prediction,
-    so skorch adds the regulariser to every training and validation loss
+    so skorch adds the regularizer to every training and validation loss
     without a custom ``get_loss``.
 
     Parameters
     ----------
     reg_weight : float, default=0.001
-        Weight of the feature-transform regulariser.
+        Weight of the feature-transform regularizer.
 
     See Also
     --------
     PointNet : The network whose output it takes.
-    orthogonality_penalty : The regulariser.
+    orthogonality_penalty : The regularizer.
 
     Examples
     --------
@@ -217,7 +217,7 @@ class PointNetLoss(nn.Module):
         self.ce = nn.CrossEntropyLoss()
 
     def forward(self, y_pred, y_true):
-        """Compute the regularised loss of a batch.
+        """Compute the regularized loss of a batch.
 
         Parameters
         ----------

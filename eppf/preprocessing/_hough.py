@@ -1,10 +1,10 @@
 """Surface normals by the randomized Hough transform of Boulch and Marlet (2012).
 
 The estimator the EPPF paper used for its normals. Unlike PCA, which blends
-the planes of a neighbourhood, the Hough estimator votes for the dominant
+the planes of a neighborhood, the Hough estimator votes for the dominant
 plane: near a sharp edge a point gets the normal of one of the two faces.
 
-The Python layer validates input, finds the k nearest neighbours
+The Python layer validates input, finds the k nearest neighbors
 (:class:`scipy.spatial.cKDTree`) and draws one seed per object; the voting is
 done by the compiled kernel in ``eppf.preprocessing._hough_fast`` (OpenMP over
 points). :func:`eppf.preprocessing.estimate_normals` and
@@ -29,7 +29,7 @@ __all__ = ["estimate_normals_hough"]
 _DEFAULTS = {"n_triplets": 700, "n_phi": 15, "n_rotations": 5, "cluster_angle": 0.79,
              "tolerance": 0.05, "confidence": 0.95}
 
-# Neighbour indices held at once in the batch path (rows x k), bounding memory.
+# Neighbor indices held at once in the batch path (rows x k), bounding memory.
 _MAX_NEIGHBOR_ENTRIES = 1 << 22
 
 
@@ -140,7 +140,7 @@ def _hough_packed(pts, off, k, seeds, params, n_threads, owner):
     n_obj = sizes.shape[0]
     start = 0
     while start < n_obj:
-        # A chunk of objects whose neighbour table stays below the bound.
+        # A chunk of objects whose neighbor table stays below the bound.
         stop, entries = start, 0
         while stop < n_obj and (stop == start or entries + sizes[stop] * min(k, sizes[stop]) <= _MAX_NEIGHBOR_ENTRIES):
             entries += sizes[stop] * min(k, sizes[stop])
@@ -229,10 +229,10 @@ def estimate_normals_hough(points, n_neighbors=20, *, n_triplets=700, n_phi=15, 
     """Estimate unit surface normals by the randomized Hough transform.
 
     Boulch and Marlet's estimator [1]_, the one the EPPF paper [2]_ used:
-    for each point, random triplets of its ``n_neighbors`` nearest neighbours
+    for each point, random triplets of its ``n_neighbors`` nearest neighbors
     each vote with their plane's normal into an accumulator over the
     directions of the half sphere; the normal is the mean of the votes of the
-    most voted bin. Where PCA averages the planes of a neighbourhood, this
+    most voted bin. Where PCA averages the planes of a neighborhood, this
     picks the dominant one, so normals stay sharp at edges and corners and
     outliers barely move them.
 
@@ -241,7 +241,7 @@ def estimate_normals_hough(points, n_neighbors=20, *, n_triplets=700, n_phi=15, 
     points : array-like of shape (n_points, 3)
         Coordinates of the cloud, at least 3 points, not all identical.
     n_neighbors : int, default=20
-        Neighbourhood size, the point itself included; at least 3, clipped to
+        Neighborhood size, the point itself included; at least 3, clipped to
         ``n_points``. The authors used 100 to 200 on dense scans; 20 is
         :class:`eppf.EPPFTransformer`'s default for clouds of about 1,000
         points.
@@ -276,7 +276,7 @@ default="centroid"
     Returns
     -------
     normals : ndarray of shape (n_points, 3), dtype float64
-        Unit normals. A neighbourhood where no triplet spans a plane
+        Unit normals. A neighborhood where no triplet spans a plane
         (coincident or collinear points) gets a unit vector orthogonal to
         its line, or (1, 0, 0) when all its points coincide.
 
@@ -296,7 +296,7 @@ default="centroid"
 
     Notes
     -----
-    Triplets of three distinct neighbours are drawn uniformly (with
+    Triplets of three distinct neighbors are drawn uniformly (with
     replacement between triplets); collinear or coincident triplets do not
     vote. Each normal, flipped into ``z >= 0`` of the (rotated) accumulator,
     falls into a ring of polar angle (step ``pi / n_phi``, a cap at the pole)
@@ -310,7 +310,7 @@ default="centroid"
     confident first, with those within ``cluster_angle``, and the group of
     largest summed confidence gives the confidence-weighted mean.
 
-    Neighbours come from :class:`scipy.spatial.cKDTree`, so points at exactly
+    Neighbors come from :class:`scipy.spatial.cKDTree`, so points at exactly
     equal distance may be taken in another order than PCA's grid search.
     The cost is that of up to ``n_triplets * max(n_rotations, 1)`` votes per
     point (3,500 by default), fewer where early stopping ends the voting

@@ -2,10 +2,10 @@
 """Compiled kernel for randomized-Hough surface normals (Boulch and Marlet,
 SGP 2012), parallel over points with OpenMP.
 
-For each point, with its neighbourhood given (global indices into the packed
+For each point, with its neighborhood given (global indices into the packed
 coordinates):
 
-- random triplets of distinct neighbours are drawn from the point's private
+- random triplets of distinct neighbors are drawn from the point's private
   generator; each non-degenerate triplet's plane normal votes into an
   accumulator over the directions of the half sphere (antipodal directions
   identified), made of rings of constant polar angle cut into bins of about
@@ -24,18 +24,18 @@ object only, and no state is shared between points, so the output is
 bit-identical for any thread count or chunking.
 """
 from cython.parallel cimport prange, threadid
-from libc.math cimport sqrt, fabs, floor, sin, cos
+from libc.math cimport sqrt, fabs, floor, sin, cos, M_PI
 from libc.stdint cimport int64_t, int32_t, uint64_t, uint32_t
 
 from eppf.utils._common cimport splitmix64, rand_below
 
 import numpy as np
 
-cdef double _PI = 3.141592653589793
+cdef double _PI = M_PI
 # Triplets whose cross product is below this fraction of the product of its
 # two edge lengths are treated as collinear and do not vote.
 cdef double _COLLINEAR = 1e-10
-# At most this many draws are spent looking for three distinct neighbours.
+# At most this many draws are spent looking for three distinct neighbors.
 cdef int _MAX_DRAW = 64
 
 
@@ -168,7 +168,7 @@ cdef double _one_pass(const double* pts, const int64_t* nb, int64_t k, uint64_t*
             uy = -uy
             uz = -uz
         b = _bin_of(ux, uy, uz, n_rings, ring_z, ring_start, ring_bins, edges)
-        # Votes of one bin are summed with one sign (that of the bin's centre).
+        # Votes of one bin are summed with one sign (that of the bin's center).
         # u is the rotated vote after the flip into u_z >= 0; n, unrotated,
         # takes the same flips.
         sgn = 1.0 if ux * centre[3 * b] + uy * centre[3 * b + 1] + uz * centre[3 * b + 2] >= 0.0 else -1.0
@@ -206,9 +206,9 @@ cdef double _one_pass(const double* pts, const int64_t* nb, int64_t k, uint64_t*
 
 
 cdef void _fallback(const double* pts, const int64_t* nb, int64_t k, double* out) noexcept nogil:
-    """Normal of a neighbourhood where no triplet voted (coincident or
+    """Normal of a neighborhood where no triplet voted (coincident or
     collinear points): a unit vector orthogonal to the direction to the
-    farthest neighbour, or (1, 0, 0) when all points coincide."""
+    farthest neighbor, or (1, 0, 0) when all points coincide."""
     cdef int64_t i
     cdef double dx, dy, dz, d2, best = 0.0, lx = 0.0, ly = 0.0, lz = 0.0, ax, ay, az, nx, ny, nz, nrm
     cdef const double* q = pts + 3 * nb[0]
@@ -322,11 +322,11 @@ cdef void _point_normal(const double* pts, const int64_t* nb, int64_t k, uint64_
 def ring_layout(int64_t n_phi):
     """Rings of the half-sphere accumulator for ``n_phi`` slices of the whole
     sphere (polar step ``pi / n_phi``): ``(ring_start, ring_bins, ring_z,
-    edges, centres)``, the first bin of each ring, its number of bins (about
+    edges, centers)``, the first bin of each ring, its number of bins (about
     its area over ``(pi / n_phi)^2``), the cosine of its lower polar bound,
     the pseudo angles (see ``_pseudo_angle``) of the azimuth boundaries
     between its bins (equal steps of azimuth, from ``ring_start``, one unused
-    slot per ring), and the unit centre direction of every bin (on the
+    slot per ring), and the unit center direction of every bin (on the
     equator for the last ring, whose bins identify azimuths ``theta`` and
     ``theta + pi``)."""
     cdef double dphi = _PI / n_phi
@@ -376,7 +376,7 @@ def hough_normals(const double[:, ::1] points, const int64_t[:, ::1] neighbors,
     """Fill ``out[i]`` with the unoriented Hough normal of point ``i``.
 
     ``neighbors[i, :n_valid[i]]`` are global row indices into ``points`` of
-    point ``i``'s neighbourhood; ``seeds[i]`` is its object's seed and
+    point ``i``'s neighborhood; ``seeds[i]`` is its object's seed and
     ``local[i]`` its index in the object. The kernel checks every index
     against ``points`` and raises ValueError on any out of range.
     """

@@ -1,4 +1,4 @@
-"""Surface normals of point clouds by PCA over k nearest neighbours.
+"""Surface normals of point clouds by PCA over k nearest neighbors.
 
 The Python layer validates input and resolves parameters; the work is done by
 the compiled kernel in ``eppf.preprocessing._normals_fast`` (exact kNN on a uniform grid,
@@ -107,10 +107,10 @@ def estimate_normals(points, n_neighbors=10, *, orientation="centroid", n_jobs=N
                      random_state=0, method_params=None):
     """Estimate unit surface normals of one point cloud by local PCA or a Hough transform.
 
-    For each point, the covariance of its ``n_neighbors`` nearest neighbours
-    (the point itself included, as its own nearest neighbour) is computed, and
-    the normal is the eigenvector of its smallest eigenvalue. Neighbours are
-    exact Euclidean nearest neighbours; points at exactly equal distance are
+    For each point, the covariance of its ``n_neighbors`` nearest neighbors
+    (the point itself included, as its own nearest neighbor) is computed, and
+    the normal is the eigenvector of its smallest eigenvalue. Neighbors are
+    exact Euclidean nearest neighbors; points at exactly equal distance are
     taken in a fixed order that depends only on the cloud (grid cell, then
     index), so the result is deterministic.
 
@@ -119,9 +119,9 @@ def estimate_normals(points, n_neighbors=10, *, orientation="centroid", n_jobs=N
     points : array-like of shape (n_points, 3)
         Coordinates of the cloud, at least 3 points, not all identical.
     n_neighbors : int, default=10
-        Size of each neighbourhood, the point itself included; at least 3.
+        Size of each neighborhood, the point itself included; at least 3.
         A value larger than the cloud is clipped to ``n_points`` (every
-        neighbourhood is then the whole cloud).
+        neighborhood is then the whole cloud).
     orientation : {"centroid", "origin", "viewpoint"}, array-like of shape (3,) or None, \
 default="centroid"
         How the sign of each normal is chosen:
@@ -145,7 +145,7 @@ default="centroid"
     method : {"pca", "hough"}, default="pca"
         ``"pca"``: local PCA (below). ``"hough"``: Boulch and Marlet's
         randomized Hough transform, the estimator of the paper, which keeps
-        edges sharp (see :func:`eppf.preprocessing._hough.estimate_normals_hough`).
+        edges sharp.
     random_state : int, RandomState instance or None, default=0
         Seeds the ``"hough"`` estimator (unused by ``"pca"``).
     method_params : dict, default=None
@@ -156,7 +156,7 @@ default="centroid"
     Returns
     -------
     normals : ndarray of shape (n_points, 3), dtype float64
-        Unit normals. Degenerate neighbourhoods (collinear or coincident
+        Unit normals. Degenerate neighborhoods (collinear or coincident
         points) give a finite unit vector orthogonal to the line, or an
         arbitrary axis for coincident points, never NaN.
 
@@ -168,7 +168,7 @@ default="centroid"
         If ``points`` does not have shape (n_points, 3), holds NaN or infinite
         values, has fewer than 3 points or only identical points, is too
         small for its distance from the origin (e.g. a 1e-10 object at
-        1e300: centre it), or if ``n_neighbors < 3`` or ``orientation`` is
+        1e300: center it), or if ``n_neighbors < 3`` or ``orientation`` is
         not understood.
 
     See Also
@@ -177,11 +177,11 @@ default="centroid"
 
     Notes
     -----
-    With neighbours :math:`q_1, \\dots, q_k` and mean :math:`\\bar q`, the
+    With neighbors :math:`q_1, \\dots, q_k` and mean :math:`\\bar q`, the
     normal is the unit eigenvector of the smallest eigenvalue of
     :math:`C = \\sum_i (q_i - \\bar q)(q_i - \\bar q)^T`.
 
-    The compiled kernel finds exact neighbours on a uniform grid whose cell
+    The compiled kernel finds exact neighbors on a uniform grid whose cell
     size adapts to the cloud and to ``n_neighbors``, takes the eigenvalues of
     :math:`C` in closed form and the eigenvector as a cross product of two
     rows of :math:`C - \\lambda_{min} I`, falling back to cyclic Jacobi
@@ -190,12 +190,10 @@ default="centroid"
     ``2**100``) is first rescaled by an exact power of two, and a viewpoint
     with it, so any finite coordinates give the normals of a sane scale. The search's
     distance scan runs on AVX-512 or AVX2 where the CPU has them, with the
-    same normals bit for bit. About 0.55 ms of CPU for 1,024 points and 7 ms
-    for 10,000 with ``n_neighbors=20`` on one core of an AVX-512 CPU, 3.4 to
-    4.5 times less than Open3D's ``estimate_normals`` (see
-    ``benchmarks/bench_normals.py``). The grid's cost grows with the square
-    of the number of points that share one cell, so tens of thousands of
-    exact duplicates of one point are slow (seconds), though still exact.
+    same normals bit for bit (timings against Open3D: the documentation's
+    Performance page, "Normal estimation"). The grid's cost grows with the
+    square of the number of points that share one cell, so tens of thousands
+    of exact duplicates of one point are slow, though still exact.
 
     References
     ----------
@@ -273,7 +271,7 @@ def estimate_normals_batch(points, offsets, n_neighbors=10, orientation="centroi
         Start of each object in ``points``, then ``n_total``; non-decreasing,
         starting at 0.
     n_neighbors : int, default=10
-        Neighbourhood size, the point itself included; at least 3. Clipped to
+        Neighborhood size, the point itself included; at least 3. Clipped to
         each object's size, so objects with fewer than 3 points still get
         finite unit normals (for 1 or 2 points: an arbitrary unit vector
         orthogonal to their line), and empty objects are allowed.

@@ -2,10 +2,10 @@
 """Compiled kernel for PCA surface normals, parallel over objects (or over the
 points of one object) with OpenMP.
 
-- Exact k nearest neighbours on a uniform grid of cubic cells. The cell size
+- Exact k nearest neighbors on a uniform grid of cubic cells. The cell size
   adapts to the object and to k (about ``_CELL_OVER_RADIUS`` times the radius
-  of a k-neighbourhood, from the grid's occupancy), so the 3x3x3 block of
-  cells around a query usually holds its neighbourhood. Fast path: candidates of that block closer than a guess of the
+  of a k-neighborhood, from the grid's occupancy), so the 3x3x3 block of
+  cells around a query usually holds its neighborhood. Fast path: candidates of that block closer than a guess of the
   k-th distance (taken from the previous query) are ranked without branches,
   and the result is accepted when the k-th distance is provably smaller than
   the distance to the block's boundary. With too few or too many candidates
@@ -23,7 +23,7 @@ points of one object) with OpenMP.
   candidates and normals bit for bit (``_set_simd_level`` picks a lower one
   for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
-  neighbourhood's covariance: closed-form eigenvalues plus a cross product of
+  neighborhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
   spectra.
 
@@ -99,7 +99,7 @@ cdef enum:
 # Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
 # the closed-form eigenvector is replaced by Jacobi's.
 cdef double _GAP_RATIO = 1e-3
-# Grid cell size over the estimated radius of a k-neighbourhood.
+# Grid cell size over the estimated radius of a k-neighborhood.
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
 # k-th squared distance, and gives up when more than _MAX_CAND_PER_K * k pass.
@@ -134,7 +134,7 @@ cdef struct Scratch:
     int64_t* sel          # max_n + EPPF_NRM_SLACK  fast-path candidates of the k-th's bucket
     # Query part (sized by k).
     double* kd2           # k          the k-list's squared distances, ascending
-    double* nb            # 3 * k      gathered neighbourhood
+    double* nb            # 3 * k      gathered neighborhood
     double* guess         # 1          k-th squared distance guess for the next query
     int64_t* kpos         # k + EPPF_NRM_SLACK  the k-list's grid-order positions (+ slack
                           #            for the fast path's branch-free compaction)
@@ -148,7 +148,7 @@ def max_cells(Py_ssize_t n):
 
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
-    at most ``max_n`` points and neighbourhoods of ``k`` points."""
+    at most ``max_n`` points and neighborhoods of ``k`` points."""
     return (7 * max_n + EPPF_NRM_SLACK + 4 * k + 1,
             4 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
 
@@ -322,7 +322,7 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
                 h = e1 / t
     _set_resolution(g, e, h, cap)
     # Then resize so that a cell is about _CELL_OVER_RADIUS times the radius of
-    # a k-neighbourhood. The local dimension d (1 for curves, 2 for surfaces,
+    # a k-neighborhood. The local dimension d (1 for curves, 2 for surfaces,
     # 3 for volumes) is read from how occupancy changes with the cell size.
     h0 = g.h
     pc0 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
@@ -336,7 +336,7 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
         d = 1.0
     if d > 3.0:
         d = 3.0
-    # Points per occupied cell when the cell is the neighbourhood radius:
+    # Points per occupied cell when the cell is the neighborhood radius:
     # about 0.7 k on curves and surfaces (a cell holds ~1.5 h^2 of surface)
     # down to 0.24 k in volumes (k / (4 pi / 3)).
     tau = 0.7 if d <= 2.0 else 0.7 - (0.7 - 0.24) * (d - 2.0)
@@ -796,11 +796,11 @@ cdef void _smallest_eigvec(const double* a, double* out) noexcept nogil:
     """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix
     (row-major ``a``).
 
-    The eigenvalues come from the characteristic cubic, normalised to
+    The eigenvalues come from the characteristic cubic, normalized to
     4 x^3 - 3 x = r and solved by Newton's method (``_cubic_roots``); the eigenvector is the longest cross product of two
     rows of ``a - lambda_min I``, which spans its null space. When the two
     smallest eigenvalues are within a factor ``_GAP_RATIO`` of the spread
-    (nearly collinear or isotropic neighbourhoods, where that construction
+    (nearly collinear or isotropic neighborhoods, where that construction
     loses accuracy), cyclic Jacobi takes over.
     """
     cdef double q, p1, p2, p, d0, d1, d2, b00, b11, b22, b01, b02, b12, r, x1, x2, x3, lam
@@ -921,7 +921,7 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
         return
     _split_scratch(fs, its, max_n, k, &sc)
     # The cell cap of the object's own size (4 n + 64), not of the largest
-    # object's: the grid, hence the neighbours' order and the sums, are those
+    # object's: the grid, hence the neighbors' order and the sums, are those
     # of the object alone (:func:`normals_single`), whatever it is packed with.
     _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start)
     sc.guess[0] = INFINITY

@@ -1,4 +1,4 @@
-/* SIMD distance scan of the normals kernel's fast neighbour search
+/* SIMD distance scan of the normals kernel's fast neighbor search
  * (_normals_fast.pyx's ``_knn_block``), chosen at run time:
  *
  * - AVX-512 (F): eight grid-order points at a time;

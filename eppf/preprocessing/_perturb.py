@@ -341,8 +341,8 @@ def random_rotation_matrix(*, axis=None, random_state=None):
     Notes
     -----
     A uniform rotation is the matrix of a unit quaternion whose four
-    components are independent standard normal draws, normalised; the
-    normalised Gaussian is uniform on the 3-sphere, and the double cover maps
+    components are independent standard normal draws, normalized; the
+    normalized Gaussian is uniform on the 3-sphere, and the double cover maps
     that uniform measure to the Haar measure on SO(3).
     """
     owner = "random_rotation_matrix"
@@ -391,7 +391,7 @@ def rotate(cloud, rotation, *, center="centroid"):
         Coordinates, optionally followed by unit normals.
     rotation : array-like of shape (3, 3)
         Proper rotation matrix ``R``; each point ``p`` becomes ``R p`` (about
-        the centre) and each normal ``n`` becomes ``R n``.
+        the center) and each normal ``n`` becomes ``R n``.
     center : {"centroid", "origin"}, default="centroid"
         Fixed point of the rotation: the mean of the points, so the object
         stays where it is, or the coordinate origin.
@@ -489,7 +489,7 @@ def scale(cloud, factors, *, center="centroid"):
     factors : float or array-like of shape (3,)
         Positive scale factor per axis (one number scales all three axes
         alike). Each point ``p`` becomes ``diag(factors) (p - c) + c`` for the
-        centre ``c``; each normal ``n`` becomes ``diag(factors)^-1 n``, scaled
+        center ``c``; each normal ``n`` becomes ``diag(factors)^-1 n``, scaled
         back to unit length, so it stays perpendicular to the stretched
         surface.
     center : {"centroid", "origin"}, default="centroid"

@@ -49,7 +49,7 @@ cdef signed char _scan_object(const double* src, double* dst, int64_t n, int col
     normals with a component above 2**510). Returns 0 (valid), 1 (a NaN
     or infinite value), 2 (all points identical) or 3 (a normal shorter
     than 1e-12). ``dst`` is the caller's own copy, so an invalid cloud may be
-    left partly normalised there (the caller then validates the original
+    left partly normalized there (the caller then validates the original
     cloud by cloud to word the error).
     """
     cdef int64_t i, m = n * cols

@@ -6,7 +6,7 @@ computed ahead of the consumer. The consumer (say, a descriptor kernel that
 releases the GIL) works on result ``k`` while the threads produce ``k + 1``,
 ``k + 2``...; memory holds at most ``depth + 1`` results whatever the number
 of items. When the consumer stops early (an exception, Ctrl-C, ``close()``)
-the items not started are cancelled and the running ones are waited for, so
+the items not started are canceled and the running ones are waited for, so
 no thread outlives the call.
 
 :class:`RowWriter` appends float64 rows to an open binary file as a ``.npy``

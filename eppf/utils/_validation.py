@@ -214,7 +214,7 @@ def _check_stacked(items, min_points, allow_normals, n_threads=1):
     bit what :func:`check_point_cloud` returns for each cloud, or None when
     some item is not such an array or is invalid (the per-cloud path then
     finds the first problem and words the error). C-contiguous float64
-    clouds are copied, checked and normalised by one compiled pass with the
+    clouds are copied, checked and normalized by one compiled pass with the
     objects spread over ``n_threads`` threads; others are first cast and
     concatenated by NumPy.
     """
@@ -342,7 +342,7 @@ def condition_point_clouds(clouds, *, owner=None, single=False):
     ValueError
         If a cloud's extent is too small for its distance from the origin
         for any power of two to bring it in (e.g. points at 1e300 +- 1e-10);
-        centring it first fixes that.
+        centering it first fixes that.
     """
     packed = _stacked_view(clouds)
     if packed is not None:
@@ -506,7 +506,6 @@ def check_int(value, name, owner, low, high=None):
 
     See Also
     --------
-    eppf.utils._param_validation.validate_params : The declarative checks estimators use.
     check_n_jobs : The check of ``n_jobs``.
 
     Examples

@@ -1,0 +1,120 @@
+/* The parts of _eppf_walk.h that every level shares: the packed line walk's
+ * layout, the batch size, the CPU checks behind the choice of level and the
+ * order and bins of a batch's walks (levels 1 and 2). */
+#ifndef EPPF_WALK_COMMON_H
+#define EPPF_WALK_COMMON_H
+
+#include <stdint.h>
+#include <string.h>
+#include <math.h>
+
+#include "../utils/_cpu.h"
+
+#if EPPF_CPU_CHECKS  /* (gcc or clang on x86-64, EPPF_NO_SIMD not defined: _cpu.h) */
+#define EPPF_WALK_SIMD 1
+#include <immintrin.h>
+#else
+#define EPPF_WALK_SIMD 0
+#endif
+
+/* The packed line walk's layout, defined here once and read by _eppf_fast.pyx:
+ * three lanes of 21 bits (x from bit 42, y from bit 21, z from bit 0), each a
+ * voxel coordinate with EPPF_PK_FRAC fraction bits; the integer part of a
+ * lane is found at EPPF_PK_{X,Y,Z}SHIFT. */
+#define EPPF_PK_FRAC 14
+#define EPPF_PK_YLANE 21
+#define EPPF_PK_XLANE 42
+#define EPPF_PK_ZSHIFT EPPF_PK_FRAC
+#define EPPF_PK_YSHIFT (EPPF_PK_YLANE + EPPF_PK_FRAC)
+#define EPPF_PK_XSHIFT (EPPF_PK_XLANE + EPPF_PK_FRAC)
+#define EPPF_PK_S (1 << EPPF_PK_FRAC)
+#define EPPF_PK_X ((int64_t)1 << EPPF_PK_XLANE)
+#define EPPF_PK_Y ((int64_t)1 << EPPF_PK_YLANE)
+/* The largest grid the packed walks serve: one 64-bit word of z bits per (x, y)
+   row, and voxel coordinates that fit the 21-bit lanes. */
+#define EPPF_WALK_MAX_GRID 64
+/* Pairs per batch (the walks sort a batch by line length: a longer batch
+   groups the lanes better, up to about this size). */
+#define EPPF_WALK_BATCH 256
+
+#define EPPF_AVX512_TARGET "avx2,avx512f,avx512bw,avx512vl,avx512dq,avx512vbmi"
+/* Plain C compiled for AVX-512 where the SIMD kernels are built (it serves only them). */
+#if EPPF_WALK_SIMD
+#define EPPF_AVX512_FN __attribute__((target(EPPF_AVX512_TARGET)))
+#else
+#define EPPF_AVX512_FN
+#endif
+
+/* AVX-512 F, BW, VL, DQ and VBMI (with the OS saving the zmm state: libgcc's
+   cpu check reads XCR0). */
+static int eppf_walk_has_avx512(void)
+{
+    return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_AVX512F | EPPF_CPU_AVX512BW | EPPF_CPU_AVX512VL | EPPF_CPU_AVX512DQ
+                        | EPPF_CPU_AVX512VBMI);
+}
+
+/* Whether the skipping AVX-512 walk (``eppf_f4_walkq_avx512``) is the better of
+   the two AVX-512 walks here: on AMD Zen 4 an eight-element gather costs about
+   13 cycles, and the skipping walk's 1.3 look-ups a pair (by scalar loads,
+   against 3.0 gathers) pay for its extra vector work; where gathers are
+   cheaper (Intel) the grouped walk's lighter steps are expected to win. Both
+   give the same counts. */
+static int eppf_walk_prefers_skips(void)
+{
+    return eppf_cpu_has(EPPF_CPU_AMD);
+}
+
+static int eppf_walk_has_avx2(void)
+{
+    return eppf_cpu_has(EPPF_CPU_AVX2);
+}
+
+#if EPPF_WALK_SIMD
+/* The pairs with inner voxels (L > 1) in walk order, longest line first, into
+   ``order``; returns their number. */
+static int eppf_f4_order(int m, const int32_t *Ls, int *order)
+{
+    int count[EPPF_WALK_MAX_GRID + 1], start[EPPF_WALK_MAX_GRID + 1];
+    int t, k, n_walk;
+    for (k = 0; k <= EPPF_WALK_MAX_GRID; k++)
+        count[k] = 0;
+    for (t = 0; t < m; t++)
+        count[Ls[t]]++;
+    {
+        int s = 0;
+        for (k = EPPF_WALK_MAX_GRID; k >= 2; k--) {
+            start[k] = s;
+            s += count[k];
+        }
+        n_walk = s;
+    }
+    for (t = 0; t < m; t++) {
+        int L = Ls[t];
+        if (L > 1)
+            order[start[L]++] = t;
+    }
+    return n_walk;
+}
+
+/* The f4 bin of occ occupied voxels on a line of T voxels: how many of the
+   thresholds thr[T n4 + b], b = 1..n4-1, occ reaches. */
+static inline int eppf_f4_bin(const int32_t *thr, int n4, int64_t T, int64_t occ)
+{
+    const int32_t *th = thr + T * n4;
+    int b = 0, j;
+    for (j = 1; j < n4; j++)
+        b += occ >= th[j];
+    return b;
+}
+
+/* f4 bins of the lines without inner voxels (L <= 1): occ = T = L + 1, all voxels occupied. */
+static void eppf_f4_short_lines(int m, const int32_t *Ls, const int32_t *thr, int n4, int32_t *B)
+{
+    int t;
+    for (t = 0; t < m; t++)
+        if (Ls[t] <= 1)
+            B[t] += eppf_f4_bin(thr, n4, Ls[t] + 1, Ls[t] + 1);
+}
+#endif
+
+#endif /* EPPF_WALK_COMMON_H */
