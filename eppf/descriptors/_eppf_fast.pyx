@@ -192,7 +192,7 @@ def _simd_levels():
 
 def _simd_level():
     """The kernel level in use: 0 scalar, 1 AVX2, 2 AVX-512 grouped walk, 3 AVX-512 skipping walk."""
-    return _simd
+    return _level
 
 
 def _default_simd_level():
