@@ -1,5 +1,6 @@
 """The EPPF descriptor as a scikit-learn transformer."""
 
+import math
 import numbers
 
 import numpy as np
@@ -346,7 +347,10 @@ def _weight_and_normalise(counts, kernel_bins, c, weighted):
     hist = counts.astype(np.float64).reshape((counts.shape[0],) + tuple(kernel_bins))
     if weighted:
         n1 = kernel_bins[0]
-        alpha = np.log(np.arange(n1, dtype=np.float64) / n1 + c)
+        # the C library's log, value by value: NumPy's vector log differs from it in the
+        # last bit for some arguments on AVX-512 CPUs (and not on others), and these
+        # weights are in every descriptor's bits
+        alpha = np.array([math.log(i / n1 + c) for i in range(n1)], dtype=np.float64)
         hist *= alpha[None, :, None, None, None]
     out = hist.reshape(counts.shape[0], -1)
     out /= out.sum(axis=1, keepdims=True)

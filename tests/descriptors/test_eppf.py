@@ -930,3 +930,32 @@ def test_kernel_reads_wide_rows_in_place_with_the_same_counts():
         eppf_counts(block[:, :3], block[:200, 3:], *args)
     with pytest.raises(ValueError, match=r"shape \(N, 3\)"):
         eppf_counts(block[:, :2], block[:, 3:], *args)
+
+
+_WEIGHTS_DIGEST = (
+    "import hashlib, numpy as np, eppf\n"
+    "from eppf.datasets import make_shapes\n"
+    "clouds = [c.astype(np.float32).astype(np.float64) for c in make_shapes(random_state=0).data[:3]]\n"
+    "X = eppf.EPPFTransformer(n_pairs=500, n_bins=(61, 2, 2, 2), c=2.0, random_state=0).fit_transform(clouds)\n"
+    "print(hashlib.sha256(X.tobytes()).hexdigest())\n"
+)
+
+
+def test_f1_weights_do_not_depend_on_numpys_simd_code():
+    """ln(i / N1 + c) with N1 = 61, c = 2: NumPy's AVX-512 log and the C library's differ at i = 4."""
+    import os
+    import subprocess
+    import sys
+
+    from numpy._core._multiarray_umath import __cpu_dispatch__
+
+    runs = []
+    for disabled in ("", " ".join(n for n in __cpu_dispatch__ if n.startswith("AVX512") or n == "X86_V4")):
+        env = {k: v for k, v in os.environ.items() if k != "NPY_DISABLE_CPU_FEATURES"}
+        if disabled:
+            env["NPY_DISABLE_CPU_FEATURES"] = disabled
+        run = subprocess.run([sys.executable, "-c", _WEIGHTS_DIGEST], env=env, capture_output=True, text=True,
+                             timeout=300)
+        assert run.returncode == 0, run.stderr
+        runs.append(run.stdout.strip())
+    assert runs[0] == runs[1]
