@@ -195,9 +195,9 @@ class _Encoder:
 
 
 def _prepared_type():
-    from .neighbors._kl import _Prepared
+    from .neighbors._base import Prepared
 
-    return _Prepared
+    return Prepared
 
 
 def save_model(model, path):
@@ -342,13 +342,13 @@ class _Decoder:
         return value
 
     def _prepared(self, H, where):
-        from .neighbors._kl import _prepare
+        from .neighbors._base import prepare_histograms
 
         if H.ndim != 2 or H.dtype != np.float64 or not np.all(np.isfinite(H)) or (H.size and H.min() <= 0):
             raise self.fail(where, "the stored training histograms must be a 2D array of positive finite float64")
         # H is already floored (and renormalised): a floor of 0 keeps it as it is
         # and recomputes the logarithms and row terms exactly as fit did.
-        return _prepare(H, 0.0, False, "load_model")
+        return prepare_histograms(H, 0.0, False, "load_model")
 
     def _estimator(self, node, where):
         name = node.get("class")
