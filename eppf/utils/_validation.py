@@ -13,6 +13,8 @@ import numbers
 
 import numpy as np
 
+from ._bounds import largest_sides
+
 __all__ = [
     "check_int", "check_n_jobs", "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds",
     "pack_point_clouds",
@@ -364,7 +366,7 @@ def _bounding_sides(clouds):
     packed = _stacked_view(clouds)
     if packed is not None:
         return (packed[3] - packed[2]).max(axis=1)
-    return np.array([np.ptp(c[:, :3], axis=0).max() for c in clouds], dtype=np.float64)
+    return largest_sides(clouds)
 
 
 def pack_point_clouds(clouds):
