@@ -11,7 +11,7 @@ from ._hough import hough_batch, hough_single
 from ._normal_options import ORIENT_NONE, ORIENT_VIEWPOINT, check_n_neighbors, resolve_orientation
 from ._normals_fast import cloud_in_window, normals_cloud, normals_packed, normals_single, scratch_sizes
 from ..utils._validation import (
-    SAFE_MAX_EXP, SAFE_MIN_EXP, _scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds,
+    SAFE_MAX_EXP, SAFE_MIN_EXP, scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds,
 )
 
 __all__ = ["estimate_normals", "estimate_normals_batch"]
@@ -296,7 +296,7 @@ default="centroid"
     hi = np.ones((len(sizes), 3))  # (empty objects: inside the window)
     lo[full] = np.minimum.reduceat(pts, off[full], axis=0)
     hi[full] = np.maximum.reduceat(pts, off[full], axis=0)
-    exps = _scale_exponents(lo, hi, owner)
+    exps = scale_exponents(lo, hi, owner)
     orient_here = False
     if exps.any():
         pts = pts.copy()
