@@ -36,6 +36,7 @@ __all__ = [
     "named",
     "neighbour_votes",
     "prepare_histograms",
+    "relative_rounding",
     "smallest_k",
     "validate_histogram_array",
     "validate_histograms",
@@ -274,6 +275,26 @@ def prepare_histograms(X, floor, renormalize, owner):
         raise ValueError(f"{owner}: histogram values are too large for the KL divergence (overflow in x ln x)")
     lam = np.abs(L).max(axis=1) if L.shape[1] else np.zeros(L.shape[0])
     return Prepared(H, L, s, H.sum(axis=1), lam)
+
+
+def relative_rounding(n_bins):
+    """Relative rounding bound of the distances between histograms of ``n_bins`` bins.
+
+    A dot product of length ``n`` carries a relative error of at most about
+    ``n`` units in the last place; the tie tolerance of a distance is this
+    times the size of the terms it sums.
+
+    Parameters
+    ----------
+    n_bins : int
+        Bins per histogram.
+
+    Returns
+    -------
+    rel : float
+        ``4 max(n_bins, 16)`` machine epsilons.
+    """
+    return 4.0 * max(n_bins, 16) * np.finfo(np.float64).eps
 
 
 def first_near_min(D, T, axis):

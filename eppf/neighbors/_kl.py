@@ -24,6 +24,7 @@ from ._base import (
     first_near_min,
     learn_floor,
     prepare_histograms,
+    relative_rounding,
     smallest_k,
     validate_histogram_array,
     validate_histograms,
@@ -57,9 +58,10 @@ def _tie_tolerance(P, Q, out):
     The terms summed are bounded by ``|s_p| + |s_q| + m_p lam_q + m_q lam_p``
     (masses ``m``, largest ``|ln h|`` per row ``lam``); a dot product of
     length ``n`` carries a relative error of at most about ``n`` units in the
-    last place. Distances closer than this are treated as ties.
+    last place (:func:`~eppf.neighbors._base.relative_rounding`). Distances
+    closer than this are treated as ties.
     """
-    rel = 4.0 * max(P.H.shape[1], 16) * np.finfo(np.float64).eps
+    rel = relative_rounding(P.H.shape[1])
     np.multiply(P.mass[:, None], Q.lam[None, :], out=out)
     out += P.lam[:, None] * Q.mass[None, :]
     out += np.abs(P.s)[:, None]

@@ -9,9 +9,24 @@ bins above the floor in compressed rows (:func:`rerank_sparse_candidates`).
 
 import numpy as np
 
-from ._base import prepare_histograms, smallest_k
+from ._base import prepare_histograms, relative_rounding, smallest_k
 
 __all__ = ["rerank_candidates", "rerank_sparse_candidates"]
+
+
+def _sorted_candidates(candidates):
+    """Each row's candidates in increasing index order (``-1``, no candidate, last), and which are valid."""
+    order = np.argsort(np.where(candidates < 0, np.iinfo(np.intp).max, candidates), axis=1, kind="stable")
+    cand = np.take_along_axis(candidates, order, axis=1).astype(np.intp)
+    return cand, cand >= 0
+
+
+def _nearest(D, T, cand, valid, k):
+    """The ``k`` nearest valid candidates of each row, by the tie rule of exact search."""
+    D[~valid] = np.inf
+    T[~valid] = 0.0
+    pick = smallest_k(D, T, k)
+    return np.take_along_axis(D, pick, axis=1), np.take_along_axis(cand, pick, axis=1)
 
 
 def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
@@ -46,9 +61,7 @@ def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
         :class:`~eppf.neighbors.KLNearestNeighbors`.
     """
     n_q, m = candidates.shape
-    order = np.argsort(np.where(candidates < 0, np.iinfo(np.intp).max, candidates), axis=1, kind="stable")
-    cand = np.take_along_axis(candidates, order, axis=1).astype(np.intp)
-    valid = cand >= 0
+    cand, valid = _sorted_candidates(candidates)
     C = prepare_histograms(database[np.where(valid, cand, 0).ravel()], floor, renormalize, owner)
     n_bins = C.H.shape[1]
     Hc = C.H.reshape(n_q, m, n_bins)
@@ -59,13 +72,10 @@ def rerank_candidates(P, database, candidates, k, floor, renormalize, owner):
     np.subtract(P.s[:, None], D, out=D)
     D += C.s.reshape(n_q, m)
     np.maximum(D, 0.0, out=D)
-    rel = 4.0 * max(n_bins, 16) * np.finfo(np.float64).eps
+    rel = relative_rounding(n_bins)
     T = (P.mass[:, None] * C.lam.reshape(n_q, m) + P.lam[:, None] * C.mass.reshape(n_q, m)
          + np.abs(P.s)[:, None] + np.abs(C.s.reshape(n_q, m))) * rel
-    D[~valid] = np.inf
-    T[~valid] = 0.0
-    pick = smallest_k(D, T, k)
-    return np.take_along_axis(D, pick, axis=1), np.take_along_axis(cand, pick, axis=1)
+    return _nearest(D, T, cand, valid, k)
 
 
 def rerank_sparse_candidates(P, support, row_terms, candidates, k, floor):
@@ -113,9 +123,7 @@ def rerank_sparse_candidates(P, support, row_terms, candidates, k, floor):
     indptr, indices, values = support
     row_s, row_mass, row_lam = row_terms
     n_q, m = candidates.shape
-    order = np.argsort(np.where(candidates < 0, np.iinfo(np.intp).max, candidates), axis=1, kind="stable")
-    cand = np.take_along_axis(candidates, order, axis=1).astype(np.intp)
-    valid = cand >= 0
+    cand, valid = _sorted_candidates(candidates)
     c = np.where(valid, cand, 0).ravel()
     lo = indptr[c]
     lens = np.where(valid.ravel(), indptr[c + 1] - lo, 0)
@@ -132,10 +140,7 @@ def rerank_sparse_candidates(P, support, row_terms, candidates, k, floor):
     D = np.bincount(pair, weights=term, minlength=n_q * m).reshape(n_q, m)
     D += A[:, None]
     np.maximum(D, 0.0, out=D)
-    rel = 4.0 * max(P.H.shape[1], 16) * np.finfo(np.float64).eps
+    rel = relative_rounding(P.H.shape[1])
     T = (P.mass[:, None] * row_lam[cand] + P.lam[:, None] * row_mass[cand]
          + np.abs(P.s)[:, None] + np.abs(row_s[cand])) * rel
-    D[~valid] = np.inf
-    T[~valid] = 0.0
-    pick = smallest_k(D, T, k)
-    return np.take_along_axis(D, pick, axis=1), np.take_along_axis(cand, pick, axis=1)
+    return _nearest(D, T, cand, valid, k)
