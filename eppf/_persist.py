@@ -45,7 +45,7 @@ _ARRAYS = "arrays.npz"
 _MAX_MANIFEST_BYTES = 64 << 20
 
 #: Classes a model file may hold: the name written to the file -> (module, attribute).
-_ALLOWED = {
+ALLOWED = {
     "eppf.EPPFTransformer": ("eppf.descriptors", "EPPFTransformer"),
     "eppf.ESFTransformer": ("eppf.descriptors", "ESFTransformer"),
     "eppf.WahlTransformer": ("eppf.descriptors", "WahlTransformer"),
@@ -86,14 +86,14 @@ _TORCH_DTYPES = ("float32", "float64", "float16", "bfloat16", "int64", "int32", 
 def _import_class(name):
     import importlib
 
-    module, attr = _ALLOWED[name]
+    module, attr = ALLOWED[name]
     return getattr(importlib.import_module(module), attr)
 
 
 def _class_name(obj):
     """The allow-list name of ``obj``'s exact class, or None."""
     cls = type(obj)
-    for name, (module, attr) in _ALLOWED.items():
+    for name, (module, attr) in ALLOWED.items():
         if cls.__name__ == attr and (cls.__module__ == module or cls.__module__.startswith(module + ".")):
             if _import_class(name) is cls:
                 return name
@@ -150,7 +150,7 @@ class _Encoder:
         raise TypeError(
             f"save_model: cannot save {where}: objects of type {type(value).__module__}.{type(value).__qualname__} "
             f"are not supported by the safe model format (allowed: numbers, strings, lists, tuples, dicts, "
-            f"arrays and the estimators {', '.join(sorted(_ALLOWED))})"
+            f"arrays and the estimators {', '.join(sorted(ALLOWED))})"
         )
 
     def _ndarray(self, arr, where):
@@ -195,9 +195,9 @@ class _Encoder:
 
 
 def _prepared_type():
-    from .neighbors._kl import _Prepared
+    from .neighbors._base import Prepared
 
-    return _Prepared
+    return Prepared
 
 
 def save_model(model, path):
@@ -342,20 +342,20 @@ class _Decoder:
         return value
 
     def _prepared(self, H, where):
-        from .neighbors._kl import _prepare
+        from .neighbors._base import prepare_histograms
 
         if H.ndim != 2 or H.dtype != np.float64 or not np.all(np.isfinite(H)) or (H.size and H.min() <= 0):
             raise self.fail(where, "the stored training histograms must be a 2D array of positive finite float64")
         # H is already floored (and renormalised): a floor of 0 keeps it as it is
         # and recomputes the logarithms and row terms exactly as fit did.
-        return _prepare(H, 0.0, False, "load_model")
+        return prepare_histograms(H, 0.0, False, "load_model")
 
     def _estimator(self, node, where):
         name = node.get("class")
-        if not isinstance(name, str) or name not in _ALLOWED:
+        if not isinstance(name, str) or name not in ALLOWED:
             raise ValueError(
                 f"{self.path}: {where}: class {name!r} is not on the allow-list of classes a model file may "
-                f"hold ({', '.join(sorted(_ALLOWED))}); refusing to load it"
+                f"hold ({', '.join(sorted(ALLOWED))}); refusing to load it"
             )
         cls = _import_class(name)
         params = node.get("params")

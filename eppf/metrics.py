@@ -14,16 +14,9 @@ from sklearn.base import clone
 from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import type_of_target
 
-from .neighbors._kl import (
-    _blas_limits,
-    _check_chunk_size,
-    _check_floor,
-    _check_renormalize,
-    _learn_floor,
-    _loo_nearest,
-    _prepare,
-    _validate_histograms,
-)
+from .neighbors._base import check_distance_params, learn_floor, prepare_histograms, validate_histogram_array
+from .neighbors._kl import loo_nearest
+from .utils._blas import blas_limits
 
 __all__ = [
     "RepeatedRetrievalResult",
@@ -199,20 +192,20 @@ def leave_one_out_retrieval(
     (array([0, 0, 1, 1]), array([1, 0, 3, 2]))
     """
     owner = "leave_one_out_retrieval"
-    floor = _check_floor(floor, owner)
-    renormalize = _check_renormalize(renormalize, owner)
-    chunk_size = _check_chunk_size(chunk_size, owner)
-    X = _validate_histograms(X, owner, "X")
+    floor, renormalize, chunk_size = check_distance_params(
+        owner, floor=floor, renormalize=renormalize, chunk_size=chunk_size, n_jobs=n_jobs
+    )
+    X = validate_histogram_array(X, owner, "X")
     y = _check_labels(y, owner, "y")
     if y.shape[0] != X.shape[0]:
         raise ValueError(f"{owner}: X has {X.shape[0]} samples but y has {y.shape[0]} labels")
     if X.shape[0] < 2:
         raise ValueError(f"{owner}: leave-one-out needs at least 2 samples, got {X.shape[0]}")
     if floor == "auto":
-        floor = _learn_floor([X], owner)
-    prepared = _prepare(X, floor, renormalize, owner)
-    with _blas_limits(n_jobs, owner) as n_threads:
-        indices, _ = _loo_nearest(prepared, chunk_size, n_threads)
+        floor = learn_floor([X], owner)
+    prepared = prepare_histograms(X, floor, renormalize, owner)
+    with blas_limits(n_jobs, owner) as n_threads:
+        indices, _ = loo_nearest(prepared, chunk_size, n_threads)
     y_pred = y[indices]
     return (y_pred, indices) if return_indices else y_pred
 

@@ -1,14 +1,9 @@
 """Shared set-up of the test suite.
 
 The tests mirror the package (``tests/descriptors/test_esf.py`` tests
-``eppf/descriptors/_esf.py``); the helpers that several of them import
-(``eppf_reference``, ``fingerprints``, ``_public_api``) live here in ``tests/``,
-which is put on ``sys.path`` for test modules in the subfolders.
+``eppf/descriptors/_esf.py``). ``tests`` and its folders are packages, so the
+helpers several of them import are imported by name: ``tests.eppf_reference``
+(a NumPy reference of EPPF), ``tests.fingerprints`` (digests of every output)
+and ``tests._public_api`` (the public modules). Fixtures shared by the tests
+of one folder live in that folder's ``conftest.py``.
 """
-
-import os
-import sys
-
-TESTS = os.path.dirname(os.path.abspath(__file__))
-if TESTS not in sys.path:
-    sys.path.insert(0, TESTS)

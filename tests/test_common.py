@@ -34,7 +34,7 @@ from sklearn.utils import get_tags
 from sklearn.utils import estimator_checks as skchecks
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from _public_api import public_modules
+from tests._public_api import public_modules
 from eppf.datasets import make_shapes
 from eppf.registry import CLASSIFIERS, DESCRIPTORS
 

@@ -53,7 +53,7 @@ def test_gallery_example_runs(script, tmp_path):
 def test_every_public_name_is_in_the_api_reference():
     import re
 
-    from _public_api import public_modules
+    from tests._public_api import public_modules
 
     api = (DOCS / "api.rst").read_text()
     sections = re.split(r"^\.\. currentmodule:: (\S+)$", api, flags=re.M)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from _public_api import public_modules
+from tests._public_api import public_modules
 
 numpydoc_validate = pytest.importorskip("numpydoc.validate")
 

@@ -50,7 +50,7 @@ def test_public_names_have_examples():
     """Every public class and function in the API reference shows an example."""
     import inspect
 
-    from _public_api import public_modules
+    from tests._public_api import public_modules
 
     missing = []
     for modname, module in public_modules():

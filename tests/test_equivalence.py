@@ -17,7 +17,7 @@ import os
 
 import pytest
 
-import fingerprints
+from tests import fingerprints
 
 _REF = os.path.join(os.path.dirname(__file__), "data", "fingerprints.json")
 

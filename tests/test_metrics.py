@@ -173,9 +173,9 @@ def test_loo_n_jobs():
         ([[0.5, np.nan], [0.1, 0.9]], [0, 1], {}, ValueError, "leave_one_out_retrieval: Input X contains NaN"),
         ([0.5, 0.5], [0, 1], {}, ValueError, "leave_one_out_retrieval: Expected 2D array, got 1D array instead"),
         ([[0.5, 0.5], [0.1, 0.9]], [0.5, 0.7], {}, ValueError, "leave_one_out_retrieval: y must hold class labels, got a 'continuous' target"),
-        ([[0.5, 0.5], [0.1, 0.9]], [0, 1], {"floor": -1}, ValueError, "leave_one_out_retrieval: floor must be 'auto' or a positive float, got -1.0"),
+        ([[0.5, 0.5], [0.1, 0.9]], [0, 1], {"floor": -1}, ValueError, "leave_one_out_retrieval: floor must be 'auto' or a positive float, got -1"),
         ([[0.5, 0.5], [0.1, 0.9]], [0, 1], {"chunk_size": 0}, ValueError, "leave_one_out_retrieval: chunk_size must be a positive int or None, got 0"),
-        ([[0.5, 0.5], [0.1, 0.9]], [0, 1], {"renormalize": 1}, TypeError, "leave_one_out_retrieval: renormalize must be a bool, got int"),
+        ([[0.5, 0.5], [0.1, 0.9]], [0, 1], {"renormalize": 1}, TypeError, "leave_one_out_retrieval: renormalize must be a bool, got 1"),
         ([[0.0, 0.0], [0.0, 0.0]], [0, 1], {}, ValueError, "leave_one_out_retrieval: cannot learn floor='auto' because X has no positive value"),
     ],
 )

@@ -334,7 +334,8 @@ def __getattr__(name):
     # then name eppf.classifiers._pointnet.PointNet etc. Resolved lazily so that
     # importing this module needs no torch.
     if name in ("TNet", "PointNet", "PointNetLoss", "orthogonality_penalty"):
-        from ..nn import _pointnet
+        from ..nn._pointnet import PointNet, PointNetLoss, TNet, orthogonality_penalty
 
-        return getattr(_pointnet, name)
+        return {"TNet": TNet, "PointNet": PointNet, "PointNetLoss": PointNetLoss,
+                "orthogonality_penalty": orthogonality_penalty}[name]
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -52,6 +52,7 @@ import numpy as np
 
 from ..utils import check_n_jobs, object_seeds
 from ..utils._atomic import atomic_write
+from ..utils._bounds import largest_sides
 from ..utils._stream import RowWriter, ordered_map
 from ._common import (Command, add_descriptor, add_runtime, add_sampling, check_output, descriptor_settings,
                       is_data_set_input, make_descriptor, min_points_needed, plan_inputs, progress_of, read_inputs,
@@ -323,7 +324,7 @@ def _stream(args, est, sampling, output, progress, cmd):
                     if not clouds:
                         continue
                     clouds = [np.ascontiguousarray(c, dtype=np.float64) for c in clouds]
-                    sides = _largest_sides(clouds)
+                    sides = largest_sides(clouds)
                     j = int(np.argmax(sides))
                     if sides[j] > best[0] or best[1] is None:
                         best = (sides[j], clouds[j], files[j])
@@ -496,19 +497,6 @@ class _ParallelRows:
 def _same_state(a, b):
     """Whether two ``RandomState.get_state()`` tuples are the same state."""
     return a[0] == b[0] and np.array_equal(a[1], b[1]) and a[2:] == b[2:]
-
-
-def _largest_sides(clouds):
-    """Largest bounding-box side of each non-empty cloud, as ``np.ptp(c[:, :3], axis=0).max()`` gives it.
-
-    One reduction over the chunk's stacked coordinates instead of three per
-    cloud; maxima, minima and their difference are the same floats either
-    way. Sides beyond float64 are inf (the descriptor's fit refuses them).
-    """
-    starts = np.cumsum([0] + [len(c) for c in clouds[:-1]])
-    xyz = np.concatenate([c[:, :3] for c in clouds])
-    with np.errstate(over="ignore", invalid="ignore"):
-        return (np.maximum.reduceat(xyz, starts, axis=0) - np.minimum.reduceat(xyz, starts, axis=0)).max(axis=1)
 
 
 def _read_back(plan, fd, group):

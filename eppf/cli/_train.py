@@ -120,12 +120,12 @@ def make_pipeline_from_args(args):
 
 def _check_saveable(model):
     """Refuse, before training, a pipeline the safe model format cannot hold."""
-    from .._persist import _ALLOWED
+    from .._persist import ALLOWED
 
     for _, step in model.steps:
         cls = type(step)
         names = (f"eppf.{cls.__name__}", f"{cls.__module__.split('._')[0]}.{cls.__name__}")
-        if not any(n in _ALLOWED for n in names):
+        if not any(n in ALLOWED for n in names):
             raise ValueError(f"a model with {cls.__name__} cannot be saved by this eppf (its model format does "
                              "not hold that class yet); choose another --descriptor")
 

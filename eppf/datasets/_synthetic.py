@@ -14,13 +14,13 @@ import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
 from ..preprocessing._perturb import (
-    _add_noise,
-    _check_fraction,
-    _check_non_negative,
-    _occlude,
-    _random_unit_vector,
-    _rotate,
+    add_noise_array,
+    check_fraction,
+    check_non_negative,
+    occlude_array,
     random_rotation_matrix,
+    random_unit_vector,
+    rotate_array,
 )
 
 __all__ = ["make_shapes"]
@@ -438,17 +438,17 @@ def make_shapes(
     n_per_class = _check_int(n_samples_per_class, "n_samples_per_class", 1)
     n_points = _check_int(n_points, "n_points", 2)
     classes = _check_classes(classes)
-    noise = _check_non_negative(noise, "noise", _OWNER)
-    occlusion = _check_fraction(occlusion, "occlusion", _OWNER)
+    noise = check_non_negative(noise, "noise", _OWNER)
+    occlusion = check_fraction(occlusion, "occlusion", _OWNER)
     if occlusion > _MAX_OCCLUSION:
         # each object is sampled with n_points / (1 - occlusion) points
         raise ValueError(f"{_OWNER}: occlusion must be <= {_MAX_OCCLUSION}, got {occlusion!r}")
-    size_variation = _check_fraction(size_variation, "size_variation", _OWNER)
+    size_variation = check_fraction(size_variation, "size_variation", _OWNER)
     if isinstance(rotate, (bool, np.bool_)):
         rotate = bool(rotate)
     elif not (isinstance(rotate, str) and rotate == "z"):
         raise ValueError(f"{_OWNER}: rotate must be True, False or 'z', got {rotate!r}")
-    test_size = _check_fraction(test_size, "test_size", _OWNER)
+    test_size = check_fraction(test_size, "test_size", _OWNER)
     rng = check_random_state(random_state)
 
     n_sampled = int(np.ceil(n_points / (1.0 - occlusion)))
@@ -470,9 +470,9 @@ def make_shapes(
             xyz *= rng.uniform(1.0 - size_variation, 1.0 + size_variation)
             if rotate is not False:
                 axis = "z" if rotate == "z" else None
-                cloud = _rotate(cloud, random_rotation_matrix(axis=axis, random_state=rng), "origin")
-            cloud = _occlude(cloud, removed, _random_unit_vector(rng))
-            cloud = _add_noise(cloud, noise, rng)
+                cloud = rotate_array(cloud, random_rotation_matrix(axis=axis, random_state=rng), "origin")
+            cloud = occlude_array(cloud, removed, random_unit_vector(rng))
+            cloud = add_noise_array(cloud, noise, rng)
             data.append(cloud if with_normals else np.ascontiguousarray(cloud[:, :3]))
     target = np.repeat(np.arange(len(classes), dtype=np.int64), n_per_class)
 

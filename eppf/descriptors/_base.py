@@ -41,6 +41,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds, transform_in_chunks
+from ..utils._bounds import largest_sides
 from ..utils._validation import condition_point_clouds
 from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
 
@@ -227,9 +228,7 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """With ``scaling="fit"``, 1 / the largest bounding-box side of any cloud; else 1."""
         if self.scaling != "fit":
             return 1.0
-        with np.errstate(over="ignore"):
-            side = max(float(np.ptp(c[:, :3], axis=0).max()) for c in clouds)
-        return self._data_set_scale(side)
+        return self._data_set_scale(float(largest_sides(clouds).max()))
 
     def _data_set_scale(self, side):
         """1 / ``side``, or a ValueError when that is not a finite positive float64."""

@@ -16,6 +16,7 @@ import numpy as np
 from libc.string cimport memset
 
 from ..utils._common cimport clamp_floor
+from ._flann_tree cimport build_tree, radius_search
 
 
 cdef enum:
@@ -213,3 +214,60 @@ def pcl_region_growing(const int32_t[::1] neighbors, const int64_t[::1] offsets,
                     labels[queue[t]] = n_regions
                 n_regions += 1
     return n_regions
+
+
+def radius_neighbors_flann(const float[:, ::1] points, double radius):
+    """Every point's neighbors in the order PCL's unsorted radius search gives.
+
+    Neighbors are the points whose single-precision squared distance is
+    below ``float(radius**2)`` (the point itself included), listed in the
+    depth-first order of FLANN's single k-d tree, as PCL's
+    ``search::KdTree(false)`` returns them. Returns ``(indices, offsets)``:
+    point ``i``'s neighbors are ``indices[offsets[i]:offsets[i + 1]]``.
+    """
+    cdef int64_t n = points.shape[0], i, total = 0, m
+    cdef int d
+    if points.shape[1] != 3:
+        raise ValueError("radius_neighbors_flann: points must have shape (n, 3)")
+    if n >= 2**30:
+        raise ValueError("radius_neighbors_flann: at most 2**30 points")
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    if n == 0:
+        return np.zeros(0, dtype=np.int32), offsets
+    n_nodes = 2 * n
+    cdef int32_t[::1] vind = np.empty(n, dtype=np.int32)
+    cdef int32_t[::1] ni = np.empty(5 * n_nodes, dtype=np.int32)
+    cdef float[::1] nf = np.empty(2 * n_nodes, dtype=np.float32)
+    cdef int32_t[::1] stk = np.empty(3 * n_nodes, dtype=np.int32)
+    cdef float[::1] sbox = np.empty(6 * n_nodes, dtype=np.float32)
+    cdef int32_t[::1] hits = np.empty(n, dtype=np.int32)
+    cdef float[::1] hd2 = np.empty(n, dtype=np.float32)
+    cdef int64_t[::1] off = offsets
+    cdef float root_box[6]
+    cdef float r2 = <float>(radius * radius)
+    cdef const float* p = &points[0, 0]
+    with nogil:
+        for d in range(3):
+            root_box[d] = p[d]
+            root_box[3 + d] = p[d]
+        for i in range(1, n):
+            for d in range(3):
+                if p[3 * i + d] < root_box[d]:
+                    root_box[d] = p[3 * i + d]
+                if p[3 * i + d] > root_box[3 + d]:
+                    root_box[3 + d] = p[3 * i + d]
+        build_tree(p, <int>n, &vind[0], &ni[0], &nf[0], &stk[0], &sbox[0])
+        for i in range(n):
+            m = radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
+                               &hits[0], &hd2[0])
+            total += m
+            off[i + 1] = total
+    indices = np.empty(total, dtype=np.int32)
+    cdef int32_t[::1] idx = indices
+    with nogil:
+        for i in range(n):
+            m = radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
+                               &hits[0], &hd2[0])
+            for d in range(<int>m):
+                idx[off[i] + d] = hits[d]
+    return indices, offsets

@@ -307,18 +307,22 @@ cdef inline void _add(double* out, int64_t g, int64_t hs, int64_t ix, int64_t iy
     out[((ix * g + iy) * g + iz) * hs + h] += w
 
 
-cdef void _add_sample(double* out, const double* q, double max_coord, int64_t half, int64_t hs, int interp,
-                      double hbin, double incr, bint wrap) noexcept nogil:
+cdef inline void _add_sample(double* out, const double* q, double max_coord, int64_t half, int64_t hs, int interp,
+                             double hbin, double incr, bint wrap) noexcept nogil:
     """PCL's addSampleToHistograms for one aligned point ``q`` with histogram coordinate ``hbin``.
 
     ``wrap``: the histogram is circular (hue), so PCL's padding bins fold
-    onto the opposite ends instead of being dropped.
+    onto the opposite ends instead of being dropped. Otherwise (the shape
+    grid) trilinear weights whose 8 cells all lie inside the grid take a
+    direct path: the same weights, added without bounds checks.
     """
     cdef double s[3]
     cdef double f[3]
     cdef int64_t b[3]
     cdef int64_t g = 2 * half, hb, h, ax, ay, az, e
-    cdef double ft, wx, wxy, w
+    cdef int64_t sx = hs, sy = g * hs, sxx = g * g * hs
+    cdef double ft, wx, wxy, w, w0, ww
+    cdef double* o
     cdef int j
     for j in range(3):
         s[j] = (q[j] / max_coord) * <double>half + <double>half
@@ -330,6 +334,7 @@ cdef void _add_sample(double* out, const double* q, double max_coord, int64_t ha
             hb = (hb + hs) % hs
         _add(out, g, hs, b[0], b[1], b[2], hb, incr)
         return
+    # interpolation: bin centers carry full weight
     for j in range(3):
         s[j] -= 0.5
         b[j] = _clamp_index(s[j], -2, g + 1)
@@ -345,6 +350,30 @@ cdef void _add_sample(double* out, const double* q, double max_coord, int64_t ha
         ft = 0.0
     elif ft > 1.0:
         ft = 1.0
+    if interp == INTERP_TRILINEAR and not wrap:
+        if hb < 0 or hb >= hs:
+            return  # PCL's bin below the histogram, dropped from the output
+        if b[0] >= 0 and b[0] < g - 1 and b[1] >= 0 and b[1] < g - 1 and b[2] >= 0 and b[2] < g - 1:
+            o = out + ((b[0] * g + b[1]) * g + b[2]) * hs + hb
+            wx = incr * f[0]
+            w0 = incr - wx
+            w = w0 * f[1]
+            ww = w * f[2]
+            o[sy + sx] += ww
+            o[sy] += w - ww
+            w = w0 - w
+            ww = w * f[2]
+            o[sx] += ww
+            o[0] += w - ww
+            w = wx * f[1]
+            ww = w * f[2]
+            o[sxx + sy + sx] += ww
+            o[sxx + sy] += w - ww
+            w = wx - w
+            ww = w * f[2]
+            o[sxx + sx] += ww
+            o[sxx] += w - ww
+            return
     for ax in range(2):
         wx = incr * f[0] if ax else incr - incr * f[0]
         for ay in range(2):
@@ -368,13 +397,7 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
     cdef double rot[9]
     cdef double c[3]
     cdef double q[3]
-    cdef double s[3]
-    cdef double f[3]
-    cdef int64_t b[3]
-    cdef double max_coord = 0.0, dmax = 0.0, d, t, frac, hbin, step, incr, ft, w, ww, w0
-    cdef double wx, wxy
-    cdef double* o
-    cdef int64_t g = 2 * half, hb, ax, ay, az, sx, sy, sxx
+    cdef double max_coord = 0.0, dmax = 0.0, d, t, frac, hbin, step, incr
     cdef Py_ssize_t i
     cdef int j
     cdef double sc = pow2_scale(pts, n)
@@ -403,9 +426,6 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
     # PCL's expressions (a division each, not a multiplication by the
     # inverse), so that the farthest point lands where PCL puts it
     step = dmax / <double>half
-    sx = hs
-    sy = g * hs
-    sxx = g * g * hs
     for i in range(n):
         _local(rot, c, &pts[3 * i], sc, q)
         d = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
@@ -414,65 +434,7 @@ cdef int _gasd_object(const double* pts, Py_ssize_t n, const double* view, int s
         if not (frac >= 0.0):
             frac = 0.0
         hbin = frac * <double>hs
-        for j in range(3):
-            s[j] = (q[j] / max_coord) * <double>half + <double>half
-        if interp == INTERP_NONE:
-            for j in range(3):
-                b[j] = _clamp_index(s[j], -1, g + 1)
-            _add(out, g, hs, b[0], b[1], b[2], _clamp_index(hbin, -1, hs), incr)
-            continue
-        # interpolation: bin centers carry full weight
-        for j in range(3):
-            s[j] -= 0.5
-            b[j] = _clamp_index(s[j], -2, g + 1)
-            f[j] = s[j] - <double>b[j]
-            if not (f[j] >= 0.0):
-                f[j] = 0.0
-            elif f[j] > 1.0:
-                f[j] = 1.0
-        hbin -= 0.5
-        hb = _clamp_index(hbin, -2, hs + 1)
-        ft = hbin - <double>hb
-        if not (ft >= 0.0):
-            ft = 0.0
-        elif ft > 1.0:
-            ft = 1.0
-        if interp == INTERP_TRILINEAR:
-            if hb < 0 or hb >= hs:
-                continue  # PCL's bin below the histogram, dropped from the output
-            if b[0] >= 0 and b[0] < g - 1 and b[1] >= 0 and b[1] < g - 1 and b[2] >= 0 and b[2] < g - 1:
-                # all 8 cells inside the grid
-                o = out + ((b[0] * g + b[1]) * g + b[2]) * hs + hb
-                wx = incr * f[0]
-                w0 = incr - wx
-                w = w0 * f[1]
-                ww = w * f[2]
-                o[sy + sx] += ww
-                o[sy] += w - ww
-                w = w0 - w
-                ww = w * f[2]
-                o[sx] += ww
-                o[0] += w - ww
-                w = wx * f[1]
-                ww = w * f[2]
-                o[sxx + sy + sx] += ww
-                o[sxx + sy] += w - ww
-                w = wx - w
-                ww = w * f[2]
-                o[sxx + sx] += ww
-                o[sxx] += w - ww
-                continue
-        for ax in range(2):
-            wx = incr * f[0] if ax else incr - incr * f[0]
-            for ay in range(2):
-                wxy = wx * f[1] if ay else wx - wx * f[1]
-                for az in range(2):
-                    w = wxy * f[2] if az else wxy - wxy * f[2]
-                    if interp == INTERP_TRILINEAR:
-                        _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, hb, w)
-                    else:
-                        _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, hb, w - w * ft)
-                        _add(out, g, hs, b[0] + ax, b[1] + ay, b[2] + az, hb + 1, w * ft)
+        _add_sample(out, q, max_coord, half, hs, interp, hbin, incr, False)
     if hue != NULL:
         # GASDColorEstimation: the same aligned points, cube and weights, a
         # circular histogram of hue bins in each cell of the color grid

@@ -28,10 +28,11 @@ from libc.stdint cimport int64_t, int32_t, int8_t
 from libc.stdlib cimport qsort
 from libc.string cimport memset
 
+from ._flann_tree cimport build_tree, radius_search
+
 import numpy as np
 
 cdef enum:
-    LEAF_MAX = 15       # FLANN leaf size PCL's KdTreeFLANN asks for
     N_CLASSES = 6       # noise, plane, cylinder, sphere, edge, empty
     N_BINS = 21
     MAX_SUBDIV = 64
@@ -71,239 +72,6 @@ cdef inline int _clamp_signed(float t, int lim) noexcept nogil:
     if t >= lim:
         return lim
     return <int>t
-
-
-# ---------------------------------------------------------------- k-d tree
-# Node arrays (n_nodes <= 2 n - 1):
-#   ni[5 * id + 0..4] = left, right (leaf point range), divfeat (-1 for a leaf),
-#                       child1, child2
-#   nf[2 * id + 0..1] = divlow, divhigh
-
-cdef int _build_tree(const float* p, int n, int32_t* vind, int32_t* ni, float* nf,
-                     int32_t* stk, float* sbox) noexcept nogil:
-    """FLANN 1.9 KDTreeSingleIndex::buildIndex (middleSplit, leaf size 15),
-    iteratively. Returns the number of nodes (the root is node 0)."""
-    cdef int i, d, n_nodes = 1, top = 0, node, left, right, count
-    cdef int cutfeat, k, lo_i, hi_i, lim1, lim2, idx, c1, c2, t
-    cdef float mn, mx, span, max_span, cutval, v
-    cdef float* box
-    for i in range(n):
-        vind[i] = i
-    # root box: exact bounds
-    box = sbox
-    for d in range(3):
-        box[d] = p[d]
-        box[3 + d] = p[d]
-    for i in range(1, n):
-        for d in range(3):
-            v = p[3 * i + d]
-            if v < box[d]:
-                box[d] = v
-            if v > box[3 + d]:
-                box[3 + d] = v
-    stk[0] = 0
-    stk[1] = 0
-    stk[2] = n
-    top = 1
-    while top > 0:
-        top -= 1
-        node = stk[3 * top]
-        left = stk[3 * top + 1]
-        right = stk[3 * top + 2]
-        box = sbox + 6 * top
-        count = right - left
-        if count <= LEAF_MAX:
-            ni[5 * node] = left
-            ni[5 * node + 1] = right
-            ni[5 * node + 2] = -1
-            ni[5 * node + 3] = -1
-            ni[5 * node + 4] = -1
-            continue
-        # middleSplit: largest side of the approximate box, refined by exact spreads
-        max_span = box[3] - box[0]
-        cutfeat = 0
-        for d in range(1, 3):
-            span = box[3 + d] - box[d]
-            if span > max_span:
-                max_span = span
-                cutfeat = d
-        mn = p[3 * vind[left] + cutfeat]
-        mx = mn
-        for i in range(left + 1, right):
-            v = p[3 * vind[i] + cutfeat]
-            if v < mn:
-                mn = v
-            if v > mx:
-                mx = v
-        cutval = (mn + mx) / <float>2.0
-        max_span = mx - mn
-        k = cutfeat
-        for d in range(3):
-            if d == k:
-                continue
-            span = box[3 + d] - box[d]
-            if span > max_span:
-                mn = p[3 * vind[left] + d]
-                mx = mn
-                for i in range(left + 1, right):
-                    v = p[3 * vind[i] + d]
-                    if v < mn:
-                        mn = v
-                    if v > mx:
-                        mx = v
-                span = mx - mn
-                if span > max_span:
-                    max_span = span
-                    cutfeat = d
-                    cutval = (mn + mx) / <float>2.0
-        # planeSplit: < cutval | == cutval | > cutval
-        lo_i = 0
-        hi_i = count - 1
-        while True:
-            while lo_i <= hi_i and p[3 * vind[left + lo_i] + cutfeat] < cutval:
-                lo_i += 1
-            while lo_i <= hi_i and p[3 * vind[left + hi_i] + cutfeat] >= cutval:
-                hi_i -= 1
-            if lo_i > hi_i:
-                break
-            t = vind[left + lo_i]
-            vind[left + lo_i] = vind[left + hi_i]
-            vind[left + hi_i] = t
-            lo_i += 1
-            hi_i -= 1
-        lim1 = lo_i
-        hi_i = count - 1
-        while True:
-            while lo_i <= hi_i and p[3 * vind[left + lo_i] + cutfeat] <= cutval:
-                lo_i += 1
-            while lo_i <= hi_i and p[3 * vind[left + hi_i] + cutfeat] > cutval:
-                hi_i -= 1
-            if lo_i > hi_i:
-                break
-            t = vind[left + lo_i]
-            vind[left + lo_i] = vind[left + hi_i]
-            vind[left + hi_i] = t
-            lo_i += 1
-            hi_i -= 1
-        lim2 = lo_i
-        if lim1 > count // 2:
-            idx = lim1
-        elif lim2 < count // 2:
-            idx = lim2
-        else:
-            idx = count // 2
-        c1 = n_nodes
-        c2 = n_nodes + 1
-        n_nodes += 2
-        ni[5 * node] = left
-        ni[5 * node + 1] = right
-        ni[5 * node + 2] = cutfeat
-        ni[5 * node + 3] = c1
-        ni[5 * node + 4] = c2
-        # divlow / divhigh: the children's exact bounds along cutfeat
-        mx = p[3 * vind[left] + cutfeat]
-        for i in range(left + 1, left + idx):
-            v = p[3 * vind[i] + cutfeat]
-            if v > mx:
-                mx = v
-        mn = p[3 * vind[left + idx] + cutfeat]
-        for i in range(left + idx + 1, right):
-            v = p[3 * vind[i] + cutfeat]
-            if v < mn:
-                mn = v
-        nf[2 * node] = mx
-        nf[2 * node + 1] = mn
-        # children's approximate boxes: the parent's with the cut applied;
-        # child2 pushed first (it reuses this slot), child1 on top
-        for d in range(6):
-            sbox[6 * (top + 1) + d] = box[d]
-        box[cutfeat] = cutval                       # slot top, child2: low = cutval
-        sbox[6 * (top + 1) + 3 + cutfeat] = cutval  # slot top + 1, child1: high = cutval
-        stk[3 * top] = c2
-        stk[3 * top + 1] = left + idx
-        stk[3 * top + 2] = right
-        stk[3 * (top + 1)] = c1
-        stk[3 * (top + 1) + 1] = left
-        stk[3 * (top + 1) + 2] = left + idx
-        top += 2
-    return n_nodes
-
-
-cdef int _radius_search(const float* p, const float* q, float r2, const int32_t* vind,
-                        const int32_t* ni, const float* nf, const float* root_box,
-                        int32_t* sn, float* sf, int32_t* hits, float* hd2) noexcept nogil:
-    """FLANN's exact radius search (squared distance < r2, single precision),
-    hits in the tree's depth-first order, best child first. Returns the count."""
-    cdef int top = 0, node, i, j, feat, n_hits = 0, best, other
-    cdef float mind, d0, d1, d2, dist, diff, val, diff1, diff2, cut, dst, nm
-    cdef float* ent
-    # initial distances to the root box
-    sf[0] = 0.0
-    for j in range(3):
-        sf[1 + j] = 0.0
-        if q[j] < root_box[j]:
-            diff = q[j] - root_box[j]
-            sf[1 + j] = diff * diff
-            sf[0] = sf[0] + sf[1 + j]
-        if q[j] > root_box[3 + j]:
-            diff = q[j] - root_box[3 + j]
-            sf[1 + j] = diff * diff
-            sf[0] = sf[0] + sf[1 + j]
-    sn[0] = 0
-    top = 1
-    while top > 0:
-        top -= 1
-        node = sn[top]
-        ent = sf + 4 * top
-        feat = ni[5 * node + 2]
-        if feat < 0:
-            for i in range(ni[5 * node], ni[5 * node + 1]):
-                j = vind[i]
-                diff = q[0] - p[3 * j]
-                dist = diff * diff
-                diff = q[1] - p[3 * j + 1]
-                dist = dist + diff * diff
-                diff = q[2] - p[3 * j + 2]
-                dist = dist + diff * diff
-                if dist < r2:
-                    hits[n_hits] = j
-                    hd2[n_hits] = dist
-                    n_hits += 1
-            continue
-        val = q[feat]
-        diff1 = val - nf[2 * node]
-        diff2 = val - nf[2 * node + 1]
-        if diff1 + diff2 < 0:
-            best = ni[5 * node + 3]
-            other = ni[5 * node + 4]
-            diff = val - nf[2 * node + 1]
-        else:
-            best = ni[5 * node + 4]
-            other = ni[5 * node + 3]
-            diff = val - nf[2 * node]
-        cut = diff * diff
-        mind = ent[0]
-        d0 = ent[1]
-        d1 = ent[2]
-        d2 = ent[3]
-        dst = ent[1 + feat]
-        nm = mind + cut - dst
-        # the other child goes below the best one (visited after its subtree)
-        if nm <= r2:
-            sn[top] = other
-            sf[4 * top] = nm
-            sf[4 * top + 1] = d0
-            sf[4 * top + 2] = d1
-            sf[4 * top + 3] = d2
-            sf[4 * top + 1 + feat] = cut
-            top += 1
-        sn[top] = best
-        sf[4 * top] = mind
-        sf[4 * top + 1] = d0
-        sf[4 * top + 2] = d1
-        sf[4 * top + 3] = d2
-        top += 1
-    return n_hits
 
 
 # --------------------------------------------------------------- RSD class
@@ -462,11 +230,11 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
         vijk[3 * n_vox + 2] = <int32_t>(key // (<int64_t>dims[0] * dims[1]))
         n_vox += 1
         start += cnt
-    _build_tree(p, n, vind, ni, nf, stk, sbox)
+    build_tree(p, n, vind, ni, nf, stk, sbox)
     r2 = <float>(max_dist * max_dist)
     for v in range(n_vox):
-        n_hits = _radius_search(p, &cent[3 * v], r2, vind, ni, nf, root_box, stk,
-                                sbox, hits, hd2)
+        n_hits = radius_search(p, &cent[3 * v], r2, vind, ni, nf, root_box, stk,
+                               sbox, hits, hd2)
         types[v] = <int8_t>_rsd_class(nrm, hits, hd2, n_hits, max_dist, nsub, plane_radius,
                                       thr, work, work + MAX_SUBDIV)
     memset(T, 0, sizeof(T))
@@ -612,60 +380,3 @@ def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double 
     return (np.asarray(s["vijk"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["cent"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["types"][0, :n_vox]).copy(), counts)
-
-
-def radius_neighbors_flann(const float[:, ::1] points, double radius):
-    """Every point's neighbors in the order PCL's unsorted radius search gives.
-
-    Neighbors are the points whose single-precision squared distance is
-    below ``float(radius**2)`` (the point itself included), listed in the
-    depth-first order of FLANN's single k-d tree, as PCL's
-    ``search::KdTree(false)`` returns them. Returns ``(indices, offsets)``:
-    point ``i``'s neighbors are ``indices[offsets[i]:offsets[i + 1]]``.
-    """
-    cdef int64_t n = points.shape[0], i, total = 0, m
-    cdef int d
-    if points.shape[1] != 3:
-        raise ValueError("radius_neighbors_flann: points must have shape (n, 3)")
-    if n >= 2**30:
-        raise ValueError("radius_neighbors_flann: at most 2**30 points")
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    if n == 0:
-        return np.zeros(0, dtype=np.int32), offsets
-    s = _scratch(1, n)
-    cdef int32_t[::1] vind = s["vind"][0]
-    cdef int32_t[::1] ni = s["ni"][0]
-    cdef float[::1] nf = s["nf"][0]
-    cdef int32_t[::1] stk = s["stk"][0]
-    cdef float[::1] sbox = s["sbox"][0]
-    cdef int32_t[::1] hits = s["hits"][0]
-    cdef float[::1] hd2 = s["hd2"][0]
-    cdef int64_t[::1] off = offsets
-    cdef float root_box[6]
-    cdef float r2 = <float>(radius * radius)
-    cdef const float* p = &points[0, 0]
-    with nogil:
-        for d in range(3):
-            root_box[d] = p[d]
-            root_box[3 + d] = p[d]
-        for i in range(1, n):
-            for d in range(3):
-                if p[3 * i + d] < root_box[d]:
-                    root_box[d] = p[3 * i + d]
-                if p[3 * i + d] > root_box[3 + d]:
-                    root_box[3 + d] = p[3 * i + d]
-        _build_tree(p, <int>n, &vind[0], &ni[0], &nf[0], &stk[0], &sbox[0])
-        for i in range(n):
-            m = _radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
-                               &hits[0], &hd2[0])
-            total += m
-            off[i + 1] = total
-    indices = np.empty(total, dtype=np.int32)
-    cdef int32_t[::1] idx = indices
-    with nogil:
-        for i in range(n):
-            m = _radius_search(p, &p[3 * i], r2, &vind[0], &ni[0], &nf[0], root_box, &stk[0], &sbox[0],
-                               &hits[0], &hd2[0])
-            for d in range(<int>m):
-                idx[off[i] + d] = hits[d]
-    return indices, offsets

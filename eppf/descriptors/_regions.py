@@ -7,8 +7,8 @@ for that reason): the surface variation of a point's neighborhood
 the points that pass it (:func:`smooth_clusters`), PCL's pair features of a
 reference point (a region's centroid and mean normal) against every point of
 the object (:func:`pair_features`), and FLANN's single k-d tree radius search
-(:func:`radius_neighbors_flann`, compiled with GRSD's kernel, which searches
-the same tree) for PCL's own region growing.
+(:func:`radius_neighbors_flann`, compiled with CVFH's kernel on the tree
+GRSD's kernel searches too) for PCL's own region growing.
 """
 
 import numpy as np
@@ -16,7 +16,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ._grsd_fast import radius_neighbors_flann
+from ._cvfh_fast import radius_neighbors_flann
 
 __all__ = ["curvature", "pair_features", "radius_neighbors_flann", "smooth_clusters"]
 

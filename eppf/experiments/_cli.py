@@ -159,7 +159,11 @@ def main(argv=None):
     out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
     common = dict(data=args.data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
                   cache_dir=args.cache_dir, verbose=not args.quiet, command=command, scaling=args.scaling)
-    from . import run_ablation, run_classification, run_noise, run_retrieval, run_runtime
+    from ._ablation import run_ablation
+    from ._classification import run_classification
+    from ._noise import run_noise
+    from ._retrieval import run_retrieval
+    from ._runtime import run_runtime
 
     draws = getattr(args, "draws", None)
     draws = draws if draws is not None else (2 if args.quick else 10)

@@ -10,29 +10,8 @@ reader, which reads the file or names the line at fault.
 
 import numpy as np
 
+from ._text_scan cimport end_of_line, number_start, skip_blank
 from libc.stdlib cimport strtod, strtol
-
-
-cdef inline Py_ssize_t _skip_blank(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
-    # skip spaces, tabs, carriage returns and whole blank lines
-    while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r' or s[i] == b'\n'):
-        i += 1
-    return i
-
-
-cdef inline Py_ssize_t _end_of_line(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
-    # after the last value: only spaces, tabs, \r, then \n or the end; -1 otherwise
-    while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r'):
-        i += 1
-    if i == n:
-        return i
-    if s[i] == b'\n':
-        return i + 1
-    return -1
-
-
-cdef inline bint _number_start(char c) noexcept nogil:
-    return (c >= b'0' and c <= b'9') or c == b'-' or c == b'+' or c == b'.'
 
 
 def parse_off_body(bytes data, Py_ssize_t start, Py_ssize_t n_vertices, Py_ssize_t n_faces):
@@ -54,11 +33,11 @@ def parse_off_body(bytes data, Py_ssize_t start, Py_ssize_t n_vertices, Py_ssize
     cdef long long[:, ::1] f = faces
     with nogil:
         for k in range(n_vertices):
-            i = _skip_blank(s, i, n)
+            i = skip_blank(s, i, n)
             for j in range(3):
                 while i < n and (s[i] == b' ' or s[i] == b'\t'):
                     i += 1
-                if i >= n or not _number_start(s[i]):
+                if i >= n or not number_start(s[i]):
                     ok = False
                     break
                 v[k, j] = strtod(s + i, &end)
@@ -68,13 +47,13 @@ def parse_off_body(bytes data, Py_ssize_t start, Py_ssize_t n_vertices, Py_ssize
                 i = end - s
             if not ok:
                 break
-            i = _end_of_line(s, i, n)
+            i = end_of_line(s, i, n)
             if i < 0:
                 ok = False
                 break
         if ok:
             for k in range(n_faces):
-                i = _skip_blank(s, i, n)
+                i = skip_blank(s, i, n)
                 if i >= n or s[i] < b'0' or s[i] > b'9':
                     ok = False
                     break
@@ -93,7 +72,7 @@ def parse_off_body(bytes data, Py_ssize_t start, Py_ssize_t n_vertices, Py_ssize
                     i = end - s
                 if not ok:
                     break
-                i = _end_of_line(s, i, n)
+                i = end_of_line(s, i, n)
                 if i < 0:
                     ok = False
                     break

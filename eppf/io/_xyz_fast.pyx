@@ -8,6 +8,7 @@ line-by-line reader reads the file or names the line at fault.
 
 import numpy as np
 
+from ._text_scan cimport end_of_line, number_start, skip_blank
 from libc.stdlib cimport strtod
 
 
@@ -84,28 +85,6 @@ cdef inline double _strtod(const char* p, const char* lim, char** endp) noexcept
     return -v if neg else v
 
 
-cdef inline Py_ssize_t _skip_blank(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
-    # skip spaces, tabs, carriage returns and whole blank lines
-    while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r' or s[i] == b'\n'):
-        i += 1
-    return i
-
-
-cdef inline Py_ssize_t _end_of_line(const char* s, Py_ssize_t i, Py_ssize_t n) noexcept nogil:
-    # after the last value: only spaces, tabs, \r, then \n or the end; -1 otherwise
-    while i < n and (s[i] == b' ' or s[i] == b'\t' or s[i] == b'\r'):
-        i += 1
-    if i == n:
-        return i
-    if s[i] == b'\n':
-        return i + 1
-    return -1
-
-
-cdef inline bint _number_start(char c) noexcept nogil:
-    return (c >= b'0' and c <= b'9') or c == b'-' or c == b'+' or c == b'.'
-
-
 cdef inline bint _is_sep(char c) noexcept nogil:
     return c == b' ' or c == b'\t' or c == b',' or c == b';'
 
@@ -133,7 +112,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
     cdef bint ok = True
     cap = data.count(b"\n", start) + 1
     # the first row fixes the column count
-    i = _skip_blank(s, i, n)
+    i = skip_blank(s, i, n)
     if i >= n:
         return None
     cols = 0
@@ -155,7 +134,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
     cdef double[::1] o = out
     with nogil:
         while True:
-            i = _skip_blank(s, i, n)
+            i = skip_blank(s, i, n)
             if i >= n:
                 break
             cols = 0
@@ -164,7 +143,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
                     i += 1
                 if i >= n or s[i] == b'\n' or s[i] == b'\r':
                     break
-                if cols == n_cols or not _number_start(s[i]):
+                if cols == n_cols or not number_start(s[i]):
                     ok = False
                     break
                 o[k] = _strtod(s + i, s + n, &end)
@@ -181,7 +160,7 @@ def parse_float_table(bytes data, Py_ssize_t start):
                 ok = False
                 break
             row_count += 1
-            i = _end_of_line(s, i, n)
+            i = end_of_line(s, i, n)
             if i < 0:
                 ok = False
                 break

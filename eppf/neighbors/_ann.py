@@ -18,21 +18,15 @@ smaller and its scans faster.
 import numbers
 
 import numpy as np
-from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
-from ._kl import (
-    NeighbourVotesMixin,
-    check_kl_params,
-    check_n_neighbors,
-    learn_floor,
-    prepare_histograms,
-    rerank_candidates,
-    rerank_sparse_candidates,
-    single_blas_thread,
-    validate_histograms,
-)
+from ..utils._blas import single_blas_thread
+from ..utils._param_validation import Interval, Options, StrOptions
+from ..utils._stream import ordered_map
+from ..utils._validation import check_n_jobs
+from ._base import KL_CONSTRAINTS, KLNeighborsBase, learn_floor, prepare_histograms, validate_histograms
+from ._rerank import rerank_candidates, rerank_sparse_candidates
 
 __all__ = ["ApproximateKLNearestNeighbors"]
 
@@ -78,18 +72,6 @@ class _faiss_threads:
         self.faiss.omp_set_num_threads(self.old)
 
 
-def _check_int(value, name, owner, minimum=1, allow=()):
-    if value in allow and isinstance(value, (str, type(None))):
-        return value
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        extra = "".join(f" or {a!r}" for a in allow)
-        raise TypeError(f"{owner}: {name} must be an int >= {minimum}{extra}, got {type(value).__name__}")
-    if value < minimum:
-        extra = "".join(f" or {a!r}" for a in allow)
-        raise ValueError(f"{owner}: {name} must be an int >= {minimum}{extra}, got {value}")
-    return int(value)
-
-
 def _drop_own(cand, start):
     """Remove from row ``r`` of ``cand`` the query's own index ``start + r`` (or, when absent, the last entry)."""
     n_q, m = cand.shape
@@ -100,7 +82,7 @@ def _drop_own(cand, start):
     return cand[keep].reshape(n_q, m - 1)
 
 
-class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEstimator):
+class ApproximateKLNearestNeighbors(KLNeighborsBase):
     """Approximate nearest neighbors by symmetric KL divergence, for millions of histograms.
 
     A fast index proposes ``n_candidates`` neighbors per query in the
@@ -253,6 +235,22 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
     array([0, 1, 2])
     """
 
+    _parameter_constraints = {
+        **KL_CONSTRAINTS,
+        "n_candidates": [Interval(numbers.Integral, 1, None, closed="left")],
+        "n_components": [Interval(numbers.Integral, 1, None, closed="left"), None],
+        "index": [StrOptions(["ivf", "hnsw"])],
+        "n_lists": [Interval(numbers.Integral, 1, None, closed="left"), StrOptions(["auto"])],
+        "n_probe": [Interval(numbers.Integral, 1, None, closed="left")],
+        "hnsw_m": [Interval(numbers.Integral, 2, None, closed="left")],
+        "ef_search": [Interval(numbers.Integral, 1, None, closed="left")],
+        "random_state": [
+            None,
+            Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
+            Options(np.random.RandomState, description="a numpy RandomState"),
+        ],
+    }
+
     def __init__(self, n_neighbors=1, *, weights="uniform", floor="auto", renormalize=False, n_candidates=32,
                  n_components=32, index="ivf", n_lists="auto", n_probe=128, hnsw_m=16, ef_search=64,
                  chunk_size=None, random_state=None, n_jobs=None):
@@ -273,30 +271,19 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
-        tags.input_tags.positive_only = True
         tags.non_deterministic = self.random_state is None
         return tags
 
     # ------------------------------------------------------------ parameters
 
     def _check_params(self):
-        name = type(self).__name__
-        floor, renormalize, chunk_size = check_kl_params(self)
-        n_candidates = _check_int(self.n_candidates, "n_candidates", name)
-        if n_candidates < self.n_neighbors:
+        floor, renormalize, chunk_size = super()._check_params()
+        if self.n_candidates < self.n_neighbors:
             raise ValueError(
-                f"{name}: n_candidates={n_candidates} must be at least n_neighbors={self.n_neighbors}"
+                f"{type(self).__name__}: n_candidates={self.n_candidates} must be at least "
+                f"n_neighbors={self.n_neighbors}"
             )
-        n_components = _check_int(self.n_components, "n_components", name, allow=(None,))
-        n_lists = _check_int(self.n_lists, "n_lists", name, allow=("auto",))
-        if isinstance(n_lists, str) and n_lists != "auto":
-            raise ValueError(f"{name}: n_lists must be an int >= 1 or 'auto', got {n_lists!r}")
-        n_probe = _check_int(self.n_probe, "n_probe", name)
-        if self.index not in ("ivf", "hnsw"):
-            raise ValueError(f"{name}: index must be 'ivf' or 'hnsw', got {self.index!r}")
-        _check_int(self.hnsw_m, "hnsw_m", name, minimum=2)
-        _check_int(self.ef_search, "ef_search", name)
-        return floor, renormalize, chunk_size, n_candidates, n_components, n_lists, n_probe
+        return floor, renormalize, chunk_size
 
     # ------------------------------------------------------------ embedding
 
@@ -309,11 +296,6 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
             h -= self.mean_.astype(np.float32)
             h = h @ self.components_.T.astype(np.float32)
         return np.ascontiguousarray(h, dtype=np.float32)
-
-    def _n_threads(self):
-        from ..utils._validation import check_n_jobs
-
-        return check_n_jobs(self.n_jobs, owner=type(self).__name__)
 
     # ------------------------------------------------------------ fit
 
@@ -334,7 +316,8 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
             The fitted classifier.
         """
         name = type(self).__name__
-        floor, renormalize, _, _, n_components, n_lists, _ = self._check_params()
+        floor, renormalize, _ = self._check_params()
+        n_components, n_lists = self.n_components, self.n_lists
         faiss = _import_faiss(name)
         X, y = validate_histograms(self, X, y, reset=True, dtype=[np.float64, np.float32])
         n, n_bins = X.shape
@@ -346,7 +329,7 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
             n_lists = int(max(1, min(round(4 * np.sqrt(n)), n // _MIN_PER_LIST)))
         elif n_lists > n:
             raise ValueError(f"{name}: n_lists={n_lists} is more than the {n} training samples")
-        self.floor_ = learn_floor(X, name) if floor == "auto" else floor
+        self.floor_ = learn_floor([X], name) if floor == "auto" else floor
         self.classes_, self._y = np.unique(y, return_inverse=True)
         self._renormalize = renormalize
         self.n_samples_fit_ = n
@@ -515,17 +498,13 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
         """
         check_is_fitted(self)
         name = type(self).__name__
-        _, _, chunk_size, n_candidates, _, _, n_probe = self._check_params()
+        _, _, chunk_size = self._check_params()
+        n_candidates, n_probe = self.n_candidates, self.n_probe
         faiss = _import_faiss(name)
-        k = check_n_neighbors(self.n_neighbors if n_neighbors is None else n_neighbors, name)
         loo = X is None
+        k = self._check_k(n_neighbors, loo)
         Q = None if loo else validate_histograms(self, X, reset=False)
         available = self.n_samples_fit_ - (1 if loo else 0)
-        if k > available:
-            extra = " excluding each query itself" if loo else ""
-            raise ValueError(
-                f"{name}: n_neighbors={k} is more than the {available} training sample(s) available{extra}"
-            )
         if k > n_candidates:
             raise ValueError(f"{name}: n_neighbors={k} is more than n_candidates={n_candidates}")
         m = min(n_candidates, available)
@@ -540,16 +519,12 @@ class ApproximateKLNearestNeighbors(NeighbourVotesMixin, ClassifierMixin, BaseEs
 
         ind = np.empty((n_q, k), dtype=np.intp)
         dist = np.empty((n_q, k))
-        n_threads = self._n_threads()
+        n_threads = check_n_jobs(self.n_jobs, owner=name)
         with single_blas_thread(), _faiss_threads(faiss, 1):
             if n_threads <= 1 or len(starts) <= 1:
                 results = map(block, starts)
-                for start, (d, i) in zip(starts, results):
-                    dist[start : start + step], ind[start : start + step] = d, i
             else:
-                from concurrent.futures import ThreadPoolExecutor
-
-                with ThreadPoolExecutor(max_workers=n_threads) as pool:
-                    for start, (d, i) in zip(starts, pool.map(block, starts)):
-                        dist[start : start + step], ind[start : start + step] = d, i
+                results = ordered_map(block, starts, workers=n_threads, depth=2 * n_threads)
+            for start, (d, i) in zip(starts, results):
+                dist[start : start + step], ind[start : start + step] = d, i
         return (dist, ind) if return_distance else ind

@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ._hough_fast import hough_normals
+from ._normal_options import ORIENT_CENTROID, ORIENT_NONE, check_n_neighbors, resolve_orientation
 from ..utils._validation import check_n_jobs, check_point_cloud, object_seeds
 
 __all__ = ["estimate_normals_hough"]
@@ -115,8 +116,6 @@ def triplets_for(tolerance, confidence):
 
 def _orient_packed(pts, off, normals, orientation, owner):
     """Flip normals in place as :func:`estimate_normals` orients PCA normals."""
-    from ._normals import ORIENT_CENTROID, ORIENT_NONE, resolve_orientation
-
     mode, viewpoint = resolve_orientation(orientation, owner)
     if mode == ORIENT_NONE or pts.shape[0] == 0:
         return
@@ -189,13 +188,13 @@ def _check_random_state_seeds(random_state, n_objects, owner):
     return object_seeds(int(random_state), n_objects)
 
 
-def hough_batch(pts, off, k, orientation, n_threads, random_state, method_params, owner):
+def hough_batch(pts, off, k, orientation, n_threads, random_state, method_params, owner, small_objects=None):
     """Hough normals of validated packed objects (the ``method="hough"`` path
     of :func:`~eppf.preprocessing._normals.estimate_normals_batch`). Objects
     below 3 points get PCA's answer for them (an arbitrary unit vector
-    orthogonal to their line)."""
-    from ._normals import estimate_normals_batch
-
+    orthogonal to their line) from ``small_objects``, the PCA estimator
+    ``estimate_normals_batch`` that calls this (there are none when
+    ``small_objects`` is None)."""
     params = _check_params(method_params, owner)
     sizes = np.diff(off)
     seeds = _check_random_state_seeds(random_state, sizes.shape[0], owner)
@@ -206,7 +205,7 @@ def hough_batch(pts, off, k, orientation, n_threads, random_state, method_params
         s_pts = np.concatenate([pts[off[i]:off[i + 1]] for i in idx]) if pts.shape[0] else pts
         s_off = np.concatenate([[0], np.cumsum(sizes[idx])]).astype(np.int64)
         if s_off[-1] > 0:
-            est = estimate_normals_batch(s_pts, s_off, 3, None, n_threads, owner=owner)
+            est = small_objects(s_pts, s_off, 3, None, n_threads, owner=owner)
             for j, i in enumerate(idx):
                 out[off[i]:off[i + 1]] = est[s_off[j]:s_off[j + 1]]
     big = np.flatnonzero(~small)
@@ -346,8 +345,6 @@ default="centroid"
 
 def hough_single(points, n_neighbors, orientation, n_jobs, random_state, method_params, owner):
     """One cloud, validated as :func:`estimate_normals` validates it."""
-    from ._normals import check_n_neighbors, resolve_orientation
-
     cloud = check_point_cloud(points, owner=owner, min_points=3, allow_normals=False)
     k = check_n_neighbors(n_neighbors, owner)
     resolve_orientation(orientation, owner)

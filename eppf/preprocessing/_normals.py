@@ -5,58 +5,18 @@ the compiled kernel in ``eppf.preprocessing._normals_fast`` (exact kNN on a unif
 Jacobi 3x3 eigensolver, OpenMP over objects or over the points of one object).
 """
 
-import numbers
-
 import numpy as np
 
+from ._hough import hough_batch, hough_single
+from ._normal_options import ORIENT_NONE, ORIENT_VIEWPOINT, check_n_neighbors, resolve_orientation
 from ._normals_fast import cloud_in_window, normals_cloud, normals_packed, normals_single, scratch_sizes
 from ..utils._validation import (
-    SAFE_MAX_EXP, SAFE_MIN_EXP, _scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds,
+    SAFE_MAX_EXP, SAFE_MIN_EXP, scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds,
 )
 
 __all__ = ["estimate_normals", "estimate_normals_batch"]
 
-ORIENT_NONE, ORIENT_CENTROID, _ORIENT_VIEWPOINT = 0, 1, 2
 _MIN_SIDE, _MAX_ABS = 2.0**SAFE_MIN_EXP, 2.0**SAFE_MAX_EXP
-
-
-def check_n_neighbors(n_neighbors, owner):
-    if isinstance(n_neighbors, bool) or not isinstance(n_neighbors, numbers.Integral):
-        raise TypeError(f"{owner}: n_neighbors must be an int, got {type(n_neighbors).__name__}")
-    if n_neighbors < 3:
-        raise ValueError(f"{owner}: n_neighbors must be >= 3 (a plane needs three points), got {n_neighbors}")
-    return int(n_neighbors)
-
-
-def resolve_orientation(orientation, owner):
-    """Return (kernel mode, viewpoint as float64 (3,))."""
-    viewpoint = np.zeros(3, dtype=np.float64)
-    if orientation is None:
-        return ORIENT_NONE, viewpoint
-    if isinstance(orientation, str):
-        if orientation == "centroid":
-            return ORIENT_CENTROID, viewpoint
-        if orientation in ("origin", "viewpoint"):
-            return _ORIENT_VIEWPOINT, viewpoint
-        raise ValueError(
-            f"{owner}: orientation must be 'centroid', 'origin', 'viewpoint', None or a viewpoint "
-            f"of shape (3,), got {orientation!r}"
-        )
-    try:
-        vp = np.asarray(orientation)
-    except Exception:
-        vp = None
-    if vp is None or vp.dtype == object or not (np.issubdtype(vp.dtype, np.number) or vp.dtype == bool):
-        raise TypeError(
-            f"{owner}: orientation must be 'centroid', 'origin', 'viewpoint', None or a viewpoint "
-            f"of shape (3,), got {type(orientation).__name__}"
-        )
-    if np.iscomplexobj(vp) or vp.shape != (3,):
-        raise ValueError(f"{owner}: a viewpoint orientation must have shape (3,), got shape {vp.shape}")
-    vp = vp.astype(np.float64)
-    if not np.isfinite(vp).all():
-        raise ValueError(f"{owner}: the viewpoint contains NaN or infinite values")
-    return _ORIENT_VIEWPOINT, np.ascontiguousarray(vp)
 
 
 def _scaled_viewpoint(viewpoint, e):
@@ -84,12 +44,10 @@ def _orient_towards(points, normals, viewpoint):
     normals[dot < 0.0] *= -1.0
 
 
-def _other_method(method, method_params, owner):
-    """The module of a non-PCA estimator, or a ValueError."""
+def _check_other_method(method, method_params, owner):
+    """Raise unless ``method`` is "hough" (``method_params`` apply to it only)."""
     if method == "hough":
-        from . import _hough
-
-        return _hough
+        return
     if method == "pca":
         raise ValueError(f"{owner}: method_params apply to method='hough' only, got {method_params!r}")
     raise ValueError(f"{owner}: method must be 'pca' or 'hough', got {method!r}")
@@ -216,8 +174,8 @@ default="centroid"
     """
     owner = "estimate_normals"
     if method != "pca" or method_params is not None:
-        return _other_method(method, method_params, owner).hough_single(
-            points, n_neighbors, orientation, n_jobs, random_state, method_params, owner)
+        _check_other_method(method, method_params, owner)
+        return hough_single(points, n_neighbors, orientation, n_jobs, random_state, method_params, owner)
     if (type(points) is np.ndarray and points.ndim == 2 and points.shape[1] == 3 and points.shape[0] >= 3
             and points.dtype.kind == "f" and points.dtype.itemsize in (4, 8)):
         # Fast path for the common case, a float array already inside the
@@ -320,8 +278,9 @@ default="centroid"
     mode, viewpoint = resolve_orientation(orientation, owner)
     n_threads = check_n_jobs(n_jobs, owner=owner)
     if method != "pca" or method_params is not None:
-        return _other_method(method, method_params, owner).hough_batch(
-            pts, off, k, orientation, n_threads, random_state, method_params, owner)
+        _check_other_method(method, method_params, owner)
+        return hough_batch(pts, off, k, orientation, n_threads, random_state, method_params, owner,
+                           small_objects=estimate_normals_batch)
     sizes = np.diff(off)
     max_n = int(sizes.max())
     k = min(k, max(max_n, 1))
@@ -335,14 +294,14 @@ default="centroid"
     hi = np.ones((len(sizes), 3))  # (empty objects: inside the window)
     lo[full] = np.minimum.reduceat(pts, off[full], axis=0)
     hi[full] = np.maximum.reduceat(pts, off[full], axis=0)
-    exps = _scale_exponents(lo, hi, owner)
+    exps = scale_exponents(lo, hi, owner)
     orient_here = False
     if exps.any():
         pts = pts.copy()
         for j in np.flatnonzero(exps):
             np.ldexp(pts[off[j]:off[j + 1]], int(exps[j]), out=pts[off[j]:off[j + 1]])
         # a viewpoint off the origin moves with each object's own 2**e: oriented below
-        orient_here = mode == _ORIENT_VIEWPOINT and viewpoint.any()
+        orient_here = mode == ORIENT_VIEWPOINT and viewpoint.any()
     kmode = ORIENT_NONE if orient_here else mode
     n_objects = off.shape[0] - 1
     if n_objects == 1:

@@ -49,7 +49,7 @@ def _check_real(value, name, owner):
     return value
 
 
-def _check_non_negative(value, name, owner):
+def check_non_negative(value, name, owner):
     value = _check_real(value, name, owner)
     if value < 0:
         raise ValueError(f"{owner}: {name} must be >= 0, got {value!r}")
@@ -62,7 +62,7 @@ def _check_flag(value, name, owner):
     return bool(value)
 
 
-def _check_fraction(value, name, owner):
+def check_fraction(value, name, owner):
     value = _check_real(value, name, owner)
     if not 0.0 <= value < 1.0:
         raise ValueError(f"{owner}: {name} must be in [0, 1), got {value!r}")
@@ -94,7 +94,7 @@ def _n_removed(fraction, n_points):
     return min(int(np.floor(fraction * n_points + 0.5)), n_points - 2)
 
 
-def _random_unit_vector(rng):
+def random_unit_vector(rng):
     while True:
         vec = rng.normal(size=3)
         norm = np.sqrt(vec @ vec)
@@ -149,16 +149,16 @@ def add_gaussian_noise(cloud, sigma, *, relative_to="unit_cube", random_state=No
     """
     owner = "add_gaussian_noise"
     arr = check_point_cloud(cloud, owner=owner)
-    sigma = _check_non_negative(sigma, "sigma", owner)
+    sigma = check_non_negative(sigma, "sigma", owner)
     if relative_to not in ("unit_cube", "none"):
         raise ValueError(f"{owner}: relative_to must be 'unit_cube' or 'none', got {relative_to!r}")
     rng = check_random_state(random_state)
     if relative_to == "unit_cube":
         sigma = sigma * float(np.ptp(arr[:, :3], axis=0).max())
-    return _add_noise(arr, sigma, rng)
+    return add_noise_array(arr, sigma, rng)
 
 
-def _add_noise(arr, sigma, rng):
+def add_noise_array(arr, sigma, rng):
     """Kernel of :func:`add_gaussian_noise` on a validated array, in place."""
     if sigma > 0:
         arr[:, :3] += rng.normal(scale=sigma, size=(arr.shape[0], 3))
@@ -220,15 +220,15 @@ def occlude(cloud, fraction, *, direction=None, random_state=None):
     """
     owner = "occlude"
     arr = check_point_cloud(cloud, owner=owner)
-    fraction = _check_fraction(fraction, "fraction", owner)
+    fraction = check_fraction(fraction, "fraction", owner)
     if direction is None:
-        view = _random_unit_vector(check_random_state(random_state))
+        view = random_unit_vector(check_random_state(random_state))
     else:
         view = _check_vector(direction, "direction", owner)
-    return _occlude(arr, fraction, view)
+    return occlude_array(arr, fraction, view)
 
 
-def _occlude(arr, fraction, view):
+def occlude_array(arr, fraction, view):
     """Kernel of :func:`occlude` on a validated array and a unit direction."""
     n_remove = _n_removed(fraction, arr.shape[0])
     if n_remove == 0:
@@ -273,7 +273,7 @@ def random_dropout(cloud, fraction, *, random_state=None):
     """
     owner = "random_dropout"
     arr = check_point_cloud(cloud, owner=owner)
-    fraction = _check_fraction(fraction, "fraction", owner)
+    fraction = check_fraction(fraction, "fraction", owner)
     rng = check_random_state(random_state)
     n = arr.shape[0]
     n_remove = _n_removed(fraction, n)
@@ -365,7 +365,7 @@ def random_rotation_matrix(*, axis=None, random_state=None):
     )
 
 
-def _rotate(arr, rotation, center):
+def rotate_array(arr, rotation, center):
     out = arr.copy()
     if center == "centroid":
         origin = arr[:, :3].mean(axis=0)
@@ -418,7 +418,7 @@ def rotate(cloud, rotation, *, center="centroid"):
         raise ValueError(f"{owner}: rotation contains NaN or infinite values")
     if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
         raise ValueError(f"{owner}: rotation must be a proper rotation matrix (orthonormal, determinant +1)")
-    return _rotate(arr, rot, center)
+    return rotate_array(arr, rot, center)
 
 
 def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
@@ -462,7 +462,7 @@ def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
     if axis is not None:
         axis = _check_vector(axis, "axis", owner)
     rot = random_rotation_matrix(axis=axis, random_state=random_state)
-    return _rotate(arr, rot, center)
+    return rotate_array(arr, rot, center)
 
 
 # --------------------------------------------------------------------------- #

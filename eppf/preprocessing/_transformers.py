@@ -106,7 +106,7 @@ class GaussianNoise(_CloudTransformer):
 
     def _check_params(self):
         owner = type(self).__name__
-        _perturb._check_non_negative(self.sigma, "sigma", owner)
+        _perturb.check_non_negative(self.sigma, "sigma", owner)
         if self.relative_to not in ("unit_cube", "none"):
             raise ValueError(f"{owner}: relative_to must be 'unit_cube' or 'none', got {self.relative_to!r}")
 
@@ -144,7 +144,7 @@ class RandomDropout(_CloudTransformer):
         self.random_state = random_state
 
     def _check_params(self):
-        _perturb._check_fraction(self.fraction, "fraction", type(self).__name__)
+        _perturb.check_fraction(self.fraction, "fraction", type(self).__name__)
 
     def _apply(self, cloud, rng):
         return _perturb.random_dropout(cloud, self.fraction, random_state=rng)
@@ -186,7 +186,7 @@ class Occlusion(_CloudTransformer):
 
     def _check_params(self):
         owner = type(self).__name__
-        _perturb._check_fraction(self.fraction, "fraction", owner)
+        _perturb.check_fraction(self.fraction, "fraction", owner)
         if self.direction is not None:
             _perturb._check_vector(self.direction, "direction", owner)
 

@@ -13,6 +13,8 @@ import numbers
 
 import numpy as np
 
+from ._bounds import largest_sides
+
 __all__ = [
     "check_int", "check_n_jobs", "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds",
     "pack_point_clouds",
@@ -262,7 +264,7 @@ SAFE_MIN_EXP = -100
 SAFE_MAX_EXP = 100
 
 
-def _scale_exponents(lo, hi, owner=None, first_index=0, single=False):
+def scale_exponents(lo, hi, owner=None, first_index=0, single=False):
     """Power-of-two exponents that bring each cloud into the safe window.
 
     ``lo`` and ``hi`` are (n_objects, 3) per-axis minima and maxima. Returns
@@ -350,7 +352,7 @@ def condition_point_clouds(clouds, *, owner=None, single=False):
     else:
         lo = np.array([c[:, :3].min(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
         hi = np.array([c[:, :3].max(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
-    exps = _scale_exponents(lo, hi, owner, single=single)
+    exps = scale_exponents(lo, hi, owner, single=single)
     for k in np.flatnonzero(exps):
         _ldexp_inplace(clouds[k][:, :3], exps[k])
         if packed is not None:  # min and max commute with the (monotone) scaling
@@ -364,7 +366,7 @@ def _bounding_sides(clouds):
     packed = _stacked_view(clouds)
     if packed is not None:
         return (packed[3] - packed[2]).max(axis=1)
-    return np.array([np.ptp(c[:, :3], axis=0).max() for c in clouds], dtype=np.float64)
+    return largest_sides(clouds)
 
 
 def pack_point_clouds(clouds):

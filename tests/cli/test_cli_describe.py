@@ -235,16 +235,6 @@ def test_a_file_that_changes_between_the_passes_stops_describe_naming_it(tmp_pat
     assert not (tmp_path / "d.npy").exists()
 
 
-def test_largest_sides_of_a_chunk_are_those_of_np_ptp():
-    rng = np.random.default_rng(3)
-    clouds = [rng.normal(size=(n, k)) * s for n, k, s in ((5, 3, 1.0), (1, 6, 2.0), (40, 3, 1e-300), (7, 6, 1e5))]
-    clouds.append(np.array([[1e308, 0, 0], [-1e308, 1, 1]]))
-    with np.errstate(over="ignore"):
-        expected = [np.ptp(c[:, :3], axis=0).max() for c in clouds]
-    got = describe_module._largest_sides(clouds)
-    assert got.tolist() == expected and np.isinf(got[-1])
-
-
 # ---------------------------------------------------------------------------
 # Chunks described side by side (--n-jobs above 1)
 # ---------------------------------------------------------------------------

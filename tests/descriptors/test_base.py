@@ -1,8 +1,6 @@
 """The descriptors' common skeleton: one base class, one parameter-validation mechanism."""
 
-import ast
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +10,6 @@ from eppf.descriptors._base import PointCloudDescriptor
 from eppf.registry import DESCRIPTORS
 from eppf.utils._param_validation import IntTuple, InvalidParameterError, make_constraint
 
-PACKAGE = Path(descriptors.__file__).parent
 # Compositions of descriptors (DescriptorUnion and its presets) are meta-estimators over these,
 # checked in test_union.py; every descriptor proper is one of the classes below.
 CLASSES = sorted({DESCRIPTORS[name].estimator_class() for name in DESCRIPTORS} | {descriptors.GASDColorTransformer},
@@ -49,15 +46,6 @@ def test_every_parameter_is_validated_with_a_message_naming_estimator_and_parame
         est.set_params(**{name: bad})
         with pytest.raises(InvalidParameterError, match=re.escape(f"{cls.__name__}: {name} must be ")):
             est.transform([cloud])
-
-
-def test_no_descriptor_module_imports_a_private_name_of_a_sibling():
-    for path in sorted(PACKAGE.glob("*.py")):
-        tree = ast.parse(path.read_text())
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.level == 1:
-                private = [a.name for a in node.names if a.name.startswith("_")]
-                assert not private, f"{path.name} imports {private} from .{node.module}"
 
 
 def test_int_tuple_constraint():

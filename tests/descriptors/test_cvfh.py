@@ -328,7 +328,7 @@ def test_pcl_region_growing_hand_cases():
 
 
 def test_flann_radius_lists():
-    from eppf.descriptors._grsd_fast import radius_neighbors_flann
+    from eppf.descriptors._cvfh_fast import radius_neighbors_flann
 
     rng = np.random.default_rng(4)
     p = rng.uniform(size=(300, 3)).astype(np.float32)
@@ -354,7 +354,7 @@ def test_pcl_region_growing_on_two_planes():
     assert_allclose(refs[1], [0.0, -np.sin(PHI), np.cos(PHI)], atol=1e-6)
     # the same seed-by-seed growth in Python over the same neighbour lists
     from eppf.descriptors._cvfh import _radius_normals
-    from eppf.descriptors._grsd_fast import radius_neighbors_flann
+    from eppf.descriptors._cvfh_fast import radius_neighbors_flann
 
     p32 = pts.astype(np.float32)
     rn = _radius_normals(p32.astype(np.float64), 0.015).astype(np.float32)

@@ -11,20 +11,6 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
-
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
 
 # --------------------------------------------------------------------------- round trips
 
@@ -32,8 +18,8 @@ def _write(path, text, mode="w"):
 @pytest.mark.parametrize("ext", ["pcd", "ply", "xyz", "txt", "csv", "pts", "npy", "npz", "PCD", "Ply", "XYZ", "NPZ"])
 @pytest.mark.parametrize("binary", [True, False])
 @pytest.mark.parametrize("normals", [True, False])
-def test_point_cloud_round_trip(tmp_path, ext, binary, normals):
-    cloud = _cloud(normals=normals)
+def test_point_cloud_round_trip(make_cloud, tmp_path, ext, binary, normals):
+    cloud = make_cloud(normals=normals)
     path = tmp_path / f"cloud.{ext}"
     write_point_cloud(path, cloud, binary=binary)
     back = read_point_cloud(path)
@@ -44,8 +30,8 @@ def test_point_cloud_round_trip(tmp_path, ext, binary, normals):
 
 
 @pytest.mark.parametrize("ext", ["off", "obj", "ply", "stl", "OFF", "Obj", "PLY", "STL"])
-def test_mesh_round_trip(tmp_path, ext):
-    vertices = _cloud(normals=False, n=6)
+def test_mesh_round_trip(make_cloud, tmp_path, ext):
+    vertices = make_cloud(normals=False, n=6)
     faces = np.array([[0, 1, 2], [2, 3, 4], [4, 5, 0]])
     path = tmp_path / f"mesh.{ext}"
     write_mesh(path, vertices, faces)
@@ -58,12 +44,12 @@ def test_mesh_round_trip(tmp_path, ext):
     assert_array_equal(mesh.faces, faces)
 
 
-def test_normals_false_drops_and_true_requires(tmp_path):
+def test_normals_false_drops_and_true_requires(make_cloud, tmp_path):
     path = tmp_path / "c.npy"
-    write_point_cloud(path, _cloud())
+    write_point_cloud(path, make_cloud())
     assert read_point_cloud(path, normals=False).shape == (40, 3)
     path3 = tmp_path / "c3.npy"
-    write_point_cloud(path3, _cloud(normals=False))
+    write_point_cloud(path3, make_cloud(normals=False))
     with pytest.raises(ValueError, match="has no normals, but normals=True"):
         read_point_cloud(path3, normals=True)
 
@@ -73,8 +59,8 @@ def test_normals_false_drops_and_true_requires(tmp_path):
 
 
 @pytest.mark.parametrize("ext", ["pcd", "xyz", "pts", "xyzn", "npy", "npz", "off", "obj", "ply", "stl"])
-def test_empty_file(tmp_path, ext):
-    path = _write(tmp_path / f"empty.{ext}", "")
+def test_empty_file(write_file, tmp_path, ext):
+    path = write_file(tmp_path / f"empty.{ext}", "")
     readers = [read_point_cloud] + ([read_mesh] if ext in ("off", "obj", "ply", "stl") else [])
     for reader in readers:
         with pytest.raises(FileFormatError, match=re.escape(f"{path!r} is empty")):
@@ -228,8 +214,8 @@ def test_mesh_vertices_mode(tmp_path, ext):
     assert_allclose(read_point_cloud(path, mesh="vertices"), v, rtol=1e-6 if ext == "ply" else 0)
 
 
-def test_mesh_without_faces(tmp_path):
-    path = _write(tmp_path / "p.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n")
+def test_mesh_without_faces(write_file, tmp_path):
+    path = write_file(tmp_path / "p.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n")
     with pytest.raises(FileFormatError, match=re.escape("has no faces, so it cannot be sampled; pass mesh='vertices'")):
         read_point_cloud(path)
     assert read_point_cloud(path, mesh="vertices").shape == (3, 3)
@@ -238,17 +224,17 @@ def test_mesh_without_faces(tmp_path):
     assert_allclose(read_point_cloud(tmp_path / "c.ply", n_points=None), np.eye(3))
 
 
-def test_degenerate_mesh_error_names_the_file(tmp_path):
-    path = _write(tmp_path / "flat.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n")
+def test_degenerate_mesh_error_names_the_file(write_file, tmp_path):
+    path = write_file(tmp_path / "flat.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n")
     with pytest.raises(FileFormatError, match=r"flat\.off'.*zero total area|flat\.off'.*area"):
         read_point_cloud(path)
 
 
-def test_point_files_resampled_like_resample(tmp_path):
+def test_point_files_resampled_like_resample(make_cloud, tmp_path):
     from eppf.utils._sampling import resample
     from eppf.utils._sampling import object_rng
 
-    cloud = _cloud(n=50)
+    cloud = make_cloud(n=50)
     write_point_cloud(tmp_path / "c.npy", cloud)
     for n in (20, 80):
         assert_array_equal(read_point_cloud(tmp_path / "c.npy", n_points=n, random_state=77),

@@ -10,20 +10,6 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
-
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
 
 def test_npz_data_set_points_to_load_npz(tmp_path):
     path = tmp_path / "set.npz"

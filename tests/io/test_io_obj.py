@@ -10,27 +10,13 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
 
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
-
-def test_obj_index_forms(tmp_path):
+def test_obj_index_forms(write_file, tmp_path):
     text = (
         "# cube corner\nmtllib x.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
         "f 1/1/1 2/1/1 3/1/1\nf 1//1 3//1 4//1\nf -4 -3 -2 -1\n"
     )
-    mesh = read_mesh(_write(tmp_path / "m.obj", text))
+    mesh = read_mesh(write_file(tmp_path / "m.obj", text))
     assert_array_equal(mesh.faces, [[0, 1, 2], [0, 2, 3], [0, 1, 2], [0, 2, 3]])
 
 
@@ -44,15 +30,15 @@ def test_obj_index_forms(tmp_path):
         ("# nothing\nf 1 2 3\n", "holds no vertices"),
     ],
 )
-def test_obj_malformed(tmp_path, text, msg):
-    path = _write(tmp_path / "bad.obj", text)
+def test_obj_malformed(write_file, tmp_path, text, msg):
+    path = write_file(tmp_path / "bad.obj", text)
     with pytest.raises(FileFormatError, match=re.escape(msg)):
         read_mesh(path)
 
 
 
-def test_obj_polygon_fan_and_sampling(tmp_path):
-    path = _write(tmp_path / "q.OBJ", "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4\n")
+def test_obj_polygon_fan_and_sampling(write_file, tmp_path):
+    path = write_file(tmp_path / "q.OBJ", "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3 4\n")
     mesh = read_mesh(path)
     assert_array_equal(mesh.faces, [[0, 1, 2], [0, 2, 3]])
     cloud = read_point_cloud(path, n_points=400, random_state=5)

@@ -10,20 +10,6 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
-
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
 
 # --------------------------------------------------------------------------- OFF / OBJ fixtures
 
@@ -42,8 +28,8 @@ SQUARE = "0 0 0\n1 0 0\n1 1 0\n0 1 0\n"
         + "3 0 1 2 1 1 1\n3 0 2 3 1 1 1\n",
     ],
 )
-def test_off_variants(tmp_path, text):
-    mesh = read_mesh(_write(tmp_path / "m.off", text))
+def test_off_variants(write_file, tmp_path, text):
+    mesh = read_mesh(write_file(tmp_path / "m.off", text))
     assert_allclose(mesh.vertices, np.loadtxt(SQUARE.splitlines()))
     assert_array_equal(mesh.faces, [[0, 1, 2], [0, 2, 3]])
     assert mesh.faces.dtype == np.int64
@@ -65,8 +51,8 @@ def test_off_variants(tmp_path, text):
         ("OFF\n0 0 0\n", "line 2: the mesh has no vertices"),
     ],
 )
-def test_off_malformed(tmp_path, text, msg):
-    path = _write(tmp_path / "bad.off", text)
+def test_off_malformed(write_file, tmp_path, text, msg):
+    path = write_file(tmp_path / "bad.off", text)
     with pytest.raises(FileFormatError, match=re.escape(msg)) as info:
         read_mesh(path)
     assert "bad.off" in str(info.value)
@@ -85,7 +71,7 @@ def test_off_malformed(tmp_path, text, msg):
         ("OFF\n4 2 0 # counts\n" + SQUARE + "3 0 1 2\n3 0 2 3\n", False),
     ],
 )
-def test_off_compiled_path_matches_general_reader(tmp_path, text, plain):
+def test_off_compiled_path_matches_general_reader(write_file, tmp_path, text, plain):
     from eppf.io import _off as io
 
     if io._parse_off_body is None:
@@ -94,7 +80,7 @@ def test_off_compiled_path_matches_general_reader(tmp_path, text, plain):
     fast = io._read_off_compiled(data)
     assert (fast is not None) == plain
     # the reference: the line-by-line reader, with both fast paths switched off
-    path = _write(tmp_path / "m.off", text)
+    path = write_file(tmp_path / "m.off", text)
     ref_parser, ref_fast = io._parse_off_body, io._read_off_fast
     try:
         io._parse_off_body, io._read_off_fast = None, lambda text: None
@@ -149,22 +135,22 @@ def test_off_compiled_path_random_mesh(tmp_path):
         ("OFF\n3 1 0\n0 0 0\n1e999 0 0\n0 1 0\n3 0 1 2\n", "is not finite"),
     ],
 )
-def test_off_hostile(tmp_path, text, msg):
-    path = _write(tmp_path / "h.off", text)
+def test_off_hostile(write_file, tmp_path, text, msg):
+    path = write_file(tmp_path / "h.off", text)
     for reader in (read_mesh, read_point_cloud):
         with pytest.raises(FileFormatError, match=re.escape(msg)) as info:
             reader(path)
         assert "h.off" in str(info.value)
 
 
-def test_off_nan_vertex_rejected_on_every_path(tmp_path):
+def test_off_nan_vertex_rejected_on_every_path(write_file, tmp_path):
     # the compiled parser leaves NaN to the general reader, which names the line
     from eppf.io import _off
 
     text = "OFF\n4 2 0\n0 0 0\n1 0 0\nnan 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n"
     assert _off._read_off_compiled(text.encode()) is None
     with pytest.raises(FileFormatError, match=re.escape("line 5: vertex 2 is not finite")):
-        read_mesh(_write(tmp_path / "n.off", text))
+        read_mesh(write_file(tmp_path / "n.off", text))
 
 
 def test_off_counts_checked_before_the_compiled_parser_allocates():

@@ -10,20 +10,6 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
-
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
 
 # --------------------------------------------------------------------------- PCD fixtures
 
@@ -41,9 +27,9 @@ DATA {kind}
 """
 
 
-def test_pcd_ascii_extra_fields(tmp_path):
+def test_pcd_ascii_extra_fields(write_file, tmp_path):
     body = "1 2 3 4278190080 0 0 1\n-1.5 0.25 7 0 1 0 0\nnan nan nan 0 0 0 1\n"
-    path = _write(tmp_path / "a.pcd", PCD_HEAD.format(n=3, kind="ascii") + body)
+    path = write_file(tmp_path / "a.pcd", PCD_HEAD.format(n=3, kind="ascii") + body)
     cloud = read_point_cloud(path)
     # the NaN point (PCL's marker of an invalid point) is dropped
     assert_allclose(cloud, [[1, 2, 3, 0, 0, 1], [-1.5, 0.25, 7, 1, 0, 0]])
@@ -116,9 +102,9 @@ def test_pcd_binary_compressed_corrupt_reference(tmp_path):
         read_point_cloud(path)
 
 
-def test_pcd_truncated_binary_names_byte(tmp_path):
+def test_pcd_truncated_binary_names_byte(make_cloud, tmp_path):
     path = tmp_path / "t.pcd"
-    write_point_cloud(path, _cloud(n=10), binary=True)
+    write_point_cloud(path, make_cloud(n=10), binary=True)
     data = path.read_bytes()
     path.write_bytes(data[:-5])
     size = len(data) - 5
@@ -127,16 +113,16 @@ def test_pcd_truncated_binary_names_byte(tmp_path):
         read_point_cloud(path)
 
 
-def test_pcd_truncated_ascii_names_line(tmp_path):
+def test_pcd_truncated_ascii_names_line(write_file, tmp_path):
     body = "1 2 3 0 0 0 1\n"
-    path = _write(tmp_path / "t.pcd", PCD_HEAD.format(n=3, kind="ascii") + body)
+    path = write_file(tmp_path / "t.pcd", PCD_HEAD.format(n=3, kind="ascii") + body)
     with pytest.raises(ValueError, match=re.escape("line 12: file ends after 1 of 3 points (truncated)")):
         read_point_cloud(path)
 
 
-def test_pcd_malformed_number_names_line(tmp_path):
+def test_pcd_malformed_number_names_line(write_file, tmp_path):
     body = "1 2 3 0 0 0 1\n1 2 x 0 0 0 1\n"
-    path = _write(tmp_path / "m.pcd", PCD_HEAD.format(n=2, kind="ascii") + body)
+    path = write_file(tmp_path / "m.pcd", PCD_HEAD.format(n=2, kind="ascii") + body)
     with pytest.raises(ValueError, match=re.escape(f"{path!r} line 13: malformed number in point 1")):
         read_point_cloud(path)
 
@@ -151,8 +137,8 @@ def test_pcd_malformed_number_names_line(tmp_path):
         ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F Q\nPOINTS 1\nDATA ascii\n", "line 3: unsupported TYPE/SIZE Q/4"),
     ],
 )
-def test_pcd_malformed_header(tmp_path, header, msg):
-    path = _write(tmp_path / "h.pcd", header)
+def test_pcd_malformed_header(write_file, tmp_path, header, msg):
+    path = write_file(tmp_path / "h.pcd", header)
     with pytest.raises(ValueError, match=re.escape(msg)):
         read_point_cloud(path)
 
@@ -281,10 +267,10 @@ def test_pcd_hostile_headers(tmp_path, header, body, msg):
     assert "h.pcd" in str(info.value)
 
 
-def test_pcd_ascii_fast_path_matches_general_reader(tmp_path):
+def test_pcd_ascii_fast_path_matches_general_reader(make_cloud, tmp_path):
     from eppf.io import _pcd
 
-    cloud = _cloud(n=200)
+    cloud = make_cloud(n=200)
     path = tmp_path / "a.pcd"
     write_point_cloud(path, cloud, binary=False)
     fast = read_point_cloud(path)

@@ -10,32 +10,18 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
-
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
 
 # --------------------------------------------------------------------------- PLY fixtures
 
 
-def test_ply_ascii_fixture_with_quads_and_normals(tmp_path):
+def test_ply_ascii_fixture_with_quads_and_normals(write_file, tmp_path):
     text = (
         "ply\nformat ascii 1.0\ncomment by hand\nelement vertex 4\nproperty float x\nproperty float y\n"
         "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
         "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
         "0 0 0 0 0 1\n1 0 0 0 0 1\n1 1 0 0 0 1\n0 1 0 0 0 1\n4 0 1 2 3\n"
     )
-    path = _write(tmp_path / "q.ply", text)
+    path = write_file(tmp_path / "q.ply", text)
     # a PLY with faces is a mesh: read_point_cloud samples it unless mesh="vertices"
     assert_allclose(read_point_cloud(path, mesh="vertices")[:, 3:], np.tile([0, 0, 1], (4, 1)))
     assert_array_equal(read_mesh(path).faces, [[0, 1, 2], [0, 2, 3]])
@@ -43,16 +29,16 @@ def test_ply_ascii_fixture_with_quads_and_normals(tmp_path):
     assert sampled.shape == (300, 6) and np.all((sampled[:, :2] >= 0) & (sampled[:, :2] <= 1))
 
 
-def test_ply_truncated_binary(tmp_path):
+def test_ply_truncated_binary(make_cloud, tmp_path):
     path = tmp_path / "t.ply"
-    write_point_cloud(path, _cloud(n=10), binary=True)
+    write_point_cloud(path, make_cloud(n=10), binary=True)
     path.write_bytes(path.read_bytes()[:-7])
     with pytest.raises(FileFormatError, match=r"t\.ply' byte \d+: malformed PLY element 'vertex', row 9"):
         read_point_cloud(path)
 
 
-def test_ply_malformed_header(tmp_path):
-    path = _write(tmp_path / "h.ply", "ply\nformat ascii 1.0\nelement vertex two\nend_header\n")
+def test_ply_malformed_header(write_file, tmp_path):
+    path = write_file(tmp_path / "h.ply", "ply\nformat ascii 1.0\nelement vertex two\nend_header\n")
     with pytest.raises(ValueError, match=r"h\.ply' line 3: malformed PLY header"):
         read_point_cloud(path)
 
@@ -109,9 +95,9 @@ def test_ply_mixed_polygons_match_plyfile(tmp_path, fmt):
 
 @pytest.mark.parametrize("binary", [True, False])
 @pytest.mark.parametrize("normals", [True, False])
-def test_ply_written_files_read_by_plyfile(tmp_path, binary, normals):
+def test_ply_written_files_read_by_plyfile(make_cloud, tmp_path, binary, normals):
     plyfile = pytest.importorskip("plyfile")
-    cloud = _cloud(n=25, normals=normals)
+    cloud = make_cloud(n=25, normals=normals)
     path = tmp_path / "c.ply"
     write_point_cloud(path, cloud, binary=binary)
     ref = plyfile.PlyData.read(str(path))
@@ -124,11 +110,11 @@ def test_ply_written_files_read_by_plyfile(tmp_path, binary, normals):
     assert_array_equal(read_mesh(tmp_path / "q.ply").faces, [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
 
 
-def test_ply_reads_without_plyfile(tmp_path, monkeypatch):
+def test_ply_reads_without_plyfile(make_cloud, tmp_path, monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "plyfile", None)  # makes `import plyfile` fail
-    write_point_cloud(tmp_path / "c.ply", _cloud(n=5))
+    write_point_cloud(tmp_path / "c.ply", make_cloud(n=5))
     assert read_point_cloud(tmp_path / "c.ply").shape == (5, 6)
     write_mesh(tmp_path / "m.ply", np.eye(3), [[0, 1, 2]], binary=False)
     assert_array_equal(read_mesh(tmp_path / "m.ply").faces, [[0, 1, 2]])
@@ -225,12 +211,12 @@ def test_ply_polygon_longer_than_a_uchar_count(tmp_path, binary):
     assert_array_equal(mesh.faces, [[0, k, k + 1] for k in range(1, 299)])
 
 
-def test_ply_cached_header_still_checks_every_file_against_its_own_size(tmp_path):
+def test_ply_cached_header_still_checks_every_file_against_its_own_size(make_cloud, tmp_path):
     # many files of one folder share a header, parsed once: the checks of each file's body stay its own
     from eppf.io import _ply
 
     _ply._HEADERS.clear()
-    cloud = _cloud(30)
+    cloud = make_cloud(30)
     write_point_cloud(tmp_path / "a.ply", cloud)
     data = (tmp_path / "a.ply").read_bytes()
     assert_array_equal(read_point_cloud(tmp_path / "a.ply"), cloud.astype(np.float32).astype(np.float64))
@@ -251,11 +237,11 @@ def test_ply_cached_header_still_checks_every_file_against_its_own_size(tmp_path
     assert all(b"floatt" not in key for key in _ply._HEADERS)
 
 
-def test_ply_header_cache_is_bounded(tmp_path):
+def test_ply_header_cache_is_bounded(make_cloud, tmp_path):
     from eppf.io import _ply
 
     _ply._HEADERS.clear()
-    cloud = _cloud(5, normals=False)
+    cloud = make_cloud(5, normals=False)
     for i in range(_ply._HEADERS_MAX + 10):
         path = tmp_path / f"{i}.ply"
         write_point_cloud(path, cloud)
@@ -283,10 +269,10 @@ _XYZ = ("x", "y", "z")
 @pytest.mark.parametrize("endian", ["<", ">"])
 @pytest.mark.parametrize("typ", ["float", "double"])
 @pytest.mark.parametrize("names", [_XYZ, _XYZ + ("nx", "ny", "nz"), _XYZ + ("normal_x", "normal_y", "normal_z")])
-def test_ply_plain_vertex_block_is_read_as_the_general_path_reads_it(tmp_path, monkeypatch, endian, typ, names):
+def test_ply_plain_vertex_block_is_read_as_the_general_path_reads_it(make_cloud, tmp_path, monkeypatch, endian, typ, names):
     from eppf.io import _ply
 
-    rows = _cloud(300, normals=True, seed=4)[:, :len(names)] * 1e3
+    rows = make_cloud(300, normals=True, seed=4)[:, :len(names)] * 1e3
     rows[5, 1], rows[9, 2] = np.nan, -np.inf  # dropped rows
     path = _binary_ply(tmp_path / "v.ply", [(typ, n) for n in names], rows, endian, more=b"trailing bytes")
     data = path.read_bytes()
@@ -321,10 +307,10 @@ def test_ply_other_vertex_layouts_take_the_general_path(tmp_path, props):
     assert_array_equal(read_point_cloud(path), rows[:, [cols.index(c) for c in _XYZ]])
 
 
-def test_ply_plain_layout_truncated_or_with_faces_is_left_to_the_general_path(tmp_path):
+def test_ply_plain_layout_truncated_or_with_faces_is_left_to_the_general_path(make_cloud, tmp_path):
     from eppf.io import _ply
 
-    rows = _cloud(50, normals=False)
+    rows = make_cloud(50, normals=False)
     path = _binary_ply(tmp_path / "t.ply", [("float", n) for n in _XYZ], rows)
     path.write_bytes(path.read_bytes()[:-4])
     data = path.read_bytes()

@@ -10,39 +10,25 @@ from numpy.testing import assert_allclose, assert_array_equal
 from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
-def _cloud(n=40, normals=True, seed=0):
-    rng = np.random.RandomState(seed)
-    xyz = rng.uniform(-2, 3, size=(n, 3))
-    if not normals:
-        return xyz
-    nrm = rng.normal(size=(n, 3))
-    return np.hstack([xyz, nrm / np.linalg.norm(nrm, axis=1, keepdims=True)])
-
-
-def _write(path, text, mode="w"):
-    with open(path, mode) as fh:
-        fh.write(text)
-    return str(path)
-
 
 # --------------------------------------------------------------------------- text fixtures
 
 
-def test_xyz_header_and_separators(tmp_path):
-    path = _write(tmp_path / "p.csv", "x,y,z\n1,2,3\n# comment\n\n4,5,6\n")
+def test_xyz_header_and_separators(write_file, tmp_path):
+    path = write_file(tmp_path / "p.csv", "x,y,z\n1,2,3\n# comment\n\n4,5,6\n")
     assert_allclose(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
 
 
-def test_xyz_colour_columns_are_not_normals(tmp_path):
+def test_xyz_colour_columns_are_not_normals(write_file, tmp_path):
     # S3DIS-style x y z r g b
-    path = _write(tmp_path / "p.txt", "1 2 3 255 0 12\n4 5 6 0 128 7\n")
+    path = write_file(tmp_path / "p.txt", "1 2 3 255 0 12\n4 5 6 0 128 7\n")
     assert read_point_cloud(path).shape == (2, 3)
     assert_allclose(read_point_cloud(path, normals=True)[:, 3:], [[255, 0, 12], [0, 128, 7]])
 
 
-def test_xyz_unit_normal_columns_are_normals(tmp_path):
+def test_xyz_unit_normal_columns_are_normals(write_file, tmp_path):
     # modelnet40_normal_resampled-style x,y,z,nx,ny,nz
-    path = _write(tmp_path / "p.txt", "1,2,3,0,0,1\n4,5,6,0.6,0.8,0\n")
+    path = write_file(tmp_path / "p.txt", "1,2,3,0,0,1\n4,5,6,0.6,0.8,0\n")
     assert_allclose(read_point_cloud(path), [[1, 2, 3, 0, 0, 1], [4, 5, 6, 0.6, 0.8, 0]])
 
 
@@ -55,15 +41,15 @@ def test_xyz_unit_normal_columns_are_normals(tmp_path):
         ("# only a comment\n", "holds no points (only blank or comment lines)"),
     ],
 )
-def test_xyz_malformed(tmp_path, text, msg):
-    path = _write(tmp_path / "bad.xyz", text)
+def test_xyz_malformed(write_file, tmp_path, text, msg):
+    path = write_file(tmp_path / "bad.xyz", text)
     with pytest.raises(FileFormatError, match=re.escape(msg)):
         read_point_cloud(path)
 
 
 
 @pytest.mark.parametrize("token", ["0x10", "-0x1p3", "+0X1", "+nan(1)", "-inf(2)"])
-def test_text_compiled_path_refuses_what_python_float_refuses(tmp_path, token):
+def test_text_compiled_path_refuses_what_python_float_refuses(write_file, tmp_path, token):
     # strtod takes hexadecimal and nan(...) tokens; Python's float, hence the general reader, does not.
     # Both paths must read a file the same way, so the compiled one hands such a table back.
     from eppf.io import _xyz as io
@@ -71,7 +57,7 @@ def test_text_compiled_path_refuses_what_python_float_refuses(tmp_path, token):
     text = f"0 0 0\n1 0 0\n{token} 1 0\n0 0 1\n"
     if io._parse_float_table is not None:
         assert io._xyz_compiled(text.encode()) is None
-    path = _write(tmp_path / "hex.xyz", text)
+    path = write_file(tmp_path / "hex.xyz", text)
     with pytest.raises(FileFormatError, match=re.escape("line 3: malformed number in point 2")):
         read_point_cloud(path)
 
@@ -87,13 +73,13 @@ def test_text_compiled_path_refuses_what_python_float_refuses(tmp_path, token):
         ("1 2 3 # a comment\n4 5 6\n", False),
     ],
 )
-def test_text_compiled_path_matches_general_reader(tmp_path, text, plain):
+def test_text_compiled_path_matches_general_reader(write_file, tmp_path, text, plain):
     from eppf.io import _xyz as io
 
     if io._parse_float_table is None:
         pytest.skip("eppf.io._xyz_fast is not compiled")
     assert (io._xyz_compiled(text.encode()) is not None) == plain
-    path = _write(tmp_path / "p.xyz", text)
+    path = write_file(tmp_path / "p.xyz", text)
     saved = io._parse_float_table
     try:
         io._parse_float_table = None
@@ -120,14 +106,14 @@ def test_text_compiled_path_random_table(tmp_path):
 
 
 @pytest.mark.parametrize("count_line", [True, False])
-def test_pts_with_and_without_count_line(tmp_path, count_line):
+def test_pts_with_and_without_count_line(write_file, tmp_path, count_line):
     rows = "1 2 3 0.5 10 20 30\n4 5 6 0.1 40 50 60\n7 8 9 0.9 70 80 90\n"
-    path = _write(tmp_path / "p.pts", ("3\n" if count_line else "") + rows)
+    path = write_file(tmp_path / "p.pts", ("3\n" if count_line else "") + rows)
     assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
 
 
-def test_pts_count_line_without_final_newline_and_xyz_only(tmp_path):
-    path = _write(tmp_path / "p.PTS", "\n2\n1 2 3\n4 5 6")
+def test_pts_count_line_without_final_newline_and_xyz_only(write_file, tmp_path):
+    path = write_file(tmp_path / "p.PTS", "\n2\n1 2 3\n4 5 6")
     assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
 
 
@@ -141,38 +127,38 @@ def test_pts_count_line_without_final_newline_and_xyz_only(tmp_path):
         ("1e308\n1 2 3\n", "expected 1 values in point 1, got 3"),
     ],
 )
-def test_pts_bad_count_line(tmp_path, text, msg):
-    path = _write(tmp_path / "bad.pts", text)
+def test_pts_bad_count_line(write_file, tmp_path, text, msg):
+    path = write_file(tmp_path / "bad.pts", text)
     with pytest.raises(FileFormatError, match=re.escape(msg)) as info:
         read_point_cloud(path)
     assert "bad.pts" in str(info.value)
 
 
-def test_xyzn_always_normals_and_round_trip(tmp_path):
+def test_xyzn_always_normals_and_round_trip(make_cloud, write_file, tmp_path):
     # normals need not be unit length in an .xyzn file: the format says they are normals
-    path = _write(tmp_path / "p.xyzn", "1 2 3 0 0 2\n4 5 6 0 3 0\n")
+    path = write_file(tmp_path / "p.xyzn", "1 2 3 0 0 2\n4 5 6 0 3 0\n")
     assert_array_equal(read_point_cloud(path), [[1, 2, 3, 0, 0, 2], [4, 5, 6, 0, 3, 0]])
     assert read_point_cloud(path, normals=False).shape == (2, 3)
-    cloud = _cloud(n=20)
+    cloud = make_cloud(n=20)
     write_point_cloud(tmp_path / "c.xyzn", cloud)
     assert_array_equal(read_point_cloud(tmp_path / "c.xyzn"), cloud)
     with pytest.raises(ValueError, match="an .xyzn file holds normals"):
         write_point_cloud(tmp_path / "d.xyzn", cloud[:, :3])
 
 
-def test_xyzrgb_colour_is_ignored(tmp_path):
+def test_xyzrgb_colour_is_ignored(make_cloud, write_file, tmp_path):
     # unit-length colours must not turn into normals
-    path = _write(tmp_path / "p.XYZRGB", "1 2 3 1 0 0\n4 5 6 0 1 0\n")
+    path = write_file(tmp_path / "p.XYZRGB", "1 2 3 1 0 0\n4 5 6 0 1 0\n")
     assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
     with pytest.raises(FileFormatError, match="has no normals, but normals=True"):
         read_point_cloud(path, normals=True)
     with pytest.raises(ValueError, match="does not write xyzrgb files"):
-        write_point_cloud(tmp_path / "c.xyzrgb", _cloud(n=3))
+        write_point_cloud(tmp_path / "c.xyzrgb", make_cloud(n=3))
 
 
 @pytest.mark.parametrize("ext", ["xyzn", "xyzrgb"])
-def test_six_column_formats_need_six_columns(tmp_path, ext):
-    path = _write(tmp_path / f"p.{ext}", "1 2 3\n4 5 6\n")
+def test_six_column_formats_need_six_columns(write_file, tmp_path, ext):
+    path = write_file(tmp_path / f"p.{ext}", "1 2 3\n4 5 6\n")
     with pytest.raises(FileFormatError, match=re.escape(f"line 1: a .{ext} row holds 6 values, got 3")):
         read_point_cloud(path)
 

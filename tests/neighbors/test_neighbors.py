@@ -148,11 +148,11 @@ def test_distances_n_jobs_and_dtypes():
         ({"X": [[1.0]], "floor": 0.0}, ValueError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got 0.0"),
         ({"X": [[1.0]], "floor": "min"}, ValueError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got 'min'"),
         ({"X": [[1.0]], "floor": np.nan}, ValueError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got nan"),
-        ({"X": [[1.0]], "floor": None}, TypeError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got NoneType"),
+        ({"X": [[1.0]], "floor": None}, TypeError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got None"),
         ({"X": [[1.0]], "chunk_size": 0}, ValueError, "symmetric_kl_distances: chunk_size must be a positive int or None, got 0"),
-        ({"X": [[1.0]], "chunk_size": 2.5}, TypeError, "symmetric_kl_distances: chunk_size must be a positive int or None, got float"),
-        ({"X": [[1.0]], "renormalize": "yes"}, TypeError, "symmetric_kl_distances: renormalize must be a bool, got str"),
-        ({"X": [[1.0]], "n_jobs": 0}, ValueError, "symmetric_kl_distances: n_jobs == 0 has no meaning; use None, a positive int or -1"),
+        ({"X": [[1.0]], "chunk_size": 2.5}, TypeError, "symmetric_kl_distances: chunk_size must be a positive int or None, got 2.5"),
+        ({"X": [[1.0]], "renormalize": "yes"}, TypeError, "symmetric_kl_distances: renormalize must be a bool, got 'yes'"),
+        ({"X": [[1.0]], "n_jobs": 0}, ValueError, "symmetric_kl_distances: n_jobs must be None or a non-zero int (-1: all cores), got 0"),
         ({"X": [[1e308, 1.0]]}, ValueError, "symmetric_kl_distances: histogram values are too large for the KL divergence (overflow in x ln x)"),
     ],
 )
@@ -354,13 +354,13 @@ def _fitted():
     "make, call, err, msg",
     [
         (lambda: KLNearestNeighbors(n_neighbors=0), lambda c: c.fit([[1.0, 0.0]], [0]), ValueError, "KLNearestNeighbors: n_neighbors must be a positive int, got 0"),
-        (lambda: KLNearestNeighbors(n_neighbors=1.5), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: n_neighbors must be a positive int, got float"),
+        (lambda: KLNearestNeighbors(n_neighbors=1.5), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: n_neighbors must be a positive int, got 1.5"),
         (lambda: KLNearestNeighbors(weights="gaussian"), lambda c: c.fit([[1.0, 0.0]], [0]), ValueError, "KLNearestNeighbors: weights must be 'uniform' or 'distance', got 'gaussian'"),
         (lambda: KLNearestNeighbors(floor=-1.0), lambda c: c.fit([[1.0, 0.0]], [0]), ValueError, "KLNearestNeighbors: floor must be 'auto' or a positive float, got -1.0"),
-        (lambda: KLNearestNeighbors(floor=[0.1]), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: floor must be 'auto' or a positive float, got list"),
+        (lambda: KLNearestNeighbors(floor=[0.1]), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: floor must be 'auto' or a positive float, got [0.1]"),
         (lambda: KLNearestNeighbors(chunk_size=-3), lambda c: c.fit([[1.0, 0.0]], [0]), ValueError, "KLNearestNeighbors: chunk_size must be a positive int or None, got -3"),
-        (lambda: KLNearestNeighbors(renormalize=None), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: renormalize must be a bool, got NoneType"),
-        (lambda: KLNearestNeighbors(n_jobs="all"), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: n_jobs must be an int or None, got str"),
+        (lambda: KLNearestNeighbors(renormalize=None), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: renormalize must be a bool, got None"),
+        (lambda: KLNearestNeighbors(n_jobs="all"), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: n_jobs must be None or a non-zero int (-1: all cores), got 'all'"),
         (KLNearestNeighbors, lambda c: c.fit([[1.0, -0.5]], [0]), ValueError, "Negative values in data passed to KLNearestNeighbors (X): histograms must be non-negative, found minimum -0.5"),
         (KLNearestNeighbors, lambda c: c.fit([[0.0, 0.0]], [0]), ValueError, "KLNearestNeighbors: cannot learn floor='auto' because X has no positive value; pass floor as a positive float"),
         (KLNearestNeighbors, lambda c: c.fit([[1.0, np.nan]], [0]), ValueError, "KLNearestNeighbors: Input X contains NaN"),
@@ -373,7 +373,7 @@ def _fitted():
         (_fitted, lambda c: c.kneighbors([[0.5, 0.5]], n_neighbors=3), ValueError, "KLNearestNeighbors: n_neighbors=3 is more than the 2 training sample(s) available"),
         (_fitted, lambda c: c.kneighbors(n_neighbors=2), ValueError, "KLNearestNeighbors: n_neighbors=2 is more than the 1 training sample(s) available excluding each query itself"),
         (_fitted, lambda c: c.kneighbors(n_neighbors=0), ValueError, "KLNearestNeighbors: n_neighbors must be a positive int, got 0"),
-        (_fitted, lambda c: c.kneighbors(n_neighbors="2"), TypeError, "KLNearestNeighbors: n_neighbors must be a positive int, got str"),
+        (_fitted, lambda c: c.kneighbors(n_neighbors="2"), TypeError, "KLNearestNeighbors: n_neighbors must be a positive int, got '2'"),
     ],
 )
 def test_estimator_errors(make, call, err, msg):
@@ -423,19 +423,19 @@ def _force_small_blocks(monkeypatch):
     import eppf.neighbors._kl as kl
 
     monkeypatch.setattr(kl, "_LOO_BLOCK", 16)
-    monkeypatch.setattr(kl, "_BLOCK_ENTRIES", 16 * 70)  # 16-row blocks against 70 references
+    monkeypatch.setattr(kl, "BLOCK_ENTRIES", 16 * 70)  # 16-row blocks against 70 references
 
 
 def test_joblib_backend_is_detected():
     from joblib import parallel_config
 
-    from eppf.neighbors._kl import _joblib_backend_is_set
+    from eppf.utils._blas import joblib_backend_is_set
 
-    assert not _joblib_backend_is_set()
+    assert not joblib_backend_is_set()
     with parallel_config(backend="threading", n_jobs=2):
-        assert _joblib_backend_is_set()
+        assert joblib_backend_is_set()
     with parallel_config(n_jobs=2):  # no backend named: the thread pool of n_jobs stays in charge
-        assert not _joblib_backend_is_set()
+        assert not joblib_backend_is_set()
 
 
 def _local_and_remote_results(X, Q, y):
