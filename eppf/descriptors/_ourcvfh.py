@@ -229,7 +229,10 @@ class OURCVFHTransformer(PointCloudDescriptor):
     tolerance defaults to a multiple of the point spacing so clusters form
     on sparse clouds; an object without any cluster is described as one
     cluster of all its points (PCL falls back to a plain VFH with a
-    different layout). No randomness: the output is deterministic.
+    different layout). No randomness: the output is deterministic, bit for
+    bit for any ``n_jobs``; across CPUs its curvature and reference frames
+    (NumPy and LAPACK) can differ in the last bit, which can move points
+    between regions (class (b) of the documentation's Reproducibility page).
 
     References
     ----------

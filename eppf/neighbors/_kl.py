@@ -180,7 +180,10 @@ def symmetric_kl_distances(X, Y=None, *, floor="auto", renormalize=False, chunk_
     products, chunk by chunk. The cancellation between these terms limits
     the absolute accuracy to a small multiple of machine precision times
     the size of the terms (``sum |x ln y|``), e.g. about ``1e-13`` for
-    normalized histograms of 1,200 bins, however small ``d`` is.
+    normalized histograms of 1,200 bins, however small ``d`` is. The
+    distances are bit-identical for any ``n_jobs`` on one machine; BLAS and
+    NumPy choose their code by CPU, so between machines they agree within
+    that accuracy (class (b) of the documentation's Reproducibility page).
 
     References
     ----------
