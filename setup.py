@@ -40,15 +40,87 @@ than its usual RLIMIT_AS). Rebuild normally afterwards::
     python setup.py build_ext --inplace --force -j 1
 """
 import glob
+import multiprocessing
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 
 import numpy as np
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+try:
+    from setuptools.modified import newer_group
+except ImportError:  # setuptools < 69
+    from setuptools.dep_util import newer_group
 from Cython.Build import cythonize
+
+
+def _jobs():
+    """Parallel compile jobs: ``EPPF_BUILD_JOBS`` if set, else every core this process may use."""
+    value = os.environ.get("EPPF_BUILD_JOBS", "").strip()
+    if value:
+        try:
+            jobs = int(value)
+        except ValueError:
+            jobs = 0
+        if jobs < 1:
+            sys.exit(f"eppf: EPPF_BUILD_JOBS must be a positive integer, got {value!r}")
+        return jobs
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+class BuildExt(build_ext):
+    """``build_ext`` that compiles the kernels in parallel and, under ``pip install -e``,
+    keeps them between installs.
+
+    Without ``-j`` it runs one compile job per core (``EPPF_BUILD_JOBS`` overrides),
+    largest kernel first so that no core waits on a big file started last. An editable
+    install (PEP 660) builds in throw-away temporary folders, so every ``pip install -e``
+    would recompile every kernel; here the build folders stay in ``build/``, where the
+    next install finds each module newer than its sources and copies it instead. Each
+    kernel prints one line as it starts and one when it is done (``pip install -v``
+    shows them).
+    """
+
+    def finalize_options(self):
+        super().finalize_options()
+        if self.parallel is None:
+            self.parallel = _jobs()
+        if getattr(self, "editable_mode", False):
+            # the folders of a plain build (``build/lib.<platform>-<python>``), shared
+            # with ``python setup.py build_ext --inplace`` and ``pip install .``
+            plain = type(self.distribution.get_command_obj("build"))(self.distribution)
+            plain.ensure_finalized()
+            self.build_lib, self.build_temp = plain.build_platlib, plain.build_temp
+
+    def build_extensions(self):
+        self.extensions.sort(key=lambda ext: -sum(os.path.getsize(s) for s in ext.sources))
+        self._done = 0
+        self._lock = threading.Lock()
+        super().build_extensions()
+
+    def build_extension(self, ext):
+        target = self.get_ext_fullpath(ext.name)
+        source = ext.sources[0]
+        if not (self.force or newer_group(ext.sources + ext.depends, target, "newer")):
+            self._progress(f"{source} is up to date, not compiled")
+            return
+        print(f"eppf: compiling {source} ...", file=sys.stderr, flush=True)
+        start = time.perf_counter()
+        super().build_extension(ext)
+        self._progress(f"{source} compiled in {time.perf_counter() - start:.0f} s")
+
+    def _progress(self, message):
+        with self._lock:
+            self._done += 1
+            print(f"eppf: [{self._done}/{len(self.extensions)}] {message}", file=sys.stderr, flush=True)
 
 
 def _openmp_flags():
@@ -120,9 +192,15 @@ def _extension(pyx):
 
 extensions = [_extension(p) for p in sorted(glob.glob(os.path.join("eppf", "**", "_*.pyx"), recursive=True))]
 
+# Cython translates the stale .pyx files in parallel too, where worker processes are
+# forked (spawned ones would run this script again).
+fork = multiprocessing.get_start_method(allow_none=False) == "fork"
+
 setup(
+    cmdclass={"build_ext": BuildExt},
     ext_modules=cythonize(
         extensions,
+        nthreads=_jobs() if fork else 0,
         compiler_directives={
             "language_level": "3",
             "boundscheck": debug,
