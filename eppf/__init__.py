@@ -5,7 +5,7 @@ Deep Learning for Object Classification in 3D Point Clouds Using a Point Pair
 Descriptor", IEEE Robotics and Automation Letters, 2018.
 """
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 from .utils._simd import simd_cap as _simd_cap
 

@@ -33,6 +33,7 @@ import zlib
 
 import numpy as np
 
+from ._version import __version__
 from .utils._atomic import atomic_write
 
 __all__ = ["load_model", "save_model"]
@@ -251,8 +252,6 @@ def save_model(model, path):
     >>> load_model(path).predict([[0.8, 0.2]])
     array(['a'], dtype='<U1')
     """
-    from . import __version__
-
     encoder = _Encoder()
     root = encoder.encode(model, "model")
     manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "eppf_version": __version__,
@@ -568,8 +567,6 @@ def load_model(path, *, trust=False):
 
 
 def _check_manifest(manifest, path):
-    from . import __version__
-
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise ValueError(f"{path}: {_MANIFEST} does not describe an eppf model (format {FORMAT!r} expected)")
     version = manifest.get("format_version")
