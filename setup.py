@@ -4,6 +4,12 @@ All metadata lives in ``pyproject.toml``; this file only declares the compiled
 modules and probes for OpenMP, falling back to a serial build (``prange`` runs
 as a plain loop) when ``-fopenmp`` does not compile.
 
+The kernels are translated and compiled in parallel, one job per core
+(``EPPF_BUILD_JOBS=N`` for N jobs), and only when their sources changed: the C
+files and compiled modules stay in the source tree and ``build/`` between
+installs, ``pip install -e`` included (see ``BuildExt`` and ``_translated``).
+``pip install -v`` shows one line per kernel as it compiles.
+
 Every kernel is named after its caller and sits beside it: ``eppf/<pkg>/_x_fast.pyx``
 builds the extension ``eppf.<pkg>._x_fast`` used by ``eppf/<pkg>/_x.py``. Each
 extension sees only its own folder's C headers (and depends on the headers it
