@@ -1,5 +1,6 @@
 """EPPF4DClassifier: the paper's 2D/3D/4D networks on EPPF descriptors, via skorch."""
 
+import functools
 import math
 import numbers
 
@@ -429,7 +430,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
             optimizer__weight_decay=float(self.weight_decay),
             # One fused kernel instead of a dozen passes over the 15 M
             # parameters: the same Adam update, 8x faster on CPU.
-            optimizer__fused=torch.device(self.device).type in ("cpu", "cuda"),
+            optimizer__fused=_fused_adam(torch.device(self.device).type),
         )
 
     def _precision_in_use(self):
@@ -500,6 +501,22 @@ class EPPF4DClassifier(SkorchClassifierBase):
         tags = super().__sklearn_tags__()
         tags.input_tags.three_d_array = True
         return tags
+
+
+@functools.lru_cache(maxsize=None)
+def _fused_adam(device_type):
+    """Whether torch's fused Adam runs on ``device_type``: on CUDA, and on the CPU from torch 2.4."""
+    if device_type == "cuda":
+        return True
+    if device_type != "cpu":
+        return False
+    import torch
+
+    try:
+        torch.optim.Adam([torch.zeros(1, requires_grad=True)], fused=True)
+    except RuntimeError:  # torch < 2.4: "`fused=True` requires ... devices: ['cuda', ...]"
+        return False
+    return True
 
 
 def __getattr__(name):

@@ -350,7 +350,9 @@ def test_adam_is_the_fused_kernel_on_cpu():
     X, y = _toy(30, rng)
     clf = EPPF4DClassifier(n_bins=N_BINS, max_epochs=1, early_stopping=False, random_state=0, **SMALL).fit(X, y)
     opt = clf.net_.optimizer_
-    assert isinstance(opt, torch.optim.Adam) and opt.defaults["fused"] is True
+    # torch has a fused Adam for the CPU from 2.4 on; before, the plain one runs
+    fused_on_cpu = tuple(int(v) for v in torch.__version__.split(".")[:2]) >= (2, 4)
+    assert isinstance(opt, torch.optim.Adam) and opt.defaults["fused"] is fused_on_cpu
     assert opt.defaults["lr"] == 5e-4
 
 
