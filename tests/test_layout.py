@@ -34,9 +34,8 @@ PACKAGE = ROOT / "eppf"
 PENDING_CROSSINGS = {
     ("descriptors/_eppf.py", "private ['_bounding_sides', '_stacked_view'] from eppf.utils._validation"),
 }
-#: Cycles (sorted members) that changes under way remove (issue 27: __version__
-#: in a module of its own), with the same rule.
-PENDING_CYCLES = {("eppf", "eppf._persist")}
+#: Cycles (sorted members) that changes under way remove, with the same rule.
+PENDING_CYCLES = set()
 
 
 def _modules():
