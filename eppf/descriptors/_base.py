@@ -11,9 +11,11 @@ the same way is written here once:
 - ``fit`` checks the clouds, lets the subclass learn from them
   (:meth:`PointCloudDescriptor._learn`, e.g. EPPF's data-set scale) and
   records ``n_features_out_``;
-- ``transform`` validates the clouds once (all of them, in one compiled pass),
+- ``transform`` checks the parameters and validates the clouds once (all of
+  them, in one compiled pass, into one :class:`eppf.utils.PackedClouds`),
   draws the per-object inputs (seeds from ``random_state``, scales) for the
-  whole input before chunking, and hands chunks of objects to joblib
+  whole input before chunking, and hands chunks of objects (slices of the
+  packed clouds, with the resolved parameters) to joblib
   (:func:`eppf.utils.transform_in_chunks`), so results never depend on threads,
   chunk sizes or where a chunk runs;
 - clouds may carry extra per-point columns after the coordinates (and
@@ -22,26 +24,28 @@ the same way is written here once:
   they reach ``_describe`` as its last per-object argument;
 - kernel status codes become a ``ValueError`` naming the estimator and the
   object (:meth:`PointCloudDescriptor._raise_for_status`);
-- packing clouds with their normals (estimated where missing), optionally
+- the kernels' input: the packed points with their normals (estimated where
+  missing, :meth:`PointCloudDescriptor._points_and_normals`), optionally
   centered and scaled per object (:meth:`PointCloudDescriptor._centred_points_and_normals`);
 - tags for ragged (non-tabular) input and ``get_feature_names_out``.
 
 A subclass declares ``_parameter_constraints`` and provides
 ``_resolve_params`` (resolved parameters), ``_n_features``, ``_describe`` (the
-rows of one chunk) and ``_feature_names``, and sets ``_min_points``.
+rows of one chunk of packed clouds) and ``_feature_names``, and sets
+``_min_points``.
 
 The constraint lists that several descriptors share are the module's public
 constants (``NORMAL_ORIENTATION``, ``N_JOBS``, ...).
 """
 
+import functools
 import numbers
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils import check_n_jobs, check_point_clouds, object_seeds, pack_point_clouds, transform_in_chunks
-from ..utils._bounds import largest_sides
+from ..utils import PackedClouds, check_n_jobs, check_packed_clouds, object_seeds, transform_in_chunks
 from ..utils._validation import condition_point_clouds
 from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
 
@@ -150,7 +154,7 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         raise NotImplementedError
 
     def _describe(self, clouds, params, *per_object, first_index):  # pragma: no cover - overridden
-        """The rows of one chunk of validated clouds."""
+        """The rows of one chunk of packed clouds (a :class:`~eppf.utils.PackedClouds`)."""
         raise NotImplementedError
 
     def _feature_names(self):  # pragma: no cover - every subclass overrides it
@@ -166,17 +170,18 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         return check_n_jobs(n_jobs, owner=type(self).__name__)
 
     def _validate_clouds(self, X, n_threads=1):
-        """Validated clouds, and the list of their checked extra columns (None without any)."""
+        """Validated clouds (a :class:`~eppf.utils.PackedClouds`), and the list of their checked extra
+        columns (None without any)."""
         if not self._extra_columns:
-            return check_point_clouds(X, owner=type(self).__name__, min_points=self._min_points,
-                                      n_threads=n_threads), None
+            return check_packed_clouds(X, owner=type(self).__name__, min_points=self._min_points,
+                                       n_threads=n_threads), None
         return self._split_extra_columns(X, n_threads)
 
     def _split_extra_columns(self, X, n_threads):
         """Split clouds of shape (n, 3 + e) or (n, 6 + e) into validated clouds and checked extras."""
         owner = type(self).__name__
         e, what = self._extra_columns, self._extra_columns_name
-        if X is None or isinstance(X, (str, bytes, dict)):
+        if X is None or isinstance(X, (str, bytes, dict, PackedClouds)):
             raise TypeError(f"{owner}: X must be a list of (n_i, {3 + e}) or (n_i, {6 + e}) arrays "
                             f"(xyz[, normals], {what}), got {type(X).__name__}")
         try:
@@ -198,37 +203,42 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
                                  f"(n_points, {6 + e}) (xyz, normals, {what}), got shape {a.shape}")
             extras.append(self._check_extra_columns(i, a[:, -e:]))
             xyz.append(a[:, :-e])
-        clouds = check_point_clouds(xyz, owner=owner, min_points=self._min_points, n_threads=n_threads)
+        clouds = check_packed_clouds(xyz, owner=owner, min_points=self._min_points, n_threads=n_threads)
         return clouds, extras
 
     def _points_and_normals(self, clouds, n_neighbors, orientation, n_threads):
-        """Pack validated clouds into ``points``, ``normals`` (N, 3) and ``offsets``.
+        """``points``, ``normals`` (N, 3) and ``offsets`` of packed clouds for the kernels.
 
         Clouds given with normals keep them; the others get PCA normals from
         ``n_neighbors`` neighbors (:func:`eppf.preprocessing.estimate_normals`),
-        oriented by ``orientation``.
+        oriented by ``orientation``. Each object's normals depend on it alone,
+        so estimating them on the whole block or on the objects without
+        normals gives the same values.
         """
         from ..preprocessing._normals import estimate_normals_batch
 
-        points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
-        normals = np.empty_like(points)
-        missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
-        for k, c in enumerate(clouds):
-            if c.shape[1] == 6:
-                normals[offsets[k] : offsets[k + 1]] = c[:, 3:]
-        if missing:
-            sub_pts, _, sub_off = pack_point_clouds([clouds[k][:, :3] for k in missing])
-            est = estimate_normals_batch(sub_pts, sub_off, n_neighbors, orientation, n_threads,
-                                         owner=type(self).__name__)
-            for j, k in enumerate(missing):
-                normals[offsets[k] : offsets[k + 1]] = est[sub_off[j] : sub_off[j + 1]]
+        points, offsets, has = clouds.points, clouds.offsets, clouds.has_normals
+        if clouds.normals is not None and has.all():
+            return points, clouds.normals, offsets
+        owner = type(self).__name__
+        if clouds.normals is None:
+            normals = estimate_normals_batch(points, offsets, n_neighbors, orientation, n_threads, owner=owner)
+            return points, normals, offsets
+        missing = np.flatnonzero(~has)
+        sub = np.concatenate([points[offsets[k]:offsets[k + 1]] for k in missing])
+        sub_off = np.zeros(len(missing) + 1, dtype=np.int64)
+        np.cumsum(offsets[missing + 1] - offsets[missing], out=sub_off[1:])
+        est = estimate_normals_batch(sub, sub_off, n_neighbors, orientation, n_threads, owner=owner)
+        normals = clouds.normals.copy()
+        for j, k in enumerate(missing):
+            normals[offsets[k]:offsets[k + 1]] = est[sub_off[j]:sub_off[j + 1]]
         return points, normals, offsets
 
     def _fit_scale(self, clouds):
         """With ``scaling="fit"``, 1 / the largest bounding-box side of any cloud; else 1."""
         if self.scaling != "fit":
             return 1.0
-        return self._data_set_scale(float(largest_sides(clouds).max()))
+        return self._data_set_scale(float(clouds.sides().max()))
 
     def _data_set_scale(self, side):
         """1 / ``side``, or a ValueError when that is not a finite positive float64."""
@@ -351,9 +361,10 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
             holder = np.empty(len(extras), dtype=object)
             holder[:] = extras
             per_object = tuple(per_object) + (holder,)
+        # The parameters travel with the chunks, checked once for the whole call.
         return transform_in_chunks(
-            _describe_chunk, self, clouds, per_object, n_features=self.n_features_out_,
-            verbose=getattr(self, "verbose", 0), desc=self._progress_label,
+            functools.partial(_describe_chunk, params=params), self, clouds, per_object,
+            n_features=self.n_features_out_, verbose=getattr(self, "verbose", 0), desc=self._progress_label,
         )
 
     def get_feature_names_out(self, input_features=None):
@@ -381,7 +392,8 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         return tags
 
 
-def _describe_chunk(est, clouds, *args):
-    """One joblib task: the rows of a chunk (``args`` = per-object arrays, then the chunk's first index)."""
+def _describe_chunk(est, clouds, *args, params):
+    """One joblib task: the rows of a chunk of packed clouds (``args`` = per-object arrays, then the chunk's
+    first index; ``params`` = the estimator's resolved parameters, checked once by ``transform``)."""
     *per_object, first_index = args
-    return est._describe(clouds, est._check_params(), *per_object, first_index=first_index)
+    return est._describe(clouds, params, *per_object, first_index=first_index)

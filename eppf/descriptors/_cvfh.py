@@ -365,7 +365,7 @@ class CVFHTransformer(PointCloudDescriptor):
         return row
 
     def _describe(self, clouds, params, *, first_index):
-        """CVFH rows of one chunk of validated clouds."""
+        """CVFH rows of one chunk of packed clouds."""
         owner = type(self).__name__
         params, n_threads = params
         points, normals, offsets = self._centred_points_and_normals(clouds, params["n_neighbors"], n_threads)

@@ -6,8 +6,7 @@ import numbers
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils import check_n_jobs, object_seeds, pack_point_clouds
-from ..utils._validation import _bounding_sides, _stacked_view
+from ..utils import check_n_jobs, object_seeds
 from ..utils._param_validation import Interval, IntTuple, Satisfies, StrOptions
 from ._base import N_JOBS, NORMAL_ORIENTATION, RANDOM_STATE, VERBOSE, PointCloudDescriptor
 from ._eppf_fast import MAX_GRID_SIZE, MAX_N_BINS, MAX_N_PAIRS, MIN_GRID_SIZE, MIN_N_BINS, eppf_counts
@@ -206,7 +205,7 @@ class EPPFTransformer(PointCloudDescriptor):
         self.scale_ = None
         if self.scaling == "fit":
             with np.errstate(over="ignore"):
-                self.scale_ = self._data_set_scale(float(_bounding_sides(clouds).max()))
+                self.scale_ = self._data_set_scale(float(clouds.sides().max()))
 
     def _n_features(self, params):
         return int(np.prod(self.histogram_shape_))
@@ -243,7 +242,6 @@ class EPPFTransformer(PointCloudDescriptor):
         X_new : ndarray of shape (n_objects, `n_features_out_`)
             Descriptors, each row non-negative and summing to 1.
         """
-        check_is_fitted(self, "n_bins_")
         return super().transform(X)
 
     # clouds rescaled by 2**e get f1's absolute scale times 2**-e
@@ -254,7 +252,7 @@ class EPPFTransformer(PointCloudDescriptor):
             with np.errstate(over="ignore"):  # (an object vastly larger than the training ones: top f1 bin)
                 scales = np.ldexp(np.full(len(clouds), self.scale_), -exps)
         elif self.scaling == "object":
-            scales = 1.0 / _bounding_sides(clouds)
+            scales = 1.0 / clouds.sides()
         else:
             with np.errstate(over="ignore"):
                 scales = np.ldexp(np.ones(len(clouds)), -exps)
@@ -262,9 +260,14 @@ class EPPFTransformer(PointCloudDescriptor):
         return scales, object_seeds(self.random_state, len(clouds))
 
     def _describe(self, clouds, params, scales, seeds, *, first_index):
-        """Descriptors of one chunk of validated clouds with given scales and seeds."""
+        """Descriptors of one chunk of packed clouds with given scales and seeds."""
         n_threads = params[2]
-        points, normals, offsets = self._kernel_input(clouds, n_threads)
+        if "angle" in self.functions_ or "normal" in self.functions_:
+            points, normals, offsets = self._points_and_normals(
+                clouds, self.n_neighbors, self.normal_orientation, n_threads)
+        else:  # (the kernel reads no normals)
+            points, offsets = clouds.points, clouds.offsets
+            normals = np.zeros_like(points)
         kernel_bins = tuple(b if f in self.functions_ else 1 for b, f in zip(self.n_bins_, FUNCTIONS))
         counts, status = eppf_counts(
             points, normals, offsets, scales, seeds, int(self.n_pairs), kernel_bins,
@@ -273,42 +276,6 @@ class EPPFTransformer(PointCloudDescriptor):
         self._raise_for_status(status, first_index, {
             1: f"has too few distinct points to draw {self.n_pairs} pairs (almost all of its points coincide)"})
         return _weight_and_normalise(counts, kernel_bins, self.c, "distance" in self.functions_)
-
-    def _kernel_input(self, clouds, n_threads):
-        """Points, normals (estimated where missing and needed) and offsets for the kernel."""
-        needs_normals = "angle" in self.functions_ or "normal" in self.functions_
-        packed = _stacked_view(clouds)
-        if packed is not None and (packed[0].shape[1] == 6 or not needs_normals):
-            # Clouds validated in one block: the kernel reads the block's rows in place.
-            stacked, offsets = packed[0], packed[1]
-            points = stacked[:, :3]
-            normals = stacked[:, 3:6] if needs_normals else np.zeros((len(stacked), 3))
-            return points, normals, offsets
-        if not needs_normals:
-            points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
-            return points, np.zeros_like(points), offsets
-        from ..preprocessing._normals import estimate_normals_batch
-
-        if packed is not None:
-            # Clouds without normals validated in one block: their normals are estimated on the block in
-            # place and go to the kernel as they come (each object's normals depend on it alone, so they
-            # are those of estimating the clouds one by one), with no per-cloud copies.
-            stacked, offsets = packed[0], packed[1]
-            normals = estimate_normals_batch(
-                stacked, offsets, self.n_neighbors, self.normal_orientation, n_threads, owner=type(self).__name__
-            )
-            return stacked, normals, offsets
-        missing = [k for k, c in enumerate(clouds) if c.shape[1] == 3]
-        if missing:
-            sub = [clouds[k] for k in missing]
-            pts, _, off = pack_point_clouds(sub)
-            est = estimate_normals_batch(
-                pts, off, self.n_neighbors, self.normal_orientation, n_threads, owner=type(self).__name__
-            )
-            clouds = list(clouds)
-            for j, k in enumerate(missing):
-                clouds[k] = np.hstack([clouds[k], est[off[j]:off[j + 1]]])
-        return pack_point_clouds(clouds)
 
     def _feature_names(self):
         """Names of the descriptor bins, e.g. ``eppf_d03_a1_n2_o0``."""

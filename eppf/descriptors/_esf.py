@@ -4,7 +4,7 @@ import numbers
 
 import numpy as np
 
-from ..utils import check_n_jobs, pack_point_clouds
+from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Satisfies
 from ._base import N_JOBS, RANDOM_STATE, PointCloudDescriptor
 from ._esf_fast import esf_batch
@@ -145,9 +145,9 @@ class ESFTransformer(PointCloudDescriptor):
         return [f"esf_{h}_{i}" for h in _HISTOGRAMS for i in range(n_bins)]
 
     def _describe(self, clouds, params, seeds, *, first_index):
-        """ESF rows of one chunk of validated clouds."""
+        """ESF rows of one chunk of packed clouds."""
         n_triplets, grid_size, n_bins, n_threads = params
-        points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
+        points, offsets = clouds.points, clouds.offsets
         out = np.zeros((len(clouds), 10 * n_bins), dtype=np.float64)
         status = np.zeros(len(clouds), dtype=np.int8)
         n_threads = max(1, min(n_threads, len(clouds)))

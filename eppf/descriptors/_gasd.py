@@ -5,7 +5,7 @@ import numbers
 import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils import check_n_jobs, check_point_clouds, pack_point_clouds
+from ..utils import check_n_jobs, check_point_clouds
 from ..utils._param_validation import Interval, Satisfies, StrOptions
 from ._base import N_JOBS, PointCloudDescriptor, as_vector3
 from ._gasd_fast import gasd_batch
@@ -186,7 +186,7 @@ class GASDTransformer(PointCloudDescriptor):
         return _cell_names(half, hs)
 
     def _describe(self, clouds, params, *, first_index):
-        """GASD rows of one chunk of validated clouds."""
+        """GASD rows of one chunk of packed clouds."""
         return _gasd_compute(self, clouds, params, first_index)[0]
 
     def alignment_transforms(self, X):
@@ -226,9 +226,9 @@ def _cell_names(half, hs, prefix="gasd"):
 
 
 def _gasd_compute(est, clouds, params, first_index, hues=None):
-    """GASD rows and alignment transforms of validated clouds (with ``hues``: the color grid too)."""
+    """GASD rows and alignment transforms of packed clouds (with ``hues``: the color grid too)."""
     half, hs, interp, sign, view, n_threads, *color = params
-    points, _, offsets = pack_point_clouds([c[:, :3] for c in clouds])
+    points, offsets = clouds.points, clouds.offsets
     width = (2 * half) ** 3 * hs
     extra = {}
     if hues is not None:
@@ -444,5 +444,5 @@ class GASDColorTransformer(PointCloudDescriptor):
         return cells
 
     def _describe(self, clouds, params, hues, *, first_index):
-        """Color GASD rows of one chunk of validated clouds (``hues``: one array per cloud)."""
+        """Color GASD rows of one chunk of packed clouds (``hues``: one array per cloud)."""
         return _gasd_compute(self, clouds, params, first_index, list(hues))[0]

@@ -206,7 +206,7 @@ class GRSDTransformer(PointCloudDescriptor):
         return [f"grsd_{a}_{b}" for i, a in enumerate(CLASSES) for b in CLASSES[i:]]
 
     def _describe(self, clouds, params, *, first_index):
-        """GRSD rows of one chunk of validated clouds."""
+        """GRSD rows of one chunk of packed clouds."""
         params, n_threads = params
         owner = type(self).__name__
         points, normals, offsets = self._centred_points_and_normals(clouds, params["n_neighbors"], n_threads)

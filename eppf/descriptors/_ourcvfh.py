@@ -340,7 +340,7 @@ class OURCVFHTransformer(PointCloudDescriptor):
         return row
 
     def _describe(self, clouds, params, *, first_index):
-        """OUR-CVFH rows of one chunk of validated clouds."""
+        """OUR-CVFH rows of one chunk of packed clouds."""
         params, n_threads = params
         points, normals, offsets = self._points_and_normals(
             clouds, params["n_neighbors"], self.normal_orientation, n_threads

@@ -183,18 +183,20 @@ class VFHTransformer(PointCloudDescriptor):
     def _validate_clouds(self, X, n_threads=1):
         owner = type(self).__name__
         clouds, extras = super()._validate_clouds(X, n_threads)
-        for i, c in enumerate(clouds):
-            big = np.abs(c[:, :3]).max()
-            if big > _MAX_COORD:
+        big = np.maximum(np.abs(clouds.lower), np.abs(clouds.upper)).max(axis=1)
+        sizes = clouds.sizes
+        bad = np.flatnonzero((big > _MAX_COORD) | (~clouds.has_normals & (sizes < 3)))
+        if bad.size:
+            i = int(bad[0])
+            if big[i] > _MAX_COORD:
                 raise ValueError(
-                    f"{owner}: point cloud {i} has coordinates of magnitude {big:g}; at most {_MAX_COORD:g} "
+                    f"{owner}: point cloud {i} has coordinates of magnitude {big[i]:g}; at most {_MAX_COORD:g} "
                     "are supported"
                 )
-            if c.shape[1] == 3 and c.shape[0] < 3:
-                raise ValueError(
-                    f"{owner}: point cloud {i} has {c.shape[0]} points and no normals; estimating normals "
-                    "needs at least 3 points"
-                )
+            raise ValueError(
+                f"{owner}: point cloud {i} has {sizes[i]} points and no normals; estimating normals "
+                "needs at least 3 points"
+            )
         return clouds, extras
 
     def _n_features(self, params):
@@ -207,7 +209,7 @@ class VFHTransformer(PointCloudDescriptor):
         return names
 
     def _describe(self, clouds, params, *, first_index):
-        """VFH rows of one chunk of validated clouds."""
+        """VFH rows of one chunk of packed clouds."""
         vp, flags, k, n_threads = params
         points, normals, offsets = self._points_and_normals(clouds, k, self.normal_orientation, n_threads)
         out = np.zeros((len(clouds), N_FEATURES), dtype=np.float64)

@@ -146,7 +146,7 @@ class WahlTransformer(PointCloudDescriptor):
         return [f"wahl_a{a}_b{b}_g{g}_d{d}" for a, b, g, d in idx]
 
     def _describe(self, clouds, params, seeds, *, first_index):
-        """Wahl histograms of one chunk of validated clouds."""
+        """Wahl histograms of one chunk of packed clouds."""
         n_bins, n_pairs, n_neighbors, n_threads = params
         points, normals, offsets = self._points_and_normals(clouds, n_neighbors, self.normal_orientation, n_threads)
         out = np.zeros((len(clouds), int(np.prod(n_bins))), dtype=np.float64)

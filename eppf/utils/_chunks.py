@@ -13,6 +13,8 @@ at least about once a second.
 import numpy as np
 from joblib import Parallel, delayed
 
+from ._validation import PackedClouds, check_n_jobs
+
 __all__ = ["CHUNK", "CHUNK_POINTS", "transform_in_chunks"]
 
 #: Objects per chunk: bounds the memory of one packed chunk and one task.
@@ -29,8 +31,6 @@ CHUNK_POINTS = 1 << 15
 
 def _n_threads(est):
     """Threads the estimator's kernels use (1 if it cannot say)."""
-    from ._validation import check_n_jobs
-
     try:
         return check_n_jobs(getattr(est, "n_jobs", None))
     except (TypeError, ValueError, ImportError):
@@ -40,15 +40,15 @@ def _n_threads(est):
 def _chunk_bounds(clouds, chunk, chunk_points):
     """``(lo, hi)`` pairs covering ``clouds`` with at most ``chunk`` objects and
     (unless one cloud alone is larger) at most ``chunk_points`` points each."""
+    sizes = clouds.sizes.tolist() if isinstance(clouds, PackedClouds) else [len(c) for c in clouds]
     chunks, lo, points = [], 0, 0
-    for i, cloud in enumerate(clouds):
-        size = len(cloud)
+    for i, size in enumerate(sizes):
         if i > lo and (i - lo >= chunk or points + size > chunk_points):
             chunks.append((lo, i))
             lo, points = i, 0
         points += size
-    if lo < len(clouds):
-        chunks.append((lo, len(clouds)))
+    if lo < len(sizes):
+        chunks.append((lo, len(sizes)))
     return chunks
 
 
@@ -69,8 +69,8 @@ def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose
         module-level function so that it pickles.
     est : estimator
         The fitted transformer, passed to every task.
-    clouds : list of ndarray
-        Validated point clouds.
+    clouds : PackedClouds or list of ndarray
+        Validated point clouds; chunks are its slices ``clouds[lo:hi]``.
     per_object : sequence of ndarray
         Arrays with one entry per object (seeds, scales), sliced with the clouds.
     n_features : int

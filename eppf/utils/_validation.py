@@ -1,23 +1,24 @@
 """Validation and packing of ragged point-cloud input.
 
 Every estimator that takes point clouds goes through :func:`check_point_clouds`
-so that bad input fails the same way everywhere: a ``TypeError`` for the wrong
-kind of object, a ``ValueError`` naming the estimator, the object index and the
-problem for wrong shapes, non-finite values, too few or identical points and
+(a list of arrays) or :func:`check_packed_clouds` (a :class:`PackedClouds`, the
+form the descriptors hold their clouds in and hand to the kernels), so that bad
+input fails the same way everywhere: a ``TypeError`` for the wrong kind of
+object, a ``ValueError`` naming the estimator, the object index and the problem
+for wrong shapes, non-finite values, too few or identical points and
 zero-length normals. :func:`condition_point_clouds` then brings clouds of
 extreme magnitude into the range the compiled kernels compute in, by an
 exact power of two.
 """
 
 import numbers
+import operator
 
 import numpy as np
 
-from ._bounds import largest_sides
-
 __all__ = [
-    "check_int", "check_n_jobs", "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds",
-    "pack_point_clouds",
+    "PackedClouds", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
+    "condition_point_clouds", "object_seeds", "pack_point_clouds",
 ]
 
 
@@ -104,6 +105,31 @@ def check_point_cloud(cloud, *, owner=None, index=None, min_points=2, allow_norm
     return arr
 
 
+def _items(X, pre):
+    """The clouds of a collection ``X`` as a list, or the TypeError/ValueError for a wrong kind of collection."""
+    if isinstance(X, PackedClouds):
+        return X
+    if X is None or isinstance(X, (str, bytes, dict, numbers.Number)):
+        raise TypeError(f"{pre}X must be a list of point clouds (arrays of shape (n_i, 3) or (n_i, 6)), got {type(X).__name__}")
+    if isinstance(X, np.ndarray) and X.dtype != object:
+        if X.ndim == 2:
+            raise ValueError(
+                f"{pre}X is a single 2D array of shape {X.shape}; pass a list of point clouds, "
+                "e.g. [cloud], or a 3D array of shape (n_objects, n_points, 3|6)"
+            )
+        if X.ndim != 3:
+            raise ValueError(f"{pre}X must be a list of (n_i, 3|6) arrays or a 3D array, got an array of shape {X.shape}")
+        items = list(X)
+    else:
+        try:
+            items = list(X)
+        except TypeError:
+            raise TypeError(f"{pre}X must be a list of point clouds, got {type(X).__name__}") from None
+    if len(items) == 0:
+        raise ValueError(f"{pre}X is empty: at least one point cloud is needed")
+    return items
+
+
 def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True, n_threads=1):
     """Validate a collection of point clouds.
 
@@ -136,89 +162,249 @@ def check_point_clouds(X, *, owner=None, min_points=2, allow_normals=True, n_thr
     >>> [c.shape for c in clouds]
     [(3, 3), (4, 3)]
     """
-    pre = _prefix(owner)
-    if X is None or isinstance(X, (str, bytes, dict, numbers.Number)):
-        raise TypeError(f"{pre}X must be a list of point clouds (arrays of shape (n_i, 3) or (n_i, 6)), got {type(X).__name__}")
-    if isinstance(X, np.ndarray) and X.dtype != object:
-        if X.ndim == 2:
-            raise ValueError(
-                f"{pre}X is a single 2D array of shape {X.shape}; pass a list of point clouds, "
-                "e.g. [cloud], or a 3D array of shape (n_objects, n_points, 3|6)"
-            )
-        if X.ndim != 3:
-            raise ValueError(f"{pre}X must be a list of (n_i, 3|6) arrays or a 3D array, got an array of shape {X.shape}")
-        items = list(X)
-    else:
-        try:
-            items = list(X)
-        except TypeError:
-            raise TypeError(f"{pre}X must be a list of point clouds, got {type(X).__name__}") from None
-    if len(items) == 0:
-        raise ValueError(f"{pre}X is empty: at least one point cloud is needed")
-    fast = _check_stacked(items, min_points, allow_normals, n_threads)
-    if fast is not None:
-        return fast
-    # Per-cloud path: mixed or unusual input, and every error message.
+    items = _items(X, _prefix(owner))
+    if isinstance(items, PackedClouds):
+        items = list(items)
+    block = _scan_block(items, min_points, allow_normals, n_threads)
+    if block is not None:
+        stacked, offsets = block[0], block[1].tolist()
+        return [stacked[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+    return _check_each(items, owner, min_points, allow_normals)
+
+
+def _check_each(items, owner, min_points, allow_normals):
+    """Per-cloud path: mixed or unusual input, and every error message."""
     return [
         check_point_cloud(c, owner=owner, index=i, min_points=min_points, allow_normals=allow_normals)
         for i, c in enumerate(items)
     ]
 
 
-class _CloudList(list):
-    """Validated clouds that are consecutive row blocks of one float64 array.
+class PackedClouds:
+    """A validated batch of point clouds, packed for the compiled kernels.
 
-    It remembers that array, the offsets and the bounding boxes, so that
-    packing and bounding sizes need no per-cloud NumPy call. The memory is
-    trusted only while the list still holds the very arrays it was made with
-    (:func:`_stacked_view` checks), and slices keep it; copies and pickles are
-    plain lists.
+    The one form in which an estimator holds its clouds after validation
+    (:func:`check_packed_clouds` makes it): object ``k`` is the rows
+    ``offsets[k]:offsets[k + 1]`` of ``points`` (and of ``normals``). Kernels
+    read the arrays directly; slicing by a range of objects
+    (``packed[a:b]``) gives a ``PackedClouds`` whose arrays are views of
+    these (only the small ``offsets`` array is new), which is how chunks of
+    objects are made. Indexing by an int gives object ``k`` as one array,
+    ``(n_k, 3)`` or, with normals, ``(n_k, 6)`` (a copy), so a
+    ``PackedClouds`` can stand wherever a list of clouds is read.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n_points, 3), float64, C-contiguous
+        The coordinates of every object, one after another.
+    normals : ndarray of shape (n_points, 3), float64, C-contiguous, or None
+        Unit normals, None when no object has them; the rows of objects
+        without normals (``has_normals[k]`` False) are zeros.
+    offsets : ndarray of shape (n_objects + 1,), int64
+        Start of each object in ``points``, then ``n_points``; starts at 0.
+    lower : ndarray of shape (n_objects, 3), float64
+        Per-axis minimum of each object's coordinates.
+    upper : ndarray of shape (n_objects, 3), float64
+        Per-axis maximum of each object's coordinates.
+    has_normals : ndarray of shape (n_objects,), bool
+        Which objects came with normals.
+
+    Attributes
+    ----------
+    dtype : numpy.dtype
+        The dtype of ``points`` and ``normals`` (float64).
+    sizes : ndarray of shape (n_objects,), int64
+        Points of each object.
+
+    See Also
+    --------
+    check_packed_clouds : Validates clouds into a ``PackedClouds``.
+    pack_point_clouds : The ``(points, normals, offsets)`` of validated clouds.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import check_packed_clouds
+    >>> packed = check_packed_clouds([np.eye(3), np.ones((2, 3)) * [[0], [2]]])
+    >>> len(packed), packed.points.shape, packed.offsets
+    (2, (5, 3), array([0, 3, 5]))
+    >>> packed[1:].points
+    array([[0., 0., 0.],
+           [2., 2., 2.]])
+    >>> packed.sides()
+    array([1., 2.])
     """
 
-    def __init__(self, views, stacked, offsets, lo, hi):
-        super().__init__(views)
-        self._views = tuple(views)
-        self._stacked = stacked
-        self._offsets = offsets
-        self._lo = lo
-        self._hi = hi
+    __slots__ = ("points", "normals", "offsets", "lower", "upper", "has_normals")
+
+    def __init__(self, points, normals, offsets, lower, upper, has_normals):
+        self.points = points
+        self.normals = normals
+        self.offsets = offsets
+        self.lower = lower
+        self.upper = upper
+        self.has_normals = has_normals
+
+    @property
+    def dtype(self):
+        """The dtype of ``points`` and ``normals`` (float64)."""
+        return self.points.dtype
+
+    @property
+    def sizes(self):
+        """Points of each object, ndarray of shape (n_objects,)."""
+        return np.diff(self.offsets)
+
+    def sides(self):
+        """Largest bounding-box side of each object.
+
+        Returns
+        -------
+        sides : ndarray of shape (n_objects,), float64
+            ``np.ptp`` of each object's coordinates, largest over the axes
+            (inf where the difference is past float64's range).
+        """
+        with np.errstate(over="ignore"):
+            return (self.upper - self.lower).max(axis=1)
+
+    def __len__(self):
+        return len(self.offsets) - 1
+
+    def __iter__(self):
+        for k in range(len(self)):
+            yield self[k]
 
     def __getitem__(self, key):
-        items = list.__getitem__(self, key)
-        if not isinstance(key, slice):
-            return items
-        start, stop, step = key.indices(len(self))
-        if step != 1 or stop <= start or _stacked_view(self) is None:
-            return items
-        a, b = int(self._offsets[start]), int(self._offsets[stop])
-        return _CloudList(
-            items, self._stacked[a:b], self._offsets[start:stop + 1] - a, self._lo[start:stop], self._hi[start:stop]
-        )
+        n = len(self)
+        if isinstance(key, slice):
+            start, stop, step = key.indices(n)
+            if step != 1:
+                raise TypeError(f"PackedClouds takes slices of consecutive objects, got step {step}")
+            stop = max(start, stop)
+            a, b = self.offsets[start], self.offsets[stop]
+            return PackedClouds(
+                self.points[a:b], None if self.normals is None else self.normals[a:b],
+                self.offsets[start:stop + 1] - a, self.lower[start:stop], self.upper[start:stop],
+                self.has_normals[start:stop],
+            )
+        k = operator.index(key)
+        if not -n <= k < n:
+            raise IndexError(f"object {key} out of range for {n} objects")
+        k %= n
+        a, b = self.offsets[k], self.offsets[k + 1]
+        if self.has_normals[k]:
+            return np.hstack([self.points[a:b], self.normals[a:b]])
+        return self.points[a:b]
 
-    def __reduce__(self):
-        return (list, (list(self),))
+    def __repr__(self):
+        return (f"PackedClouds(n_objects={len(self)}, n_points={len(self.points)}, "
+                f"normals={'none' if self.normals is None else int(self.has_normals.sum())})")
 
 
-def _stacked_view(clouds):
-    """``(stacked, offsets, lo, hi)`` of clouds validated in one block, or None."""
-    if type(clouds) is not _CloudList or len(clouds) != len(clouds._views):
-        return None
-    for a, b in zip(clouds, clouds._views):
-        if a is not b:
-            return None
-    return clouds._stacked, clouds._offsets, clouds._lo, clouds._hi
+def check_packed_clouds(X, *, owner=None, min_points=2, allow_normals=True, n_threads=1):
+    """Validate a collection of point clouds into one :class:`PackedClouds`.
+
+    What :func:`check_point_clouds` accepts and refuses, with the same
+    messages; the result is packed instead of a list. The arrays are new
+    (the caller's own: :func:`condition_point_clouds` may change them in
+    place). A ``PackedClouds`` given as ``X`` is validated again like any
+    list of clouds.
+
+    Parameters
+    ----------
+    X : list of array-like of shape (n_i, 3) or (n_i, 6), ndarray of shape (n_objects, n_points, 3|6), \
+or PackedClouds
+        The clouds.
+    owner : str, default=None
+        Name of the calling estimator or function, used in error messages.
+    min_points : int, default=2
+        Smallest accepted number of points per cloud.
+    allow_normals : bool, default=True
+        Whether six-column clouds are accepted.
+    n_threads : int, default=1
+        Threads of the compiled validation pass.
+
+    Returns
+    -------
+    packed : PackedClouds
+        The validated clouds.
+
+    See Also
+    --------
+    check_point_clouds : The same validation, giving a list of arrays.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.utils import check_packed_clouds
+    >>> packed = check_packed_clouds([np.eye(3), [[0, 0, 0, 0, 0, 2], [1, 0, 0, 0, 0, 3]]])
+    >>> packed.has_normals
+    array([False,  True])
+    >>> packed[1]
+    array([[0., 0., 0., 0., 0., 1.],
+           [1., 0., 0., 0., 0., 1.]])
+    """
+    items = _items(X, _prefix(owner))
+    if isinstance(items, PackedClouds):
+        items = _packed_items(items)
+    block = _scan_block(items, min_points, allow_normals, n_threads)
+    if block is not None:
+        stacked, offsets, lo, hi = block
+        if stacked.shape[1] == 6:
+            from ._scan_fast import split_columns
+
+            points, normals = split_columns(stacked)
+            has = np.ones(len(offsets) - 1, dtype=bool)
+        else:
+            points, normals, has = stacked, None, np.zeros(len(offsets) - 1, dtype=bool)
+        return PackedClouds(points, normals, offsets, lo, hi, has)
+    return _pack_checked(_check_each(items, owner, min_points, allow_normals))
 
 
-def _check_stacked(items, min_points, allow_normals, n_threads=1):
+def _packed_items(packed):
+    """The objects of a ``PackedClouds`` as C-contiguous float64 arrays for :func:`_scan_block`.
+
+    All with normals: views of one new (N, 6) block; otherwise one array each.
+    """
+    if packed.normals is not None and packed.has_normals.all():
+        block = np.hstack([packed.points, packed.normals])
+        offsets = packed.offsets.tolist()
+        return [block[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+    return list(packed)
+
+
+def _pack_checked(clouds):
+    """A :class:`PackedClouds` of clouds validated one by one (copied into new arrays)."""
+    sizes = np.fromiter((c.shape[0] for c in clouds), dtype=np.int64, count=len(clouds))
+    offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    points = np.ascontiguousarray(np.concatenate([c[:, :3] for c in clouds], axis=0), dtype=np.float64)
+    has = np.fromiter((c.shape[1] == 6 for c in clouds), dtype=bool, count=len(clouds))
+    normals = None
+    if has.any():
+        normals = np.zeros_like(points)
+        for k in np.flatnonzero(has):
+            normals[offsets[k]:offsets[k + 1]] = clouds[k][:, 3:6]
+    lo = np.full((len(clouds), 3), np.inf)
+    hi = np.full((len(clouds), 3), -np.inf)
+    full = np.flatnonzero(sizes > 0)
+    if full.size:
+        lo[full] = np.minimum.reduceat(points, offsets[full], axis=0)
+        hi[full] = np.maximum.reduceat(points, offsets[full], axis=0)
+    return PackedClouds(points, normals, offsets, lo, hi, has)
+
+
+def _scan_block(items, min_points, allow_normals, n_threads=1):
     """Validate plain float/int arrays of one width with a few whole-collection calls.
 
-    Returns a :class:`_CloudList` of views into one new float64 array, bit for
-    bit what :func:`check_point_cloud` returns for each cloud, or None when
-    some item is not such an array or is invalid (the per-cloud path then
-    finds the first problem and words the error). C-contiguous float64
-    clouds are copied, checked and normalized by one compiled pass with the
-    objects spread over ``n_threads`` threads; others are first cast and
-    concatenated by NumPy.
+    Returns ``(stacked, offsets, lo, hi)``: the clouds copied into one new
+    C-ordered float64 array, rows ``offsets[k]:offsets[k + 1]`` of it bit for
+    bit what :func:`check_point_cloud` returns for cloud ``k``, and their
+    bounding boxes; or None when some item is not such an array or is
+    invalid (the per-cloud path then finds the first problem and words the
+    error). C-contiguous float64 clouds are copied, checked and normalized
+    by one compiled pass with the objects spread over ``n_threads`` threads;
+    others are first cast and concatenated by NumPy.
     """
     from ._scan_fast import scan_clouds
 
@@ -226,13 +412,15 @@ def _check_stacked(items, min_points, allow_normals, n_threads=1):
     cols = None
     sizes = np.empty(len(items), dtype=np.int64)
     plain = True
+    need = max(min_points, 2)
+    ndarray = np.ndarray
     for k, c in enumerate(items):
-        if type(c) is not np.ndarray or c.ndim != 2 or c.dtype.kind not in "biuf":
+        if type(c) is not ndarray or c.ndim != 2 or c.dtype.kind not in "biuf":
             return None
         n, m = c.shape
         if cols is None:
             cols = m
-        if m != cols or n < max(min_points, 2):
+        if m != cols or n < need:
             return None
         sizes[k] = n
         plain = plain and c.dtype == np.float64 and c.flags.c_contiguous
@@ -248,8 +436,7 @@ def _check_stacked(items, min_points, allow_normals, n_threads=1):
         lo, hi, status = scan_clouds(stacked, offsets, None, int(n_threads))
     if status.any():
         return None
-    views = [stacked[a:b] for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())]
-    return _CloudList(views, stacked, offsets, lo, hi)
+    return stacked, offsets, lo, hi
 
 
 #: The magnitude window the compiled kernels work in without overflow or
@@ -324,11 +511,11 @@ def condition_point_clouds(clouds, *, owner=None, single=False):
 
     Parameters
     ----------
-    clouds : list of ndarray
-        Clouds returned by :func:`check_point_clouds` or
-        :func:`check_point_cloud` (the caller's own copies: they are
-        modified in place). The bounding boxes cached by a batched result
-        are updated with them.
+    clouds : PackedClouds or list of ndarray
+        Clouds returned by :func:`check_packed_clouds`,
+        :func:`check_point_clouds` or :func:`check_point_cloud` (the
+        caller's own copies: they are modified in place). The bounds of a
+        ``PackedClouds`` are updated with them.
     owner : str, default=None
         Name used in error messages.
     single : bool, default=False
@@ -346,27 +533,21 @@ def condition_point_clouds(clouds, *, owner=None, single=False):
         for any power of two to bring it in (e.g. points at 1e300 +- 1e-10);
         centering it first fixes that.
     """
-    packed = _stacked_view(clouds)
-    if packed is not None:
-        stacked, offsets, lo, hi = packed
-    else:
-        lo = np.array([c[:, :3].min(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
-        hi = np.array([c[:, :3].max(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
+    if isinstance(clouds, PackedClouds):
+        exps = scale_exponents(clouds.lower, clouds.upper, owner, single=single)
+        offsets = clouds.offsets
+        for k in np.flatnonzero(exps):
+            _ldexp_inplace(clouds.points[offsets[k]:offsets[k + 1]], exps[k])
+            # min and max commute with the (monotone) scaling
+            _ldexp_inplace(clouds.lower[k], exps[k])
+            _ldexp_inplace(clouds.upper[k], exps[k])
+        return exps
+    lo = np.array([c[:, :3].min(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
+    hi = np.array([c[:, :3].max(axis=0) for c in clouds], dtype=np.float64).reshape(-1, 3)
     exps = scale_exponents(lo, hi, owner, single=single)
     for k in np.flatnonzero(exps):
         _ldexp_inplace(clouds[k][:, :3], exps[k])
-        if packed is not None:  # min and max commute with the (monotone) scaling
-            _ldexp_inplace(lo[k], exps[k])
-            _ldexp_inplace(hi[k], exps[k])
     return exps
-
-
-def _bounding_sides(clouds):
-    """Largest bounding-box side of each validated cloud (``np.ptp`` over the coordinates)."""
-    packed = _stacked_view(clouds)
-    if packed is not None:
-        return (packed[3] - packed[2]).max(axis=1)
-    return largest_sides(clouds)
 
 
 def pack_point_clouds(clouds):
@@ -374,7 +555,7 @@ def pack_point_clouds(clouds):
 
     Parameters
     ----------
-    clouds : list of ndarray of shape (n_i, 3) or (n_i, 6)
+    clouds : list of ndarray of shape (n_i, 3) or (n_i, 6), or PackedClouds
         Validated clouds, all with normals or all without.
 
     Returns
@@ -393,14 +574,10 @@ def pack_point_clouds(clouds):
     >>> points.shape, normals, offsets
     ((5, 3), None, array([0, 3, 5]))
     """
-    packed = _stacked_view(clouds)
-    if packed is not None:
-        from ._scan_fast import split_columns
-
-        stacked, offsets = packed[0], packed[1].copy()
-        if stacked.shape[1] == 6:
-            return (*split_columns(stacked), offsets)
-        return stacked, None, offsets
+    if isinstance(clouds, PackedClouds):
+        if clouds.normals is not None and not clouds.has_normals.all():
+            raise ValueError("pack_point_clouds: the clouds must all have normals or all have none")
+        return clouds.points, clouds.normals, clouds.offsets.copy()
     sizes = np.fromiter((c.shape[0] for c in clouds), dtype=np.int64, count=len(clouds))
     offsets = np.zeros(len(clouds) + 1, dtype=np.int64)
     np.cumsum(sizes, out=offsets[1:])

@@ -22,7 +22,7 @@ from eppf.descriptors._eppf_fast import (
     eppf_pair_features,
     eppf_pairs,
 )
-from eppf.utils._validation import object_seeds
+from eppf.utils import object_seeds
 
 
 def _sphere(n, rng, radius=1.0, center=(0.0, 0.0, 0.0)):
@@ -798,8 +798,8 @@ def test_degenerate_cloud_reports_object():
 
 
 def test_kernel_reads_wide_rows_in_place_with_the_same_counts():
-    # The (N, 6) block is read through strided views of its two halves: the counts must be
-    # those of the contiguous (N, 3) copies, for every SIMD setting.
+    # Points and normals may be strided views (the two halves of an (N, 6) block): the counts must
+    # be those of the contiguous (N, 3) copies, for every SIMD setting.
     rng = np.random.default_rng(5)
     block = rng.normal(size=(300, 6))
     block[:, 3:] /= np.linalg.norm(block[:, 3:], axis=1, keepdims=True)

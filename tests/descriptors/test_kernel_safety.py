@@ -17,7 +17,7 @@ from eppf.descriptors import _esf_fast as _baselines
 from eppf.descriptors import _wahl_fast
 from eppf.preprocessing._normals import estimate_normals_batch
 from eppf.preprocessing._normals_fast import normals_packed, scratch_sizes
-from eppf.utils._validation import _stacked_view, check_point_cloud, check_point_clouds, condition_point_clouds
+from eppf.utils._validation import check_packed_clouds, check_point_cloud, check_point_clouds, condition_point_clouds
 
 
 def _sphere(n=400, seed=1):
@@ -229,9 +229,9 @@ def test_tiny_object_far_from_the_origin_is_a_clear_error(est):
 def test_condition_leaves_ordinary_clouds_alone_and_rescales_the_others_in_place():
     rng = np.random.default_rng(5)
     X = [rng.normal(size=(30, 3)), rng.normal(size=(30, 3)) * 1e-200, rng.normal(size=(30, 3)) * 1e250]
-    for batched in (True, False):
-        clouds = check_point_clouds(X if batched else [c.tolist() for c in X])
-        assert (_stacked_view(clouds) is not None) == batched
+    for check, batched in ((check_packed_clouds, True), (check_packed_clouds, False), (check_point_clouds, True),
+                           (check_point_clouds, False)):
+        clouds = check(X if batched else [c.tolist() for c in X])
         before = [c.copy() for c in clouds]
         exps = condition_point_clouds(clouds)
         assert exps[0] == 0 and exps[1] > 0 and exps[2] < 0
@@ -242,11 +242,9 @@ def test_condition_leaves_ordinary_clouds_alone_and_rescales_the_others_in_place
             assert 2.0**-100 <= side and np.abs(c).max() <= 2.0**100
         # the input arrays are never touched (the validated clouds are copies)
         assert np.abs(X[1]).max() < 1e-190
-        packed = _stacked_view(clouds)
-        if packed is not None:  # the cached bounding boxes follow the rescaling
-            lo, hi = packed[2], packed[3]
-            assert np.array_equal(lo, np.array([c.min(axis=0) for c in clouds]))
-            assert np.array_equal(hi, np.array([c.max(axis=0) for c in clouds]))
+        if check is check_packed_clouds:  # the bounding boxes follow the rescaling
+            assert np.array_equal(clouds.lower, np.array([c.min(axis=0) for c in clouds]))
+            assert np.array_equal(clouds.upper, np.array([c.max(axis=0) for c in clouds]))
 
 
 def test_estimate_normals_does_not_touch_the_callers_array_and_keeps_the_viewpoint():

@@ -1,4 +1,4 @@
-"""Validation of point clouds (eppf.utils._validation): the block path over a whole collection, its cache, its errors."""
+"""Tests of eppf/utils/_validation.py: whole-collection validation and the packed clouds."""
 
 import pickle
 import re
@@ -7,13 +7,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from eppf.utils._validation import (
-    _bounding_sides,
-    _stacked_view,
-    check_point_cloud,
-    check_point_clouds,
-    pack_point_clouds,
-)
+from eppf.utils import PackedClouds, check_packed_clouds, check_point_cloud, check_point_clouds, pack_point_clouds
+from eppf.utils._chunks import _chunk_bounds
+from eppf.utils._validation import condition_point_clouds
 
 
 def _mixed_magnitude_clouds(rng, dtype=np.float64, cols=6):
@@ -28,21 +24,46 @@ def _mixed_magnitude_clouds(rng, dtype=np.float64, cols=6):
     return out
 
 
+def _assert_packs(packed, want):
+    """``packed`` holds exactly the clouds ``want`` (validated one by one), with their bounds."""
+    assert isinstance(packed, PackedClouds) and len(packed) == len(want)
+    sizes = [len(c) for c in want]
+    assert_array_equal(packed.offsets, np.concatenate([[0], np.cumsum(sizes)]))
+    assert packed.offsets.dtype == np.int64
+    assert packed.points.flags.c_contiguous and packed.points.dtype == np.float64 == packed.dtype
+    assert_array_equal(packed.points, np.vstack([c[:, :3] for c in want]))
+    has = np.array([c.shape[1] == 6 for c in want])
+    assert_array_equal(packed.has_normals, has)
+    if has.any():
+        assert packed.normals.flags.c_contiguous and packed.normals.shape == packed.points.shape
+        assert_array_equal(packed.normals, np.vstack([c[:, 3:] if c.shape[1] == 6 else np.zeros((len(c), 3))
+                                                      for c in want]))
+    else:
+        assert packed.normals is None
+    assert_array_equal(packed.lower, [c[:, :3].min(axis=0) for c in want])
+    assert_array_equal(packed.upper, [c[:, :3].max(axis=0) for c in want])
+    assert_array_equal(packed.sides(), [np.ptp(c[:, :3], axis=0).max() for c in want])
+    for k, c in enumerate(want):
+        assert_array_equal(packed[k], c)
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int64, np.int8])
 @pytest.mark.parametrize("cols", [3, 6])
 def test_block_validation_equals_per_cloud_validation(dtype, cols):
     # The whole-collection path must return bit for bit what check_point_cloud returns.
     rng = np.random.default_rng(cols)
     X = _mixed_magnitude_clouds(rng, dtype, cols)
+    want = [check_point_cloud(c, owner="T", index=k) for k, c in enumerate(X)]
     got = check_point_clouds(X, owner="T")
-    assert _stacked_view(got) is not None  # the block path was taken
+    assert type(got) is list
     for k, c in enumerate(X):
-        want = check_point_cloud(c, owner="T", index=k)
         assert got[k].flags.c_contiguous and got[k].dtype == np.float64
-        assert_array_equal(got[k], want)
+        assert_array_equal(got[k], want[k])
         assert not np.shares_memory(got[k], c)
-    assert_array_equal(_bounding_sides(got), [np.ptp(c[:, :3], axis=0).max() for c in map(np.asarray, got)])
-    for a, b in zip(pack_point_clouds(got), pack_point_clouds(list(got))):
+    packed = check_packed_clouds(X, owner="T")
+    _assert_packs(packed, want)
+    assert not any(np.shares_memory(packed.points, c) for c in X)
+    for a, b in zip(pack_point_clouds(packed), pack_point_clouds(got)):
         assert_array_equal(a, b)
 
 
@@ -57,52 +78,101 @@ def test_block_validation_is_the_same_on_any_thread_count_and_layout(cols):
     for layout in ("C", "F"):
         clouds = [np.asarray(c, order=layout) for c in X]
         for n_threads in (1, 2, 3):
-            got = check_point_clouds(clouds, n_threads=n_threads)
-            assert _stacked_view(got) is not None
-            for a, b in zip(got, want):
+            for a, b in zip(check_point_clouds(clouds, n_threads=n_threads), want):
                 assert_array_equal(a, b)
+            _assert_packs(check_packed_clouds(clouds, n_threads=n_threads), want)
     # a bad cloud among many is still found and named, whichever thread meets it
     bad = [c.copy() for c in X]
     bad[-2][1, 0] = np.nan
-    with pytest.raises(ValueError, match=f"point cloud {len(X) - 2} contains NaN"):
-        check_point_clouds(bad, owner="T", n_threads=2)
+    for check in (check_point_clouds, check_packed_clouds):
+        with pytest.raises(ValueError, match=f"point cloud {len(X) - 2} contains NaN"):
+            check(bad, owner="T", n_threads=2)
 
 
 def test_block_validation_of_3d_array_and_mixed_widths():
     rng = np.random.default_rng(1)
     arr = rng.normal(size=(4, 50, 6))
     got = check_point_clouds(arr)
-    assert _stacked_view(got) is not None
     for k in range(4):
         assert_array_equal(got[k], check_point_cloud(arr[k]))
-    mixed = [arr[0], arr[1][:, :3]]  # widths differ: per-cloud path, same results
+    _assert_packs(check_packed_clouds(arr), [check_point_cloud(c) for c in arr])
+    # widths differ: per-cloud path, same results; the packed normals say which objects have them
+    mixed = [arr[0], arr[1][:, :3], np.asarray(arr[2], dtype=np.float32), arr[3][:, :3].tolist()]
+    want = [check_point_cloud(c) for c in mixed]
     got = check_point_clouds(mixed)
-    assert _stacked_view(got) is None
-    assert_array_equal(got[1], arr[1][:, :3])
+    for a, b in zip(got, want):
+        assert_array_equal(a, b)
+    packed = check_packed_clouds(mixed)
+    _assert_packs(packed, want)
+    assert_array_equal(packed.normals[50:100], 0.0)
+    with pytest.raises(ValueError, match="all have normals or all have none"):
+        pack_point_clouds(packed)
 
 
-def test_cloud_list_cache_follows_slices_and_ignores_replaced_items():
+def test_packed_slices_are_views_and_chunks_follow_sizes():
     rng = np.random.default_rng(2)
     X = [rng.normal(size=(n, 6)) for n in (5, 9, 12, 7)]
-    got = check_point_clouds(X)
-    part = got[1:3]
-    assert _stacked_view(part) is not None
+    packed = check_packed_clouds(X)
+    part = packed[1:3]
+    assert isinstance(part, PackedClouds) and len(part) == 2
+    assert np.shares_memory(part.points, packed.points) and np.shares_memory(part.normals, packed.normals)
+    assert_array_equal(part.offsets, [0, 9, 21])
+    assert_array_equal(part.points, packed.points[5:26])
+    assert_array_equal(part.sides(), packed.sides()[1:3])
+    _assert_packs(part, [packed[1], packed[2]])
     points, normals, offsets = pack_point_clouds(part)
     assert_array_equal(offsets, [0, 9, 21])
-    assert_array_equal(points, np.vstack([got[1][:, :3], got[2][:, :3]]))
-    assert_array_equal(normals, np.vstack([got[1][:, 3:], got[2][:, 3:]]))
-    assert_array_equal(_bounding_sides(part), [np.ptp(got[k][:, :3], axis=0).max() for k in (1, 2)])
-    # Replacing a cloud invalidates the shared block: packing must see the new cloud.
-    new = rng.normal(size=(4, 6))
-    part[0] = new
-    assert _stacked_view(part) is None
-    points, _, offsets = pack_point_clouds(part)
-    assert_array_equal(points[:4], new[:, :3])
-    assert_array_equal(offsets, [0, 4, 16])
-    assert_array_equal(_bounding_sides(part)[0], np.ptp(new[:, :3], axis=0).max())
-    # Pickles and copies are plain lists.
-    assert type(pickle.loads(pickle.dumps(got))) is list
-    assert type(got[::2]) is list and type(got[0:0]) is list
+    assert_array_equal(normals, np.vstack([packed[1][:, 3:], packed[2][:, 3:]]))
+    # ends past the range are clipped as for lists; an empty range is an empty batch
+    assert len(packed[2:100]) == 2 and len(packed[3:1]) == 0 and len(packed[-1:]) == 1
+    assert_array_equal(packed[-1], packed[3])
+    with pytest.raises(TypeError, match="consecutive objects"):
+        packed[::2]
+    with pytest.raises(IndexError):
+        packed[4]
+    # an int gives the object as the caller passed it (validated): (n, 6) with normals, a copy
+    assert packed[0].shape == (5, 6) and not np.shares_memory(packed[0], packed.points)
+    # chunks are cut from the sizes, as for a list of clouds
+    assert_array_equal(packed.sizes, [5, 9, 12, 7])
+    assert _chunk_bounds(packed, 2, 100) == _chunk_bounds(list(packed), 2, 100) == [(0, 2), (2, 4)]
+    assert _chunk_bounds(packed, 8, 15) == [(0, 2), (2, 3), (3, 4)]
+    # pickles (joblib's workers) keep the values, a slice only its own rows
+    back = pickle.loads(pickle.dumps(part))
+    _assert_packs(back, [packed[1], packed[2]])
+    assert len(back.points) == 21
+
+
+def test_packed_clouds_are_validated_again_like_a_list():
+    # a PackedClouds passed back in is checked as the list of its objects would be, into new arrays
+    rng = np.random.default_rng(3)
+    X = [rng.normal(size=(n, 6)) for n in (5, 9)] + [rng.normal(size=(4, 3))]
+    packed = check_packed_clouds(X)
+    again = check_packed_clouds(packed)
+    _assert_packs(again, [check_point_cloud(c) for c in packed])
+    assert not np.shares_memory(again.points, packed.points)
+    same_width = check_packed_clouds(X[:2])
+    again = check_packed_clouds(same_width, n_threads=2)
+    _assert_packs(again, check_point_clouds(list(same_width)))
+    for a, b in zip(check_point_clouds(same_width), check_point_clouds(list(same_width))):
+        assert_array_equal(a, b)
+    with pytest.raises(ValueError, match=re.escape("T: point cloud 2 has 4 points; at least 5 are needed")):
+        check_packed_clouds(packed, owner="T", min_points=5)
+
+
+def test_conditioning_rescales_packed_points_and_their_bounds():
+    rng = np.random.default_rng(5)
+    X = [rng.normal(size=(30, 6)) * ([scale] * 3 + [1.0] * 3) for scale in (1.0, 1e-200, 1e250)]
+    packed = check_packed_clouds(X)
+    before = [c.copy() for c in packed]
+    exps = condition_point_clouds(packed)
+    assert exps[0] == 0 and exps[1] > 0 and exps[2] < 0
+    for k, (b, e) in enumerate(zip(before, exps)):
+        c = packed[k]
+        assert_array_equal(c[:, :3], np.ldexp(b[:, :3], int(e)))
+        assert_array_equal(c[:, 3:], b[:, 3:])  # normals are unit vectors: untouched
+        assert_array_equal(packed.lower[k], c[:, :3].min(axis=0))
+        assert_array_equal(packed.upper[k], c[:, :3].max(axis=0))
+    assert np.abs(X[1][:, :3]).max() < 1e-190  # the input arrays are never touched
 
 
 @pytest.mark.parametrize(
@@ -115,6 +185,24 @@ def test_cloud_list_cache_follows_slices_and_ignores_replaced_items():
         ([np.eye(3), np.eye(3)[:1]], "T: point cloud 1 has 1 point; at least 2 are needed"),
     ],
 )
-def test_block_validation_reports_the_first_bad_cloud(X, match):
+@pytest.mark.parametrize("check", [check_point_clouds, check_packed_clouds])
+def test_block_validation_reports_the_first_bad_cloud(X, match, check):
     with pytest.raises(ValueError, match=re.escape(match)):
-        check_point_clouds(X, owner="T")
+        check(X, owner="T")
+
+
+@pytest.mark.parametrize(
+    "X, match, exc",
+    [
+        ([], "T: X is empty", ValueError),
+        (None, "T: X must be a list of point clouds", TypeError),
+        ("cloud.ply", "T: X must be a list of point clouds", TypeError),
+        (3, "T: X must be a list of point clouds", TypeError),
+        (np.zeros((10, 3)), "T: X is a single 2D array of shape (10, 3)", ValueError),
+        (np.zeros((2, 3, 3, 3)), "T: X must be a list of (n_i, 3|6) arrays or a 3D array", ValueError),
+    ],
+)
+@pytest.mark.parametrize("check", [check_point_clouds, check_packed_clouds])
+def test_wrong_collections_are_refused_the_same_way(X, match, exc, check):
+    with pytest.raises(exc, match=re.escape(match)):
+        check(X, owner="T")
