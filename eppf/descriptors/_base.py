@@ -47,7 +47,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ..utils import PackedClouds, check_n_jobs, check_packed_clouds, object_seeds, transform_in_chunks
 from ..utils._validation import condition_point_clouds
-from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
+from ..utils._param_validation import N_JOBS, RANDOM_STATE, Interval, Options, StrOptions, validate_params
 
 __all__ = [
     "N_JOBS",
@@ -59,10 +59,6 @@ __all__ = [
     "PointCloudDescriptor",
     "as_vector3",
 ]
-
-
-def _nonzero_int(value):
-    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value != 0
 
 
 def as_vector3(value):
@@ -84,14 +80,6 @@ def as_vector3(value):
     return v if np.isfinite(v).all() else None
 
 
-#: ``n_jobs``: None (OpenMP's default) or joblib's non-zero ints.
-N_JOBS = [None, Satisfies(_nonzero_int, "a non-zero int (-1: all cores)")]
-#: ``random_state``: what :func:`sklearn.utils.check_random_state` takes.
-RANDOM_STATE = [
-    None,
-    Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
-    Options(np.random.RandomState, description="a numpy RandomState"),
-]
 #: ``verbose``: a non-negative int (or a bool).
 VERBOSE = [Interval(numbers.Integral, 0, None, closed="left"), Options(bool)]
 #: ``normal_orientation`` of estimated normals.

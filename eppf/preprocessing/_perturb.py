@@ -18,6 +18,7 @@ import numbers
 import numpy as np
 from sklearn.utils import check_random_state
 
+from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_parameter
 from ..utils._sampling import resample
 from ..utils._validation import check_point_cloud
 
@@ -40,53 +41,79 @@ _AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 # --------------------------------------------------------------------------- #
 # parameter checks
 # --------------------------------------------------------------------------- #
-def _check_real(value, name, owner):
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{owner}: {name} must be a real number, got {type(value).__name__}")
-    value = float(value)
-    if not np.isfinite(value):
-        raise ValueError(f"{owner}: {name} must be finite, got {value!r}")
-    return value
+def _is_direction(value):
+    """``'x'``, ``'y'``, ``'z'`` or a finite vector of length 3 that is not (near) zero."""
+    if isinstance(value, str):
+        return value in _AXES
+    vec = np.asarray(value, dtype=np.float64)
+    return vec.shape == (3,) and bool(np.isfinite(vec).all()) and bool(np.sqrt(vec @ vec) >= 1e-12)
+
+
+def _is_factors(value):
+    """A finite number > 0, or a vector of 3 of them."""
+    if isinstance(value, (str, bytes)):
+        return False
+    fac = np.asarray(value, dtype=np.float64)
+    return fac.shape in ((), (3,)) and bool(np.isfinite(fac).all()) and bool((fac > 0).all())
+
+
+#: What each parameter of the perturbations accepts: the functions here and
+#: the transformers of :mod:`eppf.preprocessing` check their parameters
+#: against these lists (:mod:`eppf.utils._param_validation`).
+CONSTRAINTS = {
+    "sigma": [Interval(numbers.Real, 0, None, closed="left", description="a finite float >= 0")],
+    "relative_to": [StrOptions(["unit_cube", "none"])],
+    "fraction": [Interval(numbers.Real, 0, 1, closed="left", description="a float in [0, 1)")],
+    "direction": [Satisfies(_is_direction, "'x', 'y', 'z' or a finite non-zero vector of length 3")],
+    "axis": [Satisfies(_is_direction, "'x', 'y', 'z' or a finite non-zero vector of length 3")],
+    "angle": [Interval(numbers.Real, None, None, closed="neither", description="a finite float")],
+    "center": [StrOptions(["centroid", "origin"])],
+    "factors": [Satisfies(_is_factors, "a finite number > 0 or a vector of length 3 of them")],
+    "low": [Interval(numbers.Real, 0, None, closed="neither", description="a finite float > 0")],
+    "high": [Interval(numbers.Real, 0, None, closed="neither", description="a finite float > 0")],
+    "anisotropic": [Options(bool)],
+}
+
+
+def _check(owner, **values):
+    """Check each named value against :data:`CONSTRAINTS` (an InvalidParameterError naming ``owner``)."""
+    for name, value in values.items():
+        validate_parameter(value, CONSTRAINTS[name], name=name, owner=owner)
 
 
 def check_non_negative(value, name, owner):
-    value = _check_real(value, name, owner)
-    if value < 0:
-        raise ValueError(f"{owner}: {name} must be >= 0, got {value!r}")
-    return value
-
-
-def _check_flag(value, name, owner):
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{owner}: {name} must be True or False, got {type(value).__name__}")
-    return bool(value)
+    """Check a finite number >= 0 (as ``sigma``); return it as a float."""
+    validate_parameter(value, CONSTRAINTS["sigma"], name=name, owner=owner)
+    return float(value)
 
 
 def check_fraction(value, name, owner):
-    value = _check_real(value, name, owner)
-    if not 0.0 <= value < 1.0:
-        raise ValueError(f"{owner}: {name} must be in [0, 1), got {value!r}")
-    return value
+    """Check a share in [0, 1) (as ``fraction``); return it as a float."""
+    validate_parameter(value, CONSTRAINTS["fraction"], name=name, owner=owner)
+    return float(value)
+
+
+def _unit_vector(value):
+    """A checked direction (see :func:`_is_direction`) as a unit 3-vector."""
+    if isinstance(value, str):
+        return np.array(_AXES[value])
+    vec = np.asarray(value, dtype=np.float64)
+    return vec / np.sqrt(vec @ vec)
 
 
 def _check_vector(value, name, owner):
-    """Return ``value`` as a unit 3-vector; ``'x'``, ``'y'``, ``'z'`` name the axes."""
-    if isinstance(value, str):
-        if value not in _AXES:
-            raise ValueError(f"{owner}: {name} must be 'x', 'y', 'z' or a vector of length 3, got {value!r}")
-        return np.array(_AXES[value])
-    try:
-        vec = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"{owner}: {name} must be 'x', 'y', 'z' or a vector of length 3, got {type(value).__name__}") from None
-    if vec.shape != (3,):
-        raise ValueError(f"{owner}: {name} must be a vector of length 3, got shape {vec.shape}")
-    if not np.isfinite(vec).all():
-        raise ValueError(f"{owner}: {name} contains NaN or infinite values")
-    norm = np.sqrt(vec @ vec)
-    if norm < 1e-12:
-        raise ValueError(f"{owner}: {name} must be a nonzero vector")
-    return vec / norm
+    """Check the direction ``name`` (``'x'``, ``'y'``, ``'z'`` or a vector); return it as a unit 3-vector."""
+    _check(owner, **{name: value})
+    return _unit_vector(value)
+
+
+def _check_scale_range(low, high, owner):
+    """Checked ``low`` and ``high`` as floats, with ``low <= high``."""
+    _check(owner, low=low, high=high)
+    low, high = float(low), float(high)
+    if not low <= high:
+        raise ValueError(f"{owner}: need 0 < low <= high, got low={low!r}, high={high!r}")
+    return low, high
 
 
 def _n_removed(fraction, n_points):
@@ -150,8 +177,7 @@ def add_gaussian_noise(cloud, sigma, *, relative_to="unit_cube", random_state=No
     owner = "add_gaussian_noise"
     arr = check_point_cloud(cloud, owner=owner)
     sigma = check_non_negative(sigma, "sigma", owner)
-    if relative_to not in ("unit_cube", "none"):
-        raise ValueError(f"{owner}: relative_to must be 'unit_cube' or 'none', got {relative_to!r}")
+    _check(owner, relative_to=relative_to)
     rng = check_random_state(random_state)
     if relative_to == "unit_cube":
         sigma = sigma * float(np.ptp(arr[:, :3], axis=0).max())
@@ -316,7 +342,8 @@ def rotation_matrix(axis, angle):
     """
     owner = "rotation_matrix"
     u = _check_vector(axis, "axis", owner)
-    angle = _check_real(angle, "angle", owner)
+    _check(owner, angle=angle)
+    angle = float(angle)
     k = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
     return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
 
@@ -377,11 +404,6 @@ def rotate_array(arr, rotation, center):
     return out
 
 
-def _check_center(center, owner):
-    if center not in ("centroid", "origin"):
-        raise ValueError(f"{owner}: center must be 'centroid' or 'origin', got {center!r}")
-
-
 def rotate(cloud, rotation, *, center="centroid"):
     """Rotate a point cloud and its normals by a given rotation matrix.
 
@@ -407,7 +429,7 @@ def rotate(cloud, rotation, *, center="centroid"):
     """
     owner = "rotate"
     arr = check_point_cloud(cloud, owner=owner)
-    _check_center(center, owner)
+    _check(owner, center=center)
     try:
         rot = np.asarray(rotation, dtype=np.float64)
     except (TypeError, ValueError):
@@ -458,7 +480,7 @@ def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
     """
     owner = "random_rotation"
     arr = check_point_cloud(cloud, owner=owner)
-    _check_center(center, owner)
+    _check(owner, center=center)
     if axis is not None:
         axis = _check_vector(axis, "axis", owner)
     rot = random_rotation_matrix(axis=axis, random_state=random_state)
@@ -516,24 +538,9 @@ def scale(cloud, factors, *, center="centroid"):
     """
     owner = "scale"
     arr = check_point_cloud(cloud, owner=owner)
-    _check_center(center, owner)
-    try:
-        fac = np.asarray(factors, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"{owner}: factors must be a number or a vector of length 3, got {type(factors).__name__}") from None
-    if fac.shape not in ((), (3,)):
-        raise ValueError(f"{owner}: factors must be a number or a vector of length 3, got shape {fac.shape}")
-    if not np.isfinite(fac).all() or (fac <= 0).any():
-        raise ValueError(f"{owner}: factors must be finite and > 0, got {fac.tolist()!r}")
+    _check(owner, center=center, factors=factors)
+    fac = np.asarray(factors, dtype=np.float64)
     return _scale(arr, np.broadcast_to(fac, (3,)), center)
-
-
-def _check_scale_range(low, high, owner):
-    low = _check_real(low, "low", owner)
-    high = _check_real(high, "high", owner)
-    if not 0.0 < low <= high:
-        raise ValueError(f"{owner}: need 0 < low <= high, got low={low!r}, high={high!r}")
-    return low, high
 
 
 def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centroid", random_state=None):
@@ -573,8 +580,8 @@ def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centr
     owner = "random_scaling"
     arr = check_point_cloud(cloud, owner=owner)
     low, high = _check_scale_range(low, high, owner)
-    anisotropic = _check_flag(anisotropic, "anisotropic", owner)
-    _check_center(center, owner)
+    _check(owner, anisotropic=anisotropic, center=center)
+    anisotropic = bool(anisotropic)
     rng = check_random_state(random_state)
     log_factors = rng.uniform(np.log(low), np.log(high), size=3 if anisotropic else 1)
     return _scale(arr, np.broadcast_to(np.exp(log_factors), (3,)), center)

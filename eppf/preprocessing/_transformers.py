@@ -5,6 +5,8 @@ import numbers
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
+from ._perturb import CONSTRAINTS
+from ..utils._param_validation import RANDOM_STATE, Interval, validate_params
 from ..utils._sampling import object_rng, sample_mesh
 from ..utils._validation import check_point_clouds, object_seeds
 
@@ -12,10 +14,16 @@ __all__ = ["GaussianNoise", "Occlusion", "RandomDropout", "RandomRotation", "Ran
 
 
 class _CloudTransformer(TransformerMixin, BaseEstimator):
-    """Shared plumbing: validation, per-object seeding, tags."""
+    """Shared plumbing: validation, per-object seeding, tags.
 
-    def _check_params(self):  # pragma: no cover - overridden
-        raise NotImplementedError
+    Parameters are checked against ``_parameter_constraints`` (the
+    perturbations' :data:`eppf.preprocessing._perturb.CONSTRAINTS`).
+    """
+
+    _parameter_constraints = {}
+
+    def _check_params(self):
+        validate_params(self)
 
     def _apply(self, cloud, rng):  # pragma: no cover - overridden
         raise NotImplementedError
@@ -104,11 +112,9 @@ class GaussianNoise(_CloudTransformer):
         self.relative_to = relative_to
         self.random_state = random_state
 
-    def _check_params(self):
-        owner = type(self).__name__
-        _perturb.check_non_negative(self.sigma, "sigma", owner)
-        if self.relative_to not in ("unit_cube", "none"):
-            raise ValueError(f"{owner}: relative_to must be 'unit_cube' or 'none', got {self.relative_to!r}")
+    _parameter_constraints = {
+        "sigma": CONSTRAINTS["sigma"], "relative_to": CONSTRAINTS["relative_to"], "random_state": RANDOM_STATE,
+    }
 
     def _apply(self, cloud, rng):
         return _perturb.add_gaussian_noise(cloud, self.sigma, relative_to=self.relative_to, random_state=rng)
@@ -143,8 +149,7 @@ class RandomDropout(_CloudTransformer):
         self.fraction = fraction
         self.random_state = random_state
 
-    def _check_params(self):
-        _perturb.check_fraction(self.fraction, "fraction", type(self).__name__)
+    _parameter_constraints = {"fraction": CONSTRAINTS["fraction"], "random_state": RANDOM_STATE}
 
     def _apply(self, cloud, rng):
         return _perturb.random_dropout(cloud, self.fraction, random_state=rng)
@@ -184,11 +189,9 @@ class Occlusion(_CloudTransformer):
         self.direction = direction
         self.random_state = random_state
 
-    def _check_params(self):
-        owner = type(self).__name__
-        _perturb.check_fraction(self.fraction, "fraction", owner)
-        if self.direction is not None:
-            _perturb._check_vector(self.direction, "direction", owner)
+    _parameter_constraints = {
+        "fraction": CONSTRAINTS["fraction"], "direction": [*CONSTRAINTS["direction"], None], "random_state": RANDOM_STATE,
+    }
 
     def _apply(self, cloud, rng):
         return _perturb.occlude(cloud, self.fraction, direction=self.direction, random_state=rng)
@@ -226,11 +229,9 @@ class RandomRotation(_CloudTransformer):
         self.center = center
         self.random_state = random_state
 
-    def _check_params(self):
-        owner = type(self).__name__
-        if self.axis is not None:
-            _perturb._check_vector(self.axis, "axis", owner)
-        _perturb._check_center(self.center, owner)
+    _parameter_constraints = {
+        "axis": [*CONSTRAINTS["axis"], None], "center": CONSTRAINTS["center"], "random_state": RANDOM_STATE,
+    }
 
     def _apply(self, cloud, rng):
         return _perturb.random_rotation(cloud, axis=self.axis, center=self.center, random_state=rng)
@@ -281,11 +282,14 @@ class RandomScaling(_CloudTransformer):
         self.center = center
         self.random_state = random_state
 
+    _parameter_constraints = {
+        "low": CONSTRAINTS["low"], "high": CONSTRAINTS["high"], "anisotropic": CONSTRAINTS["anisotropic"],
+        "center": CONSTRAINTS["center"], "random_state": RANDOM_STATE,
+    }
+
     def _check_params(self):
-        owner = type(self).__name__
-        _perturb._check_scale_range(self.low, self.high, owner)
-        _perturb._check_flag(self.anisotropic, "anisotropic", owner)
-        _perturb._check_center(self.center, owner)
+        super()._check_params()
+        _perturb._check_scale_range(self.low, self.high, type(self).__name__)
 
     def _apply(self, cloud, rng):
         return _perturb.random_scaling(
@@ -324,12 +328,9 @@ class Resampler(_CloudTransformer):
         self.n_points = n_points
         self.random_state = random_state
 
-    def _check_params(self):
-        owner = type(self).__name__
-        if isinstance(self.n_points, bool) or not isinstance(self.n_points, numbers.Integral):
-            raise TypeError(f"{owner}: n_points must be an int, got {type(self.n_points).__name__}")
-        if self.n_points < 2:
-            raise ValueError(f"{owner}: n_points must be >= 2, got {self.n_points}")
+    _parameter_constraints = {
+        "n_points": [Interval(numbers.Integral, 2, None, closed="left")], "random_state": RANDOM_STATE,
+    }
 
     def _apply(self, cloud, rng):
         return _perturb.resample(cloud, int(self.n_points), random_state=rng)

@@ -58,6 +58,8 @@ import numbers
 import numpy as np
 
 __all__ = [
+    "N_JOBS",
+    "RANDOM_STATE",
     "IntTuple",
     "InvalidParameterError",
     "Interval",
@@ -472,3 +474,17 @@ def validate_params(estimator):
         raise TypeError(f"{owner}: _parameter_constraints has no entry for {', '.join(missing)}")
     for name, value in params.items():
         validate_parameter(value, declared[name], name=name, owner=owner)
+
+
+def _nonzero_int(value):
+    return _is_int(value) and value != 0
+
+
+#: ``n_jobs``: None (OpenMP's default) or joblib's non-zero ints.
+N_JOBS = [None, Satisfies(_nonzero_int, "a non-zero int (-1: all cores)")]
+#: ``random_state``: what :func:`sklearn.utils.check_random_state` takes.
+RANDOM_STATE = [
+    None,
+    Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
+    Options(np.random.RandomState, description="a numpy RandomState"),
+]

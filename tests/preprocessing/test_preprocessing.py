@@ -145,19 +145,19 @@ def test_pipeline():
 @pytest.mark.parametrize(
     "est, exc, msg",
     [
-        (GaussianNoise(-0.1), ValueError, "GaussianNoise: sigma must be >= 0, got -0.1"),
-        (GaussianNoise("big"), TypeError, "GaussianNoise: sigma must be a real number, got str"),
+        (GaussianNoise(-0.1), ValueError, "GaussianNoise: sigma must be a finite float >= 0, got -0.1"),
+        (GaussianNoise("big"), TypeError, "GaussianNoise: sigma must be a finite float >= 0, got 'big'"),
         (GaussianNoise(0.1, relative_to="bbox"), ValueError, "GaussianNoise: relative_to must be 'unit_cube' or 'none', got 'bbox'"),
-        (RandomDropout(1.0), ValueError, "RandomDropout: fraction must be in [0, 1), got 1.0"),
-        (Occlusion(0.2, direction=[0, 0, 0]), ValueError, "Occlusion: direction must be a nonzero vector"),
-        (Occlusion(0.2, direction="w"), ValueError, "Occlusion: direction must be 'x', 'y', 'z' or a vector of length 3"),
-        (RandomRotation(axis=[1, 0]), ValueError, "RandomRotation: axis must be a vector of length 3"),
+        (RandomDropout(1.0), ValueError, "RandomDropout: fraction must be a float in [0, 1), got 1.0"),
+        (Occlusion(0.2, direction=[0, 0, 0]), ValueError, "Occlusion: direction must be 'x', 'y', 'z' or a finite non-zero vector of length 3 or None, got [0, 0, 0]"),
+        (Occlusion(0.2, direction="w"), ValueError, "Occlusion: direction must be 'x', 'y', 'z' or a finite non-zero vector of length 3 or None, got 'w'"),
+        (RandomRotation(axis=[1, 0]), ValueError, "RandomRotation: axis must be 'x', 'y', 'z' or a finite non-zero vector of length 3 or None, got [1, 0]"),
         (RandomRotation(center="middle"), ValueError, "RandomRotation: center must be 'centroid' or 'origin', got 'middle'"),
-        (Resampler(1), ValueError, "Resampler: n_points must be >= 2, got 1"),
+        (Resampler(1), ValueError, "Resampler: n_points must be an int >= 2, got 1"),
         (RandomScaling(2.0, 1.0), ValueError, "RandomScaling: need 0 < low <= high, got low=2.0, high=1.0"),
-        (RandomScaling(anisotropic="yes"), TypeError, "RandomScaling: anisotropic must be True or False, got str"),
+        (RandomScaling(anisotropic="yes"), TypeError, "RandomScaling: anisotropic must be True or False, got 'yes'"),
         (RandomScaling(center="middle"), ValueError, "RandomScaling: center must be 'centroid' or 'origin', got 'middle'"),
-        (Resampler(3.5), TypeError, "Resampler: n_points must be an int, got float"),
+        (Resampler(3.5), TypeError, "Resampler: n_points must be an int >= 2, got 3.5"),
     ],
 )
 def test_parameter_errors(est, exc, msg):
