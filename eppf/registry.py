@@ -93,11 +93,12 @@ class DescriptorSpec:
         module, name = self.cls.split(":")
         return getattr(importlib.import_module(module), name)
 
-    def make(self, *, n_samples=None, scaling=None, random_state=None, n_jobs=None, **params):
+    def make(self, *, n_samples=None, scaling=None, random_state=None, n_jobs=None, verbose=None, **params):
         """Build an unfitted transformer with the given settings.
 
-        Settings the class has no parameter for are dropped, so one set of
-        settings serves every descriptor.
+        The named settings serve every descriptor: each is passed where the
+        class has the parameter it sets and left out elsewhere. Any other
+        setting must be a parameter of the class, not one of ``fixed``.
 
         Parameters
         ----------
@@ -111,17 +112,35 @@ class DescriptorSpec:
             Seed, passed to descriptors that draw samples.
         n_jobs : int, default=None
             Threads (joblib's meaning).
+        verbose : int, default=None
+            Progress bar, passed to descriptors that show one. None keeps the
+            default.
         **params
-            Any other parameter of the class; parameters in ``fixed`` cannot
-            be overridden.
+            Other parameters of the class.
 
         Returns
         -------
         transformer : estimator
             The unfitted transformer.
+
+        Raises
+        ------
+        ValueError
+            If a setting in ``params`` is not a parameter of the class, or is
+            one of the parameters ``fixed`` defines.
         """
         cls = self.estimator_class()
         accepted = cls().get_params(deep=False)
+        unknown = sorted(k for k in params if k not in accepted)
+        if unknown:
+            raise ValueError(
+                f"descriptor {self.name!r}: {cls.__name__} has no parameter(s) {', '.join(unknown)}; "
+                f"its parameters are {', '.join(accepted)}"
+            )
+        fixed = sorted(k for k in params if k in self.fixed)
+        if fixed:
+            raise ValueError(f"descriptor {self.name!r}: {', '.join(fixed)} is fixed by the entry "
+                             f"({', '.join(f'{k}={self.fixed[k]!r}' for k in fixed)})")
         kw = dict(self.fixed)
         if n_samples is not None and self.sampling is not None:
             kw[self.sampling] = n_samples
@@ -130,7 +149,9 @@ class DescriptorSpec:
         if "random_state" in accepted and not self.deterministic:
             kw["random_state"] = random_state
         kw["n_jobs"] = n_jobs
-        kw.update({k: v for k, v in params.items() if k in accepted and k not in self.fixed})
+        if verbose is not None:
+            kw["verbose"] = verbose
+        kw.update(params)
         return cls(**{k: v for k, v in kw.items() if k in accepted})
 
 

@@ -179,10 +179,9 @@ def descriptor_settings(args, progress=None):
 def make_descriptor(name, settings):
     """A registered descriptor, refusing a ``--normal-neighbors`` it cannot use."""
     spec = DESCRIPTORS[name]
-    est = spec.make(**settings)
-    if "n_neighbors" in settings and "n_neighbors" not in est.get_params():
+    if "n_neighbors" in settings and "n_neighbors" not in spec.estimator_class()().get_params():
         raise ValueError(f"--normal-neighbors: the {name} descriptor estimates no normals")
-    return est
+    return spec.make(**settings)
 
 
 # ---------------------------------------------------------------------------

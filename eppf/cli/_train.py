@@ -100,7 +100,8 @@ def make_pipeline_from_args(args):
         clf = cls(n_neighbors=args.n_neighbors, n_jobs=args.n_jobs)
     else:
         n_bins = descriptor.get_params().get("n_bins")
-        if type(descriptor).__name__ != "EPPFTransformer" or len(tuple(n_bins)) != 4:
+        # (the class through the registry, which imports it on use)
+        if not isinstance(descriptor, DESCRIPTORS["eppf"].estimator_class()) or len(tuple(n_bins)) != 4:
             raise ValueError(f"the {name} classifier reads the 4D EPPF histogram; use --descriptor eppf or "
                              f"eppf_short, not {args.descriptor}")
         if getattr(args, "recipe", "paper") == "recommended":

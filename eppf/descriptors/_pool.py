@@ -7,9 +7,15 @@ from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
+from ..utils._param_validation import RANDOM_STATE, Interval, Options, validate_parameter, validate_params
+
 __all__ = ["DescriptorPool", "descriptor_pool"]
 
 _OWNER = "descriptor_pool"
+
+
+#: ``n_draws`` (and ``test_draws``): draws per object.
+_N_DRAWS = [Interval(numbers.Integral, 1, None, closed="left")]
 
 
 def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=None):
@@ -65,10 +71,7 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
     >>> pool.shape
     (3, 3, 1200)
     """
-    if isinstance(n_draws, (bool, np.bool_)) or not isinstance(n_draws, numbers.Integral):
-        raise TypeError(f"{_OWNER}: n_draws must be an int, got {type(n_draws).__name__}")
-    if n_draws < 1:
-        raise ValueError(f"{_OWNER}: n_draws must be >= 1, got {n_draws}")
+    validate_parameter(n_draws, _N_DRAWS, name="n_draws", owner=_OWNER)
     for role, est, methods in (("transformer", transformer, ("fit", "transform")),
                                ("augment", augment, ("fit_transform",))):
         if est is None and role == "augment":
@@ -174,17 +177,18 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
         self.test_augment = test_augment
         self.random_state = random_state
 
+    _parameter_constraints = {
+        "transformer": ["no_validation"],  # (its methods and random_state: see _check_params)
+        "n_draws": _N_DRAWS,
+        "augment": ["no_validation"],
+        "test_draws": [*_N_DRAWS, None],
+        "test_augment": [Options(bool)],
+        "random_state": RANDOM_STATE,
+    }
+
     def _check_params(self):
         owner = type(self).__name__
-        for name, value, none_ok in (("n_draws", self.n_draws, False), ("test_draws", self.test_draws, True)):
-            if value is None and none_ok:
-                continue
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-                raise TypeError(f"{owner}: {name} must be an int, got {type(value).__name__}")
-            if value < 1:
-                raise ValueError(f"{owner}: {name} must be >= 1, got {value}")
-        if not isinstance(self.test_augment, (bool, np.bool_)):
-            raise TypeError(f"{owner}: test_augment must be True or False, got {self.test_augment!r}")
+        validate_params(self)
         for role, est, methods in (("transformer", self.transformer, ("fit", "transform")),
                                    ("augment", self.augment, ("fit_transform",))):
             if est is None and role == "augment":

@@ -22,6 +22,8 @@ from sklearn.utils import Bunch
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_point_clouds
+from ..utils._param_validation import N_JOBS, Interval, StrOptions, validate_params
+from ._eppf import EPPFTransformer
 
 __all__ = ["DescriptorUnion", "EPPFGASDTransformer"]
 
@@ -216,13 +218,19 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
             raise ValueError(f"{owner}: the weights must have a positive finite sum, got {weights!r}")
         return w / total
 
+    _parameter_constraints = {
+        "transformer_list": ["no_validation"],  # (a list of named blocks: see _check_blocks)
+        "weights": ["no_validation"],  # (a dict of block weights: see _check_weights)
+        "normalize": [StrOptions(["block", "none"])],
+        "n_jobs": N_JOBS,
+    }
+
     def _check_params(self):
         owner = type(self).__name__
+        validate_params(self)
         transformer_list, weights, normalize, n_jobs = self._spec()
         names = self._check_blocks(transformer_list)
         w = self._check_weights(weights, names)
-        if normalize not in ("block", "none"):
-            raise ValueError(f"{owner}: normalize must be 'block' or 'none', got {normalize!r}")
         n_threads = check_n_jobs(n_jobs, owner=owner)
         return transformer_list, w, normalize, n_jobs, n_threads
 
@@ -557,16 +565,16 @@ class EPPFGASDTransformer(DescriptorUnion):
         self.random_state = random_state
         self.n_jobs = n_jobs
 
+    _parameter_constraints = {
+        "eppf_weight": [Interval(numbers.Real, 0, 1, closed="both")],
+        **{k: EPPFTransformer._parameter_constraints[k] for k in ("n_pairs", "scaling", "n_neighbors",
+                                                                  "random_state", "n_jobs")},
+    }
+
     def _spec(self):
-        from ._eppf import EPPFTransformer
         from ._gasd import GASDTransformer
 
-        owner = type(self).__name__
         w = self.eppf_weight
-        if isinstance(w, (bool, np.bool_)) or not isinstance(w, numbers.Real):
-            raise TypeError(f"{owner}: eppf_weight must be a real number in [0, 1], got {type(w).__name__}")
-        if not (0.0 <= float(w) <= 1.0):
-            raise ValueError(f"{owner}: eppf_weight must be in [0, 1], got {w!r}")
         blocks = [
             ("eppf", EPPFTransformer(n_pairs=self.n_pairs, scaling=self.scaling, n_neighbors=self.n_neighbors,
                                      random_state=self.random_state)),

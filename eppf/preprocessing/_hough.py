@@ -20,6 +20,7 @@ from scipy.spatial import cKDTree
 
 from ._hough_fast import hough_normals
 from ._normal_options import ORIENT_CENTROID, ORIENT_NONE, check_n_neighbors, resolve_orientation
+from ..utils._param_validation import Interval, StrOptions, validate_parameter
 from ..utils._validation import check_n_jobs, check_point_cloud, object_seeds
 
 __all__ = ["estimate_normals_hough"]
@@ -34,6 +35,20 @@ _DEFAULTS = {"n_triplets": 700, "n_phi": 15, "n_rotations": 5, "cluster_angle": 
 _MAX_NEIGHBOR_ENTRIES = 1 << 22
 
 
+#: Most triplets per point and accumulator.
+MAX_TRIPLETS = 10_000_000
+
+#: What each Hough parameter accepts (:mod:`eppf.utils._param_validation`).
+PARAMETER_CONSTRAINTS = {
+    "n_triplets": [Interval(numbers.Integral, 1, MAX_TRIPLETS, closed="both"), StrOptions(["auto"])],
+    "n_phi": [Interval(numbers.Integral, 2, 180, closed="both")],
+    "n_rotations": [Interval(numbers.Integral, 0, 100, closed="both")],
+    "cluster_angle": [Interval(numbers.Real, 0, math.pi / 2, closed="left")],
+    "tolerance": [Interval(numbers.Real, 0, 1, closed="neither")],
+    "confidence": [Interval(numbers.Real, 0, 1, closed="neither")],
+}
+
+
 def _check_params(params, owner):
     """Validate Hough parameters (dict, unknown keys refused); return a full dict."""
     if params is None:
@@ -44,40 +59,21 @@ def _check_params(params, owner):
     if unknown:
         raise ValueError(f"{owner}: unknown Hough parameter(s) {unknown}; known: {sorted(_DEFAULTS)}")
     p = dict(_DEFAULTS, **params)
-
-    def _int(name, low, high):
-        v = p[name]
-        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
-            raise TypeError(f"{owner}: {name} must be an int, got {type(v).__name__}")
-        if not (low <= v <= high):
-            raise ValueError(f"{owner}: {name} must be in [{low}, {high}], got {v}")
-        return int(v)
-
-    def _float(name, low, high, open_low=True):
-        v = p[name]
-        if isinstance(v, bool) or not isinstance(v, numbers.Real):
-            raise TypeError(f"{owner}: {name} must be a real number, got {type(v).__name__}")
-        v = float(v)
-        ok = (v > low if open_low else v >= low) and v < high
-        if not ok:
-            raise ValueError(f"{owner}: {name} must be in {'(' if open_low else '['}{low}, {high}), got {v}")
-        return v
-
-    p["tolerance"] = _float("tolerance", 0.0, 1.0)
-    p["confidence"] = _float("confidence", 0.0, 1.0)
-    if isinstance(p["n_triplets"], str):
-        if p["n_triplets"] != "auto":
-            raise ValueError(f"{owner}: n_triplets must be a positive int or 'auto', got {p['n_triplets']!r}")
+    for name in ("tolerance", "confidence"):  # (first: n_triplets="auto" is computed from them)
+        validate_parameter(p[name], PARAMETER_CONSTRAINTS[name], name=name, owner=owner)
+        p[name] = float(p[name])
+    if isinstance(p["n_triplets"], str) and p["n_triplets"] == "auto":
         p["n_triplets"] = triplets_for(p["tolerance"], p["confidence"])
-        if p["n_triplets"] > 10_000_000:
+        if p["n_triplets"] > MAX_TRIPLETS:
             raise ValueError(
                 f"{owner}: tolerance={p['tolerance']} and confidence={p['confidence']} ask for "
-                f"{p['n_triplets']} triplets per point (more than 10,000,000)"
+                f"{p['n_triplets']} triplets per point (more than {MAX_TRIPLETS:,})"
             )
-    p["n_triplets"] = _int("n_triplets", 1, 10_000_000)
-    p["n_phi"] = _int("n_phi", 2, 180)
-    p["n_rotations"] = _int("n_rotations", 0, 100)
-    p["cluster_angle"] = _float("cluster_angle", 0.0, math.pi / 2, open_low=False)
+    for name in ("n_triplets", "n_phi", "n_rotations", "cluster_angle"):
+        validate_parameter(p[name], PARAMETER_CONSTRAINTS[name], name=name, owner=owner)
+    for name in ("n_triplets", "n_phi", "n_rotations"):
+        p[name] = int(p[name])
+    p["cluster_angle"] = float(p["cluster_angle"])
     return p
 
 

@@ -64,9 +64,9 @@ def test_pool_feeds_the_classifier():
 @pytest.mark.parametrize(
     "kwargs, exc, msg",
     [
-        ({"n_draws": 0}, ValueError, "descriptor_pool: n_draws must be >= 1, got 0"),
-        ({"n_draws": 2.0}, TypeError, "descriptor_pool: n_draws must be an int, got float"),
-        ({"n_draws": True}, TypeError, "descriptor_pool: n_draws must be an int, got bool"),
+        ({"n_draws": 0}, ValueError, "descriptor_pool: n_draws must be an int >= 1, got 0"),
+        ({"n_draws": 2.0}, TypeError, "descriptor_pool: n_draws must be an int >= 1, got 2.0"),
+        ({"n_draws": True}, TypeError, "descriptor_pool: n_draws must be an int >= 1, got True"),
         ({"transformer": "eppf"}, TypeError, "descriptor_pool: transformer must be a scikit-learn style estimator with fit and transform and a random_state parameter, got str"),
         ({"augment": np.sqrt}, TypeError, "descriptor_pool: augment must be a scikit-learn style estimator with fit_transform and a random_state parameter, got ufunc"),
     ],
@@ -131,10 +131,10 @@ def test_descriptor_pool_step_in_a_pipeline_with_side_features():
 
 
 @pytest.mark.parametrize("params, err, msg", [
-    (dict(n_draws=0), ValueError, "n_draws must be >= 1"),
-    (dict(n_draws=2.0), TypeError, "n_draws must be an int"),
-    (dict(test_draws=0), ValueError, "test_draws must be >= 1"),
-    (dict(test_augment="no"), TypeError, "test_augment must be True or False"),
+    (dict(n_draws=0), ValueError, "n_draws must be an int >= 1, got 0"),
+    (dict(n_draws=2.0), TypeError, "n_draws must be an int >= 1, got 2.0"),
+    (dict(test_draws=0), ValueError, "test_draws must be an int >= 1 or None, got 0"),
+    (dict(test_augment="no"), TypeError, "test_augment must be True or False, got 'no'"),
     (dict(augment=object()), TypeError, "augment must be a scikit-learn style estimator"),
     (dict(transformer=object()), TypeError, "transformer must be a scikit-learn style estimator"),
 ])
