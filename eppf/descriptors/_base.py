@@ -45,6 +45,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted
 
+from ..preprocessing._normal_options import N_NEIGHBORS
 from ..utils import PackedClouds, check_n_jobs, check_packed_clouds, object_seeds, transform_in_chunks
 from ..utils._validation import condition_point_clouds
 from ..utils._param_validation import N_JOBS, RANDOM_STATE, Interval, Options, StrOptions, validate_params
@@ -84,8 +85,6 @@ def as_vector3(value):
 VERBOSE = [Interval(numbers.Integral, 0, None, closed="left"), Options(bool)]
 #: ``normal_orientation`` of estimated normals.
 NORMAL_ORIENTATION = [StrOptions(["centroid", "origin"], description="'centroid', 'origin'"), None]
-#: ``n_neighbors`` of PCA normals (a plane needs three points).
-N_NEIGHBORS = [Interval(numbers.Integral, 3, None, closed="left")]
 #: ``scaling`` of the descriptors that center each object and scale it to a unit box.
 SCALING = [StrOptions(["object", "fit", "none"])]
 

@@ -7,7 +7,7 @@ import numpy as np
 from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Satisfies
 from ._base import N_JOBS, RANDOM_STATE, PointCloudDescriptor
-from ._esf_fast import esf_batch
+from ._esf_fast import MAX_BINS, MAX_GRID, MIN_GRID, esf_batch
 
 __all__ = ["ESFTransformer"]
 
@@ -20,7 +20,7 @@ _AREA_EPS = 0.001
 
 
 def _even_grid(value):
-    return Interval(numbers.Integral, 4, 1024, closed="both").is_satisfied_by(value) and value % 2 == 0
+    return Interval(numbers.Integral, MIN_GRID, MAX_GRID, closed="both").is_satisfied_by(value) and value % 2 == 0
 
 
 class ESFTransformer(PointCloudDescriptor):
@@ -125,8 +125,8 @@ class ESFTransformer(PointCloudDescriptor):
 
     _parameter_constraints = {
         "n_triplets": [Interval(numbers.Integral, 1, 2**31 // 4, closed="both")],
-        "grid_size": [Satisfies(_even_grid, "an even int in [4, 1024]")],
-        "n_bins": [Interval(numbers.Integral, 1, 4096, closed="both")],
+        "grid_size": [Satisfies(_even_grid, f"an even int in [{MIN_GRID}, {MAX_GRID}]")],
+        "n_bins": [Interval(numbers.Integral, 1, MAX_BINS, closed="both")],
         "random_state": RANDOM_STATE,
         "n_jobs": N_JOBS,
     }

@@ -451,6 +451,13 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
     return 0
 
 
+#: Limits of :func:`esf_batch`'s parameters (the transformer's constraints read them): an
+#: even grid side in [MIN_GRID, MAX_GRID] and at most MAX_BINS bins per histogram.
+MIN_GRID = 4
+MAX_GRID = 1024
+MAX_BINS = 4096
+
+
 def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
               const uint64_t[::1] seeds, int n_triplets, int grid, int n_bins,
               double area_eps, double[:, ::1] out, int8_t[::1] status,
@@ -470,8 +477,9 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     if points.shape[1] != 3:
         raise ValueError("esf_batch: points must be (N, 3)")
     check_batch(points.shape[0], offsets, seeds, out, status, 10 * n_bins, "esf_batch")
-    if not (4 <= grid <= 1024 and grid % 2 == 0 and 1 <= n_bins <= 4096 and n_triplets >= 1):
-        raise ValueError("esf_batch: grid must be even in [4, 1024], n_bins in [1, 4096], n_triplets positive")
+    if not (MIN_GRID <= grid <= MAX_GRID and grid % 2 == 0 and 1 <= n_bins <= MAX_BINS and n_triplets >= 1):
+        raise ValueError(f"esf_batch: grid must be even in [{MIN_GRID}, {MAX_GRID}], n_bins in [1, {MAX_BINS}], "
+                         "n_triplets positive")
     num_threads = max(1, num_threads)
     for k in range(n_objects):
         if offsets[k + 1] - offsets[k] > max_n:

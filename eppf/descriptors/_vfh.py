@@ -5,8 +5,8 @@ import numbers
 import numpy as np
 
 from ..utils import check_n_jobs
-from ..utils._param_validation import Interval, Options, Satisfies
-from ._base import N_JOBS, NORMAL_ORIENTATION, PointCloudDescriptor, as_vector3
+from ..utils._param_validation import Options, Satisfies
+from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, PointCloudDescriptor, as_vector3
 from ._vfh_fast import vfh_batch
 
 __all__ = ["VFHTransformer"]
@@ -169,8 +169,7 @@ class VFHTransformer(PointCloudDescriptor):
     _parameter_constraints = {
         "viewpoint": [Satisfies(_is_viewpoint, f"an array-like of 3 finite numbers of magnitude at most {_MAX_COORD:g}")],
         **{name: [Options(bool)] for name in _FLAGS},
-        "n_neighbors": [Interval(numbers.Integral, 3, None, closed="left",
-                                 description="an int >= 3 (a plane needs three points)")],
+        "n_neighbors": N_NEIGHBORS,
         "normal_orientation": NORMAL_ORIENTATION,
         "n_jobs": N_JOBS,
     }

@@ -4,17 +4,24 @@ import numbers
 
 import numpy as np
 
-__all__ = ["ORIENT_CENTROID", "ORIENT_NONE", "ORIENT_VIEWPOINT", "check_n_neighbors", "resolve_orientation"]
+from ..utils._param_validation import Interval, validate_parameter
+
+__all__ = [
+    "N_NEIGHBORS", "ORIENT_CENTROID", "ORIENT_NONE", "ORIENT_VIEWPOINT", "check_n_neighbors", "resolve_orientation",
+]
 
 #: The kernels' orientation modes: none, away from the centroid, towards a viewpoint.
 ORIENT_NONE, ORIENT_CENTROID, ORIENT_VIEWPOINT = 0, 1, 2
 
 
+#: ``n_neighbors`` of PCA normals (:mod:`eppf.utils._param_validation`); the descriptors that
+#: estimate normals declare it too.
+N_NEIGHBORS = [Interval(numbers.Integral, 3, None, closed="left", description="an int >= 3 (a plane needs three points)")]
+
+
 def check_n_neighbors(n_neighbors, owner):
-    if isinstance(n_neighbors, bool) or not isinstance(n_neighbors, numbers.Integral):
-        raise TypeError(f"{owner}: n_neighbors must be an int, got {type(n_neighbors).__name__}")
-    if n_neighbors < 3:
-        raise ValueError(f"{owner}: n_neighbors must be >= 3 (a plane needs three points), got {n_neighbors}")
+    """Check ``n_neighbors`` against :data:`N_NEIGHBORS`; return it as an int."""
+    validate_parameter(n_neighbors, N_NEIGHBORS, name="n_neighbors", owner=owner)
     return int(n_neighbors)
 
 

@@ -249,7 +249,7 @@ def _cloud(n=60, seed=0):
         ({"normalize_bins": "yes"}, TypeError, "normalize_bins must be True or False, got 'yes'"),
         ({"normalize": None}, TypeError, "normalize must be True or False, got None"),
         ({"scaling": "unit"}, ValueError, "scaling must be"),
-        ({"n_neighbors": 1}, ValueError, "n_neighbors must be an int >= 3, got 1"),
+        ({"n_neighbors": 1}, ValueError, "n_neighbors must be an int >= 3 (a plane needs three points), got 1"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation"),
         ({"n_jobs": 1.5}, TypeError, "n_jobs"),
     ],

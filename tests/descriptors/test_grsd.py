@@ -404,7 +404,7 @@ def _cloud(n=50, seed=0):
         ({"plane_radius": -1.0}, ValueError, "plane_radius"),
         ({"scaling": "unit"}, ValueError, "scaling must be"),
         ({"normalize": 1}, TypeError, "normalize must be True or False, got 1"),
-        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),
+        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3 (a plane needs three points), got 2"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation"),
         ({"n_jobs": 0}, ValueError, "n_jobs"),
     ],

@@ -169,7 +169,7 @@ def test_pipeline_and_grid_search():
         ({"axis_ratio": 1.5}, ValueError, "axis_ratio must be a float in (0.0, 1.0], got 1.5"),
         ({"sigma": np.nan}, ValueError, "sigma must be a float in (0.0, inf), got nan"),
         ({"normalize": 1}, TypeError, "normalize must be True or False, got 1"),
-        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),
+        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3 (a plane needs three points), got 2"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation must be 'centroid', 'origin' or None, got 'up'"),
         ({"n_jobs": 0}, ValueError, "n_jobs must be None or a non-zero int (-1: all cores), got 0"),
     ],

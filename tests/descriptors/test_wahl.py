@@ -139,7 +139,7 @@ _N_BINS = ("n_bins must be an int in [1, 1024] or a tuple of 4 ints in [1, 1024]
         ({"n_bins": (1024, 1024, 64, 2)}, ValueError, _N_BINS + "(1024, 1024, 64, 2)"),  # 2**27 bins
         ({"n_pairs": 0}, ValueError, "n_pairs must be an int in [1, 2147483647], got 0"),
         ({"source": "target"}, ValueError, "source must be 'perpendicular' or 'parallel', got 'target'"),
-        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3, got 2"),
+        ({"n_neighbors": 2}, ValueError, "n_neighbors must be an int >= 3 (a plane needs three points), got 2"),
         ({"normal_orientation": "up"}, ValueError, "normal_orientation must be 'centroid', 'origin' or None, got 'up'"),
     ],
 )
