@@ -5,18 +5,24 @@ their input with :func:`check_point_clouds` (one error style everywhere),
 draw per-object seeds with :func:`object_seeds` (results independent of
 threads and chunking) and hand chunks of objects to joblib with
 :func:`transform_in_chunks`; :func:`check_n_jobs` gives ``n_jobs`` joblib's
-meaning everywhere.
+meaning everywhere. :func:`ordered_map` is the one ordered thread map and
+:func:`progress_bar` the one progress bar.
 """
 
 from ._chunks import transform_in_chunks
+from ._progress import progress_bar
+from ._stream import RowWriter, ordered_map
 from ._validation import check_int, check_n_jobs, check_point_cloud, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = [
+    "RowWriter",
     "check_int",
     "check_n_jobs",
     "check_point_cloud",
     "check_point_clouds",
     "object_seeds",
+    "ordered_map",
     "pack_point_clouds",
+    "progress_bar",
     "transform_in_chunks",
 ]

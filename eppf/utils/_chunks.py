@@ -13,6 +13,8 @@ at least about once a second.
 import numpy as np
 from joblib import Parallel, delayed
 
+from ._progress import progress_bar
+
 __all__ = ["CHUNK", "CHUNK_POINTS", "transform_in_chunks"]
 
 #: Objects per chunk: bounds the memory of one packed chunk and one task.
@@ -50,12 +52,6 @@ def _chunk_bounds(clouds, chunk, chunk_points):
     if lo < len(clouds):
         chunks.append((lo, len(clouds)))
     return chunks
-
-
-def _progress(total, verbose, desc):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, unit="obj", disable=not verbose, leave=False)
 
 
 def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose=0, desc=""):
@@ -107,7 +103,7 @@ def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose
         delayed(task)(est, clouds[lo:hi], *[a[lo:hi] for a in per_object], lo) for lo, hi in chunks
     )
     out = np.empty((n, n_features), dtype=np.float64)
-    progress = _progress(n, verbose, desc)
+    progress = progress_bar(total=n, desc=desc, unit="obj", enabled=bool(verbose))
     for (lo, hi), block in zip(chunks, jobs):
         out[lo:hi] = block
         progress.update(hi - lo)
