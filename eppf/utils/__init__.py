@@ -11,11 +11,10 @@ meaning everywhere. :func:`ordered_map` is the one ordered thread map and
 
 from ._chunks import transform_in_chunks
 from ._progress import progress_bar
-from ._stream import RowWriter, ordered_map
+from ._stream import ordered_map
 from ._validation import check_int, check_n_jobs, check_point_cloud, check_point_clouds, object_seeds, pack_point_clouds
 
 __all__ = [
-    "RowWriter",
     "check_int",
     "check_n_jobs",
     "check_point_cloud",

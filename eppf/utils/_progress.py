@@ -51,6 +51,10 @@ def progress_bar(iterable=None, *, total=None, desc="", unit="it", enabled=True)
         Iterate over it, or call ``update(n)`` and ``close()``. The bar is
         written to standard error and erased when closed.
 
+    See Also
+    --------
+    transform_in_chunks : Shows this bar over objects with ``verbose``.
+
     Examples
     --------
     >>> from eppf.utils import progress_bar

@@ -49,6 +49,10 @@ def ordered_map(func, items, *, workers=1, depth=2):
         ``func(item)``, in the order of ``items``. An exception raised by
         ``func`` is raised here, at that item's turn.
 
+    See Also
+    --------
+    transform_in_chunks : Descriptor rows chunk by chunk through joblib.
+
     Examples
     --------
     >>> from eppf.utils import ordered_map
