@@ -104,7 +104,7 @@ def make_pipeline_from_args(args):
             raise ValueError(f"the {name} classifier reads the 4D EPPF histogram; use --descriptor eppf or "
                              f"eppf_short, not {args.descriptor}")
         if getattr(args, "recipe", "paper") == "recommended":
-            from ..experiments._classification import recommended_pipeline_parts
+            from ..registry import recommended_pipeline_parts
 
             descriptor, clf = recommended_pipeline_parts(
                 descriptor, conv=spec.fixed.get("conv", "4d"), n_jobs=args.n_jobs, random_state=args.random_state,
