@@ -12,13 +12,13 @@ from eppf import EPPFTransformer, KLNearestNeighbors
 from eppf.experiments import (
     ExperimentError,
     load_data,
-    main,
     run_ablation,
     run_classification,
     run_noise,
     run_retrieval,
     run_runtime,
 )
+from eppf.experiments.__main__ import main
 from eppf.experiments._common import draw_seeds
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores
 
@@ -299,7 +299,7 @@ def test_bad_npz_is_one_line_error(tmp_path, capsys):
 
 def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path, capsys):
     from eppf.experiments._classification import TrainingSettings
-    from eppf.experiments._cli import build_parser
+    from eppf.cli import build_parser
 
     common = dict(epochs=None, pointnet_epochs=None, pointnet_points=None, validation_fraction=0.1, patience=None,
                   scaling="fit", quick=True, n_jobs=1, random_state=0)
@@ -315,7 +315,7 @@ def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path, capsys):
     assert auto.protocol(["4d"])["precision 'auto'"].startswith(f"{resolve_precision('auto')} on this machine")
     assert "precision 'auto'" not in TrainingSettings.resolve(**common).protocol(["4d"])
     assert "precision 'auto'" in TrainingSettings.resolve(**common).protocol(["4d+"])  # the recipe's "auto"
-    args = build_parser().parse_args(["noise", "--precision", "bfloat16"])
+    args = build_parser().parse_args(["experiment", "noise", "--precision", "bfloat16"])
     assert args.precision == "bfloat16"
     result = run_classification("builtin", quick=True, models=["4d"], n_jobs=1, out=str(tmp_path), verbose=False,
                                 precision="bfloat16")

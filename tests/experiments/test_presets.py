@@ -12,6 +12,7 @@ from scipy.optimize import linprog
 from eppf import EPPFTransformer, KLNearestNeighbors
 from eppf.cli._experiment import run_experiment
 from eppf.datasets import save_npz
+from eppf.experiments.__main__ import main
 from eppf.experiments import (
     PRESETS,
     ExperimentError,
@@ -19,7 +20,6 @@ from eppf.experiments import (
     apply_preset,
     get_preset,
     load_data,
-    main,
     run_classification,
     run_noise,
 )
