@@ -213,18 +213,20 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
                  skipped=result.skipped, n_points=result.shapes[:, 0].copy(), descriptor=result.descriptor)
 
 
+def _first_messages(skipped):
+    """The messages of the first three ``(file, message)`` pairs, and how many more there are."""
+    more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
+    return "; ".join(f"{m}" for _, m in skipped[:3]) + more
+
+
 def skipped_summary(skipped, n_files):
     """``"skipped 2 of 9 files that could not be read: <first messages>"`` for ``(file, message)`` pairs."""
-    first = "; ".join(f"{m}" for _, m in skipped[:3])
-    more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
-    return f"skipped {len(skipped)} of {n_files} files that could not be read: {first}{more}"
+    return f"skipped {len(skipped)} of {n_files} files that could not be read: {_first_messages(skipped)}"
 
 
 def nothing_read(skipped, n_files):
     """The ValueError of a stream in which no file could be read."""
-    first = "; ".join(f"{m}" for _, m in skipped[:3])
-    more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
-    return ValueError(f"no file could be read ({len(skipped)} of {n_files}): {first}{more}")
+    return ValueError(f"no file could be read ({len(skipped)} of {n_files}): {_first_messages(skipped)}")
 
 
 def write_descriptors(fh, names, read, descriptor, **kwargs):
