@@ -132,7 +132,7 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     See Also
     --------
     eppf.io.read_point_cloud : How each file is read.
-    eppf.datasets.load_folder : Load a labelled folder into memory.
+    eppf.datasets.load_folder : Load a labeled folder into memory.
 
     Examples
     --------
