@@ -3,8 +3,8 @@
 One subcommand per experiment (retrieval, ablation, classification, noise,
 runtime), each with its ``--help``; ``eppf experiment classification --help``
 and ``eppf experiment noise --help`` list the presets of the paper's
-ModelNet40 protocol (``--preset``). ``python -m eppf.experiments NAME ...``
-is the same command. ``--no-progress`` hides progress lines, as in every
+ModelNet40 protocol (``--preset``). ``python -m eppf.experiments`` was a
+second parser of these options; it now only points here. ``--no-progress`` hides progress lines, as in every
 other subcommand; ``--quiet`` is kept as a deprecated alias. Bad options are
 one line on stderr.
 """

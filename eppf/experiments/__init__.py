@@ -4,7 +4,7 @@ Each experiment takes a data set (the built-in synthetic shapes or a ``.npz``
 file in the layout of :func:`eppf.datasets.load_npz`) and writes a Markdown
 report (table, exact command, protocol, machine), a CSV table and a PNG plot
 into an output folder. Run them as ``eppf experiment NAME [options]``
-(also ``python -m eppf.experiments NAME [options]``) or call the functions:
+or call the functions:
 
 - :func:`run_retrieval`: Table II, leave-one-out KL 1-NN retrieval of
   OUR-CVFH, ESF, Wahl, EPPF short and EPPF;

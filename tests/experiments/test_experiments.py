@@ -18,9 +18,10 @@ from eppf.experiments import (
     run_retrieval,
     run_runtime,
 )
-from eppf.experiments.__main__ import main
 from eppf.experiments._common import draw_seeds
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores
+
+from . import experiment_main as main
 
 try:
     import matplotlib  # noqa: F401

@@ -12,7 +12,6 @@ from scipy.optimize import linprog
 from eppf import EPPFTransformer, KLNearestNeighbors
 from eppf.cli._experiment import run_experiment
 from eppf.datasets import save_npz
-from eppf.experiments.__main__ import main
 from eppf.experiments import (
     PRESETS,
     ExperimentError,
@@ -25,6 +24,8 @@ from eppf.experiments import (
 )
 from eppf.experiments._common import draw_seeds
 from eppf.metrics import retrieval_scores
+
+from . import experiment_main as main
 
 N = 1024
 
