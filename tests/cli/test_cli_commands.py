@@ -375,17 +375,10 @@ def test_train_on_a_folder_of_class_subfolders(tmp_path, capsys):
 
 
 def test_experiment_subcommand_is_the_experiments_command_line(capsys):
-    import subprocess
-    import sys
-
     with pytest.raises(SystemExit) as exc:
         main(["experiment", "no-such-experiment"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "no-such-experiment" in err and len(err.strip().splitlines()) == 1
-    # python -m eppf.experiments is gone: it says which command replaced it
-    proc = subprocess.run([sys.executable, "-m", "eppf.experiments", "retrieval", "--quick"], capture_output=True,
-                          text=True)
-    assert proc.returncode == 2 and "eppf experiment retrieval --quick" in proc.stderr
 
 
 def test_train_passes_precision_to_the_cnn():
