@@ -1,5 +1,5 @@
 """Turn the experiment reports (``docs/results/<data>/<name>.md``, written by
-``python -m eppf.experiments``) into reStructuredText for the "Reproducing the
+``eppf experiment``) into reStructuredText for the "Reproducing the
 paper" page, so the page shows exactly what the commands printed.
 
 Only the Markdown the reports use is understood: headings, paragraphs,

@@ -90,16 +90,10 @@ def _write_cli_help(directory):
         if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
                 texts[name] = sub.format_help()
-    from eppf.experiments._cli import build_parser as build_experiments_parser
-
-    exp = build_experiments_parser()
-    exp.prog = "eppf experiment"
-    texts["experiment"] = exp.format_help()
-    for action in exp._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                sub.prog = f"eppf experiment {name}"
-                texts[f"experiment-{name}"] = sub.format_help()
+                for nested in sub._actions:  # eppf experiment NAME
+                    if isinstance(nested, argparse._SubParsersAction):
+                        for exp_name, exp in nested.choices.items():
+                            texts[f"{name}-{exp_name}"] = exp.format_help()
     for name, text in texts.items():
         path = os.path.join(directory, f"{name}.txt")
         old = None
@@ -154,6 +148,17 @@ def _write_api_pages(docs_dir):
                           f"{title}\n{'=' * len(title)}\n\n{body}\n")
     for f in set(os.listdir(folder)) - {n + ".rst" for n in names}:  # sections renamed or removed
         os.remove(os.path.join(folder, f))
+    listed, module = set(), None
+    for line in text.splitlines():
+        m = re.match(r"\.\. currentmodule:: (\S+)", line)
+        if m:
+            module = m.group(1)
+        elif module and re.fullmatch(r"   [A-Za-z_]\w*", line):
+            listed.add(f"{module}.{line.strip()}")
+    stubs = os.path.join(docs_dir, "generated")
+    for f in os.listdir(stubs):  # stub pages of names moved or removed from api.rst
+        if f.startswith("eppf.") and f.endswith(".rst") and f[:-4] not in listed:
+            os.remove(os.path.join(stubs, f))
 
 
 _write_api_pages(os.path.dirname(os.path.abspath(__file__)))

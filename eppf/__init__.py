@@ -20,6 +20,7 @@ from .preprocessing import estimate_normals
 
 from ._persist import load_model, save_model
 from ._simd import simd_levels
+from .streaming import describe_files
 
 __all__ = [
     "CVFHTransformer",
@@ -34,6 +35,7 @@ __all__ = [
     "PointNetClassifier",
     "VFHTransformer",
     "WahlTransformer",
+    "describe_files",
     "descriptor_pool",
     "estimate_normals",
     "load_model",

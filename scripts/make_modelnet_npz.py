@@ -19,7 +19,7 @@ Usage::
 
     python scripts/make_modelnet_npz.py --root ~/data/ModelNet10 -o modelnet10_1024.npz
     python scripts/make_modelnet_npz.py --download --version 10 -o modelnet10_1024.npz
-    python -m eppf.experiments retrieval --data modelnet10_1024.npz
+    eppf experiment retrieval --data modelnet10_1024.npz
 
 Exit status: 0 when the file was written, 2 on a usage error or a missing or
 unreadable folder (with a message saying what to do), 130 on Ctrl-C (the

@@ -5,8 +5,9 @@ import time
 
 import numpy as np
 
-from ._common import (DESCRIPTOR_NAMES, Command, Progress, add_runtime, emit, n_jobs_type, positive_int,
-                      progress_of, register)
+from ..utils import progress_bar
+from ._common import (DESCRIPTOR_NAMES, Command, add_runtime, emit, n_jobs_type, positive_int, progress_of,
+                      register)
 
 __all__ = ["run_bench"]
 
@@ -50,7 +51,7 @@ def run_bench(args, out=None):
     rows = []
     counts = args.n_pairs if not spec.deterministic else [None]
     settings = [(p, j) for p in counts for j in args.n_jobs]
-    for n_pairs, n_jobs in Progress(settings, progress_of(args), "bench"):
+    for n_pairs, n_jobs in progress_bar(settings, desc="bench", enabled=progress_of(args)):
         best = np.inf
         for _ in range(args.repeats):
             est = spec.make(n_samples=n_pairs, n_jobs=n_jobs, random_state=args.random_state)

@@ -15,7 +15,9 @@ the command line (relative to its own folder for a file named directly), so
 a file is the same cloud in ``train``, ``predict``, ``describe``,
 ``retrieve`` and ``evaluate`` and in ``load_folder``. A folder of class
 subfolders (``<class>/...``, ``train|test/<class>/...`` or
-``<class>/train|test/...``) gives labels, class names and the split.
+``<class>/train|test/...``, by the rule of
+:func:`eppf.datasets._folder.folder_layout` that ``load_folder`` follows)
+gives labels, class names and the split.
 """
 
 import argparse
@@ -27,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..registry import CLASSIFIERS, DESCRIPTORS
+from ..registry import CLASSIFIERS, DESCRIPTORS, make_descriptor
+from ..utils import progress_bar
 from ..utils._atomic import atomic_write
 
 __all__ = []
@@ -165,7 +168,7 @@ def warn(cmd, text):
 
 
 def descriptor_settings(args, progress=None):
-    """Settings of :meth:`eppf.registry.DescriptorSpec.make` from the shared options."""
+    """Settings of :func:`eppf.registry.make_descriptor` from the shared options."""
     progress = progress_of(args) if progress is None else progress
     settings = dict(n_samples=args.n_pairs, n_jobs=args.n_jobs, random_state=args.random_state,
                     verbose=1 if progress else 0)
@@ -176,12 +179,14 @@ def descriptor_settings(args, progress=None):
     return settings
 
 
-def make_descriptor(name, settings):
-    """A registered descriptor, refusing a ``--normal-neighbors`` it cannot use."""
-    spec = DESCRIPTORS[name]
-    if "n_neighbors" in settings and "n_neighbors" not in spec.estimator_class()().get_params():
+def descriptor_from_args(args, progress=None, **params):
+    """The ``--descriptor`` of the shared options (:func:`eppf.registry.make_descriptor`), with ``params``;
+    a ``--normal-neighbors`` it cannot use is refused."""
+    name = args.descriptor
+    settings = dict(descriptor_settings(args, progress), **params)
+    if "n_neighbors" in settings and "n_neighbors" not in DESCRIPTORS[name].estimator_class()().get_params():
         raise ValueError(f"--normal-neighbors: the {name} descriptor estimates no normals")
-    return spec.make(**settings)
+    return make_descriptor(name, **settings)
 
 
 # ---------------------------------------------------------------------------
@@ -225,30 +230,12 @@ def emit(rows, header, output, out):
         print(" | ".join(v.ljust(w) for v, w in zip(c, widths)).rstrip(), file=out)
 
 
-class Progress:
-    """A tqdm bar, or a plain iterator when progress is off or tqdm is missing."""
-
-    def __init__(self, iterable, enabled, desc):
-        self.iterable, self.enabled, self.desc = iterable, enabled, desc
-
-    def __iter__(self):
-        if self.enabled:
-            try:
-                from tqdm.auto import tqdm
-            except ImportError:  # pragma: no cover
-                return iter(self.iterable)
-            return iter(tqdm(self.iterable, desc=self.desc, file=sys.stderr, leave=False))
-        return iter(self.iterable)
-
-
 # ---------------------------------------------------------------------------
 # Reading: the one way
 # ---------------------------------------------------------------------------
 
 #: The seed rule saved in models, so that a later eppf can tell whether it still applies.
 SEED_RULE = "blake2b-relpath-v1"
-
-_SPLITS = ("train", "test")
 
 
 def sampling_from_args(args):
@@ -268,25 +255,18 @@ def file_seeds(random_state, root, files):
     return loader_seeds(random_state, root, files)
 
 
-def _is_hidden(name):
-    return name.startswith(".")
-
-
 def find_files(item):
     """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder."""
+    from ..datasets._folder import object_files
     from ..io import supported_extensions
 
-    extensions = supported_extensions()
     path = Path(item)
     if path.is_dir():
-        found = []
-        for dirpath, dirnames, filenames in os.walk(path):
-            dirnames[:] = sorted(d for d in dirnames if not _is_hidden(d))
-            found += [os.path.join(dirpath, f) for f in filenames
-                      if not _is_hidden(f) and os.path.splitext(f)[1].lower() in extensions]
+        found = object_files(path)
         if not found:
-            raise ValueError(f"no point cloud or mesh files ({' '.join(extensions)}, any case) in the folder {item}")
-        return str(path), sorted(found)
+            raise ValueError(f"no point cloud or mesh files ({' '.join(supported_extensions())}, any case) in the "
+                             f"folder {item}")
+        return str(path), found
     if path.is_file():
         return os.path.dirname(str(path)) or ".", [str(path)]
     if path.exists():
@@ -294,18 +274,6 @@ def find_files(item):
     if str(item).endswith(("/", os.sep)):
         raise FileNotFoundError(f"the folder {item} does not exist")
     raise FileNotFoundError(f"no such file or folder: {item}")
-
-
-def _class_of(rel):
-    """(class, split) of a path relative to a data folder, None when it sits outside class folders."""
-    parts = rel.split("/")
-    if len(parts) >= 3 and parts[0] in _SPLITS:
-        return parts[1], parts[0]
-    if len(parts) >= 3 and parts[1] in _SPLITS:
-        return parts[0], parts[1]
-    if len(parts) >= 2:
-        return parts[0], ""
-    return None
 
 
 @dataclass
@@ -388,13 +356,13 @@ class InputPlan:
 
     def report_skipped(self, skipped, n_read):
         """Warn about skipped files (``(file, message)`` pairs), or raise when no file could be read."""
+        from ..streaming import nothing_read, skipped_summary
+
         if not skipped:
             return
-        first = "; ".join(f"{m}" for _, m in skipped[:3])
-        more = f"; and {len(skipped) - 3} more" if len(skipped) > 3 else ""
         if not n_read:
-            raise ValueError(f"no file could be read ({len(skipped)} of {len(self.entries)}): {first}{more}")
-        warn(self.cmd, f"skipped {len(skipped)} of {len(self.entries)} files that could not be read: {first}{more}")
+            raise nothing_read(skipped, len(self.entries))
+        warn(self.cmd, skipped_summary(skipped, len(self.entries)))
 
     def objects(self, kept, clouds, skipped):
         """:class:`Objects` of the entries ``kept`` (indices, in order), with their ``clouds`` (or None)."""
@@ -431,28 +399,24 @@ def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None):
     groups = [find_files(item) for item in inputs]
     folder_input = len(inputs) == 1 and os.path.isdir(inputs[0])
     root = groups[0][0] if folder_input else None
-    entries = []  # (file, root, class)
-    for r, files in groups:
-        for f in files:
-            cls = _class_of(os.path.relpath(f, r).replace(os.sep, "/")) if folder_input and labelled is not False \
-                else None
-            entries.append((f, r, cls))
+    entries = [(f, r, None) for r, files in groups for f in files]  # (file, root, class)
     class_names = None
     if folder_input and labelled is not False:
+        from ..datasets._folder import folder_layout
+
+        layout, _ = folder_layout(root, groups[0][1])
+        entries = [(f, r, cls) for (f, r, _), cls in zip(entries, layout)]
         with_class = [e for e in entries if e[2] is not None]
         if labelled and not with_class:
             raise ValueError(f"{root} holds no class subfolders with object files; expected <class>/<file>, "
                              "train|test/<class>/<file> or <class>/train|test/<file>")
         if with_class and (labelled or len(with_class) == len(entries)):
-            loose = len(entries) - len(with_class)
+            loose = sum(1 for f, _, _ in entries if os.path.dirname(os.path.relpath(f, root)) == "")
             if loose:
                 warn(cmd, f"{loose} files directly in {root} (outside the class subfolders) are left out")
-            has_split = any(e[2][1] for e in with_class)
-            if has_split:
-                dropped = sum(1 for e in with_class if not e[2][1])
-                if dropped:
-                    warn(cmd, f"{dropped} files of {root} are outside its train/test folders and are left out")
-                with_class = [e for e in with_class if e[2][1]]
+            dropped = len(entries) - len(with_class) - loose
+            if dropped:
+                warn(cmd, f"{dropped} files of {root} are outside its train/test folders and are left out")
             entries = with_class
             class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
     # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
@@ -501,7 +465,7 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
         return _read_npz_data_set(inputs[0])
     plan = plan_inputs(inputs, sampling, cmd=cmd, labelled=labelled)
     clouds, kept, skipped = [], [], []
-    for k in Progress(range(len(plan.entries)), progress, "reading"):
+    for k in progress_bar(range(len(plan.entries)), desc="reading", enabled=progress):
         try:
             cloud = plan.read(k)
         except (ValueError, OSError, KeyError) as exc:
@@ -562,11 +526,12 @@ def min_points_needed(est):
     return 3, "a descriptor needs at least 3 points"
 
 
-def warn_tiny(clouds, ids, est, cmd, name):
-    """Warn, naming the files, about clouds with fewer points than the descriptor needs."""
+def warn_tiny(clouds, ids, est, cmd, name, shapes=None):
+    """Warn, naming the files, about clouds with fewer points than the descriptor needs (``shapes``, the
+    clouds' shapes, instead of ``clouds``)."""
     need, why = min_points_needed(est)
-    tiny = [(str(i), len(c)) for c, i in zip(clouds, ids)
-            if len(c) < need and not (np.asarray(c).shape[1] >= 6 and len(c) >= 3)]
+    shapes = [np.shape(c) for c in clouds] if shapes is None else shapes
+    tiny = [(str(i), int(n)) for (n, width), i in zip(shapes, ids) if n < need and not (width >= 6 and n >= 3)]
     if tiny:
         listed = ", ".join(f"{i} ({n} points)" for i, n in tiny[:5]) + (f" and {len(tiny) - 5} more"
                                                                          if len(tiny) > 5 else "")

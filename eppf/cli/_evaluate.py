@@ -5,7 +5,7 @@ import sys
 import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_data_source, add_descriptor, add_runtime, add_sampling,
-                      check_output, descriptor_settings, emit, load_labelled, load_model, make_descriptor,
+                      check_output, descriptor_from_args, emit, load_labelled, load_model,
                       model_sampling, progress_of, register, sampling_from_args, set_runtime, warn, warn_tiny)
 
 __all__ = ["run_evaluate"]
@@ -64,7 +64,7 @@ def run_evaluate(args, out=None):
     print(f"eppf: {objects.name}: {len(y)} objects, {len(objects.class_names)} classes", file=out)
     report, rows = {}, []
     if not args.no_retrieval:
-        est = make_descriptor(args.descriptor, descriptor_settings(args))
+        est = descriptor_from_args(args)
         warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
         X = est.fit_transform(objects.clouds)
         metric = DESCRIPTORS[args.descriptor].metric

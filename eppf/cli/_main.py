@@ -109,17 +109,13 @@ def main(argv=None):
 def _main(argv):
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
-    if argv[:1] == ["experiment"]:
-        # The experiments have their own parser (and their own --help).
-        name, prefix, args = "experiment", "eppf experiment", argv[1:]
-    else:
-        args = parser.parse_args(argv)
-        name = args.command or "run"
-        prefix = "eppf" if args.command is None else f"eppf {name}"
-        args.prog = prefix
+    args = parser.parse_args(argv)
+    name = args.command or "run"
+    prefix = "eppf" if args.command is None else f"eppf {name}"
+    args.prog, args.argv = prefix, argv
     try:
-        status = SUBCOMMANDS[name].run(args)
-        return status if name == "experiment" else 0
+        SUBCOMMANDS[name].run(args)
+        return 0
     except ModuleNotFoundError as exc:
         advice = _install_advice(exc)
         if advice is None:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..registry import DESCRIPTORS
-from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_output, emit, make_descriptor,
+from ..registry import DESCRIPTORS, make_descriptor
+from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_output, emit,
                       positive_int, progress_of, read_inputs, register, warn_tiny)
 
 __all__ = ["run_retrieve"]
@@ -104,7 +104,7 @@ def run_retrieve(args, out=None):
         q_ids = objects.ids
         if objects.labels is not None:
             q_labels = objects.class_names[objects.labels]
-        est = make_descriptor(descriptor, settings)
+        est = make_descriptor(descriptor, **settings)
         warn_tiny(objects.clouds, q_ids, est, cmd, descriptor)
         est.fit(objects.clouds)
         if "scale" in db and np.isfinite(db["scale"]) and getattr(est, "scale_", None) is not None:

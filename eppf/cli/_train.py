@@ -13,8 +13,8 @@ import numpy as np
 
 from ..registry import CLASSIFIERS, DESCRIPTORS
 from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, Command, add_data_source, add_descriptor,
-                      add_runtime, add_sampling, check_classes, check_output, descriptor_settings, load_labelled,
-                      make_descriptor, positive_int, progress_of, register, sampling_from_args, warn_tiny)
+                      add_runtime, add_sampling, check_classes, check_output, descriptor_from_args, load_labelled,
+                      positive_int, progress_of, register, sampling_from_args, warn_tiny)
 
 __all__ = ["make_pipeline_from_args", "run_train"]
 
@@ -86,12 +86,12 @@ def make_pipeline_from_args(args):
         clf = cls(max_epochs=args.max_epochs, random_state=args.random_state, n_jobs=torch_jobs,
                   verbose=1 if progress else 0)
         return Pipeline([("classifier", clf)])
-    settings = descriptor_settings(args, progress)
+    extra = {}
     if args.n_bins is not None:
         if DESCRIPTORS[args.descriptor].fixed.get("n_bins") is not None:
             raise ValueError(f"--n-bins: the {args.descriptor} descriptor has fixed bins; use --descriptor eppf")
-        settings["n_bins"] = tuple(args.n_bins)
-    descriptor = make_descriptor(args.descriptor, settings)
+        extra["n_bins"] = tuple(args.n_bins)
+    descriptor = descriptor_from_args(args, progress, **extra)
     if name == "kl":
         if DESCRIPTORS[args.descriptor].metric != "kl":
             kl_names = ", ".join(k for k, s in DESCRIPTORS.items() if s.metric == "kl")
@@ -105,7 +105,7 @@ def make_pipeline_from_args(args):
             raise ValueError(f"the {name} classifier reads the 4D EPPF histogram; use --descriptor eppf or "
                              f"eppf_short, not {args.descriptor}")
         if getattr(args, "recipe", "paper") == "recommended":
-            from ..experiments._classification import recommended_pipeline_parts
+            from ..registry import recommended_pipeline_parts
 
             descriptor, clf = recommended_pipeline_parts(
                 descriptor, conv=spec.fixed.get("conv", "4d"), n_jobs=args.n_jobs, random_state=args.random_state,

@@ -4,11 +4,10 @@ from ._npz import load_npz, save_npz
 from ._synthetic import make_shapes
 from ._loaders import load_modelnet, load_s3dis_objects, load_scannet_objects
 from ._fetch import clear_data_home, fetch_file, fetch_modelnet, get_data_home
-from ._cache import CachedTransformer
+from ..descriptors import CachedTransformer  # noqa: F401 - its 0.1 place; it lives in eppf.descriptors
 from ._folder import load_folder
 
 __all__ = [
-    "CachedTransformer",
     "clear_data_home",
     "fetch_file",
     "fetch_modelnet",

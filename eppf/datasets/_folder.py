@@ -1,7 +1,6 @@
 """A labeled data set from a folder of point cloud or mesh files, one
 subfolder per class: the layout most users already have for their own scans."""
 
-import glob
 import os
 
 import numpy as np
@@ -10,19 +9,74 @@ from sklearn.utils import Bunch
 from ..io import read_point_cloud, supported_extensions
 from ._loaders import check_choice, check_dir, check_n_points, file_seeds, load_all
 
-__all__ = ["load_folder"]
+__all__ = ["folder_layout", "load_folder", "object_files"]
 
-_SPLITS = ("train", "test")
+#: The split folders of a data folder, in the order a split layout lists them.
+SPLITS = ("train", "test")
 
 
-def _object_files(folder):
-    """Object files under ``folder``, searched recursively, in sorted order."""
+def object_files(folder):
+    """Point cloud and mesh files under ``folder``, searched recursively, sorted by path.
+
+    Every extension of :func:`eppf.io.supported_extensions` counts, in any
+    case; hidden files and folders (names starting with ``.``) are skipped.
+    """
     found, extensions = [], supported_extensions()
     for dirpath, dirnames, filenames in os.walk(folder):
-        dirnames.sort()
-        found += [os.path.join(dirpath, f) for f in sorted(filenames)
-                  if os.path.splitext(f)[1].lower() in extensions and not f.startswith(".")]
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+        found += [os.path.join(dirpath, f) for f in filenames
+                  if not f.startswith(".") and os.path.splitext(f)[1].lower() in extensions]
     return sorted(found)
+
+
+def folder_layout(root, files):
+    """The class and split of each file of a data folder: the one train/test rule of eppf.
+
+    The layout is the folder's, read from where its files sit (paths
+    relative to ``root``):
+
+    - ``train/<class>/...`` and ``test/<class>/...`` when some file sits
+      under a ``train`` or ``test`` folder of ``root`` inside a class folder;
+      then every other file is outside the layout;
+    - otherwise ``<class>/train/...`` and ``<class>/test/...`` when some
+      file sits in a ``train`` or ``test`` folder of a class folder; then the
+      other files of the class folders are outside the layout;
+    - otherwise ``<class>/...``, without a split.
+
+    Files deeper in a class (or split) folder belong to it; files directly
+    in ``root`` (or directly in ``root/train``) are outside the layout.
+    ``eppf.datasets.load_folder`` and the ``eppf`` command line (``--data
+    FOLDER``, a folder given to ``describe``) read folders by this rule.
+
+    Parameters
+    ----------
+    root : str
+        The data folder.
+    files : list of str
+        Files under ``root`` (as :func:`object_files` lists them).
+
+    Returns
+    -------
+    layout : list of tuple or None
+        Per file, ``(class, split)`` with ``split`` ``"train"``, ``"test"``
+        or ``""`` (no split), or None for a file outside the layout.
+    kind : {"split/class", "class/split", "class"}
+        Which of the three layouts (the first two have a train/test split).
+
+    Examples
+    --------
+    >>> from eppf.datasets._folder import folder_layout
+    >>> folder_layout("d", ["d/train/cup/a.ply", "d/test/cup/b.ply", "d/notes.ply"])
+    ([('cup', 'train'), ('cup', 'test'), None], 'split/class')
+    >>> folder_layout("d", ["d/cup/a.ply", "d/cup/old/b.ply"])
+    ([('cup', ''), ('cup', '')], 'class')
+    """
+    parts = [os.path.relpath(f, root).replace(os.sep, "/").split("/") for f in files]
+    if any(len(p) >= 3 and p[0] in SPLITS for p in parts):
+        return [(p[1], p[0]) if len(p) >= 3 and p[0] in SPLITS else None for p in parts], "split/class"
+    if any(len(p) >= 3 and p[1] in SPLITS for p in parts):
+        return [(p[0], p[1]) if len(p) >= 3 and p[1] in SPLITS else None for p in parts], "class/split"
+    return [(p[0], "") if len(p) >= 2 else None for p in parts], "class"
 
 
 def _read_object(filename, n_points, normals, seed):
@@ -30,27 +84,26 @@ def _read_object(filename, n_points, normals, seed):
     return read_point_cloud(filename, normals=normals, n_points=n_points, random_state=seed)
 
 
-def _subfolders(folder):
-    return sorted(d for d in glob.glob(os.path.join(folder, "*")) if os.path.isdir(d)
-                  and not os.path.basename(d).startswith("."))
-
-
 def load_folder(path, *, classes=None, subset="all", n_points=None, normals="auto", on_error="raise",
                 n_jobs=None, random_state=0, return_X_y=False):
     """Load a labeled data set from a folder with one subfolder per class.
 
     Three layouts are recognized, the class of an object being the name of
-    its class folder:
+    its class folder (the rule of :func:`folder_layout`, which the ``eppf``
+    command line shares):
 
     - ``<class>/<object file>`` (files may sit in deeper subfolders): no split;
     - ``train/<class>/<object file>`` and ``test/<class>/<object file>``;
-    - ``<class>/train/<object file>`` and ``<class>/test/<object file>``.
+      other files are left out;
+    - ``<class>/train/<object file>`` and ``<class>/test/<object file>``;
+      other files of the class folders are left out.
 
     Every file :func:`eppf.io.read_point_cloud` reads is loaded with it
     (extensions in any case, see :func:`eppf.io.supported_extensions`):
     point files (PLY without faces, PCD, XYZ, TXT, CSV, PTS, XYZN, XYZRGB,
     NPY, NPZ) as they are, meshes (OFF, OBJ, STL, PLY with faces) sampled
-    area-uniformly. Hidden files and other extensions are ignored.
+    area-uniformly. Hidden files and folders and other extensions are
+    ignored.
 
     Parameters
     ----------
@@ -117,21 +170,16 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     if classes is not None and (isinstance(classes, str) or len(classes) == 0):
         raise ValueError(f"{owner}: classes must be None or a non-empty sequence of class names, got {classes!r}")
 
-    entries = []  # (file, class, split)
-    if any(os.path.isdir(os.path.join(root, s)) for s in _SPLITS):
-        has_split = True
-        for s in _SPLITS:
-            for cls_dir in _subfolders(os.path.join(root, s)):
-                entries += [(f, os.path.basename(cls_dir), s) for f in _object_files(cls_dir)]
+    files = object_files(root)
+    layout, kind = folder_layout(root, files)
+    has_split = kind != "class"
+    entries = [(f, *cls) for f, cls in zip(files, layout) if cls is not None]  # (file, class, split)
+    # listed split by split (train first) and class by class, or class by class (and split by split)
+    order = {s: k for k, s in enumerate(("",) + SPLITS)}
+    if kind == "split/class":
+        entries.sort(key=lambda e: (order[e[2]], e[1], e[0]))
     else:
-        class_dirs = _subfolders(root)
-        has_split = any(os.path.isdir(os.path.join(d, s)) for d in class_dirs for s in _SPLITS)
-        for d in class_dirs:
-            if has_split:
-                for s in _SPLITS:
-                    entries += [(f, os.path.basename(d), s) for f in _object_files(os.path.join(d, s))]
-            else:
-                entries += [(f, os.path.basename(d), "") for f in _object_files(d)]
+        entries.sort(key=lambda e: (e[1], order[e[2]], e[0]))
     found = sorted({e[1] for e in entries})
     if not found:
         raise ValueError(f"{owner}: {root!r} holds no class folders with object files "

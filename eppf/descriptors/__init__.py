@@ -19,10 +19,12 @@ its own module with its compiled kernel beside it (``_esf.py`` over
   :class:`EPPFGASDTransformer`, its measured EPPF + GASD preset;
 - :func:`descriptor_pool`: several seeded draws of one descriptor per object;
   :class:`DescriptorPool`, the same as a pipeline step;
+- :class:`CachedTransformer`: a descriptor's output cached on disk;
 - :class:`ProportionTransformer`: six scale-invariant proportions (a side input).
 """
 
 from ._eppf import FUNCTIONS, EPPFTransformer
+from ._cached import CachedTransformer
 from ._cvfh import CVFHTransformer
 from ._esf import ESFTransformer
 from ._gasd import GASDColorTransformer, GASDTransformer, gasd_alignment
@@ -36,6 +38,7 @@ from ._wahl import WahlTransformer
 
 __all__ = [
     "CVFHTransformer",
+    "CachedTransformer",
     "DescriptorPool",
     "DescriptorUnion",
     "EPPFTransformer",

@@ -10,7 +10,15 @@ the same way is written here once:
   the subclass (:meth:`PointCloudDescriptor._resolve_params`);
 - ``fit`` checks the clouds, lets the subclass learn from them
   (:meth:`PointCloudDescriptor._learn`, e.g. EPPF's data-set scale) and
-  records ``n_features_out_``;
+  records ``n_features_out_``; ``partial_fit`` does the same batch by batch
+  (the data-set scale from the largest side of any batch,
+  :meth:`PointCloudDescriptor._learned_side`);
+- a stream of clouds (:func:`eppf.describe_files`) is described chunk by
+  chunk, chunks side by side, with the rows of one ``fit_transform``: the
+  descriptor says whether it must see every cloud first
+  (:meth:`PointCloudDescriptor._learns_from_data`) and makes the copy that
+  describes the next chunk with that chunk's seeds
+  (:meth:`PointCloudDescriptor._stream_part`);
 - ``transform`` checks the parameters and validates the clouds once (all of
   them, in one compiled pass, into one :class:`eppf.utils.PackedClouds`),
   draws the per-object inputs (seeds from ``random_state``, scales) for the
@@ -38,11 +46,13 @@ The constraint lists that several descriptors share are the module's public
 constants (``NORMAL_ORIENTATION``, ``N_JOBS``, ...).
 """
 
+import copy
 import functools
 import numbers
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from ..preprocessing._normal_options import N_NEIGHBORS
@@ -225,7 +235,17 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """With ``scaling="fit"``, 1 / the largest bounding-box side of any cloud; else 1."""
         if self.scaling != "fit":
             return 1.0
-        return self._data_set_scale(float(clouds.sides().max()))
+        return self._data_set_scale(self._learned_side(clouds))
+
+    def _data_side(self, clouds):
+        """The largest bounding-box side of any of the validated clouds (inf beyond float64)."""
+        return float(clouds.sides().max())
+
+    def _learned_side(self, clouds):
+        """The side the data-set scale is learnt from: the largest of ``clouds`` (fit), or of every batch so far
+        (partial_fit)."""
+        side = vars(self).get("_partial_fit_side")
+        return self._data_side(clouds) if side is None else side
 
     def _data_set_scale(self, side):
         """1 / ``side``, or a ValueError when that is not a finite positive float64."""
@@ -322,9 +342,90 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         """
         params = self._check_params()
         clouds, _ = self._validate_clouds(X)
+        vars(self).pop("_partial_fit_side", None)
         self._learn(clouds, params)
         self.n_features_out_ = int(self._n_features(params))
         return self
+
+    def partial_fit(self, X, y=None):
+        """Fit on one more batch of the training clouds.
+
+        Batches given one after another (since the last :meth:`fit`) leave
+        the descriptor fitted as :meth:`fit` on all of them at once: with
+        ``scaling="fit"``, the data-set scale is one over the largest
+        bounding-box side of any cloud of any batch. A data set too large for
+        memory can be fitted batch by batch (:func:`eppf.describe_files` does
+        so for files).
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            One batch of training point clouds, with normals in columns 3-5
+            when available.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : object
+            The fitted transformer.
+        """
+        params = self._check_params()
+        clouds, _ = self._validate_clouds(X)
+        seen = vars(self).get("_partial_fit_side")
+        if self._learns_from_data():
+            side = self._data_side(clouds)
+            self._partial_fit_side = side if seen is None or side > seen else seen
+        try:
+            self._learn(clouds, params)  # the data-set scale from _learned_side: every batch's
+        except BaseException:
+            if seen is not None:
+                self._partial_fit_side = seen
+            else:
+                vars(self).pop("_partial_fit_side", None)
+            raise
+        self.n_features_out_ = int(self._n_features(params))
+        return self
+
+    # -------------------------------------------------------------- streams
+    # eppf.describe_files describes a stream of clouds chunk by chunk, with
+    # rows bit for bit those of one fit_transform on all of them, through
+    # these hooks (DescriptorUnion has the same).
+    def _learns_from_data(self):
+        """Whether fit learns from the clouds (``scaling="fit"``): every cloud must be seen before the first row."""
+        return self.get_params(deep=False).get("scaling") == "fit"
+
+    def _stream_generator(self):
+        """The generator a stream of ``transform`` calls draws from, made once per stream.
+
+        One ``transform`` over all the clouds draws its per-object seeds
+        (:meth:`_per_object`) from ``check_random_state(random_state)``: a
+        fresh generator for an int, which a stream keeps and goes on drawing
+        from; the generator itself for a RandomState or None. None for
+        descriptors without ``random_state``.
+        """
+        if "random_state" not in self.get_params(deep=False):
+            return None
+        return check_random_state(self.random_state)
+
+    def _stream_part(self, n_objects, generator, n_jobs=None):
+        """A copy of this fitted descriptor for the next ``n_objects`` clouds of a stream.
+
+        The copy's ``transform`` of those clouds gives the rows one
+        ``transform`` over the whole stream gives them, wherever and whenever
+        it runs: it draws from a copy of ``generator`` in the state those
+        clouds find it in, and ``generator`` moves on past their seeds (one
+        per object, as :meth:`_per_object` draws them), so the next part can
+        be made at once and described beside this one. ``n_jobs``, when
+        given, is the copy's ``n_jobs``.
+        """
+        part = copy.copy(self)
+        if n_jobs is not None:
+            part.n_jobs = n_jobs
+        if generator is not None:
+            part.random_state = copy.deepcopy(generator)
+            object_seeds(generator, n_objects)
+        return part
 
     def transform(self, X):
         """Compute one descriptor row per point cloud.

@@ -204,8 +204,11 @@ class EPPFTransformer(PointCloudDescriptor):
         self.histogram_shape_ = tuple(b for b, f in zip(n_bins, FUNCTIONS) if f in functions)
         self.scale_ = None
         if self.scaling == "fit":
-            with np.errstate(over="ignore"):
-                self.scale_ = self._data_set_scale(float(clouds.sides().max()))
+            self.scale_ = self._data_set_scale(self._learned_side(clouds))
+
+    def _data_side(self, clouds):
+        with np.errstate(over="ignore"):
+            return float(clouds.sides().max())
 
     def _n_features(self, params):
         return int(np.prod(self.histogram_shape_))

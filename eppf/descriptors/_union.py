@@ -14,6 +14,7 @@ divergences (see the class Notes), so a union is matched by
 GASD, registered as ``"eppf+gasd"``).
 """
 
+import copy
 import numbers
 
 import numpy as np
@@ -344,6 +345,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
             except (ValueError, TypeError) as exc:
                 _reraise_named(exc, owner, name)
         self._record(fitted, w)
+        vars(self).pop("_partial_fitted", None)
         return self
 
     def transform(self, X):
@@ -390,7 +392,67 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
             except (ValueError, TypeError) as exc:
                 _reraise_named(exc, owner, name)
         self._record(fitted, w)
+        vars(self).pop("_partial_fitted", None)
         return self._combine(self._transform_blocks(clouds), w, normalize, len(clouds))
+
+    def partial_fit(self, X, y=None):
+        """Fit every block on one more batch of the training clouds.
+
+        Batches given one after another (since the last :meth:`fit`) leave
+        the union fitted as :meth:`fit` on all of them at once (each block's
+        ``partial_fit``).
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            One batch of training point clouds.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        self : DescriptorUnion
+            The fitted union.
+        """
+        owner = type(self).__name__
+        transformer_list, w, _, n_jobs, n_threads = self._check_params()
+        clouds = self._validate_clouds(X, transformer_list, n_threads)
+        fitted = self.transformers_ if vars(self).get("_partial_fitted") else self._clones(transformer_list, n_jobs)
+        for name, est in fitted:
+            if not hasattr(est, "partial_fit"):
+                raise TypeError(f"{owner}: block {name!r} ({type(est).__name__}) has no partial_fit")
+            try:
+                est.partial_fit(clouds)
+            except (ValueError, TypeError) as exc:
+                _reraise_named(exc, owner, name)
+        self._record(fitted, w)
+        self._partial_fitted = True
+        return self
+
+    # -------------------------------------------------------------- streams
+    # The hooks of eppf.describe_files (see eppf.descriptors._base), block by block.
+    def _learns_from_data(self):
+        """Whether a block learns from the clouds in fit (a block that cannot say is taken to)."""
+        return any(getattr(est, "_learns_from_data", lambda: True)() for _, est in self._spec()[0])
+
+    def _stream_generator(self):
+        """Each fitted block's stream generator."""
+        owner = type(self).__name__
+        generators = []
+        for name, est in self.transformers_:
+            if not hasattr(est, "_stream_part"):
+                raise TypeError(f"{owner}: block {name!r} ({type(est).__name__}) cannot describe a stream of clouds")
+            generators.append(est._stream_generator())
+        return generators
+
+    def _stream_part(self, n_objects, generators, n_jobs=None):
+        """A copy of the fitted union for the next ``n_objects`` clouds of a stream, block by block."""
+        part = copy.copy(self)
+        part.transformers_ = [(name, est._stream_part(n_objects, g, n_jobs))
+                              for (name, est), g in zip(self.transformers_, generators)]
+        if n_jobs is not None:
+            part.n_jobs = n_jobs
+        return part
 
     def get_feature_names_out(self, input_features=None):
         """Get the names of the output columns, ``"<block>__<block's name>"``.

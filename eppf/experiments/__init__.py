@@ -3,8 +3,8 @@
 Each experiment takes a data set (the built-in synthetic shapes or a ``.npz``
 file in the layout of :func:`eppf.datasets.load_npz`) and writes a Markdown
 report (table, exact command, protocol, machine), a CSV table and a PNG plot
-into an output folder. Run them as ``python -m eppf.experiments NAME
-[options]`` or call the functions:
+into an output folder. Run them as ``eppf experiment NAME [options]``
+or call the functions:
 
 - :func:`run_retrieval`: Table II, leave-one-out KL 1-NN retrieval of
   OUR-CVFH, ESF, Wahl, EPPF short and EPPF;
@@ -25,7 +25,6 @@ Descriptors are cached on disk (``--cache-dir``), so a rerun skips them.
 
 from ._ablation import run_ablation
 from ._classification import TrainingOptions, run_classification
-from ._cli import main
 from ._common import Dataset, ExperimentError, ExperimentSettings, load_data
 from ._noise import run_noise
 from ._presets import PRESETS, Preset, apply_preset, get_preset
@@ -42,7 +41,6 @@ __all__ = [
     "apply_preset",
     "get_preset",
     "load_data",
-    "main",
     "run_ablation",
     "run_classification",
     "run_noise",

@@ -4,6 +4,7 @@ import numpy as np
 
 from .. import FUNCTIONS
 from ..metrics import METRICS
+from ..registry import make_descriptor
 from ._common import (
     ExperimentSettings,
     DescriptorCache,
@@ -13,7 +14,6 @@ from ._common import (
     draw_seeds,
     fmt_pct,
     load_or_pass,
-    make_descriptor,
     markdown_table,
     n_samples_setting,
     resolve_scaling,
@@ -90,8 +90,8 @@ def run_ablation(
     for label, removed, functions in ablation_configs():
         X_draws = []
         for r, seed in enumerate(seeds):
-            est = make_descriptor("eppf", scaling=scaling, random_state=seed, n_jobs=n_jobs, quick=quick,
-                                  functions=functions)
+            est = make_descriptor("eppf", n_samples=n_samples_setting(quick), scaling=scaling, random_state=seed,
+                                  n_jobs=n_jobs, functions=functions)
             X_draws.append(cache.describe(est, ds.clouds, {"all": ds.clouds}, f"EPPF {label} draw {r + 1}/{draws}")["all"])
         scores[label] = score_draws(X_draws, ds.y, n_jobs)
         if label == "all four":

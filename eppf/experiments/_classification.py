@@ -4,6 +4,7 @@ import time
 from dataclasses import dataclass, fields
 
 from ..metrics import METRICS, retrieval_scores
+from ..registry import RECIPE, make_descriptor, recommended_pipeline_parts
 from ._common import (
     DescriptorCache,
     ExperimentError,
@@ -13,7 +14,6 @@ from ._common import (
     command_text,
     draw_seeds,
     load_or_pass,
-    make_descriptor,
     markdown_table,
     n_samples_setting,
     params_text,
@@ -29,66 +29,6 @@ __all__ = ["TrainingOptions", "run_classification"]
 MODELS = {"pointnet": "PointNet", "2d": "EPPF 2D", "3d": "EPPF 3D", "4d": "EPPF 4D", "4d+": "EPPF 4D+",
           "kl": "EPPF KL 1-NN"}
 DEFAULT_MODELS = ("pointnet", "2d", "3d", "4d", "4d+", "kl")
-
-#: The recommended recipe beyond the paper ("4d+"): see :func:`recommended_pipeline_parts`.
-RECIPE = dict(n_draws=8, stretch=(0.8, 1.25), filters=(16, 32, 24), n_hidden=256, min_patience=8,
-              precision="auto", n_estimators=3,
-              label_smoothing=0.1)
-
-
-def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=None, max_epochs=30, n_iter_no_change=8,
-                               validation_fraction=0.1, quick=False, verbose=0):
-    """The recommended descriptor pool and classifier ("EPPF 4D+"), built around an EPPF transformer.
-
-    Beyond the paper, chosen on validation accuracy over training objects
-    only (``benchmarks/bench_cnn.py``): a :class:`~eppf.descriptors.DescriptorPool`
-    of 8 draws per object (draws 1-7 of copies stretched per axis by
-    log-uniform factors in [0.8, 1.25]; at prediction, probabilities
-    averaged over a plain and 7 stretched copies), every draw the EPPF
-    histogram followed by GASD (512 values) and the six
-    :class:`~eppf.descriptors.ProportionTransformer` ratios as side features;
-    the 4D network with filters (16, 32, 24) and a 256-unit dense layer, the
-    side features through a 128-unit branch into that layer, Adam halved on
-    validation plateaus, bfloat16 mixed precision where the hardware computes it natively (float32
-    elsewhere: ``precision="auto"``), label smoothing 0.1, and an ensemble of three
-    such networks (``n_estimators=3``, one network with ``quick``) whose
-    probabilities are averaged.
-
-    Parameters
-    ----------
-    eppf : EPPFTransformer
-        Unfitted; its ``random_state`` is overridden per draw.
-    conv : {"4d", "3d", "2d"}, default="4d"
-        Network variant (the recipe was chosen for "4d").
-    n_jobs, random_state, max_epochs, n_iter_no_change, validation_fraction, verbose
-        Passed on (the patience is at least 8 epochs unless ``quick``).
-    quick : bool, default=False
-        Two draws instead of 8 and one network instead of 3.
-
-    Returns
-    -------
-    pool : DescriptorPool
-    classifier : EPPF4DClassifier
-    """
-    from .. import EPPF4DClassifier
-    from ..descriptors import DescriptorPool, DescriptorUnion, GASDTransformer, ProportionTransformer
-    from ..preprocessing import RandomScaling
-
-    union = DescriptorUnion([("eppf", eppf), ("gasd", GASDTransformer()), ("proportions", ProportionTransformer())],
-                            normalize="none", n_jobs=n_jobs)
-    pool = DescriptorPool(union, 2 if quick else RECIPE["n_draws"], augment=RandomScaling(*RECIPE["stretch"]),
-                          random_state=random_state)
-    patience = n_iter_no_change if quick else max(n_iter_no_change, RECIPE["min_patience"])
-    clf = EPPF4DClassifier(tuple(eppf.get_params()["n_bins"]), conv, filters=RECIPE["filters"],
-                           n_hidden=RECIPE["n_hidden"], n_side_features="auto", lr_schedule="plateau",
-                           precision=RECIPE["precision"], n_estimators=1 if quick else RECIPE["n_estimators"],
-                           label_smoothing=RECIPE["label_smoothing"],
-                           max_epochs=max_epochs, n_iter_no_change=patience,
-                           validation_fraction=validation_fraction, early_stopping=True,
-                           n_jobs=None if n_jobs is None or n_jobs < 0 else n_jobs, random_state=random_state,
-                           verbose=verbose)
-    return pool, clf
-
 
 @dataclass(frozen=True)
 class TrainingOptions:
@@ -229,7 +169,8 @@ class TrainingSettings:
     def descriptor(self):
         """The EPPF transformer whose descriptors the CNNs and the KL 1-NN use."""
         seed = draw_seeds(self.random_state, 1)[0]
-        return make_descriptor("eppf", scaling=self.scaling, random_state=seed, n_jobs=self.n_jobs, quick=self.quick)
+        return make_descriptor("eppf", n_samples=n_samples_setting(self.quick), scaling=self.scaling,
+                               random_state=seed, n_jobs=self.n_jobs)
 
     def recommended(self):
         """The descriptor pool and the classifier of "EPPF 4D+"."""

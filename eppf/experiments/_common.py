@@ -624,15 +624,6 @@ def n_samples_setting(quick):
     return 5000 if quick else 20000
 
 
-def make_descriptor(name, *, scaling, random_state, n_jobs, quick, functions=None):
-    """An unfitted descriptor transformer by registry key (see :data:`eppf.registry.DESCRIPTORS`)."""
-    if name not in REGISTRY:
-        raise ExperimentError(f"unknown descriptor {name!r}; choose from {list(DESCRIPTORS)}")
-    extra = {"functions": functions} if functions is not None else {}
-    return REGISTRY[name].make(n_samples=n_samples_setting(quick), scaling=scaling, random_state=random_state,
-                               n_jobs=n_jobs, **extra)
-
-
 def params_text(est):
     """The parameters of an estimator that matter, for the protocol."""
     p = {k: v for k, v in est.get_params(deep=False).items() if k not in NEUTRAL_PARAMS + ("random_state", "device")}

@@ -3,6 +3,7 @@
 import numpy as np
 
 from ..metrics import METRICS, leave_one_out_retrieval, retrieval_scores
+from ..registry import make_descriptor
 from ._common import (
     ExperimentSettings,
     DESCRIPTORS,
@@ -15,7 +16,6 @@ from ._common import (
     draw_seeds,
     fmt_pct,
     load_or_pass,
-    make_descriptor,
     markdown_table,
     n_samples_setting,
     resolve_scaling,
@@ -127,7 +127,8 @@ def run_retrieval(
         these = [None] if name in DETERMINISTIC else seeds
         X_draws = []
         for r, seed in enumerate(these):
-            est = make_descriptor(name, scaling=scaling, random_state=seed, n_jobs=n_jobs, quick=quick)
+            est = make_descriptor(name, n_samples=n_samples_setting(quick), scaling=scaling, random_state=seed,
+                                  n_jobs=n_jobs)
             X_draws.append(cache.describe(est, ds.clouds, {"all": ds.clouds}, f"{name} draw {r + 1}/{len(these)}")["all"])
         scores[name] = score_draws(X_draws, ds.y, n_jobs)
         log(f"{DESCRIPTORS[name]}: total accuracy {fmt_pct(scores[name]['total_accuracy'])}, "
@@ -175,4 +176,5 @@ def run_retrieval(
 def _params(name, scaling, quick):
     from ._common import params_text
 
-    return params_text(make_descriptor(name, scaling=scaling, random_state=0, n_jobs=1, quick=quick))
+    return params_text(make_descriptor(name, n_samples=n_samples_setting(quick), scaling=scaling, random_state=0,
+                                       n_jobs=1))

@@ -5,6 +5,7 @@ import time
 
 import numpy as np
 
+from ..registry import make_descriptor
 from ._common import (
     ExperimentSettings,
     DESCRIPTORS,
@@ -14,7 +15,6 @@ from ._common import (
     command_text,
     cpu_model,
     load_or_pass,
-    make_descriptor,
     markdown_table,
     n_samples_setting,
     params_text,
@@ -131,7 +131,8 @@ def run_runtime(
     with_normals = [np.hstack([c, nrm]) for c, nrm in zip(clouds, normals)]
     for name in DESCRIPTORS:
         for threads in thread_counts:
-            est = make_descriptor(name, scaling=scaling, random_state=random_state, n_jobs=threads, quick=quick)
+            est = make_descriptor(name, n_samples=n_samples_setting(quick), scaling=scaling, random_state=random_state,
+                                  n_jobs=threads)
             est.fit(with_normals)
             est.transform(with_normals[:2])  # warm-up
             wall, cpu = _time(lambda: est.transform(with_normals), n, repeats)
@@ -157,7 +158,7 @@ def run_runtime(
         "normals": "estimated once per object with eppf.estimate_normals(points, 20), timed object by object, "
                    "then given to every descriptor (descriptor rows exclude normal estimation; ESF ignores normals)",
         "descriptors": "; ".join(
-            f"{DESCRIPTORS[k]}: `{params_text(make_descriptor(k, scaling=scaling, random_state=0, n_jobs=1, quick=quick))}`"
+            f"{DESCRIPTORS[k]}: `{params_text(make_descriptor(k, n_samples=n_samples_setting(quick), scaling=scaling, random_state=0, n_jobs=1))}`"
             for k in DESCRIPTORS),
         "pairs / triplets per object": n_samples_setting(quick),
         "threads": f"{thread_counts} (n_jobs={n_jobs})",

@@ -6,10 +6,13 @@ their input with :func:`check_point_clouds` (one error style everywhere;
 draw per-object seeds with :func:`object_seeds` (results independent of
 threads and chunking) and hand chunks of objects to joblib with
 :func:`transform_in_chunks`; :func:`check_n_jobs` gives ``n_jobs`` joblib's
-meaning everywhere.
+meaning everywhere. :func:`ordered_map` is the one ordered thread map and
+:func:`progress_bar` the one progress bar.
 """
 
 from ._chunks import transform_in_chunks
+from ._progress import progress_bar
+from ._stream import ordered_map
 from ._validation import (
     PackedClouds, check_int, check_n_jobs, check_packed_clouds, check_point_cloud, check_point_clouds, object_seeds,
     pack_point_clouds,
@@ -23,6 +26,8 @@ __all__ = [
     "check_point_cloud",
     "check_point_clouds",
     "object_seeds",
+    "ordered_map",
     "pack_point_clouds",
+    "progress_bar",
     "transform_in_chunks",
 ]

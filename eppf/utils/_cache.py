@@ -6,7 +6,7 @@ stores them as ``.npz`` files (read with ``allow_pickle=False``: a cache file
 cannot run code), keyed on what the output depends on: the transformer's
 class, its parameters except those that only change speed
 (:data:`NEUTRAL_PARAMS`), its fitted attributes, and a digest of the input.
-:class:`eppf.datasets.CachedTransformer` and the experiments both use it.
+:class:`eppf.descriptors.CachedTransformer` and the experiments both use it.
 """
 
 import hashlib

@@ -14,6 +14,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 from ._validation import PackedClouds, check_n_jobs
+from ._progress import progress_bar
 
 __all__ = ["CHUNK", "CHUNK_POINTS", "transform_in_chunks"]
 
@@ -50,12 +51,6 @@ def _chunk_bounds(clouds, chunk, chunk_points):
     if lo < len(sizes):
         chunks.append((lo, len(sizes)))
     return chunks
-
-
-def _progress(total, verbose, desc):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=desc, unit="obj", disable=not verbose, leave=False)
 
 
 def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose=0, desc=""):
@@ -107,7 +102,7 @@ def transform_in_chunks(task, est, clouds, per_object=(), *, n_features, verbose
         delayed(task)(est, clouds[lo:hi], *[a[lo:hi] for a in per_object], lo) for lo, hi in chunks
     )
     out = np.empty((n, n_features), dtype=np.float64)
-    progress = _progress(n, verbose, desc)
+    progress = progress_bar(total=n, desc=desc, unit="obj", enabled=bool(verbose))
     for (lo, hi), block in zip(chunks, jobs):
         out[lo:hi] = block
         progress.update(hi - lo)

@@ -1,4 +1,4 @@
-"""Bounded, ordered work ahead of a consumer: the pipeline under ``eppf describe``.
+"""Bounded, ordered work ahead of a consumer: the pipeline under :func:`eppf.describe_files`.
 
 :func:`ordered_map` runs a function over a sequence of items on a few threads
 and yields the results in the items' order, with at most ``depth`` results
@@ -27,6 +27,10 @@ __all__ = ["RowWriter", "ordered_map"]
 def ordered_map(func, items, *, workers=1, depth=2):
     """Yield ``func(item)`` for every item, in order, computing ahead on threads.
 
+    The one ordered thread map of eppf: the readers and describers of
+    :func:`eppf.describe_files`, and the blocks of distances of the
+    neighbor searches (:func:`eppf.utils._blas.map_blocks`).
+
     Parameters
     ----------
     func : callable
@@ -45,9 +49,13 @@ def ordered_map(func, items, *, workers=1, depth=2):
         ``func(item)``, in the order of ``items``. An exception raised by
         ``func`` is raised here, at that item's turn.
 
+    See Also
+    --------
+    transform_in_chunks : Descriptor rows chunk by chunk through joblib.
+
     Examples
     --------
-    >>> from eppf.utils._stream import ordered_map
+    >>> from eppf.utils import ordered_map
     >>> list(ordered_map(lambda x: x * x, range(5), workers=2, depth=3))
     [0, 1, 4, 9, 16]
     """

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import eppf.cli._describe as describe_module
+import eppf.streaming as streaming
 from eppf.cli import main
 from eppf.datasets import make_shapes
 from eppf.io import write_mesh, write_point_cloud
@@ -102,8 +103,8 @@ def test_streamed_folder_is_bit_identical_to_fit_transform_for_any_chunking_and_
     settings = {"scaling": extra[1]} if extra else {}
     expected, objects = _reference(paths, tmp_path / "data", name, 4, **settings)
     for chunk, first, n_jobs in ((3, 16, "1"), (1, 16, "2"), (3, 2, "2")):  # (a first chunk shorter than others)
-        monkeypatch.setattr(describe_module, "CHUNK_FILES", chunk)
-        monkeypatch.setattr(describe_module, "FIRST_CHUNK_FILES", first)
+        monkeypatch.setattr(streaming, "CHUNK_FILES", chunk)
+        monkeypatch.setattr(streaming, "FIRST_CHUNK_FILES", first)
         out = tmp_path / f"d{chunk}_{first}.npz"
         status = main(["describe", str(tmp_path / "data"), "-o", str(out), "--descriptor", name, "--n-pairs", "500",
                        "--random-state", "4", "--n-jobs", n_jobs, "--no-progress", *extra])
@@ -128,7 +129,7 @@ def test_streamed_npz_keeps_the_data_set_scale_and_parameters_of_the_in_memory_p
     paths = _class_folder(tmp_path / "data")
     _, objects = _reference(paths, tmp_path / "data", "eppf", 0)
     est = DESCRIPTORS["eppf"].make(n_samples=500, random_state=0, n_jobs=1).fit(objects.clouds)
-    monkeypatch.setattr(describe_module, "CHUNK_FILES", 2)
+    monkeypatch.setattr(streaming, "CHUNK_FILES", 2)
     assert main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npz"), "--n-pairs", "500",
                  "--no-progress"]) == 0
     with np.load(tmp_path / "d.npz") as f:
@@ -144,7 +145,7 @@ def test_skipped_files_leave_the_other_rows_as_without_them(tmp_path, capsys, mo
     bad = tmp_path / "data" / "blob" / "blob1b.ply"
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 99999\nproperty float x\n"
                     b"property float y\nproperty float z\nend_header\n" + b"\0" * 24)
-    monkeypatch.setattr(describe_module, "CHUNK_FILES", 2)
+    monkeypatch.setattr(streaming, "CHUNK_FILES", 2)
     status = main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npz"), "--n-pairs", "500",
                    "--random-state", "2", "--no-progress"])
     captured = capsys.readouterr()
@@ -181,7 +182,7 @@ def test_a_cloud_the_descriptor_refuses_is_named_by_its_file(tmp_path, capsys, m
     for i in range(3):
         write_point_cloud(folder / f"ok{i}.xyz", rng.normal(size=(80, 3)))
     write_point_cloud(folder / "ok3_flat.xyz", np.ones((80, 3)))  # every point the same: no pair to draw
-    monkeypatch.setattr(describe_module, "CHUNK_FILES", 2)
+    monkeypatch.setattr(streaming, "CHUNK_FILES", 2)
     status = main(["describe", str(folder), "-o", str(tmp_path / "d.npy"), "--n-pairs", "500", "--scaling",
                    "object", "--no-progress"])
     err = capsys.readouterr().err
@@ -204,10 +205,10 @@ def test_second_pass_rows_are_the_same_whether_clouds_are_spilled_or_read_again(
         return real(self, k)
 
     monkeypatch.setattr(InputPlan, "read", counting)
-    monkeypatch.setattr(describe_module, "CHUNK_FILES", 3)
-    for rate, times in ((float("inf"), 1), (0.0, 2), (describe_module.SPILL_BYTES_PER_SECOND, None)):
+    monkeypatch.setattr(streaming, "CHUNK_FILES", 3)
+    for rate, times in ((float("inf"), 1), (0.0, 2), (streaming.SPILL_BYTES_PER_SECOND, None)):
         reads.clear()
-        monkeypatch.setattr(describe_module, "SPILL_BYTES_PER_SECOND", rate)
+        monkeypatch.setattr(streaming, "SPILL_BYTES_PER_SECOND", rate)
         assert main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npy"), "--n-pairs", "500",
                      "--n-points", "64", "--random-state", "9", "--no-progress"]) == 0
         np.testing.assert_array_equal(np.load(tmp_path / "d.npy"), expected)
@@ -220,121 +221,19 @@ def test_second_pass_rows_are_the_same_whether_clouds_are_spilled_or_read_again(
 
 def test_a_file_that_changes_between_the_passes_stops_describe_naming_it(tmp_path, capsys, monkeypatch):
     paths = _class_folder(tmp_path / "data")
-    monkeypatch.setattr(describe_module, "SPILL_BYTES_PER_SECOND", 0.0)  # every file read again
-    real = describe_module._read_back
+    monkeypatch.setattr(streaming, "SPILL_BYTES_PER_SECOND", 0.0)  # every file read again
+    real = streaming._Stream._read_back
 
-    def change_then_read(plan, fd, group):
+    def change_then_read(self, fd, group):
         write_point_cloud(paths[2], np.random.default_rng(0).normal(size=(11, 3)))
-        return real(plan, fd, group)
+        return real(self, fd, group)
 
-    monkeypatch.setattr(describe_module, "_read_back", change_then_read)
+    monkeypatch.setattr(streaming._Stream, "_read_back", change_then_read)
     status = main(["describe", str(tmp_path / "data"), "-o", str(tmp_path / "d.npy"), "--n-pairs", "500",
                    "--no-progress"])
     err = capsys.readouterr().err
     assert status == 2 and str(paths[2]) in err and "changed while eppf describe ran" in err
     assert not (tmp_path / "d.npy").exists()
-
-
-# ---------------------------------------------------------------------------
-# Chunks described side by side (--n-jobs above 1)
-# ---------------------------------------------------------------------------
-
-
-class _SeedRows:
-    """A toy descriptor: one row per cloud, (its seed, its sum, the n_jobs and thread that described it).
-
-    ``per_cloud`` seeds are drawn per cloud (1 as every eppf descriptor
-    does); ``odd_after`` > 0 draws one more seed in every transform after
-    that many calls (a descriptor whose draws the first chunk cannot predict).
-    """
-
-    def __init__(self, random_state=None, n_jobs=None, per_cloud=1, odd_after=0):
-        self.random_state, self.n_jobs, self.per_cloud, self.odd_after = random_state, n_jobs, per_cloud, odd_after
-        self.calls = [0]
-
-    def get_params(self, deep=True):
-        return dict(random_state=self.random_state, n_jobs=self.n_jobs, per_cloud=self.per_cloud,
-                    odd_after=self.odd_after)
-
-    def set_params(self, **params):
-        for k, v in params.items():
-            setattr(self, k, v)
-        return self
-
-    def transform(self, clouds):
-        import threading
-
-        from eppf.utils import object_seeds
-
-        self.calls[0] += 1
-        n = len(clouds) * self.per_cloud + (self.odd_after > 0 and self.calls[0] > self.odd_after)
-        seeds = object_seeds(self.random_state, n)[::self.per_cloud][:len(clouds)]
-        return np.column_stack([seeds.astype(np.float64), [c.sum() for c in clouds],
-                                np.full(len(clouds), -1 if self.n_jobs is None else self.n_jobs),
-                                np.full(len(clouds), threading.get_ident(), dtype=np.float64)])
-
-
-def _stream_rows(est, chunks, n_threads):
-    out = []
-    rows = describe_module._ParallelRows(est, n_threads)
-    try:
-        for k, chunk in enumerate(chunks):
-            rows.submit(chunk, [f"f{k}_{i}" for i in range(len(chunk))], out.append)
-        rows.finish(out.append)
-    finally:
-        rows.close()
-    return np.vstack(out), rows
-
-
-@pytest.mark.parametrize("per_cloud", [1, 2])
-def test_chunks_side_by_side_give_the_rows_of_one_generator(per_cloud):
-    import threading
-
-    rng = np.random.default_rng(3)
-    clouds = [rng.normal(size=(int(rng.integers(5, 40)), 3)) for _ in range(40)]
-    sizes = [7, 1, 5, 9, 3, 2, 8, 5]
-    chunks = np.split(np.arange(40), np.cumsum(sizes)[:-1])
-    chunks = [[clouds[i] for i in c] for c in chunks]
-    expected = _SeedRows(np.random.RandomState(4), 2, per_cloud).transform(clouds)
-    for n_threads in (1, 2, 3):
-        got, rows = _stream_rows(_SeedRows(np.random.RandomState(4), n_threads, per_cloud), chunks, n_threads)
-        np.testing.assert_array_equal(got[:, :2], expected[:, :2])  # seeds and clouds, in order
-        side_by_side = n_threads > 1 and per_cloud == 1
-        assert rows.parallel == side_by_side
-        # the first chunk on the calling thread with the descriptor's n_jobs; then copies on one thread each
-        assert (got[:7, 2] == n_threads).all() and (got[:7, 3] == threading.get_ident()).all()
-        if side_by_side:
-            assert (got[7:, 2] == 1).all() and (got[7:, 3] != threading.get_ident()).all()
-        else:
-            assert (got[:, 2] == n_threads).all() and (got[:, 3] == threading.get_ident()).all()
-
-
-def test_chunks_side_by_side_stop_on_draws_the_first_chunk_did_not_show():
-    clouds = [np.full((4, 3), float(k)) for k in range(12)]
-    chunks = [clouds[:4], clouds[4:8], clouds[8:]]
-    with pytest.raises(RuntimeError, match="drew seeds other than one per cloud"):
-        _stream_rows(_SeedRows(np.random.RandomState(0), 2, odd_after=1), chunks, 2)
-
-
-def test_chunks_side_by_side_name_the_file_of_a_refused_cloud():
-    class Refuses(_SeedRows):
-        def transform(self, clouds):
-            if len(clouds) == 3:
-                raise ValueError("Refuses: point cloud 2 is bad")
-            return super().transform(clouds)
-
-    chunks = [[np.ones((4, 3))] * 2, [np.ones((4, 3))] * 2, [np.ones((4, 3))] * 3, [np.ones((4, 3))] * 2]
-    with pytest.raises(ValueError, match="point cloud f2_2 is bad"):
-        _stream_rows(Refuses(np.random.RandomState(0), 2), chunks, 2)
-
-
-def test_a_nested_generator_is_described_one_chunk_at_a_time():
-    est = DESCRIPTORS["eppf+gasd"].make(n_samples=500, random_state=0, n_jobs=2)
-    assert not describe_module._ParallelRows(est, 2).parallel
-    est = DESCRIPTORS["eppf"].make(n_samples=500, random_state=0, n_jobs=2).set_params(
-        random_state=np.random.RandomState(0))
-    assert describe_module._ParallelRows(est, 2).parallel
-    assert not describe_module._ParallelRows(est, 1).parallel
 
 
 @pytest.mark.parametrize("layout", ["split", "classes", "loose"])

@@ -153,8 +153,11 @@ def test_missing_optional_dependency_gives_install_advice(capsys, monkeypatch):
 
 def test_experiment_takes_no_progress_and_keeps_quiet_as_deprecated(monkeypatch, capsys):
     seen = []
-    monkeypatch.setattr("eppf.experiments.main", lambda argv: seen.append(argv) or 0)
+    monkeypatch.setattr("eppf.experiments.run_retrieval", lambda **kw: seen.append((kw["verbose"], kw["command"])))
     assert main(["experiment", "retrieval", "--quick", "--no-progress"]) == 0
+    assert "deprecated" not in capsys.readouterr().err
     assert main(["experiment", "retrieval", "--quiet"]) == 0
-    assert seen == [["retrieval", "--quick", "--quiet"], ["retrieval", "--quiet"]]
+    assert main(["experiment", "retrieval"]) == 0
+    assert seen == [(False, "eppf experiment retrieval --quick --no-progress"),
+                    (False, "eppf experiment retrieval --quiet"), (True, "eppf experiment retrieval")]
     assert "--quiet is deprecated" in capsys.readouterr().err

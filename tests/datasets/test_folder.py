@@ -135,3 +135,38 @@ def test_every_supported_format_in_any_case_is_loaded_like_read_point_cloud(tmp_
         for got, name, seed in zip(data.data, data.filenames, seeds):
             assert_array_equal(got, read_point_cloud(name, n_points=n_points, random_state=seed))
             assert got.shape[0] == (n_points or (2048 if name.lower().endswith((".off", ".obj", ".stl")) else 40))
+
+
+@pytest.mark.parametrize("folders, kind, want", [
+    # train|test/<class>/...: files elsewhere (a class folder beside the splits, loose files) are left out
+    (["train/cup", "test/cup", "train/pot/deep", "plate", "."], "split/class",
+     {"train/cup": ("cup", "train"), "test/cup": ("cup", "test"), "train/pot/deep": ("pot", "train")}),
+    # <class>/train|test/...: the class folders' other files are left out
+    (["cup/train", "cup/test", "pot/test/deep", "pot/old", "."], "class/split",
+     {"cup/train": ("cup", "train"), "cup/test": ("cup", "test"), "pot/test/deep": ("pot", "test")}),
+    # <class>/...: no split, deeper folders belong to their class
+    (["cup", "pot/deep/er", "."], "class", {"cup": ("cup", ""), "pot/deep/er": ("pot", "")}),
+])
+def test_load_folder_and_the_command_line_read_a_folder_by_one_rule(tmp_path, folders, kind, want):
+    from eppf.cli._common import plan_inputs
+    from eppf.datasets._folder import folder_layout, object_files
+
+    root = tmp_path / "d"
+    for k, sub in enumerate(folders + [".hidden", "cup/.cache"]):
+        os.makedirs(root / sub, exist_ok=True)
+        write_point_cloud(root / sub / f"o{k}.xyz", RNG.normal(size=(20, 3)))
+    files = object_files(root)
+    assert not any("/." in f.replace(os.sep, "/") for f in files)  # hidden files and folders skipped
+    layout, got_kind = folder_layout(root, files)
+    got = {os.path.relpath(os.path.dirname(f), root).replace(os.sep, "/"): cls for f, cls in zip(files, layout)}
+    assert {k: v for k, v in got.items() if v is not None} == want
+    assert got_kind == kind
+    data = load_folder(root)
+    expected = sorted(want.items(), key=lambda kv: kv[1])
+    assert sorted(zip(data.ids.tolist(), data.target_names[data.target].tolist(),
+                      [""] * len(data.ids) if data.split is None else data.split.tolist())) == \
+        sorted((f"{where}/o{folders.index(where)}", cls, split) for where, (cls, split) in expected)
+    plan = plan_inputs([str(root)], {"random_state": 0}, labelled=True)
+    cli = sorted((os.path.relpath(f, root).replace(os.sep, "/").rsplit(".", 1)[0], *cls) for f, _, cls in plan.entries)
+    assert cli == sorted(zip(data.ids.tolist(), data.target_names[data.target].tolist(),
+                             [""] * len(data.ids) if data.split is None else data.split.tolist()))

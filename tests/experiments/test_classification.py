@@ -5,7 +5,7 @@ import numpy as np
 from eppf import EPPF4DClassifier, EPPFTransformer
 from eppf.descriptors import DescriptorPool, DescriptorUnion, GASDTransformer, ProportionTransformer
 from eppf.experiments import run_classification
-from eppf.experiments._classification import RECIPE, recommended_pipeline_parts
+from eppf.registry import RECIPE, recommended_pipeline_parts
 
 
 def test_recommended_parts_are_the_documented_recipe():

@@ -12,7 +12,6 @@ from eppf import EPPFTransformer, KLNearestNeighbors
 from eppf.experiments import (
     ExperimentError,
     load_data,
-    main,
     run_ablation,
     run_classification,
     run_noise,
@@ -21,6 +20,8 @@ from eppf.experiments import (
 )
 from eppf.experiments._common import draw_seeds
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores
+
+from . import experiment_main as main
 
 try:
     import matplotlib  # noqa: F401
@@ -118,7 +119,7 @@ def test_ablation(tiny, tmp_path):
     assert "occupancy: " in md and "Mean share of the" in md
 
 
-def test_module_entry_point():
+def test_module_entry_point_names_the_command_that_replaced_it():
     import subprocess
     import sys
 
@@ -126,8 +127,8 @@ def test_module_entry_point():
     env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-m", "eppf.experiments", "nope"], capture_output=True, text=True, env=env,
                           cwd=root, timeout=120)
-    assert proc.returncode == 2
-    assert "invalid choice: 'nope'" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    assert "now 'eppf experiment'" in proc.stderr and proc.stderr.strip().endswith("eppf experiment nope")
 
 
 def test_classification(tiny, tmp_path):
@@ -299,7 +300,7 @@ def test_bad_npz_is_one_line_error(tmp_path, capsys):
 
 def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path, capsys):
     from eppf.experiments._classification import TrainingSettings
-    from eppf.experiments._cli import build_parser
+    from eppf.cli import build_parser
 
     common = dict(epochs=None, pointnet_epochs=None, pointnet_points=None, validation_fraction=0.1, patience=None,
                   scaling="fit", quick=True, n_jobs=1, random_state=0)
@@ -315,7 +316,7 @@ def test_precision_reaches_the_eppf_networks_and_the_report(tmp_path, capsys):
     assert auto.protocol(["4d"])["precision 'auto'"].startswith(f"{resolve_precision('auto')} on this machine")
     assert "precision 'auto'" not in TrainingSettings.resolve(**common).protocol(["4d"])
     assert "precision 'auto'" in TrainingSettings.resolve(**common).protocol(["4d+"])  # the recipe's "auto"
-    args = build_parser().parse_args(["noise", "--precision", "bfloat16"])
+    args = build_parser().parse_args(["experiment", "noise", "--precision", "bfloat16"])
     assert args.precision == "bfloat16"
     result = run_classification("builtin", quick=True, models=["4d"], n_jobs=1, out=str(tmp_path), verbose=False,
                                 precision="bfloat16")

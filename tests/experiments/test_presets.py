@@ -19,12 +19,13 @@ from eppf.experiments import (
     apply_preset,
     get_preset,
     load_data,
-    main,
     run_classification,
     run_noise,
 )
 from eppf.experiments._common import draw_seeds
 from eppf.metrics import retrieval_scores
+
+from . import experiment_main as main
 
 N = 1024
 

@@ -148,14 +148,14 @@ def test_table_discovery_and_supported_extensions_agree(tmp_path):
     exts = sorted(table) + [e.upper() for e in table] + [".las", ".ply.bak", ".pcd~", ".e57", ""]
     for k, ext in enumerate(exts):
         (tmp_path / f"f{k}{ext}").write_text("x")
-    found = {os.path.splitext(f)[1].lower() for f in _folder._object_files(str(tmp_path))}
+    found = {os.path.splitext(f)[1].lower() for f in _folder.object_files(str(tmp_path))}
     assert found == table
-    assert len(_folder._object_files(str(tmp_path))) == 2 * len(table)
+    assert len(_folder.object_files(str(tmp_path))) == 2 * len(table)
     # and the command line's discovery finds the very same files
     from eppf.cli._common import find_files
 
     _, cli_files = find_files(str(tmp_path))
-    assert sorted(map(os.path.basename, cli_files)) == sorted(map(os.path.basename, _folder._object_files(str(tmp_path))))
+    assert sorted(map(os.path.basename, cli_files)) == sorted(map(os.path.basename, _folder.object_files(str(tmp_path))))
     # every extension maps to a format that read_point_cloud dispatches, in any case
     for ext in table:
         assert format_of("a" + ext) == format_of("A" + ext.upper()) == _formats.BY_EXTENSION[ext].name

@@ -84,3 +84,17 @@ def test_row_writer_header_holds_huge_shapes_in_its_fixed_length():
     np.lib.format.read_magic(buf)
     assert np.lib.format.read_array_header_1_0(buf)[0] == (10 ** 15, 123456789)
     assert HEADER_BYTES % 64 == 0
+
+
+def test_progress_bar_off_takes_the_same_calls_and_shows_nothing(capsys):
+    from eppf.utils import progress_bar
+
+    bar = progress_bar(total=5, desc="files", unit="file", enabled=False)
+    bar.update(2)
+    bar.close()
+    assert list(progress_bar(range(3), desc="reading", enabled=False)) == [0, 1, 2]
+    assert capsys.readouterr() == ("", "")
+    on = progress_bar(total=2, desc="files", unit="file")
+    on.update(2)
+    on.close()
+    assert "files" in capsys.readouterr().err

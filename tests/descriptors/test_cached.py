@@ -10,7 +10,7 @@ from numpy.testing import assert_array_equal
 from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.pipeline import make_pipeline
 
-from eppf.datasets import CachedTransformer
+from eppf.descriptors import CachedTransformer
 
 CALLS = {"fit": 0, "transform": 0}
 
@@ -118,3 +118,9 @@ def test_random_state_none_warns(tmp_path):
 def test_errors(transformer, memory, exc, msg):
     with pytest.raises(exc, match=re.escape(msg)):
         CachedTransformer(transformer, memory=memory).fit(_clouds(0))
+
+
+def test_the_old_import_path_still_works():
+    import eppf.datasets
+
+    assert eppf.datasets.CachedTransformer is CachedTransformer

@@ -53,7 +53,7 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
     >>> import tempfile
     >>> import numpy as np
     >>> from sklearn.preprocessing import FunctionTransformer
-    >>> from eppf.datasets import CachedTransformer
+    >>> from eppf.descriptors import CachedTransformer
     >>> X = np.arange(6.0).reshape(3, 2)
     >>> cached = CachedTransformer(FunctionTransformer(np.sqrt), memory=tempfile.mkdtemp())
     >>> cached.fit_transform(X).shape
