@@ -37,7 +37,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_params
+from ..utils._param_validation import N_JOBS, RANDOM_STATE, Interval, Options, StrOptions, validate_params
 from ..utils._validation import check_n_jobs
 
 __all__ = []
@@ -51,10 +51,6 @@ def _print_line(text):
     """Sink for the callbacks' messages when verbose (not ``print`` itself:
     skorch mutes a ``print`` sink when the net's own ``verbose`` is 0)."""
     print(text, flush=True)
-
-
-def _nonzero_int(value):
-    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value != 0
 
 
 def positive_int_tuple(length):
@@ -81,12 +77,8 @@ COMMON_CONSTRAINTS = {
     "n_iter_no_change": [Interval(numbers.Integral, 1, None, closed="left")],
     "max_time": [None, Interval(numbers.Real, 0, None, closed="neither")],
     "device": [Options(str, description="a str such as 'cpu' or 'cuda'")],
-    "n_jobs": [None, Satisfies(_nonzero_int, "a non-zero int")],
-    "random_state": [
-        None,
-        Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
-        Options(np.random.RandomState, description="a numpy RandomState"),
-    ],
+    "n_jobs": N_JOBS,
+    "random_state": RANDOM_STATE,
     "verbose": [Interval(numbers.Integral, 0, None, closed="left")],
 }
 

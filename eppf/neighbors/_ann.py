@@ -22,7 +22,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils._blas import single_blas_thread
-from ..utils._param_validation import Interval, Options, StrOptions
+from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions
 from ..utils._stream import ordered_map
 from ..utils._validation import check_n_jobs
 from ._base import KL_CONSTRAINTS, KLNeighborsBase, learn_floor, prepare_histograms, validate_histograms
@@ -244,11 +244,7 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
         "n_probe": [Interval(numbers.Integral, 1, None, closed="left")],
         "hnsw_m": [Interval(numbers.Integral, 2, None, closed="left")],
         "ef_search": [Interval(numbers.Integral, 1, None, closed="left")],
-        "random_state": [
-            None,
-            Interval(numbers.Integral, 0, 2**32 - 1, closed="both"),
-            Options(np.random.RandomState, description="a numpy RandomState"),
-        ],
+        "random_state": RANDOM_STATE,
     }
 
     def __init__(self, n_neighbors=1, *, weights="uniform", floor="auto", renormalize=False, n_candidates=32,

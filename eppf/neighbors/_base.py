@@ -21,8 +21,7 @@ from sklearn.utils import check_array
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_parameter, validate_params
-from ..utils._validation import check_n_jobs
+from ..utils._param_validation import N_JOBS, Interval, Options, StrOptions, validate_parameter, validate_params
 
 __all__ = [
     "BLOCK_ENTRIES",
@@ -47,11 +46,6 @@ __all__ = [
 BLOCK_ENTRIES = 1 << 23
 
 
-def _n_jobs_resolves(value):
-    check_n_jobs(value)  # raises for anything it does not accept
-    return True
-
-
 #: The parameters of the symmetric-KL estimators and functions, and what they accept.
 KL_CONSTRAINTS = {
     "n_neighbors": [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")],
@@ -59,7 +53,7 @@ KL_CONSTRAINTS = {
     "floor": [StrOptions(["auto"]), Interval(numbers.Real, 0, None, closed="neither", description="a positive float")],
     "renormalize": [Options(bool, description="a bool")],
     "chunk_size": [Interval(numbers.Integral, 1, None, closed="left", description="a positive int"), None],
-    "n_jobs": [None, Satisfies(_n_jobs_resolves, "a non-zero int (-1: all cores)")],
+    "n_jobs": N_JOBS,
 }
 
 

@@ -10,7 +10,7 @@ accepts, in a class attribute ``_parameter_constraints``::
         "early_stopping": [Options(bool)],
         "max_time": [None, Interval(numbers.Real, 0, None, closed="neither")],
         "device": [Options(str, description="a str such as 'cpu' or 'cuda'")],
-        "n_jobs": [None, Satisfies(_nonzero_int, "a non-zero int")],
+        "n_jobs": N_JOBS,
         "callback": ["no_validation"],
     }
 

@@ -290,7 +290,7 @@ def test_validation_split_falls_back_to_unstratified_for_singleton_classes():
          "random_state must be None or an int in [0, 4294967295] or a numpy RandomState, got '0'"),
         ({"lr_schedule": "step"}, ValueError, "lr_schedule must be 'constant' or 'plateau', got 'step'"),
         ({"max_time": float("inf")}, ValueError, "max_time must be None or a float in (0.0, inf), got inf"),
-        ({"n_jobs": 1.0}, TypeError, "n_jobs must be None or a non-zero int, got 1.0"),
+        ({"n_jobs": 1.0}, TypeError, "n_jobs must be None or a non-zero int (-1: all cores), got 1.0"),
         ({"verbose": True}, ValueError, "verbose must be an int >= 0, got True"),
     ],
 )

@@ -465,7 +465,7 @@ def test_pipeline_with_eppf_transformer():
         ({"input_scaling": "minmax"}, ValueError, "EPPF4DClassifier: input_scaling must be one of 'global', 'bin', 'none', got 'minmax'"),
         ({"precision": "half"}, ValueError, "EPPF4DClassifier: precision must be one of 'auto', 'float32', 'bfloat16', got 'half'"),
         ({"device": None}, ValueError, "EPPF4DClassifier: device must be a str such as 'cpu' or 'cuda', got None"),
-        ({"n_jobs": 0}, ValueError, "EPPF4DClassifier: n_jobs must be None or a non-zero int, got 0"),
+        ({"n_jobs": 0}, ValueError, "EPPF4DClassifier: n_jobs must be None or a non-zero int (-1: all cores), got 0"),
         ({"verbose": -1}, ValueError, "EPPF4DClassifier: verbose must be an int >= 0, got -1"),
     ],
 )

@@ -186,7 +186,7 @@ def test_drop_last_single_object_batch():
         ({"early_stopping": 1}, "PointNetClassifier: early_stopping must be True or False, got 1"),
         ({"validation_fraction": 1.0}, "PointNetClassifier: validation_fraction must be a float in (0.0, 1.0), got 1.0"),
         ({"device": 0}, "PointNetClassifier: device must be a str such as 'cpu' or 'cuda', got 0"),
-        ({"n_jobs": 0}, "PointNetClassifier: n_jobs must be None or a non-zero int, got 0"),
+        ({"n_jobs": 0}, "PointNetClassifier: n_jobs must be None or a non-zero int (-1: all cores), got 0"),
         ({"verbose": -1}, "PointNetClassifier: verbose must be an int >= 0, got -1"),
     ],
 )
