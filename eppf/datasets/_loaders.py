@@ -30,7 +30,7 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
-from ..utils._validation import check_n_points, check_resolution
+from ..utils._sampling import check_n_points, check_resolution
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
 

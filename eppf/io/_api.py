@@ -6,9 +6,7 @@ import os
 import numpy as np
 from sklearn.utils import check_random_state
 
-from ..utils._sampling import resample
-from ..utils._validation import check_n_points, check_resolution
-from ..utils._sampling import object_rng, sample_mesh
+from ..utils._sampling import check_n_points, check_resolution, object_rng, resample, sample_mesh
 from . import _ply
 from ._common import Cloud, Mesh, read_bytes
 from ._errors import FileFormatError

@@ -9,9 +9,34 @@ import numbers
 import numpy as np
 from sklearn.utils import check_random_state
 
+from ._param_validation import Interval, validate_parameter
 from ._validation import check_point_cloud
 
-__all__ = ["object_rng", "resample", "sample_mesh"]
+__all__ = ["CONSTRAINTS", "check_n_points", "check_resolution", "object_rng", "resample", "sample_mesh"]
+
+#: What the sampling parameters accept (:mod:`eppf.utils._param_validation`):
+#: the functions here, the readers of :mod:`eppf.io` and the loaders of
+#: :mod:`eppf.datasets` check theirs against these lists.
+CONSTRAINTS = {
+    # a point count of a cloud (resample, readers, loaders): a cloud needs two points
+    "n_points": [Interval(numbers.Integral, 2, None, closed="left")],
+    # a point count drawn from a mesh's surface (sample_mesh)
+    "mesh_n_points": [Interval(numbers.Integral, 1, None, closed="left")],
+    "n_samples": [Interval(numbers.Integral, 1, None, closed="left")],
+    "resolution": [Interval(numbers.Real, 0, None, closed="neither", description="a positive finite float")],
+}
+
+
+def check_n_points(n_points, owner, allow_none=True):
+    """Check a point count against ``CONSTRAINTS["n_points"]`` (None too when ``allow_none``); return an int or None."""
+    validate_parameter(n_points, ([None] if allow_none else []) + CONSTRAINTS["n_points"], name="n_points", owner=owner)
+    return None if n_points is None else int(n_points)
+
+
+def check_resolution(resolution, owner):
+    """Check a sampling resolution against ``CONSTRAINTS["resolution"]`` or None; return a float or None."""
+    validate_parameter(resolution, [None] + CONSTRAINTS["resolution"], name="resolution", owner=owner)
+    return None if resolution is None else float(resolution)
 
 
 def object_rng(seed):
@@ -44,15 +69,6 @@ def _check_mesh(vertices, faces, owner):
     if f.min() < 0 or f.max() >= v.shape[0]:
         raise ValueError(f"{owner}: face indices must lie in 0..{v.shape[0] - 1}, got {f.min()}..{f.max()}")
     return v, f.astype(np.intp, copy=False)
-
-
-def _positive(value, name, owner, integer):
-    kind = numbers.Integral if integer else numbers.Real
-    if isinstance(value, bool) or not isinstance(value, kind):
-        raise TypeError(f"{owner}: {name} must be {'an int' if integer else 'a number'}, got {type(value).__name__}")
-    if not value > 0 or not np.isfinite(value):
-        raise ValueError(f"{owner}: {name} must be positive, got {value}")
-    return value
 
 
 def _voxel_average(cloud, leaf):
@@ -151,10 +167,10 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
     if (n_points is None) == (resolution is None):
         raise ValueError(f"{owner}: give exactly one of n_points and resolution")
     if n_points is not None:
-        count = _positive(n_points, "n_points", owner, integer=True)
+        count = int(validate_parameter(n_points, CONSTRAINTS["mesh_n_points"], name="n_points", owner=owner))
     else:
-        _positive(resolution, "resolution", owner, integer=False)
-        count = _positive(n_samples, "n_samples", owner, integer=True)
+        validate_parameter(resolution, CONSTRAINTS["resolution"], name="resolution", owner=owner)
+        count = int(validate_parameter(n_samples, CONSTRAINTS["n_samples"], name="n_samples", owner=owner))
     rng = check_random_state(random_state)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     ab, ac = b - a, c - a
@@ -226,10 +242,7 @@ def resample(cloud, n_points, *, random_state=None):
     """
     owner = "resample"
     arr = check_point_cloud(cloud, owner=owner)
-    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
-        raise TypeError(f"{owner}: n_points must be an int, got {type(n_points).__name__}")
-    if n_points < 2:
-        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
+    n_points = check_n_points(n_points, owner, allow_none=False)
     rng = check_random_state(random_state)
     n = arr.shape[0]
     if n_points <= n:

@@ -16,6 +16,8 @@ import operator
 
 import numpy as np
 
+from ._param_validation import N_JOBS, validate_parameter
+
 __all__ = [
     "PackedClouds", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
     "condition_point_clouds", "object_seeds", "pack_point_clouds",
@@ -630,13 +632,9 @@ def check_n_jobs(n_jobs, *, owner=None):
 
     from ._scan_fast import openmp_max_threads
 
-    pre = _prefix(owner)
+    validate_parameter(n_jobs, N_JOBS, name="n_jobs", owner=owner or "check_n_jobs")
     if n_jobs is None:
         return max(1, int(openmp_max_threads()))
-    if isinstance(n_jobs, bool) or not isinstance(n_jobs, numbers.Integral):
-        raise TypeError(f"{pre}n_jobs must be an int or None, got {type(n_jobs).__name__}")
-    if n_jobs == 0:
-        raise ValueError(f"{pre}n_jobs == 0 has no meaning; use None, a positive int or -1")
     if n_jobs > 0:
         return int(n_jobs)
     n_cpus = os.cpu_count() or 1
@@ -699,25 +697,3 @@ def check_int(value, name, owner, low, high=None):
         bound = f">= {low}" if high is None else f"in [{low}, {high}]"
         raise ValueError(f"{owner}: {name} must be {bound}, got {value}")
     return int(value)
-
-
-def check_n_points(n_points, owner, allow_none=True):
-    """A point count parameter: an int >= 2 (or None when ``allow_none``), else a TypeError/ValueError naming ``owner``."""
-    if n_points is None and allow_none:
-        return None
-    if isinstance(n_points, bool) or not isinstance(n_points, numbers.Integral):
-        raise TypeError(f"{owner}: n_points must be an int{' or None' if allow_none else ''}, got {type(n_points).__name__}")
-    if n_points < 2:
-        raise ValueError(f"{owner}: n_points must be >= 2, got {n_points}")
-    return int(n_points)
-
-
-def check_resolution(resolution, owner):
-    """A sampling resolution: a positive finite number or None, else a TypeError/ValueError naming ``owner``."""
-    if resolution is None:
-        return None
-    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Real):
-        raise TypeError(f"{owner}: resolution must be a number or None, got {type(resolution).__name__}")
-    if not (resolution > 0 and np.isfinite(resolution)):
-        raise ValueError(f"{owner}: resolution must be positive and finite, got {resolution}")
-    return float(resolution)
