@@ -57,7 +57,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from ..preprocessing._normal_options import N_NEIGHBORS
 from ..utils import PackedClouds, check_n_jobs, check_packed_clouds, object_seeds, transform_in_chunks
-from ..utils._validation import condition_point_clouds
+from ..utils._validation import as_vector3, condition_point_clouds
 from ..utils._param_validation import N_JOBS, RANDOM_STATE, Interval, Options, StrOptions, validate_params
 
 __all__ = [
@@ -70,25 +70,6 @@ __all__ = [
     "PointCloudDescriptor",
     "as_vector3",
 ]
-
-
-def as_vector3(value):
-    """``value`` as a float64 array of 3 finite real numbers, or None if it is not one.
-
-    For vector parameters (VFH's ``viewpoint``, GASD's ``view_direction``):
-    their constraints accept what this converts, their ``_resolve_params``
-    converts with it.
-    """
-    try:
-        v = np.asarray(value)
-    except Exception:
-        return None
-    if v.dtype == object or np.iscomplexobj(v) or not (np.issubdtype(v.dtype, np.number) or v.dtype == bool):
-        return None
-    if v.shape != (3,):
-        return None
-    v = np.ascontiguousarray(v, dtype=np.float64)
-    return v if np.isfinite(v).all() else None
 
 
 #: ``verbose``: a non-negative int (or a bool).

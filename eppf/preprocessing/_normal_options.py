@@ -4,10 +4,12 @@ import numbers
 
 import numpy as np
 
-from ..utils._param_validation import Interval, validate_parameter
+from ..utils._param_validation import Interval, Satisfies, StrOptions, validate_parameter
+from ..utils._validation import as_vector3
 
 __all__ = [
-    "N_NEIGHBORS", "ORIENT_CENTROID", "ORIENT_NONE", "ORIENT_VIEWPOINT", "check_n_neighbors", "resolve_orientation",
+    "N_NEIGHBORS", "ORIENTATION", "ORIENT_CENTROID", "ORIENT_NONE", "ORIENT_VIEWPOINT", "check_n_neighbors",
+    "resolve_orientation",
 ]
 
 #: The kernels' orientation modes: none, away from the centroid, towards a viewpoint.
@@ -19,6 +21,15 @@ ORIENT_NONE, ORIENT_CENTROID, ORIENT_VIEWPOINT = 0, 1, 2
 N_NEIGHBORS = [Interval(numbers.Integral, 3, None, closed="left", description="an int >= 3 (a plane needs three points)")]
 
 
+#: ``orientation`` of estimated normals: none, away from the centroid, towards
+#: the origin (``"origin"`` and ``"viewpoint"``) or towards a given viewpoint.
+ORIENTATION = [
+    None,
+    StrOptions(["centroid", "origin", "viewpoint"]),
+    Satisfies(lambda value: as_vector3(value) is not None, "a finite viewpoint of shape (3,)"),
+]
+
+
 def check_n_neighbors(n_neighbors, owner):
     """Check ``n_neighbors`` against :data:`N_NEIGHBORS`; return it as an int."""
     validate_parameter(n_neighbors, N_NEIGHBORS, name="n_neighbors", owner=owner)
@@ -26,31 +37,10 @@ def check_n_neighbors(n_neighbors, owner):
 
 
 def resolve_orientation(orientation, owner):
-    """Return (kernel mode, viewpoint as float64 (3,))."""
-    viewpoint = np.zeros(3, dtype=np.float64)
+    """Check ``orientation`` against :data:`ORIENTATION`; return (kernel mode, viewpoint as float64 (3,))."""
+    validate_parameter(orientation, ORIENTATION, name="orientation", owner=owner)
     if orientation is None:
-        return ORIENT_NONE, viewpoint
+        return ORIENT_NONE, np.zeros(3, dtype=np.float64)
     if isinstance(orientation, str):
-        if orientation == "centroid":
-            return ORIENT_CENTROID, viewpoint
-        if orientation in ("origin", "viewpoint"):
-            return ORIENT_VIEWPOINT, viewpoint
-        raise ValueError(
-            f"{owner}: orientation must be 'centroid', 'origin', 'viewpoint', None or a viewpoint "
-            f"of shape (3,), got {orientation!r}"
-        )
-    try:
-        vp = np.asarray(orientation)
-    except Exception:
-        vp = None
-    if vp is None or vp.dtype == object or not (np.issubdtype(vp.dtype, np.number) or vp.dtype == bool):
-        raise TypeError(
-            f"{owner}: orientation must be 'centroid', 'origin', 'viewpoint', None or a viewpoint "
-            f"of shape (3,), got {type(orientation).__name__}"
-        )
-    if np.iscomplexobj(vp) or vp.shape != (3,):
-        raise ValueError(f"{owner}: a viewpoint orientation must have shape (3,), got shape {vp.shape}")
-    vp = vp.astype(np.float64)
-    if not np.isfinite(vp).all():
-        raise ValueError(f"{owner}: the viewpoint contains NaN or infinite values")
-    return ORIENT_VIEWPOINT, np.ascontiguousarray(vp)
+        return (ORIENT_CENTROID if orientation == "centroid" else ORIENT_VIEWPOINT), np.zeros(3, dtype=np.float64)
+    return ORIENT_VIEWPOINT, as_vector3(orientation)

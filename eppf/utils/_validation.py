@@ -19,7 +19,7 @@ import numpy as np
 from ._param_validation import N_JOBS, validate_parameter
 
 __all__ = [
-    "PackedClouds", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
+    "PackedClouds", "as_vector3", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
     "condition_point_clouds", "object_seeds", "pack_point_clouds",
 ]
 
@@ -697,3 +697,22 @@ def check_int(value, name, owner, low, high=None):
         bound = f">= {low}" if high is None else f"in [{low}, {high}]"
         raise ValueError(f"{owner}: {name} must be {bound}, got {value}")
     return int(value)
+
+
+def as_vector3(value):
+    """``value`` as a float64 array of 3 finite real numbers, or None if it is not one.
+
+    For vector parameters (VFH's ``viewpoint``, GASD's ``view_direction``,
+    a viewpoint ``orientation`` of normals): their constraints accept what
+    this converts, and the code that resolves them converts with it.
+    """
+    try:
+        v = np.asarray(value)
+    except Exception:
+        return None
+    if v.dtype == object or np.iscomplexobj(v) or not (np.issubdtype(v.dtype, np.number) or v.dtype == bool):
+        return None
+    if v.shape != (3,):
+        return None
+    v = np.ascontiguousarray(v, dtype=np.float64)
+    return v if np.isfinite(v).all() else None
