@@ -14,19 +14,32 @@ import numpy as np
 from sklearn.utils import Bunch, check_random_state
 
 from ..preprocessing._perturb import (
+    CONSTRAINTS as PERTURB_CONSTRAINTS,
     add_noise_array,
-    check_fraction,
-    check_non_negative,
     occlude_array,
     random_rotation_matrix,
     random_unit_vector,
     rotate_array,
 )
+from ..utils._param_validation import Interval, Options, StrOptions, validate_parameter
+from ..utils._sampling import CONSTRAINTS as SAMPLING_CONSTRAINTS
 
 __all__ = ["make_shapes"]
 
 _OWNER = "make_shapes"
 _MAX_OCCLUSION = 0.99
+
+#: What each parameter of :func:`make_shapes` accepts (:mod:`eppf.utils._param_validation`).
+_CONSTRAINTS = {
+    "n_samples_per_class": [Interval(numbers.Integral, 1, None, closed="left")],
+    "n_points": SAMPLING_CONSTRAINTS["n_points"],
+    "noise": PERTURB_CONSTRAINTS["sigma"],
+    # each object is sampled with n_points / (1 - occlusion) points
+    "occlusion": [Interval(numbers.Real, 0, _MAX_OCCLUSION, closed="both", description=f"a float in [0, {_MAX_OCCLUSION}]")],
+    "size_variation": PERTURB_CONSTRAINTS["fraction"],
+    "rotate": [Options(bool, description="True, False"), StrOptions(["z"])],
+    "test_size": PERTURB_CONSTRAINTS["fraction"],
+}
 
 
 # --------------------------------------------------------------------------- #
@@ -283,14 +296,6 @@ def _sample_surface(patches, boxes, k, rng):
 # --------------------------------------------------------------------------- #
 # public generator
 # --------------------------------------------------------------------------- #
-def _check_int(value, name, minimum):
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{_OWNER}: {name} must be an int, got {type(value).__name__}")
-    if value < minimum:
-        raise ValueError(f"{_OWNER}: {name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
 def _check_classes(classes):
     if classes is None:
         return list(_CLASSES)
@@ -435,20 +440,16 @@ def make_shapes(
     >>> shapes.target_names[:3].tolist()
     ['box', 'sphere', 'cylinder']
     """
-    n_per_class = _check_int(n_samples_per_class, "n_samples_per_class", 1)
-    n_points = _check_int(n_points, "n_points", 2)
+    params = {
+        "n_samples_per_class": n_samples_per_class, "n_points": n_points, "noise": noise, "occlusion": occlusion,
+        "size_variation": size_variation, "rotate": rotate, "test_size": test_size,
+    }
+    for name, value in params.items():
+        validate_parameter(value, _CONSTRAINTS[name], name=name, owner=_OWNER)
+    n_per_class, n_points = int(n_samples_per_class), int(n_points)
     classes = _check_classes(classes)
-    noise = check_non_negative(noise, "noise", _OWNER)
-    occlusion = check_fraction(occlusion, "occlusion", _OWNER)
-    if occlusion > _MAX_OCCLUSION:
-        # each object is sampled with n_points / (1 - occlusion) points
-        raise ValueError(f"{_OWNER}: occlusion must be <= {_MAX_OCCLUSION}, got {occlusion!r}")
-    size_variation = check_fraction(size_variation, "size_variation", _OWNER)
-    if isinstance(rotate, (bool, np.bool_)):
-        rotate = bool(rotate)
-    elif not (isinstance(rotate, str) and rotate == "z"):
-        raise ValueError(f"{_OWNER}: rotate must be True, False or 'z', got {rotate!r}")
-    test_size = check_fraction(test_size, "test_size", _OWNER)
+    noise, occlusion, size_variation, test_size = float(noise), float(occlusion), float(size_variation), float(test_size)
+    rotate = rotate if isinstance(rotate, str) else bool(rotate)
     rng = check_random_state(random_state)
 
     n_sampled = int(np.ceil(n_points / (1.0 - occlusion)))
