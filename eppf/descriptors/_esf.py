@@ -7,7 +7,7 @@ import numpy as np
 from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Satisfies
 from ._base import N_JOBS, RANDOM_STATE, PointCloudDescriptor
-from ._esf_fast import MAX_BINS, MAX_GRID, MIN_GRID, esf_batch
+from ._esf_fast import MAX_BINS, MAX_GRID, MAX_TRIPLETS, MIN_GRID, esf_batch
 
 __all__ = ["ESFTransformer"]
 
@@ -124,7 +124,7 @@ class ESFTransformer(PointCloudDescriptor):
         self.n_jobs = n_jobs
 
     _parameter_constraints = {
-        "n_triplets": [Interval(numbers.Integral, 1, 2**31 // 4, closed="both")],
+        "n_triplets": [Interval(numbers.Integral, 1, MAX_TRIPLETS, closed="both")],
         "grid_size": [Satisfies(_even_grid, f"an even int in [{MIN_GRID}, {MAX_GRID}]")],
         "n_bins": [Interval(numbers.Integral, 1, MAX_BINS, closed="both")],
         "random_state": RANDOM_STATE,

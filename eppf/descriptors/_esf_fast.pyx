@@ -452,10 +452,13 @@ cdef int _esf_object(const double* points, int64_t start, int64_t n,
 
 
 #: Limits of :func:`esf_batch`'s parameters (the transformer's constraints read them): an
-#: even grid side in [MIN_GRID, MAX_GRID] and at most MAX_BINS bins per histogram.
+#: even grid side in [MIN_GRID, MAX_GRID], at most MAX_BINS bins per histogram and at most
+#: MAX_TRIPLETS triplets (a C int counts the triplets, and 3 n_triplets side lengths are
+#: kept per thread: 2**29 leaves that count and its multiples below 2**31).
 MIN_GRID = 4
 MAX_GRID = 1024
 MAX_BINS = 4096
+MAX_TRIPLETS = 2**31 // 4
 
 
 def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
@@ -477,9 +480,10 @@ def esf_batch(const double[:, ::1] points, const int64_t[::1] offsets,
     if points.shape[1] != 3:
         raise ValueError("esf_batch: points must be (N, 3)")
     check_batch(points.shape[0], offsets, seeds, out, status, 10 * n_bins, "esf_batch")
-    if not (MIN_GRID <= grid <= MAX_GRID and grid % 2 == 0 and 1 <= n_bins <= MAX_BINS and n_triplets >= 1):
+    if not (MIN_GRID <= grid <= MAX_GRID and grid % 2 == 0 and 1 <= n_bins <= MAX_BINS
+            and 1 <= n_triplets <= MAX_TRIPLETS):
         raise ValueError(f"esf_batch: grid must be even in [{MIN_GRID}, {MAX_GRID}], n_bins in [1, {MAX_BINS}], "
-                         "n_triplets positive")
+                         f"n_triplets in [1, {MAX_TRIPLETS}]")
     num_threads = max(1, num_threads)
     for k in range(n_objects):
         if offsets[k + 1] - offsets[k] > max_n:
