@@ -6,7 +6,7 @@ import numpy as np
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_point_clouds
-from ..utils._param_validation import Interval, Satisfies, StrOptions
+from ..utils._param_validation import Interval, Satisfies, StrOptions, validate_parameter
 from ._base import N_JOBS, PointCloudDescriptor, as_vector3
 from ._gasd_fast import gasd_batch
 
@@ -38,13 +38,18 @@ def _unit(value):
     return np.ascontiguousarray(v / np.linalg.norm(v))
 
 
-def _grid_size(owner, h_name, half, s_name, hs):
-    """Values of one grid; a ValueError naming both parameters beyond 2**24."""
-    size = (2 * half) ** 3 * hs
-    if size > _MAX_VALUES:
-        raise ValueError(f"{owner}: {h_name}={half} and {s_name}={hs} give {size} values; "
-                         "at most 2**24 are allowed")
-    return size
+def _grid_fits(pair):
+    half, hists = pair
+    return (2 * half) ** 3 * hists <= _MAX_VALUES
+
+
+#: A grid's (half size, histogram size) pair, checked jointly once each is valid.
+_GRID = [Satisfies(_grid_fits, "a grid of at most 2**24 values ((2 half)**3 * hists)")]
+
+
+def _check_grid(owner, h_name, half, s_name, hs):
+    """Check the pair ``(half, hs)`` against :data:`_GRID` (an error naming both parameters)."""
+    validate_parameter((half, hs), _GRID, name=f"({h_name}, {s_name})", owner=owner)
 
 
 class GASDTransformer(PointCloudDescriptor):
@@ -172,7 +177,7 @@ class GASDTransformer(PointCloudDescriptor):
     def _resolve_params(self):
         owner = type(self).__name__
         half, hs = int(self.half_grid_size), int(self.hists_size)
-        _grid_size(owner, "half_grid_size", half, "hists_size", hs)
+        _check_grid(owner, "half_grid_size", half, "hists_size", hs)
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
         return half, hs, _INTERP[self.interpolation], _SIGNS[self.sign_convention], _unit(self.view_direction), n_threads
 
@@ -418,8 +423,8 @@ class GASDColorTransformer(PointCloudDescriptor):
         owner = type(self).__name__
         half, hs = int(self.shape_half_grid_size), int(self.shape_hists_size)
         chalf, chs = int(self.color_half_grid_size), int(self.color_hists_size)
-        _grid_size(owner, "shape_half_grid_size", half, "shape_hists_size", hs)
-        _grid_size(owner, "color_half_grid_size", chalf, "color_hists_size", chs)
+        _check_grid(owner, "shape_half_grid_size", half, "shape_hists_size", hs)
+        _check_grid(owner, "color_half_grid_size", chalf, "color_hists_size", chs)
         n_threads = check_n_jobs(self.n_jobs, owner=owner)
         return (half, hs, _INTERP[self.shape_interpolation], _SIGNS[self.sign_convention], _unit(self.view_direction),
                 n_threads, chalf, chs, _INTERP[self.color_interpolation])

@@ -236,7 +236,7 @@ _VIEW_DIRECTION = "view_direction must be an array-like of 3 finite numbers, not
         ({"half_grid_size": 0}, ValueError, "half_grid_size must be an int in [1, 64], got 0"),
         ({"half_grid_size": 2.0}, TypeError, "half_grid_size must be an int in [1, 64], got 2.0"),
         ({"hists_size": 0}, ValueError, "hists_size must be an int in [1, 1024], got 0"),
-        ({"half_grid_size": 64, "hists_size": 10}, ValueError, "half_grid_size=64 and hists_size=10 give 20971520 values; at most 2**24 are allowed"),
+        ({"half_grid_size": 64, "hists_size": 10}, ValueError, "(half_grid_size, hists_size) must be a grid of at most 2**24 values ((2 half)**3 * hists), got (64, 10)"),
         ({"interpolation": "cubic"}, ValueError, "interpolation must be one of 'trilinear', 'none', 'quadrilinear', "
                                                  "got 'cubic'"),
         ({"sign_convention": "x"}, ValueError, "sign_convention must be 'pcl' or 'majority', got 'x'"),
