@@ -57,6 +57,19 @@ def _is_factors(value):
     return fac.shape in ((), (3,)) and bool(np.isfinite(fac).all()) and bool((fac > 0).all())
 
 
+def _is_rotation(value):
+    """A finite (3, 3) proper rotation matrix: orthonormal (to 1e-6) with determinant +1."""
+    if isinstance(value, (str, bytes)):
+        return False
+    rot = np.asarray(value, dtype=np.float64)
+    return (
+        rot.shape == (3, 3)
+        and bool(np.isfinite(rot).all())
+        and bool(np.allclose(rot @ rot.T, np.eye(3), atol=1e-6))
+        and not np.linalg.det(rot) < 0
+    )
+
+
 #: What each parameter of the perturbations accepts: the functions here and
 #: the transformers of :mod:`eppf.preprocessing` check their parameters
 #: against these lists (:mod:`eppf.utils._param_validation`).
@@ -72,6 +85,7 @@ CONSTRAINTS = {
     "low": [Interval(numbers.Real, 0, None, closed="neither", description="a finite float > 0")],
     "high": [Interval(numbers.Real, 0, None, closed="neither", description="a finite float > 0")],
     "anisotropic": [Options(bool)],
+    "rotation": [Satisfies(_is_rotation, "a proper rotation matrix (orthonormal, determinant +1) of shape (3, 3)")],
 }
 
 
@@ -429,17 +443,8 @@ def rotate(cloud, rotation, *, center="centroid"):
     """
     owner = "rotate"
     arr = check_point_cloud(cloud, owner=owner)
-    _check(owner, center=center)
-    try:
-        rot = np.asarray(rotation, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"{owner}: rotation must be a (3, 3) array, got {type(rotation).__name__}") from None
-    if rot.shape != (3, 3):
-        raise ValueError(f"{owner}: rotation must have shape (3, 3), got shape {rot.shape}")
-    if not np.isfinite(rot).all():
-        raise ValueError(f"{owner}: rotation contains NaN or infinite values")
-    if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-        raise ValueError(f"{owner}: rotation must be a proper rotation matrix (orthonormal, determinant +1)")
+    _check(owner, center=center, rotation=rotation)
+    rot = np.asarray(rotation, dtype=np.float64)
     return rotate_array(arr, rot, center)
 
 
