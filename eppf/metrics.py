@@ -17,6 +17,7 @@ from sklearn.utils.multiclass import type_of_target
 from .neighbors._base import check_distance_params, learn_floor, prepare_histograms, validate_histogram_array
 from .neighbors._kl import loo_nearest
 from .utils._blas import blas_limits
+from .utils._param_validation import Interval, validate_parameter
 
 __all__ = [
     "RepeatedRetrievalResult",
@@ -28,6 +29,9 @@ __all__ = [
 #: Names of the metrics returned by :func:`retrieval_scores`, in table order.
 METRICS = ("total_accuracy", "mean_class_accuracy", "macro_precision", "macro_recall", "macro_f1")
 
+
+#: ``n_repeats`` of :func:`repeated_retrieval` (:mod:`eppf.utils._param_validation`).
+_N_REPEATS = [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")]
 
 def _check_labels(y, owner, name):
     if y is None:
@@ -342,10 +346,7 @@ def repeated_retrieval(
     >>> print(result)  # doctest: +SKIP
     """
     owner = "repeated_retrieval"
-    if isinstance(n_repeats, bool) or not isinstance(n_repeats, numbers.Integral):
-        raise TypeError(f"{owner}: n_repeats must be a positive int, got {type(n_repeats).__name__}")
-    if n_repeats < 1:
-        raise ValueError(f"{owner}: n_repeats must be a positive int, got {n_repeats}")
+    validate_parameter(n_repeats, _N_REPEATS, name="n_repeats", owner=owner)
     if not (hasattr(transformer, "get_params") and hasattr(transformer, "fit_transform")):
         raise TypeError(
             f"{owner}: transformer must be a scikit-learn transformer with get_params and fit_transform, "

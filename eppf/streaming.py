@@ -27,6 +27,7 @@ the clouds, through hooks the descriptors expose:
 """
 
 import collections
+import numbers
 import os
 import re
 import tempfile
@@ -40,6 +41,7 @@ from sklearn.utils import Bunch
 
 from .utils import check_n_jobs, ordered_map, progress_bar
 from .utils._atomic import atomic_write
+from .utils._param_validation import Interval, validate_parameter
 from .utils._stream import RowWriter
 
 __all__ = ["describe_files"]
@@ -56,6 +58,9 @@ SPILL_BYTES_PER_SECOND = 250e6
 #: What a reader raises for a file that cannot be read (readers: ValueError; OS and h5py: OSError, KeyError).
 READ_ERRORS = (ValueError, OSError, KeyError)
 
+
+#: ``chunk_size`` of the streaming functions (:mod:`eppf.utils._param_validation`); None means CHUNK_FILES.
+_CHUNK_SIZE = [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")]
 
 def describe_files(files, descriptor, *, output=None, n_points=None, resolution=None, normals="auto",
                    random_state=0, n_jobs=None, on_error="raise", chunk_size=None, progress=False):
@@ -281,8 +286,7 @@ def stream_descriptors(names, read, descriptor, sink, *, n_jobs=None, unreadable
         raise TypeError(f"{owner}: descriptor must be an eppf descriptor transformer (with partial_fit), "
                         f"got {type(descriptor).__name__}")
     chunk_size = CHUNK_FILES if chunk_size is None else chunk_size
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
-        raise ValueError(f"{owner}: chunk_size must be a positive int, got {chunk_size}")
+    validate_parameter(chunk_size, _CHUNK_SIZE, name="chunk_size", owner=owner)
     est = clone(descriptor)
     if n_jobs is None:
         n_jobs = est.get_params(deep=False).get("n_jobs")

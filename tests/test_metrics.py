@@ -273,7 +273,7 @@ def test_repeated_retrieval_deterministic_and_table():
     "transformer, kwargs, err, msg",
     [
         (_NoisyHistogram(), {"n_repeats": 0}, ValueError, "repeated_retrieval: n_repeats must be a positive int, got 0"),
-        (_NoisyHistogram(), {"n_repeats": 2.0}, TypeError, "repeated_retrieval: n_repeats must be a positive int, got float"),
+        (_NoisyHistogram(), {"n_repeats": 2.0}, TypeError, "repeated_retrieval: n_repeats must be a positive int, got 2.0"),
         (_NoSeed(), {}, ValueError, "repeated_retrieval: _NoSeed has no random_state parameter, so repeated draws would be identical"),
         ("eppf", {}, TypeError, "repeated_retrieval: transformer must be a scikit-learn transformer with get_params and fit_transform, got str"),
         (_NoisyHistogram(), {"y": [0, 1]}, ValueError, "repeated_retrieval: 24 point clouds but 2 labels"),

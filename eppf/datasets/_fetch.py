@@ -32,6 +32,9 @@ import urllib.request
 import warnings
 import zipfile
 
+from ..utils._param_validation import validate_parameter
+from ._loaders import MODELNET_VERSION, load_modelnet
+
 __all__ = ["clear_data_home", "fetch_file", "fetch_modelnet", "get_data_home"]
 
 MODELNET_URLS = {
@@ -497,10 +500,7 @@ def fetch_modelnet(version=40, *, data_home=None, url=None, sha256=None, downloa
     OSError: fetch_file: '...ModelNet10.zip' is missing and download_if_missing=False
     """
     owner = "fetch_modelnet"
-    if version not in (10, 40) or isinstance(version, bool):
-        raise ValueError(f"{owner}: version must be 40 or 10, got {version!r}")
-    from ._loaders import load_modelnet
-
+    validate_parameter(version, MODELNET_VERSION, name="version", owner=owner)
     home = get_data_home(data_home)
     folder = os.path.join(home, f"ModelNet{version}")
     if not os.path.isdir(folder):

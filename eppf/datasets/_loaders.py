@@ -30,6 +30,7 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
+from ..utils._param_validation import Interval, Options, Satisfies, validate_parameter
 from ..utils._sampling import check_n_points, check_resolution
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
@@ -53,9 +54,16 @@ def check_dir(path, owner):
     return path
 
 
+#: ModelNet's ``version`` (:mod:`eppf.utils._param_validation`), for the loader and the fetcher.
+MODELNET_VERSION = [Options(numbers.Integral, values=[40, 10])]
+#: ``train_size`` of the loaders that split by object.
+TRAIN_SIZE = [Interval(numbers.Real, 0, 1, closed="neither", description="a number in (0, 1)")]
+
+
 def check_choice(value, name, choices, owner):
-    if value not in choices:
-        raise ValueError(f"{owner}: {name} must be one of {list(choices)}, got {value!r}")
+    """Check that ``value`` is one of ``choices`` (compared with ``==``); return it."""
+    choices = tuple(choices)
+    validate_parameter(value, [Satisfies(lambda v: v in choices, f"one of {list(choices)}")], name=name, owner=owner)
     return value
 
 
@@ -311,8 +319,7 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     """
     owner = "load_modelnet"
     root = check_dir(path, owner)
-    if version not in (10, 40) or isinstance(version, bool):
-        raise ValueError(f"{owner}: version must be 40 or 10, got {version!r}")
+    validate_parameter(version, MODELNET_VERSION, name="version", owner=owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
@@ -615,8 +622,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     n_points = check_n_points(n_points, owner)
-    if isinstance(train_size, bool) or not isinstance(train_size, numbers.Real) or not 0 < train_size < 1:
-        raise ValueError(f"{owner}: train_size must be a number in (0, 1), got {train_size!r}")
+    validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)
     if isinstance(classes, str) or len(classes) == 0:
         raise ValueError(f"{owner}: classes must be a non-empty sequence of class names, got {classes!r}")
     names = [str(c) for c in classes]

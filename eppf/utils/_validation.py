@@ -16,7 +16,7 @@ import operator
 
 import numpy as np
 
-from ._param_validation import N_JOBS, validate_parameter
+from ._param_validation import N_JOBS, Interval, validate_parameter
 
 __all__ = [
     "PackedClouds", "as_vector3", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
@@ -691,11 +691,8 @@ def check_int(value, name, owner, low, high=None):
     >>> check_int(5, "n_pairs", "MyDescriptor", 1)
     5
     """
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{owner}: {name} must be an int, got {type(value).__name__}")
-    if value < low or (high is not None and value > high):
-        bound = f">= {low}" if high is None else f"in [{low}, {high}]"
-        raise ValueError(f"{owner}: {name} must be {bound}, got {value}")
+    closed = "left" if high is None else "both"
+    validate_parameter(value, [Interval(numbers.Integral, low, high, closed=closed)], name=name, owner=owner)
     return int(value)
 
 
