@@ -37,7 +37,8 @@ Constraints
     An instance of ``type`` (``Options(bool)`` also takes ``numpy.bool_``),
     restricted to ``values`` when given.
 ``IntTuple(length, left, right, max_product=None)``
-    A sequence (not a str) of ``length`` ints in ``[left, right]``, e.g. the
+    A sequence (not a str) of ``length`` ints in ``[left, right]`` (right
+    None: unbounded), e.g. the
     bin counts of a histogram's axes, optionally with at most
     ``max_product`` cells in all.
 ``Satisfies(predicate, description)``
@@ -289,8 +290,9 @@ class IntTuple(_Constraint):
     ----------
     length : int
         Number of entries.
-    left, right : int
-        Bounds of every entry, both included.
+    left, right : int or None
+        Bounds of every entry, both included; ``right=None`` leaves the
+        entries unbounded above.
     max_product : int, default=None
         Largest accepted product of the entries (the number of cells).
     description : str, default=None
@@ -307,15 +309,15 @@ class IntTuple(_Constraint):
     def __init__(self, length, left, right, *, max_product=None, description=None):
         super().__init__(description)
         for name, v in (("length", length), ("left", left), ("right", right)):
-            if not _is_int(v):
+            if not _is_int(v) and not (name == "right" and v is None):
                 raise TypeError(f"IntTuple: {name} must be an int, got {v!r}")
-        if length < 1 or left > right:
+        if length < 1 or (right is not None and left > right):
             raise ValueError(f"IntTuple: need length >= 1 and left <= right, got {length}, {left}, {right}")
         if max_product is not None and not _is_int(max_product):
             raise TypeError(f"IntTuple: max_product must be an int or None, got {max_product!r}")
         self.length = int(length)
         self.left = int(left)
-        self.right = int(right)
+        self.right = None if right is None else int(right)
         self.max_product = max_product
 
     def is_satisfied_by(self, value):
@@ -325,12 +327,17 @@ class IntTuple(_Constraint):
             values = tuple(value)
         except TypeError:
             return False
-        if len(values) != self.length or not all(_is_int(v) and self.left <= v <= self.right for v in values):
+        if len(values) != self.length or not all(
+            _is_int(v) and self.left <= v and (self.right is None or v <= self.right) for v in values
+        ):
             return False
         return self.max_product is None or math.prod(int(v) for v in values) <= self.max_product
 
     def _describe(self):
-        out = f"a tuple of {self.length} ints in [{self.left}, {self.right}]"
+        if self.right is None:
+            out = f"a tuple of {self.length} ints >= {self.left}"
+        else:
+            out = f"a tuple of {self.length} ints in [{self.left}, {self.right}]"
         if self.max_product is not None:
             out += f" with a product of at most {self.max_product}"
         return out

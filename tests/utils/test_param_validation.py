@@ -7,6 +7,7 @@ import pytest
 from sklearn.base import BaseEstimator
 
 from eppf.utils._param_validation import (
+    IntTuple,
     InvalidParameterError,
     Interval,
     Options,
@@ -108,6 +109,18 @@ def test_options_bool_and_types():
     assert Options((str, bytes)).is_satisfied_by(b"x") and str(Options((str, bytes))) == "a str or a bytes"
     with pytest.raises(TypeError, match="Options: type must be a type or a tuple of types"):
         Options("bool")
+
+
+def test_int_tuple_unbounded_above():
+    c = IntTuple(3, 1, None)
+    assert c.is_satisfied_by((1, 2, 10**9)) and c.is_satisfied_by(np.array([4, 5, 6]))
+    assert not c.is_satisfied_by((0, 2, 3))  # below left
+    assert not c.is_satisfied_by((1, 2))  # wrong length
+    assert not c.is_satisfied_by((1, 2, 3.0)) and not c.is_satisfied_by((1, True, 3))  # not ints
+    assert not c.is_satisfied_by("123")
+    assert str(c) == "a tuple of 3 ints >= 1"
+    with pytest.raises(TypeError, match="left must be an int"):
+        IntTuple(3, None, 5)
 
 
 def test_satisfies():
