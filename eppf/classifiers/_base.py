@@ -53,18 +53,6 @@ def _print_line(text):
     print(text, flush=True)
 
 
-def positive_int_tuple(length):
-    """Predicate: an iterable of ``length`` ints >= 1 (bool excluded)."""
-
-    def check(value):
-        values = tuple(value)
-        return len(values) == length and all(
-            isinstance(v, numbers.Integral) and not isinstance(v, (bool, np.bool_)) and v >= 1 for v in values
-        )
-
-    return check
-
-
 #: Constraints of the parameters every subclass has.
 COMMON_CONSTRAINTS = {
     "max_epochs": [Interval(numbers.Integral, 1, None, closed="left")],

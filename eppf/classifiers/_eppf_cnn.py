@@ -6,8 +6,8 @@ import numbers
 
 import numpy as np
 
-from ..utils._param_validation import Interval, Options, Satisfies, StrOptions
-from ._base import COMMON_CONSTRAINTS, SkorchClassifierBase, positive_int_tuple
+from ..utils._param_validation import Interval, IntTuple, Options, StrOptions
+from ._base import COMMON_CONSTRAINTS, SkorchClassifierBase
 
 __all__ = ["EPPF4DClassifier"]
 
@@ -292,11 +292,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
 
     _parameter_constraints = {
         **COMMON_CONSTRAINTS,
-        "n_bins": [Satisfies(positive_int_tuple(4), "a tuple of 4 positive ints")],
+        "n_bins": [IntTuple(4, 1, None, description="a tuple of 4 positive ints")],
         "conv": [StrOptions(["4d", "3d", "2d"])],
         "weight_decay": [Interval(numbers.Real, 0, None, closed="left")],
         "n_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
-        "filters": [Satisfies(positive_int_tuple(3), "a tuple of 3 positive ints")],
+        "filters": [IntTuple(3, 1, None, description="a tuple of 3 positive ints")],
         "input_scaling": [StrOptions(["global", "bin", "none"])],
         "precision": [StrOptions(["auto", "float32", "bfloat16"])],
         "n_side_features": [Interval(numbers.Integral, 0, None, closed="left"), StrOptions(["auto"])],

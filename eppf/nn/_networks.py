@@ -26,6 +26,7 @@ import numbers
 import torch
 from torch import nn
 
+from ..utils._param_validation import Interval, IntTuple, Options, validate_parameter
 from ._conv4d import Conv4d, same_padding
 from ._precision import check_precision
 
@@ -38,6 +39,26 @@ __all__ = [
     "count_parameters",
     "plane_shape",
 ]
+
+
+#: What the networks' parameters accept (:mod:`eppf.utils._param_validation`);
+#: the classifiers that build them declare the same lists.
+NETWORK_CONSTRAINTS = {
+    "n_bins": [IntTuple(4, 1, None, description="a tuple of 4 positive ints")],
+    "n_classes": [Interval(numbers.Integral, 2, None, closed="left")],
+    "dropout": [Interval(numbers.Real, 0, 1, closed="left", description="a float in [0, 1)")],
+    "filters": [IntTuple(3, 1, None, description="a tuple of 3 positive ints")],
+    "n_hidden": [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")],
+    "n_side": [Interval(numbers.Integral, 0, None, closed="left")],
+    "side_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
+    "batch_norm": [Options(bool)],
+}
+
+
+def _check(owner, **values):
+    """Check each named value against :data:`NETWORK_CONSTRAINTS` (an error naming ``owner``)."""
+    for name, value in values.items():
+        validate_parameter(value, NETWORK_CONSTRAINTS[name], name=name, owner=owner)
 
 
 def check_n_bins(n_bins, *, owner=None):
@@ -62,18 +83,10 @@ def check_n_bins(n_bins, *, owner=None):
     >>> check_n_bins((20, 4, 5), owner="MyNet")
     Traceback (most recent call last):
         ...
-    ValueError: MyNet: n_bins must be a tuple of 4 positive ints, got (20, 4, 5)
+    eppf.utils._param_validation.InvalidParameterError: MyNet: n_bins must be a tuple of 4 positive ints, got (20, 4, 5)
     """
-    pre = f"{owner}: " if owner else ""
-    try:
-        values = tuple(n_bins)
-    except TypeError:
-        raise TypeError(f"{pre}n_bins must be a tuple of 4 positive ints, got {n_bins!r}") from None
-    if len(values) != 4 or not all(
-        isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1 for v in values
-    ):
-        raise ValueError(f"{pre}n_bins must be a tuple of 4 positive ints, got {n_bins!r}")
-    return tuple(int(v) for v in values)
+    _check(owner or "check_n_bins", n_bins=n_bins)
+    return tuple(int(v) for v in n_bins)
 
 
 def plane_shape(n_features):
@@ -143,26 +156,13 @@ class _SamePadConv(nn.Module):
 
 
 def _check_network_args(owner, n_bins, n_classes, dropout, filters, n_hidden):
-    n_bins = check_n_bins(n_bins, owner=owner)
-    if not isinstance(n_classes, numbers.Integral) or isinstance(n_classes, bool) or n_classes < 2:
-        raise ValueError(f"{owner}: n_classes must be an int >= 2, got {n_classes!r}")
-    if not isinstance(dropout, numbers.Real) or isinstance(dropout, bool) or not 0 <= dropout < 1:
-        raise ValueError(f"{owner}: dropout must be a float in [0, 1), got {dropout!r}")
-    filters = tuple(filters)
-    if len(filters) != 3 or not all(isinstance(f, numbers.Integral) and f >= 1 for f in filters):
-        raise ValueError(f"{owner}: filters must be 3 positive ints, got {filters!r}")
-    if not isinstance(n_hidden, numbers.Integral) or isinstance(n_hidden, bool) or n_hidden < 1:
-        raise ValueError(f"{owner}: n_hidden must be a positive int, got {n_hidden!r}")
-    return n_bins, int(n_classes), float(dropout), tuple(int(f) for f in filters), int(n_hidden)
+    _check(owner, n_bins=n_bins, n_classes=n_classes, dropout=dropout, filters=filters, n_hidden=n_hidden)
+    return tuple(int(b) for b in n_bins), int(n_classes), float(dropout), tuple(int(f) for f in filters), int(n_hidden)
 
 
 def _check_options(owner, n_side, side_hidden, batch_norm):
-    for name, value, low in (("n_side", n_side, 0), ("side_hidden", side_hidden, 1)):
-        if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < low:
-            raise ValueError(f"{owner}: {name} must be an int >= {low}, got {value!r}")
-    if not isinstance(batch_norm, bool):
-        raise ValueError(f"{owner}: batch_norm must be True or False, got {batch_norm!r}")
-    return int(n_side), int(side_hidden), batch_norm
+    _check(owner, n_side=n_side, side_hidden=side_hidden, batch_norm=batch_norm)
+    return int(n_side), int(side_hidden), bool(batch_norm)
 
 
 class _ChannelNorm(nn.BatchNorm1d):

@@ -99,7 +99,7 @@ def test_4d_network_reshape_follows_c_order():
         ({"n_bins": (20, 0, 5, 3)}, "EPPFNet4D: n_bins must be a tuple of 4 positive ints, got (20, 0, 5, 3)"),
         ({"n_classes": 1}, "EPPFNet4D: n_classes must be an int >= 2, got 1"),
         ({"dropout": 1.0}, "EPPFNet4D: dropout must be a float in [0, 1), got 1.0"),
-        ({"filters": (32, 64)}, "EPPFNet4D: filters must be 3 positive ints, got (32, 64)"),
+        ({"filters": (32, 64)}, "EPPFNet4D: filters must be a tuple of 3 positive ints, got (32, 64)"),
         ({"n_hidden": 0}, "EPPFNet4D: n_hidden must be a positive int, got 0"),
         ({"precision": "float16"}, "EPPFNet4D: precision must be 'float32' or 'bfloat16', got 'float16'"),
     ],
