@@ -23,7 +23,7 @@ from sklearn.utils import Bunch
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_point_clouds
-from ..utils._param_validation import N_JOBS, Interval, StrOptions, validate_params
+from ..utils._param_validation import N_JOBS, Interval, StrOptions, validate_parameter, validate_params
 from ._eppf import EPPFTransformer
 
 __all__ = ["DescriptorUnion", "EPPFGASDTransformer"]
@@ -41,6 +41,9 @@ def _reraise_named(exc, owner, name):
         named = (ValueError if isinstance(exc, ValueError) else TypeError)(f"{owner}: block {name!r}: {exc}")
     raise named from exc
 
+
+#: One block's entry in ``weights`` (:mod:`eppf.utils._param_validation`).
+_BLOCK_WEIGHT = [Interval(numbers.Real, 0, None, closed="left", description="a finite float >= 0")]
 
 class DescriptorUnion(TransformerMixin, BaseEstimator):
     """Concatenate several point-cloud descriptors into one weighted row.
@@ -207,12 +210,8 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         w = []
         for name in names:
             value = weights.get(name, 1.0)
-            if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-                raise TypeError(f"{owner}: weight of block {name!r} must be a real number, got {type(value).__name__}")
-            value = float(value)
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{owner}: weight of block {name!r} must be finite and non-negative, got {value!r}")
-            w.append(value)
+            validate_parameter(value, _BLOCK_WEIGHT, name=f"weight of block {name!r}", owner=owner)
+            w.append(float(value))
         w = np.asarray(w)
         total = w.sum()
         if not (total > 0) or not np.isfinite(total):

@@ -112,13 +112,13 @@ def test_normalize_none_only_weights():
 
 # -------------------------------------------------------------- validation
 @pytest.mark.parametrize("weights, exc, match", [
-    ({"eppf": -0.1, "gasd": 1.0}, ValueError, "weight of block 'eppf' must be finite and non-negative"),
+    ({"eppf": -0.1, "gasd": 1.0}, ValueError, "weight of block 'eppf' must be a finite float >= 0, got -0.1"),
     ({"eppf": 0.0, "gasd": 0.0}, ValueError, "positive finite sum"),
-    ({"eppf": float("nan")}, ValueError, "finite and non-negative"),
-    ({"eppf": float("inf")}, ValueError, "finite and non-negative"),
+    ({"eppf": float("nan")}, ValueError, "must be a finite float >= 0, got nan"),
+    ({"eppf": float("inf")}, ValueError, "must be a finite float >= 0, got inf"),
     ({"esf": 1.0}, ValueError, r"unknown blocks \['esf'\]"),
-    ({"eppf": "1"}, TypeError, "real number"),
-    ({"eppf": True}, TypeError, "real number"),
+    ({"eppf": "1"}, TypeError, "must be a finite float >= 0, got '1'"),
+    ({"eppf": True}, TypeError, "must be a finite float >= 0, got True"),
     ([0.5, 0.5], TypeError, "weights must be None or a dict"),
 ])
 def test_bad_weights(weights, exc, match):
