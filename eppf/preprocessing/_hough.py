@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 
 from ._hough_fast import hough_normals
 from ._normal_options import ORIENT_CENTROID, ORIENT_NONE, check_n_neighbors, resolve_orientation
-from ..utils._param_validation import Interval, StrOptions, validate_parameter
+from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions, validate_parameter
 from ..utils._validation import check_n_jobs, check_point_cloud, object_seeds
 
 __all__ = ["estimate_normals_hough"]
@@ -179,8 +179,7 @@ def _check_random_state_seeds(random_state, n_objects, owner):
         return random_state
     if isinstance(random_state, np.random.RandomState) or random_state is None:
         return object_seeds(random_state, n_objects)
-    if isinstance(random_state, bool) or not isinstance(random_state, numbers.Integral):
-        raise TypeError(f"{owner}: random_state must be None, an int or a RandomState, got {type(random_state).__name__}")
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     return object_seeds(int(random_state), n_objects)
 
 
