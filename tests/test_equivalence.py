@@ -14,6 +14,7 @@ its message.
 
 import json
 import os
+import platform
 
 import pytest
 
@@ -25,8 +26,17 @@ with open(_REF) as fh:
     REFERENCE = json.load(fh)
 
 
+#: Where the recorded network probabilities hold: torch's x86-64 kernels agree within
+#: fingerprints.PROBA_ATOL after training; its aarch64 kernels sum in other orders, and two
+#: epochs of training on 40 objects amplify that beyond the tolerance (labels included), so
+#: the documentation promises the networks' class (b) on x86-64 only.
+NETWORK_MACHINES = ("x86_64", "amd64")
+
+
 @pytest.mark.parametrize("group", sorted(fingerprints.GROUPS))
 def test_outputs_bit_identical_to_recorded(group):
+    if group == "networks" and platform.machine().lower() not in NETWORK_MACHINES:
+        pytest.skip(f"network probabilities are compared on x86-64 only, not on {platform.machine()}")
     now = fingerprints.compute([group])
     ref = {k: v for k, v in REFERENCE.items() if k.startswith(group + ".")}
     assert ref, f"no recorded fingerprints for {group}"
