@@ -12,6 +12,8 @@ import numbers
 
 import numpy as np
 
+from .utils._param_validation import Interval, IntTuple, StrOptions, validate_parameter
+
 try:
     import matplotlib  # noqa: F401
 except ImportError as exc:  # pragma: no cover - exercised only without matplotlib
@@ -38,6 +40,12 @@ _FUNCTION_LABELS = (
 _NORMALIZE = ("true", "pred", "all", None)
 _REDUCE = ("max", "sum")
 
+#: The numeric and choice parameters of plot_filter_responses, declared once.
+FILTER_RESPONSES = {
+    "n_filters": [Interval(numbers.Integral, 1, None, closed="left")],
+    "reduce": [StrOptions(set(_REDUCE))],
+}
+
 
 def _pyplot():
     import matplotlib.pyplot as plt
@@ -51,17 +59,13 @@ def _new_axes(ax):
     return ax
 
 
+#: The bin counts a descriptor is plotted with (the same declaration as eppf.nn's, without importing torch).
+N_BINS = [IntTuple(4, 1, None, description="a tuple of 4 positive ints")]
+
+
 def _check_bins(n_bins, owner):
     """Validate four positive bin counts without importing torch."""
-    try:
-        values = tuple(n_bins)
-    except TypeError:
-        raise TypeError(f"{owner}: n_bins must be a tuple of 4 positive ints, got {n_bins!r}") from None
-    if len(values) != 4 or not all(
-        isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= 1 for v in values
-    ):
-        raise ValueError(f"{owner}: n_bins must be a tuple of 4 positive ints, got {n_bins!r}")
-    return tuple(int(v) for v in values)
+    return tuple(int(v) for v in validate_parameter(n_bins, N_BINS, name="n_bins", owner=owner))
 
 
 def _as_histogram(descriptor, n_bins, owner):
@@ -375,10 +379,8 @@ def plot_filter_responses(classifier, descriptor, *, layers=(0, 1), n_filters=8,
     8
     """
     owner = "plot_filter_responses"
-    if not isinstance(n_filters, numbers.Integral) or isinstance(n_filters, bool) or n_filters < 1:
-        raise ValueError(f"{owner}: n_filters must be an int >= 1, got {n_filters!r}")
-    if reduce not in _REDUCE:
-        raise ValueError(f"{owner}: reduce must be 'max' or 'sum', got {reduce!r}")
+    validate_parameter(n_filters, FILTER_RESPONSES["n_filters"], name="n_filters", owner=owner)
+    validate_parameter(reduce, FILTER_RESPONSES["reduce"], name="reduce", owner=owner)
     layers = _check_layers(layers, owner)
     responses = _filter_responses(classifier, descriptor, layers, owner)
     k = min(int(n_filters), min(r.shape[0] for r in responses))

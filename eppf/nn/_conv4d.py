@@ -18,6 +18,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ..utils._param_validation import Interval, IntTuple, StrOptions, validate_parameter
+
 __all__ = ["Conv4d", "conv4d", "same_padding"]
 
 
@@ -154,8 +156,7 @@ def conv4d(input, weight, bias=None, *, path="auto"):
     81.0
     """
     _check_input(input, weight, bias)
-    if path not in ("auto", "fast", "general"):
-        raise ValueError(f"conv4d: path must be 'auto', 'fast' or 'general', got {path!r}")
+    validate_parameter(path, CONSTRAINTS["path"], name="path", owner="conv4d")
     if path == "fast" and weight.shape[5] != 1:
         raise ValueError(
             f"conv4d: the fast path needs a kernel of size 1 along the fourth axis, got {tuple(weight.shape[2:])}"
@@ -165,17 +166,20 @@ def conv4d(input, weight, bias=None, *, path="auto"):
     return _conv4d_general(input, weight, bias)
 
 
+#: The parameters of :func:`conv4d` and :class:`Conv4d`, declared once.
+CONSTRAINTS = {
+    "in_channels": [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")],
+    "out_channels": [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")],
+    "kernel_size": [Interval(numbers.Integral, 1, None, closed="left"),
+                    IntTuple(4, 1, None, description="a tuple of 4 positive ints")],
+    "path": [StrOptions({"auto", "fast", "general"})],
+}
+
+
 def _check_kernel_size(kernel_size):
-    if isinstance(kernel_size, numbers.Integral) and not isinstance(kernel_size, bool):
-        kernel_size = (int(kernel_size),) * 4
-    try:
-        kernel_size = tuple(kernel_size)
-    except TypeError:
-        raise TypeError(f"Conv4d: kernel_size must be an int or a tuple of 4 ints, got {kernel_size!r}") from None
-    if len(kernel_size) != 4 or not all(
-        isinstance(k, numbers.Integral) and not isinstance(k, bool) and k >= 1 for k in kernel_size
-    ):
-        raise ValueError(f"Conv4d: kernel_size must be 4 positive ints, got {kernel_size!r}")
+    kernel_size = validate_parameter(kernel_size, CONSTRAINTS["kernel_size"], name="kernel_size", owner="Conv4d")
+    if isinstance(kernel_size, numbers.Integral):
+        return (int(kernel_size),) * 4
     return tuple(int(k) for k in kernel_size)
 
 
@@ -231,8 +235,7 @@ class Conv4d(nn.Module):
     def __init__(self, in_channels, out_channels, kernel_size, bias=True):
         super().__init__()
         for name, value in (("in_channels", in_channels), ("out_channels", out_channels)):
-            if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"Conv4d: {name} must be a positive int, got {value!r}")
+            validate_parameter(value, CONSTRAINTS[name], name=name, owner="Conv4d")
         self.in_channels = int(in_channels)
         self.out_channels = int(out_channels)
         self.kernel_size = _check_kernel_size(kernel_size)

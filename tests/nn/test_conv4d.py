@@ -115,9 +115,9 @@ def test_conv4d_layer_shapes_and_parameters():
     [
         ({"in_channels": 0, "out_channels": 2, "kernel_size": 3}, ValueError, "Conv4d: in_channels must be a positive int, got 0"),
         ({"in_channels": 1, "out_channels": 2.5, "kernel_size": 3}, ValueError, "Conv4d: out_channels must be a positive int, got 2.5"),
-        ({"in_channels": 1, "out_channels": 2, "kernel_size": (3, 3, 3)}, ValueError, "Conv4d: kernel_size must be 4 positive ints, got (3, 3, 3)"),
-        ({"in_channels": 1, "out_channels": 2, "kernel_size": (3, 0, 3, 1)}, ValueError, "Conv4d: kernel_size must be 4 positive ints, got (3, 0, 3, 1)"),
-        ({"in_channels": 1, "out_channels": 2, "kernel_size": None}, TypeError, "Conv4d: kernel_size must be an int or a tuple of 4 ints, got None"),
+        ({"in_channels": 1, "out_channels": 2, "kernel_size": (3, 3, 3)}, ValueError, "Conv4d: kernel_size must be an int >= 1 or a tuple of 4 positive ints, got (3, 3, 3)"),
+        ({"in_channels": 1, "out_channels": 2, "kernel_size": (3, 0, 3, 1)}, ValueError, "Conv4d: kernel_size must be an int >= 1 or a tuple of 4 positive ints, got (3, 0, 3, 1)"),
+        ({"in_channels": 1, "out_channels": 2, "kernel_size": None}, TypeError, "Conv4d: kernel_size must be an int >= 1 or a tuple of 4 positive ints, got None"),
     ],
 )
 def test_conv4d_layer_errors(kwargs, err, msg):
@@ -133,7 +133,7 @@ def test_conv4d_layer_errors(kwargs, err, msg):
         ((1, 2, 3, 3, 3, 3), (1, 3, 1, 1, 1, 1), None, {}, "conv4d: input has 2 channels but weight expects 3"),
         ((1, 2, 3, 3, 3, 3), (4, 2, 1, 1, 1, 1), (3,), {}, "conv4d: bias must have shape (4,), got (3,)"),
         ((1, 2, 3, 3, 3, 3), (1, 2, 1, 1, 1, 2), None, {"path": "fast"}, "conv4d: the fast path needs a kernel of size 1 along the fourth axis, got (1, 1, 1, 2)"),
-        ((1, 2, 3, 3, 3, 3), (1, 2, 1, 1, 1, 1), None, {"path": "quick"}, "conv4d: path must be 'auto', 'fast' or 'general', got 'quick'"),
+        ((1, 2, 3, 3, 3, 3), (1, 2, 1, 1, 1, 1), None, {"path": "quick"}, "conv4d: path must be one of 'auto', 'fast', 'general', got 'quick'"),
     ],
 )
 def test_conv4d_errors(x_shape, w_shape, b_shape, kwargs, msg):
