@@ -539,7 +539,11 @@ def load_model(path, *, trust=False):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no such model file: {path}")
-    if not zipfile.is_zipfile(path):
+    # the safe format is a zip archive from its first byte; zipfile.is_zipfile alone also
+    # says yes to a pickle whose last bytes hold a zip archive (a pickled torch module's)
+    with open(path, "rb") as fh:
+        zip_head = fh.read(4) == b"PK\x03\x04"
+    if not (zip_head and zipfile.is_zipfile(path)):
         return _load_untrusted_or_refuse(path, trust)
     try:
         with zipfile.ZipFile(path) as zf:

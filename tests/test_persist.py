@@ -481,3 +481,20 @@ def test_trusted_eppf_0_1_pickle_still_loads_and_predicts():
     import sys
 
     assert "eppf._descriptor" not in sys.modules  # the old names were only aliases while loading
+
+
+def test_a_pickle_that_ends_in_a_zip_archive_is_a_pickle(tmp_path):
+    # zipfile.is_zipfile finds an archive's end record in a file's last bytes (as a pickled
+    # torch module's state can leave there); such a file is still a pickle: refused unless trusted
+    import io
+    import pickle
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        zf.writestr("data.pkl", b"x")
+    path = tmp_path / "old.joblib"
+    path.write_bytes(pickle.dumps(["model"], protocol=4) + buf.getvalue())
+    assert zipfile.is_zipfile(path)
+    with pytest.raises(ValueError, match="is not an eppf model in the safe format but a pickle"):
+        load_model(path)

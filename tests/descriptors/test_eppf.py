@@ -835,7 +835,10 @@ def test_f1_weights_do_not_depend_on_numpys_simd_code():
     import subprocess
     import sys
 
-    from numpy._core._multiarray_umath import __cpu_dispatch__
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__
+    except ImportError:  # NumPy 1.x
+        from numpy.core._multiarray_umath import __cpu_dispatch__
 
     runs = []
     for disabled in ("", " ".join(n for n in __cpu_dispatch__ if n.startswith("AVX512") or n == "X86_V4")):
