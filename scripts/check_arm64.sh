@@ -18,9 +18,10 @@
 #      only changed kernels recompile;
 #   3. builds the kernels in place (the portable, non-SIMD code: the SIMD
 #      paths are compiled on x86-64 only, see eppf/utils/_cpu.h);
-#   4. runs pytest -x -q on the kernel, descriptor and equivalence tests
-#      (or on the arguments given) and then
-#      `python tests/fingerprints.py --check tests/data/fingerprints.json`.
+#   4. runs `python tests/fingerprints.py --check tests/data/fingerprints.json`
+#      (it lists every output that differs from the recorded references) and
+#      pytest -x -q on the kernel, descriptor and equivalence tests (or on the
+#      arguments given).
 #
 # It prints each step with its time and the pytest summary, and exits non-zero
 # if the build, the tests or the fingerprint check fail. Emulation is slow: the
@@ -75,6 +76,7 @@ cleanup() {
     for ((i = ${#mounted[@]} - 1; i >= 0; i--)); do umount -l "${mounted[i]}" 2>/dev/null || true; done
 }
 trap cleanup EXIT
+trap "exit 130" INT TERM
 mount_in_root() {
     mountpoint -q "$ROOT/$1" && return
     mount --bind "/$1" "$ROOT/$1"
@@ -129,13 +131,13 @@ print('eppf SIMD levels:', _eppf_fast._simd_levels())
 EOF"
 
 status=0
-step "pytest -x -q ${TESTS[*]}"
-in_root sh -c "cd $SRC && python -m pytest -x -q -p no:cacheprovider $(printf '%q ' "${TESTS[@]}")" || status=1
-
 if [ -z "${EPPF_ARM64_NO_FINGERPRINTS:-}" ]; then
     step "python tests/fingerprints.py --check tests/data/fingerprints.json"
     in_root sh -c "cd $SRC && python tests/fingerprints.py --check tests/data/fingerprints.json" || status=1
 fi
+
+step "pytest -x -q ${TESTS[*]}"
+in_root sh -c "cd $SRC && python -m pytest -x -q -p no:cacheprovider $(printf '%q ' "${TESTS[@]}")" || status=1
 
 step "done: $([ $status = 0 ] && echo PASSED || echo FAILED)"
 exit $status
