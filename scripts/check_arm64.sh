@@ -24,10 +24,13 @@
 #      arguments given).
 #
 # It prints each step with its time and the pytest summary, and exits non-zero
-# if the build, the tests or the fingerprint check fail. Emulation is slow: the
-# first run (root, wheels, build) takes about half an hour on two cores, later
-# runs only the changed kernels and the tests. Delete build/arm64-root to start
-# afresh. Settings (environment variables):
+# if the build, the tests or the fingerprint check fail. Emulation is slow. On
+# two busy cores the first run took about 18 min for the root, 35 min for the
+# venv (about 5 GB: PyPI's aarch64 torch 2.13.0 is its CUDA build, "+cu130",
+# and pulls NVIDIA's libraries, which run on CPU alone), 17 min to compile the
+# kernels, 5 min for the fingerprints and about 25 min for the tests; later
+# runs recompile only the kernels whose sources changed. Delete build/arm64-root
+# to start afresh. Settings (environment variables):
 #   EPPF_ARM64_ROOT    the arm64 root (default build/arm64-root in the checkout)
 #   EPPF_ARM64_MIRROR  the Debian mirror (default http://deb.debian.org/debian)
 #   EPPF_ARM64_TORCH   the torch version for the venv (default: constraints.txt's)
@@ -66,7 +69,7 @@ if [ ! -e /proc/sys/fs/binfmt_misc/qemu-aarch64 ]; then
 fi
 
 in_root() {
-    chroot "$ROOT" /usr/bin/env -i HOME=/root PATH=$VENV/bin:/usr/sbin:/usr/bin:/sbin:/bin LANG=C.UTF-8 \
+    chroot "$ROOT" /usr/bin/env -i HOME=/root PATH=$VENV/bin:/usr/sbin:/usr/bin:/sbin:/bin LANG=C.UTF-8 PYTHONPATH=$SRC \
         PIP_CERT=/etc/eppf-host-ca.crt PIP_DISABLE_PIP_VERSION_CHECK=1 ${https_proxy:+https_proxy=$https_proxy} "$@"
 }
 
@@ -96,6 +99,7 @@ if [ ! -e "$ROOT/.eppf-root-done" ]; then
     chroot "$ROOT" /debootstrap/debootstrap --second-stage
     touch "$ROOT/.eppf-root-done"
 fi
+# no /sys: torch's cpuinfo then reads the host's CPUs and crashes under qemu
 mount_in_root proc
 mount_in_root dev
 cp /etc/resolv.conf "$ROOT/etc/resolv.conf"
@@ -126,8 +130,8 @@ in_root sh -c "cd $SRC && python - <<'EOF'
 import platform, numpy, scipy, sklearn, torch
 print('machine', platform.machine(), '| python', platform.python_version(), '| numpy', numpy.__version__,
       '| scipy', scipy.__version__, '| scikit-learn', sklearn.__version__, '| torch', torch.__version__)
-from eppf.descriptors import _eppf_fast
-print('eppf SIMD levels:', _eppf_fast._simd_levels())
+import eppf
+print('eppf kernel levels:', eppf.simd_levels())
 EOF"
 
 status=0
