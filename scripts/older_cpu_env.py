@@ -23,7 +23,7 @@ import platform
 import shlex
 
 
-def _numpy_above_avx2():
+def numpy_above_avx2():
     """NumPy's dispatch targets above AVX2 that this CPU runs (AVX-512 and newer)."""
     try:
         from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
@@ -38,7 +38,7 @@ def settings(eppf_level="scalar"):
     out = [("EPPF_SIMD", eppf_level)]
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return out
-    disabled = _numpy_above_avx2()
+    disabled = numpy_above_avx2()
     if disabled:
         out.append(("NPY_DISABLE_CPU_FEATURES", " ".join(disabled)))
     if not os.environ.get("OPENBLAS_CORETYPE"):

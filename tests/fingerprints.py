@@ -215,6 +215,13 @@ def matching_fingerprints():
     return out
 
 
+def torch_release():
+    """The running torch's release, "major.minor" (the network fingerprints hold within one)."""
+    import torch
+
+    return ".".join(torch.__version__.split("+")[0].split(".")[:2])
+
+
 def network_fingerprints():
     """Predictions of tiny EPPF networks and PointNet (label digests, probabilities as values)."""
     import torch
@@ -223,7 +230,6 @@ def network_fingerprints():
 
     torch.set_num_threads(1)
     clouds, y, _ = _shapes()
-    out_torch = ".".join(torch.__version__.split("+")[0].split(".")[:2])
     X = eppf.EPPFTransformer(n_pairs=3000, random_state=0).fit_transform(clouds)
     out = {}
     for conv in ("2d", "3d", "4d"):
@@ -240,7 +246,7 @@ def network_fingerprints():
     pn.fit(clouds[:30], y[:30])
     out["pointnet_labels"] = _digest(pn.predict(clouds[30:40]))
     out["pointnet_proba"] = _approx(pn.predict_proba(clouds[30:40]))
-    out["torch"] = out_torch  # the release these were recorded with: another's kernels train otherwise
+    out["torch"] = torch_release()  # the release these were recorded with: another's kernels train otherwise
     return out
 
 

@@ -38,9 +38,7 @@ def test_outputs_bit_identical_to_recorded(group):
     if group == "networks":
         if platform.machine().lower() not in NETWORK_MACHINES:
             pytest.skip(f"network probabilities are compared on x86-64 only, not on {platform.machine()}")
-        import torch
-
-        recorded, running = REFERENCE["networks.torch"], ".".join(torch.__version__.split("+")[0].split(".")[:2])
+        recorded, running = REFERENCE["networks.torch"], fingerprints.torch_release()
         if running != recorded:
             pytest.skip(f"network probabilities were recorded with torch {recorded}, not {running}")
     now = fingerprints.compute([group])

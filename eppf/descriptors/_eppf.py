@@ -8,7 +8,9 @@ from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, object_seeds
 from ..utils._param_validation import Interval, IntTuple, Satisfies, StrOptions
+from ..utils._simd import register_kernel
 from ._base import N_JOBS, NORMAL_ORIENTATION, RANDOM_STATE, VERBOSE, PointCloudDescriptor
+from . import _eppf_fast
 from ._eppf_fast import MAX_GRID_SIZE, MAX_N_BINS, MAX_N_PAIRS, MIN_GRID_SIZE, MIN_N_BINS, eppf_counts
 
 __all__ = ["EPPFTransformer", "FUNCTIONS"]
@@ -328,7 +330,4 @@ def _weight_and_normalise(counts, kernel_bins, c, weighted):
 
 
 # the SIMD code this module's kernel runs, for eppf.simd_levels()
-from . import _eppf_fast  # noqa: E402
-from ..utils._simd import register_kernel  # noqa: E402
-
 register_kernel("eppf", lambda: ("scalar", "avx2", "avx512-grouped", "avx512-skipping")[_eppf_fast._simd_level()])

@@ -6,7 +6,9 @@ import numpy as np
 
 from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Satisfies
+from ..utils._simd import register_kernel
 from ._base import N_JOBS, RANDOM_STATE, PointCloudDescriptor
+from . import _esf_fast
 from ._esf_fast import MAX_BINS, MAX_GRID, MAX_TRIPLETS, MIN_GRID, esf_batch
 
 __all__ = ["ESFTransformer"]
@@ -158,7 +160,4 @@ class ESFTransformer(PointCloudDescriptor):
 
 
 # the SIMD code this module's kernel runs, for eppf.simd_levels()
-from . import _esf_fast  # noqa: E402
-from ..utils._simd import register_kernel  # noqa: E402
-
 register_kernel("esf", lambda: "avx2" if _esf_fast._simd_enabled() else "scalar")

@@ -9,10 +9,12 @@ import numpy as np
 
 from ._hough import hough_batch, hough_single
 from ._normal_options import ORIENT_NONE, ORIENT_VIEWPOINT, check_n_neighbors, resolve_orientation
+from . import _normals_fast
 from ._normals_fast import cloud_in_window, normals_cloud, normals_packed, normals_single, scratch_sizes
 from ..utils._validation import (
     SAFE_MAX_EXP, SAFE_MIN_EXP, scale_exponents, check_n_jobs, check_point_cloud, condition_point_clouds,
 )
+from ..utils._simd import register_kernel
 
 __all__ = ["estimate_normals", "estimate_normals_batch"]
 
@@ -320,7 +322,4 @@ default="centroid"
 
 
 # the SIMD code this module's kernel runs, for eppf.simd_levels()
-from . import _normals_fast  # noqa: E402
-from ..utils._simd import register_kernel  # noqa: E402
-
 register_kernel("normals", lambda: ("scalar", "avx2", "avx512")[_normals_fast._simd_level()])
