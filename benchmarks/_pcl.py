@@ -26,7 +26,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 SOURCE = os.path.join(HERE, "pcl_harness", "pcl_bench.cpp")
 PKG_MODULES = ("pcl_features", "pcl_search", "pcl_kdtree", "pcl_common")
 #: Tasks the harness knows, with the width of one output row (normals: 3 per point).
-TASKS = {"normals": None, "esf": 640, "gasd": 512, "vfh": 308, "cvfh": 308, "ourcvfh": 308, "grsd": 21}
+TASKS = {"normals": None, "esf": 640, "gasd": 512, "vfh": 308, "cvfh": 308, "cvfh_default": 308, "ourcvfh": 308, "grsd": 21}
 BUILD_TIMEOUT = 900  # seconds: PCL's headers are heavy, and the machine may be busy
 RUN_TIMEOUT = 1800
 

@@ -26,9 +26,10 @@ from _sidebyside import (Worker, WorkerError, check_build, cpu_model, describe_l
                          run_rounds)
 
 #: eppf tasks timed at each level; (task, objects): "1k" the 1,024-point objects with normals, "10k" the large ones.
-EPPF_JOBS = (("eppf_kernel", "1k"), ("eppf", "1k"), ("gasd", "1k"), ("esf", "1k"), ("cvfh", "1k"), ("grsd", "1k"),
-             ("normals", "1k"), ("normals", "10k"))
-PCL_JOBS = (("gasd", "1k"), ("esf", "1k"), ("cvfh", "1k"), ("grsd", "1k"), ("normals", "1k"), ("normals", "10k"))
+EPPF_JOBS = (("eppf_kernel", "1k"), ("eppf", "1k"), ("gasd", "1k"), ("esf", "1k"), ("cvfh", "1k"),
+             ("cvfh_default", "1k"), ("grsd", "1k"), ("normals", "1k"), ("normals", "10k"))
+PCL_JOBS = (("gasd", "1k"), ("esf", "1k"), ("cvfh", "1k"), ("cvfh_default", "1k"), ("grsd", "1k"), ("normals", "1k"),
+            ("normals", "10k"))
 COMPARE_JOBS = (("eppf_kernel", "1k"), ("eppf", "1k"))
 
 
@@ -78,7 +79,11 @@ def _ms(v):
 def _cell(ratio, name, tier_name):
     if ratio is None:
         return "-"
-    return f"{ratio:.2f} {verdict(name, ratio, tier_name)}"
+    return f"{ratio:#.3g} {verdict(name, ratio, tier_name)}"
+
+
+def _plain(ratio):
+    return "-" if ratio is None else f"{ratio:#.3g}"
 
 
 def build_rows(columns, t, compare=None):
@@ -102,8 +107,7 @@ def build_rows(columns, t, compare=None):
     add("PCL GASD, ms", "", [_ms(pcl[("gasd", "1k")])] * len(columns))
     add("EPPF transform / PCL GASD", target_text("eppf_gasd"),
         [_cell(_ratio(ours(c, "eppf"), pcl[("gasd", "1k")]), "eppf_gasd", tr) for c, tr in columns])
-    add("our GASD / PCL GASD", "", [_cell(_ratio(ours(c, "gasd"), pcl[("gasd", "1k")]), "eppf_gasd", "-")
-                                    .replace(" info", "") for c, _ in columns])
+    add("our GASD / PCL GASD", "", [_plain(_ratio(ours(c, "gasd"), pcl[("gasd", "1k")])) for c, _ in columns])
     avx2 = next((c for c, tr in columns if tr == "avx2"), None)
     cells = []
     for c, tr in columns:
@@ -124,13 +128,14 @@ def build_rows(columns, t, compare=None):
         add(f"normals {n} pts, Open3D / eppf", target_text("normals"),
             [_cell(_ratio(o3d[objs], ours(c, "normals", objs)), "normals", tr) for c, tr in columns])
         add(f"normals {n} pts, PCL / eppf", "",
-            [_cell(_ratio(pcl[("normals", objs)], ours(c, "normals", objs)), "normals", "-").replace(" info", "")
-             for c, _ in columns])
-    for task, label in (("cvfh", "CVFH"), ("grsd", "GRSD"), ("esf", "ESF")):
+            [_plain(_ratio(pcl[("normals", objs)], ours(c, "normals", objs))) for c, _ in columns])
+    for task, label in (("cvfh", "CVFH"), ("cvfh_default", "CVFH, PCL's defaults"), ("grsd", "GRSD"),
+                        ("esf", "ESF")):
+        target = task.split("_")[0]
         add(f"{label}, eppf ms", "", [_ms(ours(c, task)) for c, _ in columns])
         add(f"{label}, PCL ms", "", [_ms(pcl[(task, "1k")])] * len(columns))
-        add(f"{label}, eppf / PCL", target_text(task),
-            [_cell(_ratio(ours(c, task), pcl[(task, "1k")]), task, tr) for c, tr in columns])
+        add(f"{label}, eppf / PCL", target_text(target),
+            [_cell(_ratio(ours(c, task), pcl[(task, "1k")]), target, tr) for c, tr in columns])
     return rows
 
 
@@ -190,8 +195,8 @@ def run(data_dir, n_objects, n_large, levels, rounds, compare_build=None, pcl=Tr
                 seen[got] = lv
                 tr = tier(info["levels"])
                 emulated = got != describe_levels(native)
-                head = f"{'native' if lv == 'native' else lv}{' (emulated)' if emulated else ''}: {tr}"
-                legend.append(f"{head} = {'EPPF_SIMD unset' if lv == 'native' else 'EPPF_SIMD=' + lv}: {got}")
+                head = f"{'native (' + tr + ')' if lv == 'native' else lv}{', emulated' if emulated else ''}"
+                legend.append(f"{head}: {'EPPF_SIMD unset' if lv == 'native' else 'EPPF_SIMD=' + lv}, {got}")
                 print(f"  {legend[-1]} (eppf {info['version']})", flush=True)
                 columns.append((lv, tr))
                 headers.append(head)

@@ -76,6 +76,12 @@ def _cvfh():
                            normalize_bins=False, normalize=False, n_jobs=1)
 
 
+def _cvfh_default():
+    # PCL's CVFHEstimation defaults (EPS angle 0.125, curvature threshold 0.03, bins not normalised).
+    from eppf.descriptors import CVFHTransformer
+    return CVFHTransformer(aggregate="first", normalize=False, n_jobs=1)
+
+
 def _grsd():
     from eppf.descriptors import GRSDTransformer
     return GRSDTransformer(normalize=False, n_jobs=1)
@@ -147,6 +153,7 @@ TASKS = {
     "vfh": _transform(_vfh),
     "esf": _transform(_esf, columns=3),
     "cvfh": _transform(_cvfh),
+    "cvfh_default": _transform(_cvfh_default),
     "grsd": _transform(_grsd),
     "normals": _normals,
     "open3d_normals": _open3d,

@@ -96,16 +96,16 @@ def test_targets_table_from_timings():
         t.add(key, ms / 1e3)
     rows = _targets.build_rows([("native", "avx512"), ("avx2", "avx2"), ("scalar", "scalar")], t)
     table = {label: cells for label, _, cells in rows}
-    assert table["EPPF transform / PCL GASD"][:2] == ["0.75 PASS", "2.25 PASS"]
+    assert table["EPPF transform / PCL GASD"][:2] == ["0.750 PASS", "2.25 PASS"]
     assert table["EPPF kernel, portable / AVX2"] == ["-", "-", "2.00 FAIL"]
-    assert table["ESF, eppf / PCL"][:2] == ["0.15 PASS", "0.25 FAIL"]
+    assert table["ESF, eppf / PCL"][:2] == ["0.150 PASS", "0.250 FAIL"]
     assert table["CVFH, eppf / PCL"] == ["-", "-", "-"]
     text = _targets.format_text(["figure", "target", "a", "b", "c"], rows)
-    assert "0.75 PASS" in text
+    assert "0.750 PASS" in text
     docutils = pytest.importorskip("docutils.core")
     rst = _targets.format_rst("title", ["figure", "target", "a", "b", "c"], rows)
     tree = docutils.publish_doctree(rst, settings_overrides={"report_level": 2, "halt_level": 2})
-    assert "0.75 PASS" in tree.astext()
+    assert "0.750 PASS" in tree.astext()
 
 
 def test_callgrind_parts(tmp_path):
