@@ -93,7 +93,7 @@ def read_objects(path):
 
 
 def scaled(cloud):
-    """The cloud centred on its mean and scaled so its largest bounding-box side is 1 (the PCL reference runs)."""
+    """The cloud centered on its mean and scaled so its largest bounding-box side is 1 (the PCL reference runs)."""
     import numpy as np
 
     p = np.asarray(cloud, dtype=np.float64)
@@ -103,7 +103,7 @@ def scaled(cloud):
 
 def densify(cloud, n_points, rng):
     """``cloud`` grown to ``n_points``: its points plus points drawn uniformly on segments
-    from a random point to one of its 6 nearest neighbours, so the new points lie on the
+    from a random point to one of its 6 nearest neighbors, so the new points lie on the
     sampled surface at a higher density (seeded by ``rng``)."""
     import numpy as np
     from scipy.spatial import cKDTree
@@ -124,7 +124,7 @@ def benchmark_objects(folder, n_objects, n_large, large=10_000, prog="benchmark"
     ``small``: ``n_objects`` ModelNet10 objects of 1,024 points (every k-th
     object of ``folder/modelnet10_1024.npz``), or the built-in synthetic
     shapes when ``folder`` is None; ``large``: the first ``n_large`` of them
-    grown to ``large`` points by :func:`densify`. All centred and scaled by
+    grown to ``large`` points by :func:`densify`. All centered and scaled by
     :func:`scaled`; points only (normals are added by the caller).
     """
     import numpy as np

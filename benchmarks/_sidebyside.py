@@ -183,6 +183,13 @@ class Worker:
             raise WorkerError(out["error"])
         return out
 
+    def timer(self, task, path):
+        """A job for :func:`run_rounds`: one pass of ``task`` over the objects file ``path``, CPU s per object."""
+        def call():
+            r = self.ask(op="time", task=task, file=path)
+            return r["cpu_s"] / max(1, r["n"])
+        return call
+
     def close(self):
         if self.proc.poll() is None:
             try:

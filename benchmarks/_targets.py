@@ -1,6 +1,6 @@
 """Every ratio issue 29 targets, side by side in one run (``bench_baselines.py --targets``).
 
-One thread, 1,024-point objects with normals given (PCA, 10 neighbours,
+One thread, 1,024-point objects with normals given (PCA, 10 neighbors,
 pointing away from the centroid, as the PCL reference runs), CPU ms per
 object, best of the rounds. Columns: eppf at each requested SIMD level (a
 worker process each, ``EPPF_SIMD`` set; below AVX-512 NumPy and OpenBLAS are
@@ -201,7 +201,7 @@ def run(data_dir, n_objects, n_large, levels, rounds, compare_build=None, pcl=Tr
                 columns.append((lv, tr))
                 headers.append(head)
                 jobs += [((lv, task, objs), f"{lv}:{task}@{objs}",
-                          _worker_call(w, task, files[objs])) for task, objs in EPPF_JOBS]
+                          w.timer(task, files[objs])) for task, objs in EPPF_JOBS]
                 if compare_build is not None:
                     cw = Worker(lv, build=compare_build)
                     workers.append(cw)
@@ -209,7 +209,7 @@ def run(data_dir, n_objects, n_large, levels, rounds, compare_build=None, pcl=Tr
                     print(f"  compare build at {lv}: {describe_levels(cinfo['levels'])} (eppf {cinfo['version']})",
                           flush=True)
                     jobs += [((("build", lv), task, objs), f"build:{lv}:{task}",
-                              _worker_call(cw, task, files[objs])) for task, objs in COMPARE_JOBS]
+                              cw.timer(task, files[objs])) for task, objs in COMPARE_JOBS]
             exe = _pcl.harness() if pcl else None
             if exe is not None:
                 jobs += [(("pcl", task, objs), f"pcl:{task}@{objs}", _pcl_call(exe, task, files[objs]))
@@ -220,7 +220,7 @@ def run(data_dir, n_objects, n_large, levels, rounds, compare_build=None, pcl=Tr
                 try:
                     ow.ask(op="time", task="open3d_normals", file=files["1k"])
                     jobs += [(("open3d", "open3d_normals", objs), f"open3d@{objs}",
-                              _worker_call(ow, "open3d_normals", files[objs])) for objs in ("1k", "10k")]
+                              ow.timer("open3d_normals", files[objs])) for objs in ("1k", "10k")]
                 except WorkerError as exc:
                     print(f"Open3D: skipped ({exc})", flush=True)
             t = run_rounds(jobs, rounds)
@@ -242,13 +242,6 @@ def run(data_dir, n_objects, n_large, levels, rounds, compare_build=None, pcl=Tr
         print("Columns: " + "; ".join(legend) + ".\n")
         print(format_rst(f"{cpu_model()}: ``{command}``", headers, rows))
     return headers, rows
-
-
-def _worker_call(worker, task, path):
-    def call():
-        r = worker.ask(op="time", task=task, file=path)
-        return r["cpu_s"] / max(1, r["n"])
-    return call
 
 
 def _pcl_call(exe, task, path):

@@ -33,7 +33,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from _data import read_objects  # noqa: E402
 
-K_NORMALS = 20  # neighbours of the timed normals (as bench_normals.py and the issue's figures)
+K_NORMALS = 20  # neighbors of the timed normals (as bench_normals.py and the issue's figures)
 
 
 def _xyz(clouds):
@@ -70,14 +70,14 @@ def _esf():
 
 
 def _cvfh():
-    # The PCL reference runs' settings: EPS angle 5 degrees, curvature threshold 1.0, bins not normalised.
+    # The PCL reference runs' settings: EPS angle 5 degrees, curvature threshold 1.0, bins not normalized.
     from eppf.descriptors import CVFHTransformer
     return CVFHTransformer(aggregate="first", eps_angle=float(np.deg2rad(5.0)), curvature_threshold=1.0,
                            normalize_bins=False, normalize=False, n_jobs=1)
 
 
 def _cvfh_default():
-    # PCL's CVFHEstimation defaults (EPS angle 0.125, curvature threshold 0.03, bins not normalised).
+    # PCL's CVFHEstimation defaults (EPS angle 0.125, curvature threshold 0.03, bins not normalized).
     from eppf.descriptors import CVFHTransformer
     return CVFHTransformer(aggregate="first", normalize=False, n_jobs=1)
 
@@ -115,7 +115,7 @@ def _normals(clouds):
 
 
 class _Open3D:
-    """Open3D's ``estimate_normals`` (k nearest neighbours), its normals cleared before each call, untimed."""
+    """Open3D's ``estimate_normals`` (k nearest neighbors), its normals cleared before each call, untimed."""
 
     def __init__(self, clouds):
         import open3d as o3d

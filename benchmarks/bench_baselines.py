@@ -12,9 +12,9 @@ PCL 1.13's own ESF and OUR-CVFH outputs (``pcl_<data set>.npz`` files with
 arrays ``esf`` and ``ourcvfh``, one row per object, in ``--reference-dir``)
 are scored the same way as a yardstick when given.
 
-Every object is centred on its mean and scaled so its largest bounding-box
+Every object is centered on its mean and scaled so its largest bounding-box
 side is 1 (as the PCL reference runs), and gets PCA normals over 10
-neighbours pointing away from its centroid, computed once and given to every
+neighbors pointing away from its centroid, computed once and given to every
 descriptor (normal estimation is timed separately).
 
 Before the table, the EPPF kernel is timed at every level the CPU has

@@ -29,8 +29,8 @@ normals present it would also orient them to the old ones), PCL 1.13's
 PCL or a compiler is missing); their passes alternate round by round, so all
 see the same load. The ``p99 angle`` column is the 99th percentile over all
 points of the angle between eppf's and Open3D's normals, up to sign (both are
-exact PCA over the 20 nearest neighbours; they differ only by rounding, or
-where the 20th neighbour is tied with the 21st). Open3D is a benchmark-only
+exact PCA over the 20 nearest neighbors; they differ only by rounding, or
+where the 20th neighbor is tied with the 21st). Open3D is a benchmark-only
 dependency (``pip install open3d``): without it its columns are skipped with
 a printed line. The CPU model and the level each kernel ran at are printed
 with the table; figures measured on the project's machines are in the
@@ -122,14 +122,14 @@ def compare(datasets, repeats, levels=("native",), pcl=True, open3d=True):
                 seen.add(got)
                 cols.append((f"eppf {lv}", lv, w))
                 print(f"eppf {lv}: {got}", flush=True)
-                jobs += [((lv, i), f"eppf {lv} set {i}", _timer(w, "normals", f)) for i, f in enumerate(files)]
+                jobs += [((lv, i), f"eppf {lv} set {i}", w.timer("normals", f)) for i, f in enumerate(files)]
             o3d = None
             if open3d:
                 o3d = Worker("native", pin=True)
                 workers.append(o3d)
                 try:
                     o3d.ask(op="time", task="open3d_normals", file=files[0])
-                    jobs += [(("open3d", i), f"open3d set {i}", _timer(o3d, "open3d_normals", f))
+                    jobs += [(("open3d", i), f"open3d set {i}", o3d.timer("open3d_normals", f))
                              for i, f in enumerate(files)]
                 except WorkerError as exc:
                     print(f"open3d is not available ({exc}); its columns are skipped")
@@ -169,13 +169,6 @@ def _f(v, digits=3):
     return "-" if v is None else f"{v:.{digits}f}"
 
 
-def _timer(worker, task, path):
-    def call():
-        r = worker.ask(op="time", task=task, file=path)
-        return r["cpu_s"] / max(1, r["n"])
-    return call
-
-
 def _angles(ours, o3d, files, tmp):
     """99th percentile of the angle between eppf's and Open3D's normals, up to sign, per file."""
     out = {}
@@ -203,8 +196,8 @@ def surface(rng, n):
 def reference(points, k):
     _, idx = cKDTree(points).query(points, k)
     nb = points[idx]
-    centred = nb - nb.mean(axis=1, keepdims=True)
-    return np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
+    centered = nb - nb.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(np.einsum("nki,nkj->nij", centered, centered))[1][:, :, 0]
 
 
 def best_of(fn, repeats, clock=time.perf_counter):

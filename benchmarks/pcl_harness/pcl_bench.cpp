@@ -4,11 +4,11 @@
 //
 //   pcl_bench FILE TASK [--repeats R] [--k K] [--per-object] [--out ROWS]
 //
-// TASK: normals (NormalEstimation, K nearest neighbours, default 20), esf,
+// TASK: normals (NormalEstimation, K nearest neighbors, default 20), esf,
 // gasd, vfh, cvfh, cvfh_default (CVFH with PCL's defaults), ourcvfh, grsd.
 // The descriptors use the normals stored in the file; normals ignores them.
 // Settings are those of the PCL reference runs of the documentation: CVFH and OUR-CVFH with an EPS angle of 5
-// degrees, curvature threshold 1.0 and bins not normalised (OUR-CVFH: axis
+// degrees, curvature threshold 1.0 and bins not normalized (OUR-CVFH: axis
 // ratio 0.8), the first signature kept; GRSD with radius 0.05; GASD, VFH and
 // ESF with PCL's defaults; a k-d tree search everywhere.
 //
@@ -221,7 +221,7 @@ int main(int argc, char** argv)
         const size_t n = objects.size();
         std::vector<std::vector<float>> rows(n);
         for (size_t i = 0; i < n; ++i) rows[i].assign(row_size(task, objects[i]), 0.0f);
-        if (n > 0) describe(task, objects[0], k, rows[0]);  // warm up: first-touch pages, lazy initialisation
+        if (n > 0) describe(task, objects[0], k, rows[0]);  // warm up: first-touch pages, lazy initialization
         double best = INFINITY;
         std::vector<double> each(n), best_each(n);
         for (int r = 0; r < repeats; ++r) {
