@@ -206,6 +206,9 @@ def run(data_dir, n_objects, n_large, levels, rounds, compare_build=None, pcl=Tr
                     cw = Worker(lv, build=compare_build)
                     workers.append(cw)
                     cinfo = cw.ask(op="info")
+                    if not os.path.abspath(cinfo["eppf"]).startswith(compare_build + os.sep):
+                        raise ValueError(f"--compare-build: the worker imported eppf from {cinfo['eppf']}, "
+                                         f"not from {compare_build}")
                     print(f"  compare build at {lv}: {describe_levels(cinfo['levels'])} (eppf {cinfo['version']})",
                           flush=True)
                     jobs += [((("build", lv), task, objs), f"build:{lv}:{task}",
