@@ -9,7 +9,8 @@ Usage::
 Valid files of every format are written first (PCD ``ascii``, ``binary`` and
 ``binary_compressed``; PLY ASCII and binary, cloud and mesh; OFF; OBJ; STL
 ASCII and binary; XYZ, PTS; NPY; NPZ; and, when laspy and pye57 are
-installed, LAS with extra bytes, LAZ 1.4 and E57 with two scans), then mutated
+installed, LAS with extra bytes, LAZ 1.2 (point-wise chunks) and 1.4 (layered
+chunks), and E57 with two scans), then mutated
 with a fixed seed: bit flips, truncations, a number of the header set to 0,
 -1, a huge value, 1e308 or NaN, a duplicated or removed line, runs of random
 bytes (overwritten or inserted), and a binary header field (1, 2, 4 or 8
@@ -160,7 +161,7 @@ def _optional_seeds(folder, xyz, rng):
         laspy = None
     if laspy is not None:
         n = xyz.shape[0]
-        for name, fmt, version in (("extra.las", 3, "1.2"), ("tile.laz", 6, "1.4")):
+        for name, fmt, version in (("extra.las", 3, "1.2"), ("tile.laz", 6, "1.4"), ("pointwise.laz", 1, "1.2")):
             header = laspy.LasHeader(point_format=fmt, version=version)
             header.offsets, header.scales = np.array([5e5, 4e6, 0.0]), np.array([0.01, 0.01, 0.01])
             if name.endswith(".las"):

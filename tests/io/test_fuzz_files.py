@@ -31,7 +31,7 @@ def test_fuzz_files_short():
     # and the optional formats, whose hostile headers (counts, offsets, extra-bytes descriptors) are refused
     import importlib.util
 
-    optional = {"extra.las": "laspy", "tile.laz": "laspy", "scans.e57": "pye57"}
+    optional = {"extra.las": "laspy", "tile.laz": "laspy", "pointwise.laz": "laspy", "scans.e57": "pye57"}
     for name, module in optional.items():
         if importlib.util.find_spec(module) is not None:
             row = next(line for line in lines if line.startswith(name + " "))
