@@ -155,8 +155,9 @@ def _check_fields(points, fields, owner, fmt):
     n = arr.shape[0]
     out = {}
     for name, values in ({} if fields is None else dict(fields)).items():
-        if not isinstance(name, str) or not name or any(c.isspace() for c in name) or not name.isprintable():
-            raise ValueError(f"{owner}: field names must be non-empty strings without spaces, got {name!r}")
+        if not isinstance(name, str) or not name or any(c.isspace() for c in name) or not name.isprintable() \
+                or not name.isascii():
+            raise ValueError(f"{owner}: field names must be non-empty ASCII strings without spaces, got {name!r}")
         if name.lower() in ("x", "y", "z"):
             raise ValueError(f"{owner}: field {name!r} would repeat a coordinate; coordinates go in points")
         if name in ("_",) or name.startswith("_n_"):

@@ -418,7 +418,7 @@ def write_las(path, points, fields, owner, compressed):
         if name in standard:
             las[name] = values
         else:
-            las.points.array[name] = values
+            las.points.array[name] = values.reshape(las.points.array[name].shape)  # (an (n, 1) field: one value)
     las.update_header()
     try:
         las.write(path, do_compress=compressed)

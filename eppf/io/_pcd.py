@@ -376,7 +376,7 @@ def write_pcd_fields(path, points, fields):
     for k, axis in enumerate("xyz"):
         rec[axis] = points[:, k]
     for name, values in fields.items():
-        rec[name] = values
+        rec[name] = values.reshape(rec[name].shape)  # (an (n, 1) field is COUNT 1)
     names = ["x", "y", "z"] + list(fields)
     head = (
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"

@@ -153,7 +153,8 @@ def test_text_with_header(tmp_path, write_file):
 
 
 @pytest.mark.parametrize("fields, exc, msg", [
-    ({"a b": np.zeros(3)}, ValueError, "field names must be non-empty strings without spaces"),
+    ({"a b": np.zeros(3)}, ValueError, "field names must be non-empty ASCII strings without spaces"),
+    ({"\u00e9t\u00e9": np.zeros(3)}, ValueError, "field names must be non-empty ASCII strings without spaces"),
     ({"x": np.zeros(3)}, ValueError, "would repeat a coordinate"),
     ({"a": np.zeros(2)}, ValueError, r"field 'a' must have shape \(3,\) or \(3, k\)"),
     ({"a": np.array(["u", "v", "w"])}, TypeError, "field 'a' must hold integers or float32/float64"),
@@ -188,3 +189,11 @@ def test_float64_points_stay_float64(tmp_path):
     for ext in ("pcd", "ply"):
         write_point_fields(tmp_path / f"p.{ext}", points)
         assert _same(read_point_fields(tmp_path / f"p.{ext}")[0], points)
+
+
+def test_a_field_of_one_column_is_one_value_per_point(tmp_path):
+    column = np.arange(3, dtype=np.float32).reshape(3, 1)
+    write_point_fields(tmp_path / "c.pcd", np.zeros((3, 3)), {"v": column})
+    assert _same(read_point_fields(tmp_path / "c.pcd")[1]["v"], column.ravel())
+    write_point_fields(tmp_path / "c.ply", np.zeros((3, 3)), {"v": column})
+    assert _same(read_point_fields(tmp_path / "c.ply")[1]["v"], column)  # a PLY list of length 1

@@ -293,3 +293,10 @@ def test_hostile_e57_record_count_is_refused_before_allocating(tmp_path):
         with pytest.raises(FileFormatError, match=f"count{count.decode()}.e57.*({msg})"):
             read_point_fields(bad)
     assert read_point_fields(path)[0].shape == (n, 3)
+
+
+def test_las_extra_bytes_of_one_column(tmp_path):
+    column = np.arange(2, dtype=np.int16).reshape(2, 1)
+    write_point_fields(tmp_path / "o.las", np.ones((2, 3)), {"v": column})
+    got = read_point_fields(tmp_path / "o.las")[1]["v"]
+    assert got.dtype == np.int16 and got.tolist() == [0, 1]
