@@ -39,8 +39,8 @@ number of files (the output rows go to disk as they come).
 
 LAS/LAZ reading speed (``--las-points``, 2,000,000 by default; 0 skips it;
 ``--las-only`` runs only this): one point-format-3 tile in projected
-coordinates (millimetre grid, random intensity, returns, classification,
-GPS time, colour) plus two extra-bytes dimensions, written by laspy as
+coordinates (millimeter grid, random intensity, returns, classification,
+GPS time, color) plus two extra-bytes dimensions, written by laspy as
 ``.las`` and ``.laz``, then read five times each (the best time counts) by
 :func:`eppf.io.read_point_fields` (coordinates and every field),
 :func:`eppf.io.read_point_cloud` (coordinates) and laspy itself

@@ -54,7 +54,7 @@ def read_point_fields(path, *, format=None):
     points : ndarray of shape (n_points, 3), dtype float64
         The coordinates in the file's own units and offsets. LAS/LAZ:
         ``X * scale + offset`` (projected coordinates of 1e5 to 1e7 m keep
-        their millimetres). E57: every scan's cartesian (or spherical,
+        their millimeters). E57: every scan's cartesian (or spherical,
         converted) coordinates moved by its pose into the file's frame, the
         scans one after the other. Every point of the file is kept,
         including PCL's NaN points.
@@ -64,7 +64,7 @@ def read_point_fields(path, *, format=None):
         for a field of ``k`` values per point):
 
         - PCD: every ``FIELDS`` entry but ``x y z`` and ``_`` padding.
-          PCL's packed colour ``rgb`` (``TYPE F``) and ``rgba`` (``TYPE U``)
+          PCL's packed color ``rgb`` (``TYPE F``) and ``rgba`` (``TYPE U``)
           are kept packed as uint32 ``0xAARRGGBB`` (the bits of the float):
           ``red = (rgb >> 16) & 255``, ``green = (rgb >> 8) & 255``,
           ``blue = rgb & 255``.
@@ -213,7 +213,7 @@ def write_point_fields(path, points, fields=None, *, format=None):
         spaces; not ``x``, ``y``, ``z``).
 
         - PCD: each field with its type; a uint32 ``rgb`` is written as
-          PCL's packed colour (``TYPE F``, the same bits).
+          PCL's packed color (``TYPE F``, the same bits).
         - PLY: each field a ``vertex`` property; an (n, k) field a list
           property of length k; 64-bit integers as ``int``/``uint`` when
           their values fit (else ValueError).

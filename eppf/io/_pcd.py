@@ -297,14 +297,14 @@ def write_pcd(path, cloud, binary=True):
 
 # --------------------------------------------------------------------------- every field
 
-#: PCL packs colour into one 4-byte field: ``rgb`` (TYPE F, the float's bits are 0xAARRGGBB) or ``rgba`` (TYPE U).
-PACKED_COLOUR = ("rgb", "rgba")
+#: PCL packs color into one 4-byte field: ``rgb`` (TYPE F, the float's bits are 0xAARRGGBB) or ``rgba`` (TYPE U).
+PACKED_COLOR = ("rgb", "rgba")
 _CODES = {"f": "F", "i": "I", "u": "U"}
 
 
 def _ascii_field(values, dtype, name, path, owner):
-    """An ASCII column (parsed as float64) in its declared type; packed colour as its uint32 bits."""
-    if name in PACKED_COLOUR and dtype.itemsize == 4:
+    """An ASCII column (parsed as float64) in its declared type; packed color as its uint32 bits."""
+    if name in PACKED_COLOR and dtype.itemsize == 4:
         # PCL writes a float rgb as the unsigned integer of its bits; older files wrote the float itself
         whole = np.isfinite(values).all() and (values == np.floor(values)).all() and \
             (values.size == 0 or (values.min() >= 0 and values.max() < 2 ** 32))
@@ -336,7 +336,7 @@ def read_pcd_fields(path, data, owner):
             col += width
             continue
         if kind != "ascii":
-            if name in PACKED_COLOUR and base.itemsize == 4:  # the colour's bits, whatever the declared type
+            if name in PACKED_COLOR and base.itemsize == 4:  # the color's bits, whatever the declared type
                 values = np.ascontiguousarray(values.view("<u4"), dtype=np.uint32)
             else:
                 values = np.ascontiguousarray(values, dtype=base.newbyteorder("="))
@@ -364,8 +364,8 @@ def write_pcd_fields(path, points, fields):
     head_types = [("F", int(coord[1]), 1)] * 3
     for name, values in fields.items():
         base = values.dtype
-        if name in PACKED_COLOUR and base == np.uint32:
-            code, size = "F", 4  # PCL's rgb is a float field holding the colour's bits
+        if name in PACKED_COLOR and base == np.uint32:
+            code, size = "F", 4  # PCL's rgb is a float field holding the color's bits
         else:
             code, size = _CODES[base.kind], base.itemsize
         count = 1 if values.ndim == 1 else values.shape[1]

@@ -140,7 +140,7 @@ def write_xyzn(path, cloud, binary=True):
 
 # --------------------------------------------------------------------------- every field
 
-#: Column names of the fixed text layouts, after x y z (Open3D's: .xyzn normals, .xyzrgb colour).
+#: Column names of the fixed text layouts, after x y z (Open3D's: .xyzn normals, .xyzrgb color).
 FIXED_NAMES = {"xyzn": ("nx", "ny", "nz"), "xyzrgb": ("red", "green", "blue")}
 #: Open3D's .pts rows: x y z, then intensity and/or r g b.
 _PTS_NAMES = {4: ("intensity",), 6: ("red", "green", "blue"), 7: ("intensity", "red", "green", "blue")}

@@ -15,7 +15,7 @@ laspy = pytest.importorskip("laspy")
 
 
 def _las_file(path, n=200, fmt=3, seed=0, extra=True, version=None):
-    """A LAS/LAZ file written by laspy: projected coordinates on a millimetre grid, every dimension filled."""
+    """A LAS/LAZ file written by laspy: projected coordinates on a millimeter grid, every dimension filled."""
     rng = np.random.default_rng(seed)
     header = laspy.LasHeader(point_format=fmt, version=version)
     header.scales = np.array([0.001, 0.001, 0.01])
@@ -55,7 +55,7 @@ def test_las_every_field_as_laspy_reads_it(tmp_path, ext, fmt):
     points, fields = read_point_fields(path)
     assert points.dtype == np.float64
     for k, axis in enumerate("xyz"):
-        np.testing.assert_array_equal(points[:, k], np.asarray(las[axis]))  # bit for bit, millimetres kept
+        np.testing.assert_array_equal(points[:, k], np.asarray(las[axis]))  # bit for bit, millimeters kept
     names = [n for n in las.point_format.dimension_names if n not in ("X", "Y", "Z")]
     assert list(fields) == names and names[-3:] == ["reflectance", "normal", "amplitude"]
     for name in names:
