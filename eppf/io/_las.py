@@ -16,7 +16,11 @@ hostile header makes laspy or lazrs allocate beyond the file:
   after the offset of the point data;
 - LAZ: the chunk table's offset must lie inside the file and its number of
   chunks may not exceed the compressed bytes (every chunk holds at least its
-  first point uncompressed). LAZ compresses constant points about 2,900
+  first point uncompressed); every chunk must lie inside the compressed
+  points, declare at most 50,000 points (LASzip's default) or 64 times the
+  file's size in decoded bytes (lazrs's parallel decoder allocates a whole
+  chunk), and, in the layered formats 6 to 10, declare layers that fit the
+  chunk (lazrs reserves a layer's declared size before reading it). LAZ compresses constant points about 2,900
   times (measured with lazrs), so a declared count is not bounded by the
   compressed size: the points are decoded in pieces of at most
   :data:`LAZ_PIECE_RATIO` times the file's size, and a file whose data ends
@@ -37,6 +41,9 @@ from ._errors import FileFormatError
 
 #: Decoded LAZ data is allocated in pieces of at most this many times the file's size.
 LAZ_PIECE_RATIO = 64
+
+#: LASzip's default points per chunk: a chunk of at most this many points is always accepted.
+_DEFAULT_CHUNK = 50000
 
 #: Point formats in the order the writer tries them (waveform formats last).
 _WRITE_ORDER = (0, 1, 2, 3, 6, 7, 8, 4, 5, 9, 10)
@@ -208,7 +215,12 @@ def check_chunks(fh, size, path, owner, record_length, fmt, laszip, offset, tabl
     pos, end = offset + 8, table
     n_layers = _LAYERS.get(fmt, 0) + (record_length - _base_sizes()[fmt] if fmt >= 6 else 0)
     head = record_length + 4 + 4 * n_layers
-    for k, (_, n_bytes) in enumerate(chunks):
+    most = max(LAZ_PIECE_RATIO * size, _DEFAULT_CHUNK * record_length)
+    for k, (n_points, n_bytes) in enumerate(chunks):
+        if n_points * record_length > most:  # lazrs's parallel decoder allocates a whole chunk's points
+            _fail(owner, path, f"byte {table}", f"LAZ chunk {k} declares {n_points} points ({n_points * record_length} "
+                  f"bytes), more than {most} bytes (the larger of {LAZ_PIECE_RATIO} times the file's size and "
+                  f"{_DEFAULT_CHUNK} points)")
         if n_bytes < 0 or n_bytes > end - pos:
             _fail(owner, path, f"byte {pos}", f"LAZ chunk {k} of {n_bytes} bytes runs past the compressed points "
                   f"(which end at byte {end})")

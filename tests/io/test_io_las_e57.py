@@ -300,3 +300,13 @@ def test_las_extra_bytes_of_one_column(tmp_path):
     write_point_fields(tmp_path / "o.las", np.ones((2, 3)), {"v": column})
     got = read_point_fields(tmp_path / "o.las")[1]["v"]
     assert got.dtype == np.int16 and got.tolist() == [0, 1]
+
+
+def test_hostile_laz_chunk_size_is_refused(tmp_path):
+    """A laszip VLR declaring 3e9 points per chunk made lazrs's parallel decoder allocate 87 GB and abort
+    (found by scripts/fuzz_files.py); a chunk may hold 50,000 points or 64 times the file's size."""
+    _las_file(tmp_path / "src.laz", n=100, fmt=1, extra=False)
+    path = _patched(tmp_path, tmp_path / "src.laz", "chunk.laz",
+                    [("<I", lambda d: d.find(b"laszip encoded") - 2 + 54 + 12, 3_099_803_465)])
+    with pytest.raises(FileFormatError, match="chunk.laz.*LAZ chunk 0 declares 3099803465 points"):
+        read_point_fields(path)
