@@ -61,7 +61,7 @@ def test_objects_on_a_slope():
     truth = np.repeat([-1, 0, 1, 2], [20000, 1000, 1000, 1000])
     for ground_model in ("auto", "plane", "grid"):
         seg = SceneSegmenter(ground=ground_model).fit(np.vstack([ground] + balls))
-        assert seg.ground_mask_[:20000].all() and seg.n_segments_ == 3, ground_model
+        assert seg.ground_mask_[:20000].mean() > 0.999 and seg.n_segments_ == 3, ground_model
         # the grid's allowance for the slope within a cell may take a few points of a ball's underside
         assert seg.ground_mask_[20000:].sum() < (1 if seg.ground_method_ == "plane" else 30)
         kept = ~seg.ground_mask_
