@@ -1,7 +1,7 @@
 """Speed and memory of scene segmentation (``eppf.segmentation.segment_scene``).
 
 A synthetic aerial-LiDAR-like scene: noisy, gently rolling terrain (a 200 m
-square for 1,000,000 points, 15 points per square metre, 3 cm noise) and
+square for 1,000,000 points, 15 points per square meter, 3 cm noise) and
 objects standing on it (spheres, boxes and upright cylinders 1.5 to 4 m
 across, 1,000 points each, at least 3 m apart), in projected coordinates (offsets 500,000 m, 4,500,000 m, 200 m);
 60% of the points are ground. For each size the table gives:
@@ -49,7 +49,7 @@ from eppf.segmentation import SceneSegmenter  # noqa: E402
 
 OFFSET = np.array([500_000.0, 4_500_000.0, 200.0])
 GROUND_SHARE = 0.6
-DENSITY = 15.0  # ground points per square metre
+DENSITY = 15.0  # ground points per square meter
 OBJECT_POINTS = 1000
 
 
@@ -71,7 +71,7 @@ def terrain(x, y):
 
 
 def _object(kind, size, rng):
-    """``OBJECT_POINTS`` points on the surface of an object ``size`` metres across, its base at z = 0."""
+    """``OBJECT_POINTS`` points on the surface of an object ``size`` meters across, its base at z = 0."""
     n = OBJECT_POINTS
     if kind == 0:  # sphere
         d = rng.normal(size=(n, 3))

@@ -17,7 +17,7 @@ describe one by one (PCL's cluster-recognition recipe).
 Labels are int64, one per point, -1 for ground and points in no segment;
 segments are numbered 0, 1, ... the same way on every run. The tolerance,
 unless given, is derived from the point spacing, so the defaults work on
-LiDAR in metres and on CAD-scale scenes alike.
+LiDAR in meters and on CAD-scale scenes alike.
 """
 
 from ._cluster import euclidean_clusters, split_by_field

@@ -3,6 +3,7 @@
 import numbers
 
 import numpy as np
+
 from . import _cluster_fast
 from ._checks import check_field, check_scene, check_tolerance
 from ..utils._param_validation import Interval, validate_parameter
@@ -14,9 +15,9 @@ __all__ = ["MIN_POINTS", "MAX_POINTS", "TOLERANCE_FACTOR", "default_tolerance", 
 MIN_POINTS = [Interval(numbers.Integral, 1, None, closed="left")]
 #: ``max_points``: None (no limit) or the largest kept segment.
 MAX_POINTS = [None, Interval(numbers.Integral, 1, None, closed="left")]
-#: The derived tolerance, in units of the median nearest-neighbour distance.
+#: The derived tolerance, in units of the median nearest-neighbor distance.
 TOLERANCE_FACTOR = 5.0
-#: Points whose nearest-neighbour distance the derived tolerance is taken from.
+#: Points whose nearest-neighbor distance the derived tolerance is taken from.
 _SPACING_SAMPLE = 20000
 
 
@@ -28,7 +29,7 @@ def default_tolerance(points, owner="segment_scene"):
     evenly through the array (the same points on every call). The distances are
     found on a grid whose cells start at twice the spacing the points would have
     on the bounding box's two longest sides, and grow fourfold until more than
-    half of those points have a neighbour within one cell: the median is then exact.
+    half of those points have a neighbor within one cell: the median is then exact.
     """
     n = len(points)
     sample = np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.int64))
@@ -73,8 +74,8 @@ def check_sizes(min_points, max_points, owner):
     return int(min_points), None if max_points is None else int(max_points)
 
 
-#: Most cells along one axis: the floor of a cell coordinate below this is exact well within
-#: the margin left in the cell's side (see ``_cluster_fast``).
+#: Most cells along one axis: below this, the rounding of a cell coordinate (about 2**30 * 3.3e-16,
+#: 3.6e-7 of a cell, for each of two points) stays under the 1e-6 margin left in the cell's side.
 _MAX_CELLS = 2**30
 #: Below this many cells along every axis, the three coordinates pack into one int64 sort key.
 _PACKED = 2**21
@@ -129,7 +130,7 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
     tolerance : float, default=None
         Largest distance (excluded) between two connected points, > 0, in the
         units of ``points``. None derives it from the point spacing: five
-        times the median nearest-neighbour distance.
+        times the median nearest-neighbor distance.
     min_points : int, default=1
         Smallest kept cluster (PCL's ``setMinClusterSize``).
     max_points : int, default=None
@@ -222,12 +223,15 @@ def split_by_field(values, *, min_points=1):
     return split_field(field, int(min_points))
 
 
-def split_field(field, min_points):
-    """:func:`split_by_field` on a checked int64 field."""
+def split_field(field, min_points, max_points=None):
+    """:func:`split_by_field` on a checked int64 field; values held by more than ``max_points`` points
+    (None: no limit) give no segment either."""
     if field.size == 0:
         return np.empty(0, dtype=np.int64)
     uniq, inverse, counts = np.unique(field, return_inverse=True, return_counts=True)
     keep = counts >= min_points
+    if max_points is not None:
+        keep &= counts <= max_points
     number = np.full(len(uniq), -1, dtype=np.int64)
     number[keep] = np.arange(int(keep.sum()), dtype=np.int64)
     return number[inverse.reshape(-1)]

@@ -20,7 +20,7 @@ components do not depend on the number of threads.
 
 Cell coordinates come from :func:`cells`, through ``clamp_floor64``: bounded
 for every double; the caller checks that the scene spans at most ``2**30``
-cells along each axis (where the floor's rounding stays far below the margin
+cells along each axis (where the floor's rounding stays below the margin
 of ``s``).
 """
 from libc.math cimport sqrt
@@ -189,7 +189,7 @@ def connect(const double[:, ::1] pts, const int64_t[::1] order, const int64_t[::
 
 
 def slope_envelope(double[:, ::1] surface, double step, double diagonal):
-    """``surface = min over cells c' of (surface[c'] + chamfer distance)``, in place, 8-neighbour chamfer
+    """``surface = min over cells c' of (surface[c'] + chamfer distance)``, in place, 8-neighbor chamfer
     weights ``step`` (along an axis) and ``diagonal``: one raster pass forward, one backward (exact for a
     3x3 chamfer mask). Empty cells hold +inf."""
     cdef Py_ssize_t h = surface.shape[0], w = surface.shape[1], i, j

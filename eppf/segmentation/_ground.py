@@ -72,11 +72,11 @@ def _grid_surface(points, cell, max_slope):
     """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side).
 
     The cells' lowest points give the surface ``S(c) = min over cells c' of
-    (zmin(c') + max_slope * |c - c'|)`` (8-neighbour chamfer distances between
-    cell centres): objects standing on the ground leave it, roofs and other
+    (zmin(c') + max_slope * |c - c'|)`` (8-neighbor chamfer distances between
+    cell centers): objects standing on the ground leave it, roofs and other
     raised flat parts too where they are narrower than their height over
     ``max_slope``. The ground under a point is then ``S(c)`` carried from the
-    lowest point of its cell (the cell's centre for an empty cell) along the
+    lowest point of its cell (the cell's center for an empty cell) along the
     surface's gradient (central differences, at most ``max_slope`` steep).
     """
     xy = points[:, :2] - points[:, :2].min(axis=0)
@@ -99,7 +99,7 @@ def _grid_surface(points, cell, max_slope):
             gradient[axis] = np.gradient(surface, cell, axis=axis)
     steep = np.hypot(gradient[0], gradient[1])
     gradient *= np.minimum(1.0, max_slope / np.maximum(steep, 1e-300))
-    # where the ground surface is known: the lowest point of each cell, else the cell's centre
+    # where the ground surface is known: the lowest point of each cell, else the cell's center
     anchor = (np.indices(tuple(shape)).reshape(2, -1).T + 0.5) * cell
     lowest = np.flatnonzero(points[:, 2] == zmin[flat])
     anchor[flat[lowest]] = xy[lowest]

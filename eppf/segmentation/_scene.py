@@ -1,7 +1,5 @@
 """From a scene to its objects: ground removal, then clustering or a field's segments."""
 
-import numbers
-
 import numpy as np
 from sklearn.base import BaseEstimator, ClusterMixin
 
@@ -44,9 +42,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
     labels = np.full(len(pts), -1, dtype=np.int64)
     if keep.size:
         if field is not None:
-            labels[keep] = split_field(field[keep], min_points)
-        elif keep.size == 1:
-            labels[keep] = 0 if min_points <= 1 else -1
+            labels[keep] = split_field(field[keep], min_points, max_points)
         else:
             labels[keep] = number_segments(cluster_roots(pts[keep], tol, owner), min_points, max_points)
     return labels, mask, tol, method
@@ -77,11 +73,11 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
         and are not clustered), or "none" to keep every point. With ``by``,
         "auto" removes no ground (the field tells objects apart).
     tolerance : float, default=None
-        Clustering distance, > 0, in the units of the points (metres for
+        Clustering distance, > 0, in the units of the points (meters for
         LiDAR), also the scale of the ground model (RANSAC's inlier distance,
         the grid's cell; see :func:`remove_ground` with ``threshold=None``).
         None derives it from the point spacing (five times the median
-        nearest-neighbour distance), which suits LiDAR in metres and CAD-scale
+        nearest-neighbor distance), which suits LiDAR in meters and CAD-scale
         scenes alike.
     min_points : int, default=30
         Smallest kept segment; smaller ones (noise, bits of ground) get -1.

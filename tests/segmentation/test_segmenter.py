@@ -30,7 +30,7 @@ def test_separated_spheres_on_a_plane(spheres_on_plane):
 
 def test_the_same_scene_at_cad_scale_gives_the_same_segments(spheres_on_plane):
     points, truth = spheres_on_plane
-    local = (points - points.min(axis=0)) * 1e-3  # millimetre-sized
+    local = (points - points.min(axis=0)) * 1e-3  # millimeter-sized
     assert _agree(segment_scene(local), truth)
 
 
@@ -203,3 +203,16 @@ def test_eight_shapes_on_a_noisy_ground_in_projected_coordinates():
         mine = seg.labels_[truth == k]
         assert np.mean(mine == mine.max()) > 0.85  # the object's lowest points go with the ground
         assert (truth[seg.labels_ == mine.max()] == k).all()
+
+
+def test_field_segments_obey_max_points(spheres_on_plane):
+    points, truth = spheres_on_plane
+    labels = segment_scene(points, {"instance": truth}, by="instance", min_points=1, max_points=600)
+    np.testing.assert_array_equal(labels, truth)  # the floor's 20,000 points are one value too many
+
+
+def test_a_single_point_left_by_the_ground():
+    rng = np.random.default_rng(6)
+    points = np.vstack([floor(10.0, 5000, rng), [[5.0, 5.0, 3.0]]])
+    np.testing.assert_array_equal(np.flatnonzero(segment_scene(points, min_points=1) >= 0), [5000])
+    assert segment_scene(points).max() == -1
