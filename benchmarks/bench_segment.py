@@ -25,7 +25,7 @@ first. The process is pinned to at most 2 CPUs (the target: 1,000,000 points
 in at most 2 s on 2 cores).
 
 Measured on the 2-vCPU AMD EPYC (Zen 4) KVM guest, shared with other jobs
-(load average 11 to 12: this process got about a third of a core, hence
+(load average 14 at the start: this process got about a third of a core, hence
 wall times three times the CPU times), with ``python benchmarks/bench_segment.py``::
 
         points  wall s   cpu s  MB peak  B/point  found  objects   kept  ground  model  tolerance
