@@ -22,12 +22,31 @@ _CONSTRAINTS = {
 }
 #: Points the RANSAC hypotheses are scored on (a fixed random subset of the scene).
 _RANSAC_SAMPLE = 50000
+#: Most least-squares refits of the RANSAC plane (each on the band its noise leaves, till it settles).
+_REFITS = 10
+#: Narrowest band of a refit, as a share of RANSAC's inlier distance (a noise-free plane).
+_FLAT = 1e-3
 #: Share of the lowest-surface cells that must lie on the plane for "auto" to keep it.
 _PLANAR_SHARE = 0.9
 
 
+def _toward_objects(local, nrm, d, threshold):
+    """The plane ``local @ nrm = d`` with its normal turned toward the side holding more of the points
+    farther than ``threshold`` from it (the objects)."""
+    dist = local @ nrm - d
+    flip = np.count_nonzero(dist <= -threshold) > np.count_nonzero(dist >= threshold)
+    return (-nrm, -d) if flip else (nrm, d)
+
+
 def _plane_ransac(points, threshold, n_trials, rng):
-    """(unit normal, offset) of the plane with most points within ``threshold``, refined by least squares."""
+    """(unit normal toward the objects, offset, robust standard deviation of the ground's noise) of the plane
+    with most points within ``threshold``, refined by least squares.
+
+    The refinement fits the points within a band around the plane, from ``threshold`` down to twice the
+    noise's standard deviation: within ``threshold`` lie the lowest parts of the objects standing on the
+    plane, which would lift and tilt it. The deviation is measured under the plane only (1.4826 times the
+    median distance of the points less than ``threshold`` under it), where there are no objects.
+    """
     n = len(points)
     sample = points if n <= _RANSAC_SAMPLE else points[np.sort(rng.choice(n, _RANSAC_SAMPLE, replace=False))]
     center = sample.mean(axis=0)
@@ -48,24 +67,26 @@ def _plane_ransac(points, threshold, n_trials, rng):
         helper = np.eye(3)[np.argmin(np.abs(axis))]
         nrm = np.cross(axis, helper)
         best = (nrm / np.linalg.norm(nrm), 0.0)
-    nrm, d = best
-    for _ in range(2):  # least squares on the inliers, twice
-        inliers = local[np.abs(local @ nrm - d) < threshold]
+    nrm, d = _toward_objects(local, *best, threshold)
+    band, sigma = threshold, threshold / 4.0
+    for _ in range(_REFITS):
+        inliers = local[np.abs(local @ nrm - d) < band]
         if len(inliers) < 3:
             break
         mean = inliers.mean(axis=0)
         _, _, vt = np.linalg.svd(inliers - mean, full_matrices=False)
-        nrm = vt[2]
-        d = mean @ nrm
-    return nrm, d + center @ nrm
-
-
-def _signed_up(points, nrm, offset, threshold):
-    """Signed distances to the plane, positive on the side most of the off-plane points are (the objects)."""
-    dist = points @ nrm - offset
-    above = np.count_nonzero(dist >= threshold)
-    below = np.count_nonzero(dist <= -threshold)
-    return -dist if below > above else dist
+        nrm, d = _toward_objects(local, vt[2], mean @ vt[2], threshold)
+        height = local @ nrm - d
+        under = height[(height < 0) & (height > -threshold)]
+        if not under.size:  # nothing under the plane: a noise-free plane
+            sigma = 0.0
+            break
+        sigma = 1.4826 * float(np.median(-under))
+        narrower = min(band, max(2.0 * sigma, _FLAT * threshold))
+        if narrower > 0.99 * band:  # settled
+            break
+        band = narrower
+    return nrm, d + center @ nrm, sigma
 
 
 def _grid_surface(points, cell, max_slope):
@@ -109,15 +130,6 @@ def _grid_surface(points, cell, max_slope):
     return points[:, 2] - ground, flat, zmin, cell
 
 
-def plane_threshold(height, tolerance):
-    """The plane model's threshold when none is given: four robust standard deviations of the ground's
-    noise (1.4826 times the median distance to the plane of the points within ``tolerance`` of it),
-    kept between a quarter of ``tolerance`` and ``tolerance``."""
-    near = np.abs(height[np.abs(height) < tolerance])
-    sigma = 1.4826 * float(np.median(near)) if near.size else tolerance
-    return min(tolerance, max(4.0 * sigma, tolerance / 4.0))
-
-
 def grid_threshold(rise, tolerance):
     """The grid model's threshold when none is given: the median height above the ground surface plus
     four robust standard deviations (1.4826 times the median absolute deviation), of the points below
@@ -139,14 +151,15 @@ def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
 
     ``tolerance`` (positive) is the distance of the point spacing: RANSAC's inlier
     distance and the grid's cell. ``threshold`` is the height above the ground model
-    under which a point is ground; None: :func:`plane_threshold` for the plane,
-    :func:`grid_threshold` for the grid.
+    under which a point is ground; None: four of the noise's standard deviations
+    :func:`_plane_ransac` measures for the plane (kept between a quarter of ``tolerance`` and
+    ``tolerance``), :func:`grid_threshold` for the grid.
     """
     if method in ("plane", "auto"):
         fit_distance = tolerance if threshold is None else threshold
-        nrm, offset = _plane_ransac(points, fit_distance, n_trials, rng)
-        height = _signed_up(points, nrm, offset, fit_distance)
-        plane = height < (plane_threshold(height, tolerance) if threshold is None else threshold)
+        nrm, offset, sigma = _plane_ransac(points, fit_distance, n_trials, rng)
+        height = points @ nrm - offset
+        plane = height < (min(tolerance, max(4.0 * sigma, tolerance / 4.0)) if threshold is None else threshold)
         if method == "plane":
             return plane, "plane"
     rise, flat, zmin, cell = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
@@ -172,12 +185,17 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
 
     - ``"plane"``: the plane holding most points within ``threshold``, found by
       RANSAC (``n_trials`` planes through three random points, scored on up to
-      50,000 points of the scene) and refined by least squares on its
-      inliers. "Above" is the side holding more of the points off the
-      plane (the objects); ground is every point less than ``threshold``
-      above the plane, points below it (noise under a floor) included. For
-      floors, CAD scenes and flat or evenly tilted terrain, in any
-      orientation. Limit: the ground must be the largest plane of the scene.
+      50,000 points of the scene) and refined by least squares on the points
+      within a band around it, narrowed round after round to twice the
+      ground's noise (the lowest parts of the objects, also within
+      ``threshold`` of the plane, would lift and tilt it). "Above" is the side
+      holding more of the points off the plane (the objects); ground is every
+      point less than ``threshold`` above the plane, points below it (noise
+      under a floor) included. For floors, CAD scenes and flat or evenly
+      tilted terrain, in any orientation. Limits: the ground must be the
+      largest plane of the scene; the objects lose their parts lower than the
+      threshold, and a flat part lying on the ground (a plate, a sheet) is
+      taken for ground.
     - ``"grid"``: for terrain that is not one plane (aerial tiles): the lowest
       point of each cell of a horizontal grid (cells ``threshold`` wide, wider
       where that would make more than four cells per point), and the surface
@@ -206,10 +224,11 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
         cell. None starts from the tolerance :func:`euclidean_clusters` derives
         from the point spacing: RANSAC takes inliers within it and the grid's
         cells are that wide; the threshold is then the ground's noise, four
-        robust standard deviations (1.4826 times a median absolute deviation)
-        of the distances to the plane, or for the grid the median height above
-        its surface plus four such deviations, kept between a quarter of the
-        tolerance and the tolerance.
+        robust standard deviations of the distances to the plane (1.4826 times
+        the median distance of the points under it, where no object is), or
+        for the grid the median height above its surface plus four robust
+        standard deviations (1.4826 times a median absolute deviation), kept
+        between a quarter of the tolerance and the tolerance.
     max_slope : float, default=0.3
         Steepest ground of the grid model, as rise over run (0.3 is about 17
         degrees), >= 0.

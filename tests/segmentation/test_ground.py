@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from eppf.segmentation import remove_ground
-from eppf.segmentation._ground import ground_mask
+from eppf.segmentation._cluster import default_tolerance
+from eppf.segmentation._ground import _plane_ransac, ground_mask
 from tests.segmentation.conftest import floor, sphere
 
 
@@ -76,6 +77,49 @@ def test_the_plane_threshold_follows_the_noise():
     # a given threshold is used as it is
     mask = remove_ground(np.vstack([ground, ball]), method="plane", threshold=0.2)
     assert ball[~mask[len(ground):], 2].min() >= 0.2 - 0.03
+
+
+def _objects_on_a_floor(rng, noise):
+    """An 8 m floor (6,400 points, truth -1) and as many points again on 8 objects standing on it (truth 0-7),
+    their lowest parts within a point spacing of the floor: 4 boxes with a bottom plate at the floor's height,
+    4 L-brackets (a plate on the floor and a plate standing on its edge); normal noise of standard deviation
+    ``noise`` on every coordinate of the objects and on the floor's heights."""
+    parts, truth = [floor(8.0, 6400, rng, noise=noise)], [np.full(6400, -1)]
+    for k in range(8):
+        x, y = 1.0 + 2.0 * (k % 4), 2.0 + 4.0 * (k // 4)
+        if k < 4:  # a box 1 m wide and 0.5 m high: walls, top and bottom
+            cloud = rng.uniform([-0.5, -0.5, 0.0], [0.5, 0.5, 0.5], size=(800, 3))
+            face = rng.integers(0, 6, 800)
+            cloud[face < 4, face[face < 4] // 2] = np.where(face[face < 4] % 2, 0.5, -0.5)
+            cloud[face == 4, 2], cloud[face == 5, 2] = 0.0, 0.5
+        else:  # an L-bracket: a 1 m x 0.6 m plate on the floor, another standing on its edge
+            cloud = rng.uniform([-0.5, -0.3, 0.0], [0.5, 0.3, 0.6], size=(800, 3))
+            cloud[:400, 2] = 0.0
+            cloud[400:, 1] = -0.3
+        parts.append(cloud + [x, y, 0.0] + rng.normal(0, noise, cloud.shape))  # the scanner's noise
+        truth.append(np.full(800, k))
+    return np.vstack(parts), np.concatenate(truth)
+
+
+def test_the_objects_lowest_parts_neither_lift_nor_widen_the_plane():
+    # within the tolerance of the plane lie the objects' lowest parts, as many points as the floor's: the
+    # least-squares refit and the noise under the plane leave them out
+    noise = 0.01
+    points, truth = _objects_on_a_floor(np.random.default_rng(6), noise)
+    tolerance = default_tolerance(points, "test")
+    assert tolerance > 10 * noise  # the objects' lowest 10 cm within RANSAC's inlier distance
+    nrm, offset, sigma = _plane_ransac(points, tolerance, 100, np.random.RandomState(0))
+    assert nrm[2] > 1 - 1e-6 and abs(offset) < 0.2 * noise
+    assert 0.9 * noise < sigma < 1.1 * noise
+    mask = remove_ground(points, method="plane")
+    assert mask[truth == -1].mean() > 0.999
+    # the objects keep all but their lowest 5 cm (four standard deviations of the noise, and the offset)
+    objects, height = ~mask[truth >= 0], points[truth >= 0, 2]
+    assert objects[height > 5 * noise].all() and not objects[height < 3 * noise].any()
+    # the limit: a plate lying on the floor is taken for ground, the bracket keeps its standing plate
+    for k in range(4, 8):
+        bracket = ~mask[truth == k]
+        assert not bracket[:400].any() and bracket[400:].mean() > 0.9
 
 
 def test_noise_below_the_floor_is_ground():
