@@ -5,7 +5,8 @@ import sys
 import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_output, class_name, emit,
-                      load_model, model_sampling, progress_of, read_inputs, register, set_runtime, warn_tiny)
+                      fewest_points, load_model, model_sampling, progress_of, read_inputs, register, set_runtime,
+                      warn_tiny)
 
 __all__ = ["run_predict"]
 
@@ -65,22 +66,42 @@ def run_predict(args, out=None):
     model = saved["model"]
     set_runtime(model, args.n_jobs, progress_of(args))
     objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=args.on_error,
-                          progress=progress_of(args), cmd=cmd, labelled=False)
-    if hasattr(model, "named_steps") and "descriptor" in model.named_steps:
-        warn_tiny(objects.clouds, objects.ids, model.named_steps["descriptor"], cmd, "the model's descriptor")
+                          progress=progress_of(args), cmd=cmd, labelled=False, min_points=fewest_points(model))
+    unreliable = warn_unreliable(model, objects.clouds, objects.ids, cmd)
     labels, proba, dist, neighbour = _evidence(model, objects.clouds, saved)
-    header = ["file", "class"]
-    columns = []
+    header, columns = evidence_columns(proba, dist, neighbour)
+    rows = [(str(i), class_name(saved, lab), *[c[k] for c in columns])
+            for k, (i, lab) in enumerate(zip(objects.ids, labels))]
+    header, rows = mark_unreliable(header, rows, [unreliable.get(str(i), "") for i in objects.ids], args.output)
+    emit(rows, header, args.output, out)
+    return np.asarray(labels)
+
+
+def warn_unreliable(model, clouds, ids, cmd):
+    """Warn about the clouds too small for the model's descriptor; ``{id: why}`` of them."""
+    if hasattr(model, "named_steps") and "descriptor" in model.named_steps:
+        return warn_tiny(clouds, ids, model.named_steps["descriptor"], cmd, "the model's descriptor")
+    return {}
+
+
+def evidence_columns(proba, dist, neighbour):
+    """The header and columns of the evidence that :func:`_evidence` found."""
+    header, columns = ["file", "class"], []
     if any(p is not None for p in proba):
         header.append("probability")
         columns.append(proba)
     if any(d is not None for d in dist):
         header += ["distance", "neighbour"]
         columns += [dist, neighbour]
-    rows = [(str(i), class_name(saved, lab), *[c[k] for c in columns])
-            for k, (i, lab) in enumerate(zip(objects.ids, labels))]
-    emit(rows, header, args.output, out)
-    return np.asarray(labels)
+    return header, columns
+
+
+def mark_unreliable(header, rows, why, output):
+    """Rows with an ``unreliable`` column (empty, or why the row's result is unreliable): always in a CSV
+    (one header for scripts), in a printed table only when a row is marked."""
+    if not output and not any(why):
+        return header, rows
+    return header + ["unreliable"], [(*row, w) for row, w in zip(rows, why)]
 
 
 register(Command(
