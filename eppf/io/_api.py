@@ -102,10 +102,11 @@ def _check_vertices(mesh, path, owner):
 
 
 def _guard(owner, path, fmt, func, *args, **kwargs):
-    """Run a reader; every failure that is not already a FileFormatError or OSError becomes one."""
+    """Run a reader; every failure that is not already a FileFormatError or OSError becomes one (an ImportError
+    naming a missing optional package passes as it is)."""
     try:
         return func(*args, **kwargs)
-    except (FileFormatError, OSError):
+    except (FileFormatError, OSError, ImportError):
         raise
     except MemoryError:
         raise FileFormatError(f"{owner}: {path!r}: reading this {fmt.name} file needs more memory than is free") from None

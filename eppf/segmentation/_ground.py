@@ -1,0 +1,200 @@
+"""Ground removal: a RANSAC plane, or a slope-limited lowest surface on a grid."""
+
+import numbers
+
+import numpy as np
+from sklearn.utils import check_random_state
+
+from ._checks import check_scene
+from ._cluster import default_tolerance
+from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions, validate_parameter
+
+__all__ = ["GROUND_METHODS", "ground_mask", "remove_ground"]
+
+GROUND_METHODS = ("auto", "plane", "grid")
+_CONSTRAINTS = {
+    "method": [StrOptions(GROUND_METHODS)],
+    "threshold": [None, Interval(numbers.Real, 0, None, closed="neither")],
+    "max_slope": [Interval(numbers.Real, 0, None, closed="left")],
+    "n_trials": [Interval(numbers.Integral, 1, 100000, closed="both")],
+    "random_state": RANDOM_STATE,
+}
+#: Points the RANSAC hypotheses are scored on (a fixed random subset of the scene).
+_RANSAC_SAMPLE = 50000
+#: Share of the lowest-surface cells that must lie on the plane for "auto" to keep it.
+_PLANAR_SHARE = 0.9
+
+
+def _plane_ransac(points, threshold, n_trials, rng):
+    """(unit normal, offset) of the plane with most points within ``threshold``, refined by least squares."""
+    n = len(points)
+    sample = points if n <= _RANSAC_SAMPLE else points[np.sort(rng.choice(n, _RANSAC_SAMPLE, replace=False))]
+    center = sample.mean(axis=0)
+    local = sample - center
+    picks = rng.randint(0, len(sample), size=(n_trials, 3))
+    a, b, c = local[picks[:, 0]], local[picks[:, 1]], local[picks[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 0
+    best, best_count = None, -1
+    for k in np.flatnonzero(ok):
+        nrm = normals[k] / length[k]
+        count = int(np.count_nonzero(np.abs(local @ nrm - a[k] @ nrm) < threshold))
+        if count > best_count:
+            best, best_count = (nrm, a[k] @ nrm), count
+    if best is None:  # every triple collinear: the points lie on a line; any plane through it
+        axis = local[np.argmax(np.linalg.norm(local, axis=1))]
+        helper = np.eye(3)[np.argmin(np.abs(axis))]
+        nrm = np.cross(axis, helper)
+        best = (nrm / np.linalg.norm(nrm), 0.0)
+    nrm, d = best
+    for _ in range(2):  # least squares on the inliers, twice
+        inliers = local[np.abs(local @ nrm - d) < threshold]
+        if len(inliers) < 3:
+            break
+        mean = inliers.mean(axis=0)
+        _, _, vt = np.linalg.svd(inliers - mean, full_matrices=False)
+        nrm = vt[2]
+        d = mean @ nrm
+    return nrm, d + center @ nrm
+
+
+def _signed_up(points, nrm, offset, threshold):
+    """Signed distances to the plane, positive on the side most of the off-plane points are (the objects)."""
+    dist = points @ nrm - offset
+    above = np.count_nonzero(dist >= threshold)
+    below = np.count_nonzero(dist <= -threshold)
+    return -dist if below > above else dist
+
+
+def _grid_surface(points, cell, max_slope):
+    """(cell of each point, lowest surface per cell): the slope-limited envelope of the cells' lowest points.
+
+    The surface is ``S(c) = min over cells c' of (zmin(c') + max_slope * |c - c'|)``
+    with 8-neighbour chamfer distances between cell centres.
+    """
+    xy = points[:, :2] - points[:, :2].min(axis=0)
+    ij = np.floor(xy / cell).astype(np.int64)
+    shape = ij.max(axis=0) + 1
+    flat = ij[:, 0] * shape[1] + ij[:, 1]
+    zmin = np.full(int(shape[0] * shape[1]), np.inf)
+    np.minimum.at(zmin, flat, points[:, 2])
+    surface = zmin.reshape(tuple(shape))
+    steps = [(1, 0, 1.0), (0, 1, 1.0), (1, 1, np.sqrt(2)), (1, -1, np.sqrt(2))]
+    while True:
+        before = surface.copy()
+        for di, dj, w in steps:
+            for s in (1, -1):
+                shifted = np.full_like(surface, np.inf)
+                src = surface[max(0, -s * di):surface.shape[0] - max(0, s * di) or None,
+                              max(0, -s * dj):surface.shape[1] - max(0, s * dj) or None]
+                shifted[max(0, s * di):max(0, s * di) + src.shape[0], max(0, s * dj):max(0, s * dj) + src.shape[1]] = src
+                np.minimum(surface, shifted + max_slope * cell * w, out=surface)
+        if np.array_equal(before, surface):
+            break
+    return flat, surface.reshape(-1)
+
+
+def ground_mask(points, method, threshold, max_slope, n_trials, rng):
+    """The ground mask of checked points (float64, (n, 3)), with a resolved positive ``threshold``.
+
+    Returns (mask, method used).
+    """
+    if method in ("plane", "auto"):
+        nrm, offset = _plane_ransac(points, threshold, n_trials, rng)
+        height = _signed_up(points, nrm, offset, threshold)
+        plane = height < threshold
+        if method == "plane":
+            return plane, "plane"
+    cell = threshold
+    flat, surface = _grid_surface(points, cell, max_slope)
+    grid = points[:, 2] - surface[flat] < threshold + max_slope * cell
+    if method == "grid":
+        return grid, "grid"
+    # auto: the plane where the lowest surface is planar (a floor, flat or tilted ground), else the grid
+    order = np.lexsort((points[:, 2], flat))
+    lowest = order[np.r_[True, flat[order][1:] != flat[order][:-1]]]  # the lowest point of each occupied cell
+    lowest = lowest[grid[lowest]]
+    on_plane = np.abs(height[lowest]) < threshold + max_slope * cell
+    share = np.count_nonzero(on_plane) / max(1, len(lowest))
+    return (plane, "plane") if share >= _PLANAR_SHARE else (grid, "grid")
+
+
+def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_trials=100, random_state=0):
+    """Find the ground points of a scene.
+
+    Two models of the ground:
+
+    - ``"plane"``: the plane holding most points within ``threshold``, found by
+      RANSAC (``n_trials`` planes through three random points, scored on up to
+      50,000 points of the scene) and refined by least squares on its
+      inliers. Ground is every point less than ``threshold`` above it (points
+      below it, noise under a floor, count as ground). For floors, tables,
+      CAD scenes and flat or evenly tilted terrain, in any orientation.
+    - ``"grid"``: for terrain that is not one plane (aerial tiles): the lowest
+      point of each cell of a horizontal grid (cells ``threshold`` wide), and
+      the surface that rises at most ``max_slope`` (rise over run) from the
+      lowest points around it; ground is every point less than ``threshold +
+      max_slope * threshold`` above that surface. The vertical axis is z.
+      Limits: an object wider than twice its height divided by ``max_slope``
+      (a large flat roof) is taken for ground at its centre, and terrain
+      steeper than ``max_slope`` is partly left out of the ground.
+    - ``"auto"``: the plane when at least 90% of the grid's lowest-surface
+      cells lie on it, else the grid.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3) or (n_points, 6)
+        The scene (normals, when given, are ignored); at least two points,
+        all finite.
+    method : {"auto", "plane", "grid"}, default="auto"
+        The ground model, see above.
+    threshold : float, default=None
+        Height above the ground model under which a point is ground, > 0, in
+        the units of the points. None takes the tolerance
+        :func:`euclidean_clusters` derives from the point spacing, so that no
+        point left out of the ground is closer than it to the ground's points
+        on a flat floor.
+    max_slope : float, default=0.3
+        Steepest ground of the grid model, as rise over run (0.3 is about 17
+        degrees), >= 0.
+    n_trials : int, default=100
+        RANSAC's planes tried (between 1 and 100,000).
+    random_state : int, RandomState instance or None, default=0
+        Seed of RANSAC's draws; the default gives the same ground on every call.
+
+    Returns
+    -------
+    ground : ndarray of shape (n_points,), dtype bool
+        True for the ground points.
+
+    Raises
+    ------
+    ValueError
+        If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
+        values, are fewer than two or all identical, or a parameter is out of
+        range.
+
+    See Also
+    --------
+    segment_scene : Ground removal followed by clustering.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.segmentation import remove_ground
+    >>> rng = np.random.default_rng(0)
+    >>> floor = np.column_stack([rng.uniform(0, 10, (2000, 2)), rng.normal(0, 0.01, 2000)])
+    >>> box = rng.uniform([4, 4, 1.0], [5, 5, 2.0], size=(300, 3))
+    >>> ground = remove_ground(np.vstack([floor, box]), method="plane")
+    >>> int(ground[:2000].sum()), int(ground[2000:].sum())
+    (2000, 0)
+    """
+    owner = "remove_ground"
+    for name, value in (("method", method), ("threshold", threshold), ("max_slope", max_slope),
+                        ("n_trials", n_trials), ("random_state", random_state)):
+        validate_parameter(value, _CONSTRAINTS[name], name=name, owner=owner)
+    pts = check_scene(points, owner)
+    thr = default_tolerance(pts) if threshold is None else float(threshold)
+    mask, _ = ground_mask(pts, method, thr, float(max_slope), int(n_trials), check_random_state(random_state))
+    return mask
