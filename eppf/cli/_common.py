@@ -340,9 +340,11 @@ def fewest_points(*estimators):
     return need
 
 
-def too_few_points(n, min_points, name):
-    """The message of a cloud ``name`` of ``n`` points, fewer than the ``min_points`` a descriptor needs."""
-    return f"{name}: {count(n, 'point')}, too few to describe (at least {min_points} are needed)"
+def too_few_points(n, min_points, name=None):
+    """The message of a cloud (``name``, when given) of ``n`` points, fewer than the ``min_points`` a
+    descriptor needs."""
+    text = f"{count(n, 'point')}, too few to describe (at least {min_points} are needed)"
+    return text if name is None else f"{name}: {text}"
 
 
 def check_enough_points(n, min_points, name):
