@@ -350,8 +350,10 @@ def read_pcd_fields(path, data, owner):
             values = np.ascontiguousarray(_ascii_field(values, base, name, path, owner))
         out[name] = values
         col += width
-    with np.errstate(invalid="ignore"):
-        points = np.column_stack([np.asarray(cols[f], dtype=np.float64).reshape(n_points, -1)[:, 0] for f in "xyz"])
+    declared = {name: base for name, (base, _) in zip(fields, types)}
+    with np.errstate(invalid="ignore", over="ignore"):  # ASCII coordinates rounded to their declared type
+        points = np.column_stack([np.asarray(cols[f], dtype=declared[f]).reshape(n_points, -1)[:, 0]
+                                  .astype(np.float64) for f in "xyz"])
     return points, out
 
 

@@ -18,11 +18,17 @@ def check_scene(points, owner):
 
     Six-column input (points and normals) is accepted; the normals are dropped.
     Raises TypeError/ValueError naming ``owner`` for a wrong type or shape, an
-    empty scene, a single point, NaN or infinite coordinates, or a scene whose
-    points are all identical.
+    empty scene, a single point, NaN or infinite coordinates, a scene whose
+    points are all identical, or one whose extent overflows float64.
     """
     arr = check_point_cloud(points, owner=owner, min_points=2, allow_normals=True)
-    return np.ascontiguousarray(arr[:, :3])
+    xyz = np.ascontiguousarray(arr[:, :3])
+    with np.errstate(over="ignore"):
+        extent = xyz.max(axis=0) - xyz.min(axis=0)
+    if not np.isfinite(extent).all():
+        raise ValueError(f"{owner}: the scene's extent overflows float64 (coordinates from {xyz.min():.6g} to "
+                         f"{xyz.max():.6g})")
+    return xyz
 
 
 def check_tolerance(tolerance, owner):

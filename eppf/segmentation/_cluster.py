@@ -3,10 +3,7 @@
 import numbers
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
-
+from . import _cluster_fast
 from ._checks import check_field, check_scene, check_tolerance
 from ..utils._param_validation import Interval, validate_parameter
 
@@ -23,28 +20,27 @@ TOLERANCE_FACTOR = 5.0
 _SPACING_SAMPLE = 20000
 
 
-def default_tolerance(points):
+def default_tolerance(points, owner="segment_scene"):
     """The tolerance derived from the point spacing of ``points`` (float64, shape (n, 3), n >= 2).
 
     ``TOLERANCE_FACTOR`` times the median distance from a point to its nearest
-    other point, over up to 20,000 points spread evenly through the array (the
-    same points on every call). Coincident points are left out of the median;
-    a positive value is always returned for a scene of two distinct points or more.
+    other point (coincident points left out), over up to 20,000 points spread
+    evenly through the array (the same points on every call). The distances are
+    found on a grid whose cells start at twice the spacing the points would have
+    on the bounding box's two longest sides, and grow fourfold until more than
+    half of those points have a neighbour within one cell: the median is then exact.
     """
     n = len(points)
-    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
-    sample = points[np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.int64))]
-    k = 2
+    sample = np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.int64))
+    extent = np.sort(points.max(axis=0) - points.min(axis=0))
+    side = 2.0 * float(np.sqrt(extent[2]) * np.sqrt(max(extent[1], extent[2] * 1e-6)) / np.sqrt(n))
+    middle = len(sample) // 2
     while True:
-        dist, _ = tree.query(sample, k=min(k, n))
-        nearest = dist[:, 1:]
-        positive = np.where(nearest > 0, nearest, np.inf).min(axis=1)
-        found = positive[np.isfinite(positive)]
-        if found.size >= max(1, len(sample) // 2) or k >= n:
-            break
-        k = min(4 * k, n)  # many duplicates: look further
-    spacing = float(np.median(found)) if found.size else float(np.ptp(points, axis=0).max())
-    return TOLERANCE_FACTOR * spacing
+        dist = _cluster_fast.nearest_distances(points, *grid_cells(points, side, owner), sample)
+        spacing = float(np.partition(dist, middle)[middle])
+        if spacing <= side:
+            return TOLERANCE_FACTOR * spacing
+        side *= 4.0
 
 
 def number_segments(roots, min_points, max_points):
@@ -77,13 +73,44 @@ def check_sizes(min_points, max_points, owner):
     return int(min_points), None if max_points is None else int(max_points)
 
 
-def cluster_roots(points, tolerance):
-    """One component id per point: points closer than ``tolerance`` share one."""
-    tree = cKDTree(points)
-    pairs = tree.query_pairs(np.nextafter(tolerance, 0), output_type="ndarray")
-    n = len(points)
-    graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
+#: Most cells along one axis: the floor of a cell coordinate below this is exact well within
+#: the margin left in the cell's side (see ``_cluster_fast``).
+_MAX_CELLS = 2**30
+#: Below this many cells along every axis, the three coordinates pack into one int64 sort key.
+_PACKED = 2**21
+
+
+def grid_cells(points, side, owner):
+    """The cubic cells of ``side`` holding ``points``: (cell of each point, order, start, occupied cells).
+
+    ``order`` sorts the points by cell lexicographically; the points of the
+    ``a``-th occupied cell are ``order[start[a]:start[a + 1]]``. Raises a
+    ValueError naming ``owner`` when the scene spans more than 2**30 cells
+    along an axis (a tolerance too small for the scene's extent).
+    """
+    lo = points.min(axis=0)
+    with np.errstate(over="ignore"):
+        span = (points.max(axis=0) - lo) / side
+    if not (span < _MAX_CELLS).all():
+        axis = "xyz"[int(np.argmax(~(span < _MAX_CELLS)))]
+        raise ValueError(f"{owner}: the scene spans more than 2**30 cells of the tolerance along {axis} "
+                         f"(extent {np.ptp(points, axis=0).max():.6g}, cell {side:.6g}); give a larger tolerance "
+                         f"or split the scene")
+    cells = _cluster_fast.cells(points, lo[0], lo[1], lo[2], 1.0 / side, _MAX_CELLS)
+    if (span < _PACKED - 1).all():
+        # the order of the points within a cell does not matter: any sort will do
+        order = np.argsort((cells[:, 0] * _PACKED + cells[:, 1]) * _PACKED + cells[:, 2])
+    else:
+        order = np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))
+    start, occupied = _cluster_fast.runs(cells, order)
+    return cells, order, start, occupied
+
+
+def cluster_roots(points, tolerance, owner="euclidean_clusters"):
+    """One component id per point (a point index): points closer than ``tolerance`` share one."""
+    side = tolerance / np.sqrt(3.0) * (1.0 - 1e-6)  # any two points of a cell are closer than the tolerance
+    _, order, start, occupied = grid_cells(points, side, owner)
+    return _cluster_fast.connect(points, order, start, occupied, tolerance)
 
 
 def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None):
@@ -146,7 +173,7 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
     tol = check_tolerance(tolerance, owner)
     min_points, max_points = check_sizes(min_points, max_points, owner)
     if tol is None:
-        tol = default_tolerance(pts)
+        tol = default_tolerance(pts, owner)
     return number_segments(cluster_roots(pts, tol), min_points, max_points)
 
 

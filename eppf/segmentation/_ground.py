@@ -5,6 +5,7 @@ import numbers
 import numpy as np
 from sklearn.utils import check_random_state
 
+from . import _cluster_fast
 from ._checks import check_scene
 from ._cluster import default_tolerance
 from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions, validate_parameter
@@ -68,31 +69,26 @@ def _signed_up(points, nrm, offset, threshold):
 
 
 def _grid_surface(points, cell, max_slope):
-    """(cell of each point, lowest surface per cell): the slope-limited envelope of the cells' lowest points.
+    """(cell of each point, lowest z per cell, lowest surface per cell, cell side): the slope-limited envelope of the cells' lowest points.
 
     The surface is ``S(c) = min over cells c' of (zmin(c') + max_slope * |c - c'|)``
     with 8-neighbour chamfer distances between cell centres.
     """
     xy = points[:, :2] - points[:, :2].min(axis=0)
-    ij = np.floor(xy / cell).astype(np.int64)
-    shape = ij.max(axis=0) + 1
+    extent = xy.max(axis=0)
+    budget = max(4.0 * len(points), 2.0**20)  # memory linear in the points, whatever the cell
+    with np.errstate(over="ignore"):
+        cells = (extent[0] / cell + 1.0) * (extent[1] / cell + 1.0)
+    if not cells <= budget:  # wider cells, as many as the budget
+        cell = max(cell, float(np.sqrt(extent[0] + cell) * np.sqrt(extent[1] + cell) / np.sqrt(budget)))
+    shape = np.minimum(np.floor(extent / cell), budget).astype(np.int64) + 1
+    ij = np.minimum(np.floor(xy / cell), shape - 1).astype(np.int64)
     flat = ij[:, 0] * shape[1] + ij[:, 1]
     zmin = np.full(int(shape[0] * shape[1]), np.inf)
     np.minimum.at(zmin, flat, points[:, 2])
-    surface = zmin.reshape(tuple(shape))
-    steps = [(1, 0, 1.0), (0, 1, 1.0), (1, 1, np.sqrt(2)), (1, -1, np.sqrt(2))]
-    while True:
-        before = surface.copy()
-        for di, dj, w in steps:
-            for s in (1, -1):
-                shifted = np.full_like(surface, np.inf)
-                src = surface[max(0, -s * di):surface.shape[0] - max(0, s * di) or None,
-                              max(0, -s * dj):surface.shape[1] - max(0, s * dj) or None]
-                shifted[max(0, s * di):max(0, s * di) + src.shape[0], max(0, s * dj):max(0, s * dj) + src.shape[1]] = src
-                np.minimum(surface, shifted + max_slope * cell * w, out=surface)
-        if np.array_equal(before, surface):
-            break
-    return flat, surface.reshape(-1)
+    surface = zmin.reshape(tuple(shape)).copy()
+    _cluster_fast.slope_envelope(surface, max_slope * cell, max_slope * cell * np.sqrt(2.0))
+    return flat, zmin, surface.reshape(-1), cell
 
 
 def ground_mask(points, method, threshold, max_slope, n_trials, rng):
@@ -106,17 +102,17 @@ def ground_mask(points, method, threshold, max_slope, n_trials, rng):
         plane = height < threshold
         if method == "plane":
             return plane, "plane"
-    cell = threshold
-    flat, surface = _grid_surface(points, cell, max_slope)
+    flat, zmin, surface, cell = _grid_surface(points, threshold, max_slope)
     grid = points[:, 2] - surface[flat] < threshold + max_slope * cell
     if method == "grid":
         return grid, "grid"
     # auto: the plane where the lowest surface is planar (a floor, flat or tilted ground), else the grid
-    order = np.lexsort((points[:, 2], flat))
-    lowest = order[np.r_[True, flat[order][1:] != flat[order][:-1]]]  # the lowest point of each occupied cell
-    lowest = lowest[grid[lowest]]
-    on_plane = np.abs(height[lowest]) < threshold + max_slope * cell
-    share = np.count_nonzero(on_plane) / max(1, len(lowest))
+    lowest = np.flatnonzero((points[:, 2] == zmin[flat]) & grid)  # each ground cell's lowest point(s)
+    ground_cells = np.zeros(len(zmin), dtype=bool)
+    ground_cells[flat[lowest]] = True
+    planar = np.zeros(len(zmin), dtype=bool)
+    planar[flat[lowest]] = np.abs(height[lowest]) < threshold + max_slope * cell
+    share = np.count_nonzero(planar) / max(1, np.count_nonzero(ground_cells))
     return (plane, "plane") if share >= _PLANAR_SHARE else (grid, "grid")
 
 
@@ -195,6 +191,6 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
                         ("n_trials", n_trials), ("random_state", random_state)):
         validate_parameter(value, _CONSTRAINTS[name], name=name, owner=owner)
     pts = check_scene(points, owner)
-    thr = default_tolerance(pts) if threshold is None else float(threshold)
+    thr = default_tolerance(pts, owner) if threshold is None else float(threshold)
     mask, _ = ground_mask(pts, method, thr, float(max_slope), int(n_trials), check_random_state(random_state))
     return mask

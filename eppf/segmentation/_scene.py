@@ -6,7 +6,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClusterMixin
 
 from ._checks import TOLERANCE, check_field, check_scene
-from ._cluster import MAX_POINTS, MIN_POINTS, check_sizes, cluster_roots, default_tolerance, number_segments, split_field
+from ._cluster import (
+    MAX_POINTS, MIN_POINTS, check_sizes, cluster_roots, default_tolerance, number_segments, split_field,
+)
 from ._ground import ground_mask
 from ..utils._param_validation import Options, StrOptions, validate_parameter
 
@@ -32,7 +34,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
         field = check_field(fields[by], len(pts), owner, name=f"field {by!r}")
     tol = float(tolerance) if tolerance is not None else None
     if tol is None and (by is None or ground not in ("none", "auto")):
-        tol = default_tolerance(pts)
+        tol = default_tolerance(pts, owner)
     method = "none" if ground == "none" or (ground == "auto" and by is not None) else ground
     if method == "none":
         mask = np.zeros(len(pts), dtype=bool)
@@ -46,7 +48,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
         elif keep.size == 1:
             labels[keep] = 0 if min_points <= 1 else -1
         else:
-            labels[keep] = number_segments(cluster_roots(pts[keep], tol), min_points, max_points)
+            labels[keep] = number_segments(cluster_roots(pts[keep], tol, owner), min_points, max_points)
     return labels, mask, tol, method
 
 
