@@ -260,14 +260,32 @@ def file_seeds(random_state, root, files):
     return loader_seeds(random_state, root, files)
 
 
+#: The index CSV that ``eppf segment`` writes beside the object files, and the start of its header.
+SEGMENT_INDEX = "segments.csv"
+SEGMENT_INDEX_HEADER = "segment,file,n_points,x,y,z"
+
+
+def is_segment_index(path):
+    """True for the index of ``eppf segment`` (a CSV, which is also a point file extension): a folder of
+    segments is read without it."""
+    if os.path.basename(path) != SEGMENT_INDEX:
+        return False
+    try:
+        with open(path, newline="") as fh:
+            return fh.readline().startswith(SEGMENT_INDEX_HEADER)
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 def find_files(item):
-    """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder."""
+    """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder. A folder's
+    ``eppf segment`` index is left out."""
     from ..datasets._folder import object_files
     from ..io import supported_extensions
 
     path = Path(item)
     if path.is_dir():
-        found = object_files(path)
+        found = [f for f in object_files(path) if not is_segment_index(f)]
         if not found:
             raise ValueError(f"no point cloud or mesh files ({' '.join(supported_extensions())}, any case) in the "
                              f"folder {item}")

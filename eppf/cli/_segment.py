@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..utils._atomic import atomic_write
-from ._common import Command, add_runtime, count, positive_float, positive_int, progress_of, register
+from ._common import (SEGMENT_INDEX, SEGMENT_INDEX_HEADER, Command, add_runtime, count, positive_float,
+                      positive_int, progress_of, register)
 
 __all__ = ["run_segment"]
 
@@ -23,8 +24,6 @@ __all__ = ["run_segment"]
 FIELD_FORMATS = ("las", "laz", "pcd", "ply")
 #: Format of the segment files of a scene in another format (text, E57, NumPy): it keeps every field.
 FALLBACK_FORMAT = "ply"
-#: The index file written beside the segment files.
-INDEX_NAME = "segments.csv"
 #: Field names of a scene's normals, as the readers give them (PCD/NumPy, PLY).
 NORMAL_FIELDS = (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"))
 #: Smallest segment kept by default (segment_scene's default): smaller ones are noise or bits of ground.
@@ -60,7 +59,7 @@ def add_arguments(p):
                                                   "or NumPy; every extension of eppf.io.supported_extensions() "
                                                   "but meshes)")
     p.add_argument("-o", "--output", required=True, metavar="FOLDER",
-                   help=f"a new or empty folder for one file per object and the index {INDEX_NAME}")
+                   help=f"a new or empty folder for one file per object and the index {SEGMENT_INDEX}")
     add_segmentation(p)
     p.add_argument("--format", choices=FIELD_FORMATS, default=None,
                    help="format of the object files (default: the scene's when it is LAS, LAZ, PCD or PLY, "
@@ -257,7 +256,7 @@ def run_segment(args, out=None):
     os.makedirs(folder, exist_ok=True)
     width = max(3, len(str(max(scene.n_segments - 1, 0))))
     by = args.by
-    header = ["segment", "file", "n_points", "x", "y", "z"] + ([by] if by else [])
+    header = SEGMENT_INDEX_HEADER.split(",") + ([by] if by else [])
     rows = []
     for k in progress_bar(range(scene.n_segments), desc="writing", unit="obj", enabled=progress):
         idx = scene.indices(k)
@@ -268,7 +267,7 @@ def run_segment(args, out=None):
         if by:
             row.append(scene.fields[by][idx[0]].item())
         rows.append(row)
-    index = os.path.join(folder, INDEX_NAME)
+    index = os.path.join(folder, SEGMENT_INDEX)
     with atomic_write(index, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(header)
@@ -283,7 +282,7 @@ register(Command(
     "Split a scene (a LiDAR tile, a room scan) into objects the way PCL's cluster-recognition recipe does: remove "
     "the ground, then connect points closer than --tolerance (Euclidean clustering; clusters of --min-points to "
     "--max-points points are kept). With --by FIELD the segments come from an integer field of the file instead. "
-    f"Each object is written with every field of the scene, in the file's coordinates, and {INDEX_NAME} lists "
+    f"Each object is written with every field of the scene, in the file's coordinates, and {SEGMENT_INDEX} lists "
     "them: segment, file, n_points and the centroid x, y, z.",
     add_arguments, run_segment,
 ))
