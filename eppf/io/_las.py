@@ -70,7 +70,8 @@ def _fail(owner, path, where, what):
 def check_header(fh, size, path, owner):
     """Validate a LAS/LAZ file's header, VLRs and point-data extents against ``size``.
 
-    Returns ``(point_count, record_length, compressed)``; raises
+    Returns ``(point_count, record_length, compressed, point format, laszip VLR data, offset to the points,
+    offset of the LAZ chunk table)``; raises
     FileFormatError naming the byte of the first problem.
     """
     head = fh.read(375)
@@ -103,7 +104,7 @@ def check_header(fh, size, path, owner):
     # the VLRs, each inside the header region before the points
     pos = header_size
     extra = 0
-    laszip = False
+    laszip = None
     for k in range(n_vlrs):
         if pos + _VLR_HEADER > offset:
             _fail(owner, path, f"byte {pos}", f"VLR {k} of {n_vlrs} does not fit before the point data at byte {offset}")
@@ -134,12 +135,13 @@ def check_header(fh, size, path, owner):
                     _fail(owner, path, f"byte {data_at + d * 192 + 2}", f"extra-bytes descriptor {d} has an unknown "
                           f"data type {dtype_id}")
         if user == b"laszip encoded":
-            laszip = True
+            fh.seek(data_at)
+            laszip = fh.read(length)
         pos = data_at + length
     if base + extra > record_length:
         _fail(owner, path, "byte 105", f"the extra-bytes descriptors describe {extra} bytes, but a record of "
               f"{record_length} bytes has only {record_length - base} beyond point format {fmt}")
-    if compressed and not laszip:
+    if compressed and laszip is None:
         _fail(owner, path, "byte 104", "the point format is marked compressed (LAZ), but there is no laszip VLR")
     points_end = size
     if minor >= 4:
@@ -164,10 +166,10 @@ def check_header(fh, size, path, owner):
             _fail(owner, path, "byte 107" if minor < 4 else "byte 247",
                   f"the header declares {count} points of {record_length} bytes ({count * record_length} bytes), "
                   f"but the file has {available} bytes of point data from byte {offset} (a wrong count or a truncated file)")
-        return count, record_length, compressed
+        return count, record_length, compressed, fmt, laszip, offset, None
     # LAZ: the chunk table (its offset is the first 8 bytes of the point data, or the file's last 8 bytes)
     if count == 0:
-        return count, record_length, compressed
+        return count, record_length, compressed, fmt, laszip, offset, None
     if available < 8:
         _fail(owner, path, f"byte {offset}", "file ends inside the LAZ chunk-table offset (truncated)")
     fh.seek(offset)
@@ -184,7 +186,42 @@ def check_header(fh, size, path, owner):
     if n_chunks > table - offset - 8:
         _fail(owner, path, f"byte {table + 4}", f"the LAZ chunk table declares {n_chunks} chunks, more than the "
               f"{table - offset - 8} bytes of compressed points can hold")
-    return count, record_length, compressed
+    return count, record_length, compressed, fmt, laszip, offset, table
+
+
+#: Layers of a LAZ 1.4 (layered) chunk per point format 6..10, besides one per extra byte:
+#: the point's 9 (xy, z, classification, flags, intensity, scan angle, user data, source, GPS time),
+#: RGB 1, NIR 1, wave packet 1.
+_LAYERS = {6: 9, 7: 10, 8: 11, 9: 10, 10: 12}
+
+
+def check_chunks(fh, size, path, owner, record_length, fmt, laszip, offset, table):
+    """Every LAZ chunk inside the compressed points, and for layered formats (6..10) every layer's declared
+    size inside its chunk: lazrs reserves a layer's declared size before reading it."""
+    import lazrs
+
+    fh.seek(offset)
+    try:
+        chunks = lazrs.read_chunk_table(fh, lazrs.LazVlr(laszip))
+    except Exception as exc:  # noqa: BLE001 - lazrs's own errors on a corrupt table or VLR
+        raise FileFormatError(f"{owner}: {path!r} byte {table}: unreadable LAZ chunk table ({exc})") from None
+    pos, end = offset + 8, table
+    n_layers = _LAYERS.get(fmt, 0) + (record_length - _base_sizes()[fmt] if fmt >= 6 else 0)
+    head = record_length + 4 + 4 * n_layers
+    for k, (_, n_bytes) in enumerate(chunks):
+        if n_bytes < 0 or n_bytes > end - pos:
+            _fail(owner, path, f"byte {pos}", f"LAZ chunk {k} of {n_bytes} bytes runs past the compressed points "
+                  f"(which end at byte {end})")
+        if fmt >= 6 and n_bytes:
+            if head > n_bytes:
+                _fail(owner, path, f"byte {pos}", f"LAZ chunk {k} of {n_bytes} bytes is shorter than its "
+                      f"{head}-byte header")
+            fh.seek(pos + record_length + 4)
+            sizes = struct.unpack(f"<{n_layers}I", fh.read(4 * n_layers))
+            if head + sum(sizes) > n_bytes:
+                _fail(owner, path, f"byte {pos + record_length + 4}", f"the layers of LAZ chunk {k} declare "
+                      f"{sum(sizes)} bytes, more than the chunk's {n_bytes - head}")
+        pos += n_bytes
 
 
 def _open(path, owner):
@@ -195,8 +232,11 @@ def _open(path, owner):
     except OSError as exc:
         raise type(exc)(exc.errno, f"{owner}: cannot read the file ({exc.strerror})", path) from None
     with fh:
-        count, record_length, compressed = check_header(fh, size, path, owner)
-    return laspy_module(owner, path, compressed), size, count, record_length, compressed
+        count, record_length, compressed, fmt, laszip, offset, table = check_header(fh, size, path, owner)
+        laspy = laspy_module(owner, path, compressed)
+        if table is not None:
+            check_chunks(fh, size, path, owner, record_length, fmt, laszip, offset, table)
+    return laspy, size, count, record_length, compressed
 
 
 def _records(path, owner):
@@ -208,7 +248,12 @@ def _records(path, owner):
             if header.point_format.size != record_length:
                 raise FileFormatError(f"{owner}: {path!r} byte 105: point record length {record_length} differs "
                                       f"from the {header.point_format.size} bytes its format and extra bytes give")
-            piece = count if not compressed else max(1, LAZ_PIECE_RATIO * size // record_length)
+            if not compressed:  # one read into fresh memory (count * record_length was checked against the file)
+                array = np.fromfile(path, dtype=header.point_format.dtype(), count=count, offset=header.offset_to_point_data)
+                if array.shape[0] != count:
+                    raise FileFormatError(f"{owner}: {path!r}: point data ends after {array.shape[0]} of {count} points")
+                return laspy, header, array
+            piece = max(1, LAZ_PIECE_RATIO * size // record_length)
             parts, got = [], 0
             while got < count:
                 want = min(piece, count - got)
@@ -268,7 +313,7 @@ def read_las_fields(path, owner):
     for name in header.point_format.dimension_names:
         if name in ("X", "Y", "Z"):
             continue
-        fields[name] = np.ascontiguousarray(np.asarray(points[name]))
+        fields[name] = np.asarray(points[name])  # whole-byte dimensions: views of the records, no copy
     return _coordinates(header, array), fields
 
 

@@ -50,7 +50,7 @@ def check_field(values, n_points, owner, name="values"):
     except Exception as exc:
         raise TypeError(f"{owner}: {name} could not be converted to an array: {exc}") from None
     if arr.ndim != 1:
-        raise ValueError(f"{owner}: {name} must be one value per point (shape ({n_points},)), got shape {arr.shape}")
+        raise ValueError(f"{owner}: {name} must be one-dimensional, one value per point, got shape {arr.shape}")
     if n_points is not None and arr.shape[0] != n_points:
         raise ValueError(f"{owner}: {name} has {arr.shape[0]} values for {n_points} points")
     if arr.dtype == bool or np.issubdtype(arr.dtype, np.integer):

@@ -91,19 +91,48 @@ def _grid_surface(points, cell, max_slope):
     return flat, zmin, surface.reshape(-1), cell
 
 
-def ground_mask(points, method, threshold, max_slope, n_trials, rng):
-    """The ground mask of checked points (float64, (n, 3)), with a resolved positive ``threshold``.
+def plane_threshold(height, tolerance):
+    """The plane model's threshold when none is given: four robust standard deviations of the ground's
+    noise (1.4826 times the median distance to the plane of the points within ``tolerance`` of it),
+    kept between a quarter of ``tolerance`` and ``tolerance``."""
+    near = np.abs(height[np.abs(height) < tolerance])
+    sigma = 1.4826 * float(np.median(near)) if near.size else tolerance
+    return min(tolerance, max(4.0 * sigma, tolerance / 4.0))
 
-    Returns (mask, method used).
+
+def grid_threshold(rise, tolerance):
+    """The grid model's threshold (before the slope's allowance) when none is given: the median height
+    above the lowest surface of the points less than ``tolerance`` above it, plus four robust standard
+    deviations (1.4826 times the median absolute deviation), kept between a quarter of ``tolerance``
+    and ``tolerance``."""
+    near = rise[rise < tolerance]
+    if not near.size:
+        return tolerance
+    middle = float(np.median(near))
+    sigma = 1.4826 * float(np.median(np.abs(near - middle)))
+    return min(tolerance, max(middle + 4.0 * sigma, tolerance / 4.0))
+
+
+def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
+    """The ground mask of checked points (float64, (n, 3)) and the method used ("plane" or "grid").
+
+    ``tolerance`` (positive) is the distance of the point spacing: RANSAC's inlier
+    distance and the grid's cell. ``threshold`` is the height above the ground model
+    under which a point is ground (plus the grid's allowance for the slope within a
+    cell); None: :func:`plane_threshold` for the plane, :func:`grid_threshold` for the grid.
     """
     if method in ("plane", "auto"):
-        nrm, offset = _plane_ransac(points, threshold, n_trials, rng)
-        height = _signed_up(points, nrm, offset, threshold)
-        plane = height < threshold
+        fit_distance = tolerance if threshold is None else threshold
+        nrm, offset = _plane_ransac(points, fit_distance, n_trials, rng)
+        height = _signed_up(points, nrm, offset, fit_distance)
+        plane = height < (plane_threshold(height, tolerance) if threshold is None else threshold)
         if method == "plane":
             return plane, "plane"
-    flat, zmin, surface, cell = _grid_surface(points, threshold, max_slope)
-    grid = points[:, 2] - surface[flat] < threshold + max_slope * cell
+    flat, zmin, surface, cell = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
+    rise = points[:, 2] - surface[flat]
+    if threshold is None:
+        threshold = grid_threshold(rise, tolerance + max_slope * cell)
+    grid = rise < threshold + max_slope * cell
     if method == "grid":
         return grid, "grid"
     # auto: the plane where the lowest surface is planar (a floor, flat or tilted ground), else the grid
@@ -111,7 +140,7 @@ def ground_mask(points, method, threshold, max_slope, n_trials, rng):
     ground_cells = np.zeros(len(zmin), dtype=bool)
     ground_cells[flat[lowest]] = True
     planar = np.zeros(len(zmin), dtype=bool)
-    planar[flat[lowest]] = np.abs(height[lowest]) < threshold + max_slope * cell
+    planar[flat[lowest]] = np.abs(height[lowest]) < tolerance + max_slope * cell
     share = np.count_nonzero(planar) / max(1, np.count_nonzero(ground_cells))
     return (plane, "plane") if share >= _PLANAR_SHARE else (grid, "grid")
 
@@ -124,17 +153,20 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
     - ``"plane"``: the plane holding most points within ``threshold``, found by
       RANSAC (``n_trials`` planes through three random points, scored on up to
       50,000 points of the scene) and refined by least squares on its
-      inliers. Ground is every point less than ``threshold`` above it (points
-      below it, noise under a floor, count as ground). For floors, tables,
-      CAD scenes and flat or evenly tilted terrain, in any orientation.
+      inliers. "Above" is the side holding more of the points off the
+      plane (the objects); ground is every point less than ``threshold``
+      above the plane, points below it (noise under a floor) included. For
+      floors, CAD scenes and flat or evenly tilted terrain, in any
+      orientation. Limit: the ground must be the largest plane of the scene.
     - ``"grid"``: for terrain that is not one plane (aerial tiles): the lowest
-      point of each cell of a horizontal grid (cells ``threshold`` wide), and
-      the surface that rises at most ``max_slope`` (rise over run) from the
-      lowest points around it; ground is every point less than ``threshold +
-      max_slope * threshold`` above that surface. The vertical axis is z.
-      Limits: an object wider than twice its height divided by ``max_slope``
-      (a large flat roof) is taken for ground at its centre, and terrain
-      steeper than ``max_slope`` is partly left out of the ground.
+      point of each cell of a horizontal grid (cells ``threshold`` wide, wider
+      where that would make more than four cells per point), and the surface
+      that rises at most ``max_slope`` (rise over run) from the lowest points
+      around it; ground is every point less than ``threshold + max_slope *
+      cell`` above that surface. The vertical axis is z. Limits: a flat
+      object of height ``h`` is taken for ground where it is farther than
+      ``h / max_slope`` from its edge (the middle of a large flat roof), and
+      terrain steeper than ``max_slope`` is partly left out of the ground.
     - ``"auto"``: the plane when at least 90% of the grid's lowest-surface
       cells lie on it, else the grid.
 
@@ -147,10 +179,14 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
         The ground model, see above.
     threshold : float, default=None
         Height above the ground model under which a point is ground, > 0, in
-        the units of the points. None takes the tolerance
-        :func:`euclidean_clusters` derives from the point spacing, so that no
-        point left out of the ground is closer than it to the ground's points
-        on a flat floor.
+        the units of the points; also RANSAC's inlier distance and the grid's
+        cell. None starts from the tolerance :func:`euclidean_clusters` derives
+        from the point spacing: RANSAC takes inliers within it and the
+        plane's threshold is four robust standard deviations of the inliers'
+        distances to the plane (the ground's noise), the grid's the median
+        height above its surface of the points less than a tolerance above it
+        plus four robust standard deviations; both kept between a quarter of
+        the tolerance and the tolerance.
     max_slope : float, default=0.3
         Steepest ground of the grid model, as rise over run (0.3 is about 17
         degrees), >= 0.
@@ -191,6 +227,7 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
                         ("n_trials", n_trials), ("random_state", random_state)):
         validate_parameter(value, _CONSTRAINTS[name], name=name, owner=owner)
     pts = check_scene(points, owner)
-    thr = default_tolerance(pts, owner) if threshold is None else float(threshold)
-    mask, _ = ground_mask(pts, method, thr, float(max_slope), int(n_trials), check_random_state(random_state))
+    thr = None if threshold is None else float(threshold)
+    tol = default_tolerance(pts, owner) if thr is None else thr
+    mask, _ = ground_mask(pts, method, thr, tol, float(max_slope), int(n_trials), check_random_state(random_state))
     return mask

@@ -39,7 +39,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
     if method == "none":
         mask = np.zeros(len(pts), dtype=bool)
     else:
-        mask, method = ground_mask(pts, method, tol, _MAX_SLOPE, _N_TRIALS, np.random.RandomState(_SEED))
+        mask, method = ground_mask(pts, method, None, tol, _MAX_SLOPE, _N_TRIALS, np.random.RandomState(_SEED))
     keep = np.flatnonzero(~mask)
     labels = np.full(len(pts), -1, dtype=np.int64)
     if keep.size:
@@ -78,8 +78,9 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
         "auto" removes no ground (the field tells objects apart).
     tolerance : float, default=None
         Clustering distance, > 0, in the units of the points (metres for
-        LiDAR), also the height above the ground model under which a point is
-        ground. None derives it from the point spacing (five times the median
+        LiDAR), also the scale of the ground model (RANSAC's inlier distance,
+        the grid's cell; see :func:`remove_ground` with ``threshold=None``).
+        None derives it from the point spacing (five times the median
         nearest-neighbour distance), which suits LiDAR in metres and CAD-scale
         scenes alike.
     min_points : int, default=30
@@ -143,8 +144,8 @@ class SceneSegmenter(ClusterMixin, BaseEstimator):
         The ground model of :func:`remove_ground`, or "none" to keep every
         point. With ``by``, "auto" removes no ground.
     tolerance : float, default=None
-        Clustering distance and ground height, > 0, in the units of the
-        points; None derives it from the point spacing.
+        Clustering distance and scale of the ground model, > 0, in the units
+        of the points; None derives it from the point spacing.
     min_points : int, default=30
         Smallest kept segment (>= 1).
     max_points : int, default=None

@@ -254,3 +254,16 @@ def test_e57_truncated_or_not_e57(tmp_path):
     (tmp_path / "no.e57").write_bytes(b"LASF" + data[4:])
     with pytest.raises(FileFormatError, match="no.e57.*not an E57 file"):
         read_point_cloud(tmp_path / "no.e57")
+
+
+def test_hostile_laz_layer_size_is_refused_before_lazrs_reserves_it(tmp_path):
+    """LAZ 1.4 chunks declare each layer's size, which lazrs reserves before reading: a size beyond the chunk
+    would abort the process (found by scripts/fuzz_files.py); it is refused first."""
+    _las_file(tmp_path / "src.laz", n=300, fmt=6, extra=False, version="1.4")
+    record = struct.unpack_from("<H", (tmp_path / "src.laz").read_bytes(), 105)[0]
+    path = _patched(tmp_path, tmp_path / "src.laz", "layer.laz",
+                    [("<I", lambda d: _offset_to_points(d) + 8 + record + 4, 4 * 10 ** 9)])
+    with pytest.raises(FileFormatError, match="layer.laz.*the layers of LAZ chunk 0 declare"):
+        read_point_fields(path)
+    np.testing.assert_array_equal(read_point_fields(tmp_path / "src.laz")[0], np.asarray(
+        [laspy.read(str(tmp_path / "src.laz"))[a] for a in "xyz"]).T)
