@@ -32,7 +32,7 @@ from eppf.segmentation import SceneSegmenter
 # A model
 # -------
 # EPPF descriptors matched by symmetric KL divergence to the closest of the
-# training objects: the built-in shapes, in their own units (metres here).
+# training objects: the built-in shapes, in their own units (meters here).
 
 train = make_shapes(n_samples_per_class=8, n_points=1024, random_state=0)
 model = Pipeline([("eppf", EPPFTransformer(n_pairs=5000, random_state=0)), ("match", KLNearestNeighbors())])
@@ -45,7 +45,7 @@ model.fit(train.data, train.target_names[train.target])
 # training), turned about the vertical only, as objects stand in a scan.
 
 rng = np.random.default_rng(1)
-origin = np.array([512000.0, 5403000.0, 250.0])  # easting, northing, height in metres
+origin = np.array([512000.0, 5403000.0, 250.0])  # easting, northing, height in meters
 new = make_shapes(n_samples_per_class=1, n_points=1000, rotate="z", random_state=1)
 parts, truth = [], []
 for k in range(8):
@@ -69,7 +69,7 @@ write_point_fields(path, scan, {"intensity": rng.integers(0, 4000, len(scan)).as
 # LAS's ``intensity``, ``classification``, ...) as named arrays.
 # :class:`~eppf.segmentation.SceneSegmenter` removes the ground and clusters
 # the other points; the clustering distance, unless given, comes from the
-# point spacing, so the defaults suit LiDAR in metres and CAD-scale scenes.
+# point spacing, so the defaults suit LiDAR in meters and CAD-scale scenes.
 
 points, fields = read_point_fields(path)
 print(f"{len(points)} points, fields: {', '.join(fields)}")
@@ -96,10 +96,10 @@ for k, (cloud, label) in enumerate(zip(segments, predicted)):
 print(f"{n_right} of {len(truth)} objects classified right")
 
 # %%
-# The labelled scan
-# -----------------
+# The labeled scan
+# ----------------
 # Every point keeps its fields and gets two more, its ``segment`` (-1:
-# ground) and its class, which any LAS viewer can colour by.
+# ground) and its class, which any LAS viewer can color by.
 
 class_names = list(model.classes_)
 point_class = np.full(len(points), -1, dtype=np.int32)
@@ -119,7 +119,7 @@ for k, label in enumerate(predicted):
 ax.set_aspect("equal")
 ax.set_xlabel(f"easting - {origin[0]:.0f} (m)")
 ax.set_ylabel(f"northing - {origin[1]:.0f} (m)")
-ax.set_title("the scan from above: ground in grey, objects by predicted class")
+ax.set_title("the scan from above: ground in gray, objects by predicted class")
 plt.show()
 
 # %%

@@ -5,7 +5,7 @@ Classifying your own point cloud files
 
 How to use eppf on clouds stored in files: train a classifier on the
 built-in shapes, then read PLY and PCD files with
-:func:`eppf.io.read_point_cloud` and classify them; then a labelled folder
+:func:`eppf.io.read_point_cloud` and classify them; then a labeled folder
 with :func:`eppf.datasets.load_folder`, and the same from the command
 line. To keep the example self-contained we first write some new built-in
 objects to a temporary folder with :func:`eppf.io.write_point_cloud`;
@@ -85,8 +85,8 @@ ax.set_box_aspect(np.ptp(cloud[:, :3], axis=0))
 plt.show()
 
 # %%
-# A labelled folder
-# -----------------
+# A labeled folder
+# ----------------
 # Training data from files: one subfolder per class (optionally inside
 # ``train/`` and ``test/``). :func:`eppf.datasets.load_folder` reads it with
 # labels, sampling meshes with one seed per file, as the command line does.
@@ -103,9 +103,9 @@ print(f"the model on them: {np.mean(model.predict(data.data) == data.target_name
 # The command line
 # ----------------
 # The same without Python: ``eppf train`` fits and saves a model (from a
-# labelled folder with ``--data``; here from the built-in shapes), ``eppf
+# labeled folder with ``--data``; here from the built-in shapes), ``eppf
 # predict`` classifies files and folders with it, ``eppf evaluate`` scores
-# it on a labelled folder. Here they run through :func:`eppf.cli.main`,
+# it on a labeled folder. Here they run through :func:`eppf.cli.main`,
 # which is what the ``eppf`` command runs.
 #
 # .. code-block:: bash

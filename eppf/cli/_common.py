@@ -516,7 +516,7 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
         Show a progress bar while reading.
     cmd : str
         The command's name for messages.
-    labelled : bool or None
+    labeled : bool or None
         True: the inputs must give labels (one folder of class subfolders or
         a data set); None: labels when the input has them; False: none.
     min_points : int

@@ -15,7 +15,7 @@ from ._segment import (FIELD_FORMATS, add_segmentation, coordinate, given_segmen
 __all__ = ["run_predict"]
 
 
-#: What ``--labelled-output`` can write: the formats that keep every field.
+#: Suffixes of the labeled scene file: the formats that keep every field.
 LABELLED_SUFFIXES = tuple(f".{f}" for f in FIELD_FORMATS)
 
 

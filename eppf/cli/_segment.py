@@ -44,9 +44,9 @@ def add_segmentation(parser, prefix=""):
                              "fits, else a slope-limited lowest surface for terrain), 'plane' (a robust plane "
                              "fit), 'grid' (the lowest surface) or 'none'")
     parser.add_argument("--tolerance", type=positive_float, default=None, metavar="DISTANCE",
-                        help=f"{prefix}clustering distance, in the file's units (metres for LiDAR): points closer "
+                        help=f"{prefix}clustering distance, in the file's units (meters for LiDAR): points closer "
                              "are one object; also the height above the ground under which points are ground "
-                             "(default: five times the median distance between neighbouring points)")
+                             "(default: five times the median distance between neighboring points)")
     parser.add_argument("--min-points", type=positive_int, default=None, metavar="N",
                         help=f"{prefix}smallest object kept; smaller clusters are left out as noise "
                              f"(default: {DEFAULT_MIN_POINTS})")
@@ -142,7 +142,7 @@ def segment_file(path, settings, cmd, progress):
     if by is not None and by not in fields:
         have = ", ".join(fields) or "none"
         raise ValueError(f"--by {by}: {path} has no field {by!r} (its fields: {have})")
-    keep = np.isfinite(points).all(axis=1)  # PCL's NaN points: no segment, no ground; kept in a labelled output
+    keep = np.isfinite(points).all(axis=1)  # PCL's NaN points: no segment, no ground; kept in a labeled output
     if not keep.any():
         raise ValueError(f"{path}: no point has finite coordinates")
     t0 = time.perf_counter()
@@ -175,7 +175,7 @@ def summary(scene):
 
 
 def coordinate(value):
-    """A coordinate for a CSV: enough digits for millimetres at 1e7 (projected LiDAR coordinates)."""
+    """A coordinate for a CSV: enough digits for millimeters at 1e7 (projected LiDAR coordinates)."""
     return format(float(value), ".12g")
 
 
