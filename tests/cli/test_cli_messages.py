@@ -9,14 +9,9 @@ import pytest
 from eppf.cli import main
 from eppf.io import write_point_cloud
 
+from tests.cli._helpers import run as _run
+
 FAST = ["--n-pairs", "600", "--n-jobs", "1"]
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.err
-    return status, captured.out, captured.err
 
 
 def _folder(root, n_per_class=3, n_points=120):

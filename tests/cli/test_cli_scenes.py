@@ -3,7 +3,6 @@
 The scenes are made here: objects of known class and position on a noisy ground plane, so every segment is
 checked against the object it must be (its points, its centroid, its class)."""
 
-import csv
 import os
 
 import numpy as np
@@ -13,20 +12,11 @@ from eppf.cli import main
 from eppf.datasets import make_shapes
 from eppf.io import read_point_cloud, read_point_fields, write_point_cloud, write_point_fields
 
+from tests.cli._helpers import read_csv as _csv
+from tests.cli._helpers import run as _run
+
 #: Projected coordinates (UTM metres) of the scenes' origin: 1e5-1e7 m, as LiDAR tiles have.
 ORIGIN = np.array([512000.0, 5403000.0, 250.0])
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.err
-    return status, captured.out, captured.err
-
-
-def _csv(path):
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
 
 
 def _scene(n_objects=8, spacing=3.0, n_points=1000, seed=1, ground_spacing=0.1, noise=0.01):
@@ -228,3 +218,27 @@ def test_predict_segment_table_and_progress(tmp_path, capsys):
     status, out, err = _run(["predict", "--model", tmp_path / "m.eppf", scene, "--segment", "--n-jobs", "1",
                              "--no-progress"], capsys)
     assert status == 0 and err == ""
+
+
+def test_segments_are_resampled_as_the_models_training_files_were(tmp_path, capsys):
+    scene, points, fields, where, truth = _pcd_scene(tmp_path)
+    data = tmp_path / "train"
+    shapes = make_shapes(n_samples_per_class=2, n_points=300, classes=["box", "sphere"], random_state=0)
+    for k, (cloud, label) in enumerate(zip(shapes.data, shapes.target)):
+        (data / str(shapes.target_names[label])).mkdir(parents=True, exist_ok=True)
+        write_point_cloud(data / str(shapes.target_names[label]) / f"{k}.ply", cloud)
+    assert main(["train", "--data", str(data), "-o", str(tmp_path / "m.eppf"), "--test-size", "0", "--n-pairs",
+                 "800", "--n-points", "150", "--no-progress"]) == 0
+    args = ["predict", "--model", tmp_path / "m.eppf", scene, "--segment", "--n-jobs", "1", "--no-progress",
+            "-o", tmp_path / "a.csv", "--labelled-output", tmp_path / "labelled.ply"]
+    status, out, err = _run(args, capsys)
+    assert status == 0, err
+    rows = _csv(tmp_path / "a.csv")
+    # n_points counts the segment's points in the scan, not the resampled cloud's
+    back, back_fields = read_point_fields(tmp_path / "labelled.ply")
+    assert [int(r["n_points"]) for r in rows] == [int((back_fields["segment"] == k).sum()) for k in range(4)]
+    assert set(back_fields) == {"intensity", "instance", "segment", "class"}
+    np.testing.assert_array_equal(back, read_point_fields(scene)[0])
+    # resampling is seeded: the same rows on a second run
+    assert _run([*args[:-4], "-o", tmp_path / "b.csv"], capsys)[0] == 0
+    assert _csv(tmp_path / "b.csv") == rows
