@@ -5,7 +5,7 @@ import os
 import numpy as np
 
 from . import _e57, _las, _pcd, _ply, _xyz
-from ._api import _guard
+from ._api import guard
 from ._common import read_bytes
 from ._errors import FileFormatError
 from ._formats import lookup
@@ -137,7 +137,7 @@ def read_point_fields(path, *, format=None):
     fmt = lookup(path, format, owner)
     if fmt.kind == "mesh":
         raise ValueError(f"{owner}: {path!r} is a {fmt.name} mesh file; read its vertices with read_mesh")
-    points, fields = _guard(owner, path, fmt, _read, path, fmt, owner)
+    points, fields = guard(owner, path, fmt, _read, path, fmt, owner)
     n = points.shape[0]
     bad = [k for k, v in fields.items() if v.shape[0] != n]
     if bad:  # pragma: no cover - each reader gives every field n rows

@@ -14,8 +14,9 @@ lie in 13 runs of consecutive sorted cells (one per (dx, dy) column), whose
 starts only move forward from one cell to the next, so each run is found by
 advancing a pointer: linear time after the sort. A pair of cells not yet in
 one component is joined (union-find) when some pair of their points is closer
-than the tolerance. One thread, one fixed order: the components do not depend
-on the number of threads.
+than the tolerance (the points of the first cell at least the tolerance away from
+the second's bounding box are skipped). One thread, one fixed order: the
+components do not depend on the number of threads.
 
 Cell coordinates come from :func:`cells`, through ``clamp_floor64``: bounded
 for every double; the caller checks that the scene spans at most ``2**30``
@@ -59,13 +60,32 @@ cdef inline int _before(const int64_t* c, int64_t x, int64_t y, int64_t z) noexc
     return c[2] < z
 
 
+cdef inline double _box_gap2(const double* p, const double* box) noexcept nogil:
+    """Squared distance from point ``p`` to the box ``box`` (lower x, y, z, then upper x, y, z)."""
+    cdef double g = 0.0, d
+    cdef int k
+    for k in range(3):
+        d = box[k] - p[k]
+        if d > 0.0:
+            g += d * d
+        else:
+            d = p[k] - box[k + 3]
+            if d > 0.0:
+                g += d * d
+    return g
+
+
 cdef int _touch(const double[:, ::1] pts, const int64_t[::1] order, int64_t a0, int64_t a1, int64_t b0, int64_t b1,
-                double tol2) noexcept nogil:
-    """Whether some point of sorted range [a0, a1) is closer than the tolerance to one of [b0, b1)."""
+                const double* box_b, double tol2) noexcept nogil:
+    """Whether some point of sorted range [a0, a1) is closer than the tolerance to one of [b0, b1), whose
+    points lie in ``box_b``: points of the first range at least the tolerance from that box are skipped,
+    so that two dense cells facing each other across a gap cost little more than their sizes."""
     cdef int64_t i, j, p, q
     cdef double dx, dy, dz
     for i in range(a0, a1):
         p = order[i]
+        if _box_gap2(&pts[p, 0], box_b) >= tol2:
+            continue
         for j in range(b0, b1):
             q = order[j]
             dx = pts[p, 0] - pts[q, 0]
@@ -122,11 +142,24 @@ def connect(const double[:, ::1] pts, const int64_t[::1] order, const int64_t[::
             ncol += 1
     roots = np.empty(n, dtype=np.int64)
     parent_arr = np.empty(max(m, 1), dtype=np.int64)
+    box_arr = np.empty((max(m, 1), 6))
     cdef int64_t[::1] parent = parent_arr
+    cdef double[:, ::1] box = box_arr
     cdef int64_t[::1] out = roots
+    cdef int d
     with nogil:
         for a in range(m):
             parent[a] = a
+            for d in range(3):
+                box[a, d] = pts[order[start[a]], d]
+                box[a, d + 3] = pts[order[start[a]], d]
+            for i in range(start[a] + 1, start[a + 1]):
+                p = order[i]
+                for d in range(3):
+                    if pts[p, d] < box[a, d]:
+                        box[a, d] = pts[p, d]
+                    if pts[p, d] > box[a, d + 3]:
+                        box[a, d + 3] = pts[p, d]
         for k in range(ncol):
             ptr[k] = 0
         for a in range(m):
@@ -141,7 +174,7 @@ def connect(const double[:, ::1] pts, const int64_t[::1] order, const int64_t[::
                 while b < m and cell[b, 0] == x + col_dx[k] and cell[b, 1] == y + col_dy[k] and cell[b, 2] <= z + 2:
                     ra = _find(&parent[0], a)
                     rb = _find(&parent[0], b)
-                    if ra != rb and _touch(pts, order, start[a], start[a + 1], start[b], start[b + 1], tol2):
+                    if ra != rb and _touch(pts, order, start[a], start[a + 1], start[b], start[b + 1], &box[b, 0], tol2):
                         if ra < rb:
                             parent[rb] = ra
                         else:

@@ -69,10 +69,15 @@ def _signed_up(points, nrm, offset, threshold):
 
 
 def _grid_surface(points, cell, max_slope):
-    """(cell of each point, lowest z per cell, lowest surface per cell, cell side): the slope-limited envelope of the cells' lowest points.
+    """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side).
 
-    The surface is ``S(c) = min over cells c' of (zmin(c') + max_slope * |c - c'|)``
-    with 8-neighbour chamfer distances between cell centres.
+    The cells' lowest points give the surface ``S(c) = min over cells c' of
+    (zmin(c') + max_slope * |c - c'|)`` (8-neighbour chamfer distances between
+    cell centres): objects standing on the ground leave it, roofs and other
+    raised flat parts too where they are narrower than their height over
+    ``max_slope``. The ground under a point is then ``S(c)`` carried from the
+    lowest point of its cell (the cell's centre for an empty cell) along the
+    surface's gradient (central differences, at most ``max_slope`` steep).
     """
     xy = points[:, :2] - points[:, :2].min(axis=0)
     extent = xy.max(axis=0)
@@ -88,7 +93,20 @@ def _grid_surface(points, cell, max_slope):
     np.minimum.at(zmin, flat, points[:, 2])
     surface = zmin.reshape(tuple(shape)).copy()
     _cluster_fast.slope_envelope(surface, max_slope * cell, max_slope * cell * np.sqrt(2.0))
-    return flat, zmin, surface.reshape(-1), cell
+    gradient = np.zeros((2,) + surface.shape)
+    for axis in (0, 1):
+        if surface.shape[axis] > 1:
+            gradient[axis] = np.gradient(surface, cell, axis=axis)
+    steep = np.hypot(gradient[0], gradient[1])
+    gradient *= np.minimum(1.0, max_slope / np.maximum(steep, 1e-300))
+    # where the ground surface is known: the lowest point of each cell, else the cell's centre
+    anchor = (np.indices(tuple(shape)).reshape(2, -1).T + 0.5) * cell
+    lowest = np.flatnonzero(points[:, 2] == zmin[flat])
+    anchor[flat[lowest]] = xy[lowest]
+    offset = xy - anchor[flat]
+    ground = surface.reshape(-1)[flat] + gradient[0].reshape(-1)[flat] * offset[:, 0] \
+        + gradient[1].reshape(-1)[flat] * offset[:, 1]
+    return points[:, 2] - ground, flat, zmin, cell
 
 
 def plane_threshold(height, tolerance):
@@ -101,16 +119,19 @@ def plane_threshold(height, tolerance):
 
 
 def grid_threshold(rise, tolerance):
-    """The grid model's threshold (before the slope's allowance) when none is given: the median height
-    above the lowest surface of the points less than ``tolerance`` above it, plus four robust standard
-    deviations (1.4826 times the median absolute deviation), kept between a quarter of ``tolerance``
-    and ``tolerance``."""
-    near = rise[rise < tolerance]
-    if not near.size:
-        return tolerance
-    middle = float(np.median(near))
-    sigma = 1.4826 * float(np.median(np.abs(near - middle)))
-    return min(tolerance, max(middle + 4.0 * sigma, tolerance / 4.0))
+    """The grid model's threshold when none is given: the median height above the ground surface plus
+    four robust standard deviations (1.4826 times the median absolute deviation), of the points below
+    the threshold found so far (from ``tolerance``, three rounds: the objects' lower parts leave the
+    sample), kept between a quarter of ``tolerance`` and ``tolerance``."""
+    cap = tolerance
+    for _ in range(3):
+        near = rise[rise < cap]
+        if not near.size:
+            break
+        middle = float(np.median(near))
+        sigma = 1.4826 * float(np.median(np.abs(near - middle)))
+        cap = min(tolerance, max(middle + 4.0 * sigma, tolerance / 4.0))
+    return cap
 
 
 def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
@@ -118,8 +139,8 @@ def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
 
     ``tolerance`` (positive) is the distance of the point spacing: RANSAC's inlier
     distance and the grid's cell. ``threshold`` is the height above the ground model
-    under which a point is ground (plus the grid's allowance for the slope within a
-    cell); None: :func:`plane_threshold` for the plane, :func:`grid_threshold` for the grid.
+    under which a point is ground; None: :func:`plane_threshold` for the plane,
+    :func:`grid_threshold` for the grid.
     """
     if method in ("plane", "auto"):
         fit_distance = tolerance if threshold is None else threshold
@@ -128,11 +149,10 @@ def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
         plane = height < (plane_threshold(height, tolerance) if threshold is None else threshold)
         if method == "plane":
             return plane, "plane"
-    flat, zmin, surface, cell = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
-    rise = points[:, 2] - surface[flat]
+    rise, flat, zmin, cell = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
     if threshold is None:
-        threshold = grid_threshold(rise, tolerance + max_slope * cell)
-    grid = rise < threshold + max_slope * cell
+        threshold = grid_threshold(rise, tolerance)
+    grid = rise < threshold
     if method == "grid":
         return grid, "grid"
     # auto: the plane where the lowest surface is planar (a floor, flat or tilted ground), else the grid
@@ -140,7 +160,7 @@ def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
     ground_cells = np.zeros(len(zmin), dtype=bool)
     ground_cells[flat[lowest]] = True
     planar = np.zeros(len(zmin), dtype=bool)
-    planar[flat[lowest]] = np.abs(height[lowest]) < tolerance + max_slope * cell
+    planar[flat[lowest]] = np.abs(height[lowest]) < threshold
     share = np.count_nonzero(planar) / max(1, np.count_nonzero(ground_cells))
     return (plane, "plane") if share >= _PLANAR_SHARE else (grid, "grid")
 
@@ -162,13 +182,16 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
       point of each cell of a horizontal grid (cells ``threshold`` wide, wider
       where that would make more than four cells per point), and the surface
       that rises at most ``max_slope`` (rise over run) from the lowest points
-      around it; ground is every point less than ``threshold + max_slope *
-      cell`` above that surface. The vertical axis is z. Limits: a flat
-      object of height ``h`` is taken for ground where it is farther than
-      ``h / max_slope`` from its edge (the middle of a large flat roof), and
-      terrain steeper than ``max_slope`` is partly left out of the ground.
-    - ``"auto"``: the plane when at least 90% of the grid's lowest-surface
-      cells lie on it, else the grid.
+      around it; the ground under a point is that surface carried from its
+      cell's lowest point along the surface's gradient, and ground is every
+      point less than ``threshold`` above it. The vertical axis is z.
+      Limits: a flat object of height ``h`` is taken for ground where it is
+      farther than ``h / max_slope`` from its edge (the middle of a large flat
+      roof), and terrain steeper than ``max_slope`` is partly left out of the
+      ground.
+    - ``"auto"``: the plane when the lowest points of at least 90% of the
+      grid's ground cells lie within the grid's threshold of it (a floor,
+      flat or evenly tilted ground), else the grid.
 
     Parameters
     ----------
@@ -181,12 +204,12 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
         Height above the ground model under which a point is ground, > 0, in
         the units of the points; also RANSAC's inlier distance and the grid's
         cell. None starts from the tolerance :func:`euclidean_clusters` derives
-        from the point spacing: RANSAC takes inliers within it and the
-        plane's threshold is four robust standard deviations of the inliers'
-        distances to the plane (the ground's noise), the grid's the median
-        height above its surface of the points less than a tolerance above it
-        plus four robust standard deviations; both kept between a quarter of
-        the tolerance and the tolerance.
+        from the point spacing: RANSAC takes inliers within it and the grid's
+        cells are that wide; the threshold is then the ground's noise, four
+        robust standard deviations (1.4826 times a median absolute deviation)
+        of the distances to the plane, or for the grid the median height above
+        its surface plus four such deviations, kept between a quarter of the
+        tolerance and the tolerance.
     max_slope : float, default=0.3
         Steepest ground of the grid model, as rise over run (0.3 is about 17
         degrees), >= 0.

@@ -67,7 +67,7 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
         The scene (normals, when given, are ignored); at least two points,
         all finite.
     fields : dict of str to array-like of shape (n_points,), default=None
-        Per-point fields of the scene, as :func:`eppf.io.read_point_fields`
+        Per-point fields of the scene, as ``eppf.io.read_point_fields``
         returns them; only needed with ``by``.
     by : str, default=None
         Name of an integer field of ``fields`` to split by: one segment per

@@ -1,6 +1,7 @@
 """LAS/LAZ (laspy + lazrs) and E57 (pye57): coordinates and every field against those packages' own readers,
 round trips, hostile headers bounded by the file's size, and the one-line hint when an extra is missing."""
 
+import os
 import struct
 import subprocess
 import sys
@@ -267,3 +268,28 @@ def test_hostile_laz_layer_size_is_refused_before_lazrs_reserves_it(tmp_path):
         read_point_fields(path)
     np.testing.assert_array_equal(read_point_fields(tmp_path / "src.laz")[0], np.asarray(
         [laspy.read(str(tmp_path / "src.laz"))[a] for a in "xyz"]).T)
+
+
+def test_hostile_e57_record_count_is_refused_before_allocating(tmp_path):
+    """A scan's recordCount beyond what the file's bytes can hold, with the page checksum made valid again."""
+    pye57 = pytest.importorskip("pye57")
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                                    "scripts"))
+    try:
+        from fuzz_files import e57_fix_checksums
+    finally:
+        sys.path.pop(0)
+    n = 100000
+    rng = np.random.default_rng(0)
+    path = tmp_path / "big.e57"
+    with pye57.E57(str(path), mode="w") as e57:
+        e57.write_scan_raw({f"cartesian{a}": rng.normal(size=n) for a in "XYZ"})
+    data = path.read_bytes()
+    assert data.count(b'recordCount="100000"') == 1
+    for count, msg in ((b"999999", "scan 0 declares 999999 points of 96 bits, more than the file's"),
+                       (b"100001", "scan 0 ends after 100000 of 100001 points|malformed E57")):
+        bad = tmp_path / f"count{count.decode()}.e57"
+        bad.write_bytes(e57_fix_checksums(data.replace(b'recordCount="100000"', b'recordCount="' + count + b'"')))
+        with pytest.raises(FileFormatError, match=f"count{count.decode()}.e57.*({msg})"):
+            read_point_fields(bad)
+    assert read_point_fields(path)[0].shape == (n, 3)

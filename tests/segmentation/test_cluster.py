@@ -151,3 +151,15 @@ def test_cell_coordinates_stay_in_range_for_any_double():
     pts = np.array([[np.nan, np.inf, -np.inf], [1e308, -1e308, 5e-324], [0.5, 2.5, 1e20]])
     cells = _cluster_fast.cells(pts, 0.0, 0.0, 0.0, 1.0, 8)
     np.testing.assert_array_equal(cells, [[0, 7, 0], [7, 0, 0], [0, 2, 7]])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_derived_tolerance_is_five_median_nearest_neighbour_distances(seed):
+    from eppf.segmentation._cluster import TOLERANCE_FACTOR, default_tolerance
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 1, (3000, 3)) * [10, 3, 0.01 if seed % 2 else 4]
+    points[:200] = points[200:400]  # coincident points are left out of the nearest-neighbour distances
+    dist, _ = cKDTree(points).query(points, k=3)
+    nearest = np.where(dist[:, 1] > 0, dist[:, 1], dist[:, 2])
+    assert np.isclose(default_tolerance(points), TOLERANCE_FACTOR * np.partition(nearest, 1500)[1500], rtol=1e-12)

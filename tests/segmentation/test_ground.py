@@ -121,3 +121,22 @@ def test_bad_parameters_are_named(kwargs, kind, pattern):
 def test_bad_scenes_are_named(points, pattern):
     with pytest.raises(ValueError, match=r"^remove_ground: .*" + pattern):
         remove_ground(points)
+
+
+def test_slope_envelope_is_the_exact_chamfer_envelope():
+    from eppf.segmentation import _cluster_fast
+
+    rng = np.random.default_rng(5)
+    zmin = rng.uniform(0, 5, size=(9, 13))
+    zmin[rng.random(zmin.shape) < 0.3] = np.inf  # empty cells
+    step, diagonal = 0.3, 0.3 * np.sqrt(2)
+    surface = zmin.copy()
+    _cluster_fast.slope_envelope(surface, step, diagonal)
+    i, j = np.indices(zmin.shape)
+    expected = np.empty_like(zmin)
+    for a in range(zmin.shape[0]):
+        for b in range(zmin.shape[1]):
+            di, dj = np.abs(i - a), np.abs(j - b)
+            chamfer = (np.maximum(di, dj) - np.minimum(di, dj)) * step + np.minimum(di, dj) * diagonal
+            expected[a, b] = np.min(zmin + chamfer)
+    np.testing.assert_allclose(surface, expected, rtol=1e-12)
