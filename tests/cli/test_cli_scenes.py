@@ -242,3 +242,19 @@ def test_segments_are_resampled_as_the_models_training_files_were(tmp_path, caps
     # resampling is seeded: the same rows on a second run
     assert _run([*args[:-4], "-o", tmp_path / "b.csv"], capsys)[0] == 0
     assert _csv(tmp_path / "b.csv") == rows
+
+
+def test_a_las_file_without_the_extra_ends_in_one_line_naming_it(tmp_path, capsys, monkeypatch):
+    import eppf.io._las as las
+
+    def missing(owner, path, compressed=False):
+        raise ImportError(f"{owner}: {str(path)!r} is a LAS file, which needs laspy: pip install 'eppf[las]'")
+
+    pytest.importorskip("laspy")
+    scene = tmp_path / "tile.las"
+    write_point_fields(scene, _scene(n_objects=1, n_points=100)[0])
+    monkeypatch.setattr(las, "laspy_module", missing)
+    status, _, err = _run(["segment", scene, "-o", tmp_path / "objects", "--no-progress"], capsys)
+    lines = err.strip().splitlines()
+    assert status == 2 and len(lines) == 1 and lines[0].startswith("eppf segment: error: ")
+    assert "pip install 'eppf[las]'" in lines[0]
