@@ -111,10 +111,10 @@ write_point_fields(os.path.join(folder, "labelled.las"), points,
 fig, ax = plt.subplots(figsize=(8, 4.2))
 local = points - origin
 ax.scatter(*local[labels < 0, :2].T, s=0.5, c="0.8")
-colors = plt.get_cmap("tab10")
+colors = [c for i, c in enumerate(plt.get_cmap("tab10").colors) if i != 7] + ["black"]  # no gray: ground's
 for k, label in enumerate(predicted):
     mine = local[labels == k]
-    ax.scatter(*mine[:, :2].T, s=2, color=colors(class_names.index(label)))
+    ax.scatter(*mine[:, :2].T, s=2, color=colors[class_names.index(label)])
     ax.annotate(label, mine[:, :2].mean(axis=0) + [0, 0.9], ha="center", fontsize=9)
 ax.set_aspect("equal")
 ax.set_xlabel(f"easting - {origin[0]:.0f} (m)")
