@@ -180,25 +180,21 @@ def coordinate(value):
 
 
 def write_fields_atomically(path, points, fields, format=None):
-    """:func:`eppf.io.write_point_fields` to a temporary file in the target's folder, renamed into place when
-    complete (an interrupted write leaves no partial file)."""
+    """:func:`eppf.io.write_point_fields` into a temporary folder beside the target, the file renamed into
+    place when complete (an interrupted write leaves no partial file)."""
+    import shutil
     import tempfile
 
     from ..io import write_point_fields
-    from ..utils._atomic import _default_mode
 
     path = str(path)
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".eppf-",
-                               suffix=os.path.splitext(path)[1])
-    os.close(fd)
+    scratch = tempfile.mkdtemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".eppf-")
     try:
+        tmp = os.path.join(scratch, os.path.basename(path))
         write_point_fields(tmp, points, fields, format=format)
-        os.chmod(tmp, _default_mode())
         os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def check_output_folder(folder):
