@@ -250,11 +250,11 @@ class CVFHTransformer(PointCloudDescriptor):
     as PCL, and so reproduces PCL's regions more often (figures:
     :ref:`api-figures-pcl`). The
     second normals are computed in double precision (PCL: single). No
-    randomness: the output is deterministic, bit for bit for any ``n_jobs``;
-    across CPUs the curvature (NumPy and LAPACK) can differ in its last bit,
-    which moves a point only where its curvature lies within that bit of
-    ``curvature_threshold`` (class (b) of the documentation's Reproducibility
-    page).
+    randomness: the output is deterministic, bit for bit for any ``n_jobs``.
+    The curvature filter is compiled and decides alike on every CPU; across
+    CPUs the second normals (LAPACK) can differ in their last bit, which moves
+    a point only where its normal lies within that bit of ``eps_angle`` from a
+    neighbor's (class (b) of the documentation's Reproducibility page).
 
     References
     ----------

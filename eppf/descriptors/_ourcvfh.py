@@ -1,4 +1,4 @@
-"""OUR-CVFH, Aldoma et al. (2012), after PCL 1.13's ``OURCVFHEstimation``, in NumPy/SciPy."""
+"""OUR-CVFH, Aldoma et al. (2012), after PCL 1.13's ``OURCVFHEstimation``, in NumPy/SciPy (its curvature filter compiled)."""
 
 import numbers
 
@@ -230,9 +230,11 @@ class OURCVFHTransformer(PointCloudDescriptor):
     on sparse clouds; an object without any cluster is described as one
     cluster of all its points (PCL falls back to a plain VFH with a
     different layout). No randomness: the output is deterministic, bit for
-    bit for any ``n_jobs``; across CPUs its curvature and reference frames
+    bit for any ``n_jobs``. Its curvature filter is compiled and decides alike
+    on every CPU; across CPUs its reference frames, octant weights and angles
     (NumPy and LAPACK) can differ in the last bit, which can move points
-    between regions (class (b) of the documentation's Reproducibility page).
+    between regions or bins (class (b) of the documentation's Reproducibility
+    page).
 
     References
     ----------
