@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from ..utils._param_validation import Interval, Options, StrOptions
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
 from ._cvfh_fast import pcl_region_growing, vfh_signatures
-from ._regions import curvature, radius_neighbors_flann, smooth_clusters
+from ._regions import low_curvature, radius_neighbors_flann, smooth_clusters
 
 __all__ = ["CVFHTransformer"]
 
@@ -75,7 +75,7 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
     p32 = points.astype(np.float32)
     n = len(points)
     if curvature_threshold < 0.5:  # surface variation never exceeds 1/3
-        keep = np.flatnonzero(curvature(points, n_neighbors) <= curvature_threshold)
+        keep = np.flatnonzero(low_curvature(points, n_neighbors, curvature_threshold))
     else:
         keep = np.arange(n)
     clusters = []
@@ -250,11 +250,11 @@ class CVFHTransformer(PointCloudDescriptor):
     as PCL, and so reproduces PCL's regions more often (figures:
     :ref:`api-figures-pcl`). The
     second normals are computed in double precision (PCL: single). No
-    randomness: the output is deterministic, bit for bit for any ``n_jobs``;
-    across CPUs the curvature (NumPy and LAPACK) can differ in its last bit,
-    which moves a point only where its curvature lies within that bit of
-    ``curvature_threshold`` (class (b) of the documentation's Reproducibility
-    page).
+    randomness: the output is deterministic, bit for bit for any ``n_jobs``.
+    The curvature filter is compiled and decides alike on every CPU; across
+    CPUs the second normals (LAPACK) can differ in their last bit, which moves
+    a point only where its normal lies within that bit of ``eps_angle`` from a
+    neighbor's (class (b) of the documentation's Reproducibility page).
 
     References
     ----------

@@ -1,7 +1,12 @@
 # cython: language_level=3
-"""Compiled VFH histograms for CVFH (see :class:`CVFHTransformer`).
+"""Compiled kernels of CVFH (see :class:`CVFHTransformer`) and OUR-CVFH.
 
-One 308-bin signature per (centroid, normal) pair of an object, in single
+The curvature filter (:func:`low_curvature`: k nearest neighbors on a k-d
+tree, their 3x3 scatter and a test of its smallest eigenvalue against the
+threshold, with ``+ - * /`` only in a fixed order, so the same bits on every
+CPU), PCL's region growing and FLANN's radius search, and the VFH histograms.
+
+VFH: one 308-bin signature per (centroid, normal) pair of an object, in single
 precision with the summation orders of PCL 1.13's Eigen code (four-wide
 vectors reduce as ``(x + z) + y``; three-wide ones as ``(x + y) + z``), so
 that bins match PCL's except in rare ties: three angle histograms of the
@@ -10,7 +15,7 @@ distance histogram (f4 over the largest distance) and 128 viewpoint bins.
 """
 
 from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf, M_PI
-from libc.stdint cimport int32_t, int64_t
+from libc.stdint cimport int32_t, int64_t, uint8_t
 
 import numpy as np
 from libc.string cimport memset
@@ -25,6 +30,9 @@ cdef enum:
     NSIG = 308
 
 cdef double PI = M_PI
+
+cdef enum:
+    KD_LEAF = 8   # most points in a leaf of the curvature's k-d tree
 
 
 cdef inline float _dot4(float a0, float a1, float a2, float b0, float b1, float b2) noexcept nogil:
@@ -271,3 +279,265 @@ def radius_neighbors_flann(const float[:, ::1] points, double radius):
             for d in range(<int>m):
                 idx[off[i] + d] = hits[d]
     return indices, offsets
+
+
+# ------------------------------------------------------------ curvature filter
+# A k-d tree over double-precision points: node ``t`` holds the points
+# perm[lo[t]:hi[t]]; an inner node splits them on axis dim[t] at the value
+# cut[t] of its median point: its left child's points have that coordinate
+# <= cut[t], its right child's >= cut[t].
+
+
+cdef void _select(const double* p, int64_t* perm, int64_t lo, int64_t hi, int64_t m, int d) noexcept nogil:
+    """Reorder perm[lo:hi] so that perm[m] holds the point of rank m - lo by
+    coordinate d, smaller or equal ones before it and greater or equal ones
+    after it (Hoare's selection, middle pivot: deterministic)."""
+    cdef int64_t i, j, t
+    cdef double pivot
+    hi -= 1
+    while lo < hi:
+        pivot = p[3 * perm[(lo + hi) >> 1] + d]
+        i = lo
+        j = hi
+        while i <= j:
+            while p[3 * perm[i] + d] < pivot:
+                i += 1
+            while p[3 * perm[j] + d] > pivot:
+                j -= 1
+            if i <= j:
+                t = perm[i]
+                perm[i] = perm[j]
+                perm[j] = t
+                i += 1
+                j -= 1
+        if m <= j:
+            hi = j
+        elif m >= i:
+            lo = i
+        else:
+            return
+
+
+cdef int64_t _build_kd(const double* p, int64_t n, int64_t* perm, int64_t* lo, int64_t* hi,
+                       int64_t* left, int* dim, double* cut, int64_t* stack) noexcept nogil:
+    """Build the tree (node 0 the root; the right child of an inner node ``t``
+    is ``left[t] + 1``); returns the number of nodes."""
+    cdef int64_t i, t, a, b, m, n_nodes = 1, top = 1
+    cdef int d, best
+    cdef double mn[3]
+    cdef double mx[3]
+    cdef double v
+    for i in range(n):
+        perm[i] = i
+    lo[0] = 0
+    hi[0] = n
+    stack[0] = 0
+    while top > 0:
+        top -= 1
+        t = stack[top]
+        a = lo[t]
+        b = hi[t]
+        if b - a <= KD_LEAF:
+            left[t] = -1
+            continue
+        for d in range(3):
+            mn[d] = p[3 * perm[a] + d]
+            mx[d] = mn[d]
+        for i in range(a + 1, b):
+            for d in range(3):
+                v = p[3 * perm[i] + d]
+                if v < mn[d]:
+                    mn[d] = v
+                if v > mx[d]:
+                    mx[d] = v
+        best = 0
+        for d in range(1, 3):
+            if mx[d] - mn[d] > mx[best] - mn[best]:
+                best = d
+        m = a + ((b - a) >> 1)
+        _select(p, perm, a, b, m, best)
+        dim[t] = best
+        cut[t] = p[3 * perm[m] + best]
+        left[t] = n_nodes
+        lo[n_nodes] = a
+        hi[n_nodes] = m
+        lo[n_nodes + 1] = m
+        hi[n_nodes + 1] = b
+        stack[top] = n_nodes
+        stack[top + 1] = n_nodes + 1
+        top += 2
+        n_nodes += 2
+    return n_nodes
+
+
+cdef void _knn(const double* sp, const double* q, int64_t k, const int64_t* perm, const int64_t* lo,
+               const int64_t* hi, const int64_t* left, const int* dim, const double* cut,
+               int64_t* stack, double* gap, double* bd, int64_t* bi) noexcept nogil:
+    """The k points nearest to ``q`` into ``bi`` (``sp``: the points in the
+    tree's order, ``sp[i] = p[perm[i]]``; their squared distances,
+    ``(dx^2 + dy^2) + dz^2``, into ``bd``), ordered by (squared distance,
+    index): ties are broken by the lower index, whatever the tree."""
+    cdef int64_t top = 1, t, i, j, s, found = 0, near
+    cdef double dx, dy, dz, d2, diff
+    stack[0] = 0
+    gap[0] = 0.0
+    while top > 0:
+        top -= 1
+        t = stack[top]
+        # a child whose points all lie farther than the k-th neighbor (ties
+        # with it are visited: a lower index wins them)
+        if found == k and gap[top] > bd[k - 1]:
+            continue
+        while left[t] >= 0:
+            diff = q[dim[t]] - cut[t]
+            near = left[t] if diff < 0 else left[t] + 1
+            # the other child's points lie at least |diff| away along dim[t]
+            stack[top] = left[t] + 1 if diff < 0 else left[t]
+            gap[top] = diff * diff
+            top += 1
+            t = near
+        for i in range(lo[t], hi[t]):
+            j = perm[i]
+            dx = sp[3 * i] - q[0]
+            dy = sp[3 * i + 1] - q[1]
+            dz = sp[3 * i + 2] - q[2]
+            d2 = (dx * dx + dy * dy) + dz * dz
+            if found == k and (d2 > bd[k - 1] or (d2 == bd[k - 1] and j > bi[k - 1])):
+                continue
+            s = found if found < k else k - 1
+            while s > 0 and (bd[s - 1] > d2 or (bd[s - 1] == d2 and bi[s - 1] > j)):
+                bd[s] = bd[s - 1]
+                bi[s] = bi[s - 1]
+                s -= 1
+            bd[s] = d2
+            bi[s] = j
+            if found < k:
+                found += 1
+
+
+cdef bint _low_curvature_one(const double* p, const int64_t* nb, int64_t k, double threshold) noexcept nogil:
+    """Whether lambda_min <= threshold * trace for the scatter matrix of the
+    points ``nb`` (lambda_min / trace is PCL's surface variation).
+
+    The scatter ``C`` about the neighbors' mean; ``C - t I`` with ``t =
+    threshold * trace(C)`` is positive definite exactly when lambda_min > t,
+    which its LDL^T decomposition tells by the signs of its pivots: no
+    eigenvalue, only ``+ - * /`` in a fixed order.
+    """
+    cdef int64_t i, j
+    cdef double mx = 0.0, my = 0.0, mz = 0.0, x, y, z
+    cdef double c00 = 0.0, c01 = 0.0, c02 = 0.0, c11 = 0.0, c12 = 0.0, c22 = 0.0
+    cdef double t, d0, d1, d2, l10, l20, r21
+    for i in range(k):
+        j = nb[i]
+        mx += p[3 * j]
+        my += p[3 * j + 1]
+        mz += p[3 * j + 2]
+    mx /= k
+    my /= k
+    mz /= k
+    for i in range(k):
+        j = nb[i]
+        x = p[3 * j] - mx
+        y = p[3 * j + 1] - my
+        z = p[3 * j + 2] - mz
+        c00 += x * x
+        c01 += x * y
+        c02 += x * z
+        c11 += y * y
+        c12 += y * z
+        c22 += z * z
+    t = threshold * ((c00 + c11) + c22)
+    d0 = c00 - t
+    if not (d0 > 0.0):
+        return True
+    l10 = c01 / d0
+    l20 = c02 / d0
+    d1 = (c11 - t) - l10 * c01
+    if not (d1 > 0.0):
+        return True
+    r21 = c12 - l20 * c01
+    d2 = ((c22 - t) - l20 * c02) - (r21 / d1) * r21
+    return not (d2 > 0.0)
+
+
+def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
+    """Which points pass CVFH's curvature filter, and where neighbors tie.
+
+    Point ``i`` passes when the surface variation ``lambda_min / (lambda_0 +
+    lambda_1 + lambda_2)`` of the scatter of its ``k`` nearest neighbors (the
+    point itself included; ``min(k, n)`` of them) is at most ``threshold``,
+    or when those neighbors all coincide. Returns ``(passes, tied)``: a
+    boolean array of length ``n``, and the points (int64 indices) whose k-th
+    nearest neighbor ties with the next one, so that their ``k`` nearest
+    are not unique: their ``passes`` is left False for the caller to decide
+    on the neighbors of its choice (:func:`low_curvature_of`). Runs without
+    the GIL.
+    """
+    cdef int64_t n = points.shape[0], i, kk, kq, n_tied = 0
+    if points.shape[1] != 3:
+        raise ValueError("low_curvature: points must have shape (n, 3)")
+    if k < 1:
+        raise ValueError(f"low_curvature: k must be at least 1, got {k}")
+    out = np.zeros(n, dtype=np.bool_)
+    tied_arr = np.empty(n, dtype=np.int64)
+    if n == 0:
+        return out, tied_arr
+    if not np.isfinite(np.asarray(points)).all():
+        raise ValueError("low_curvature: points must be finite")
+    kk = min(<int64_t>k, n)
+    kq = kk + 1 if kk < n else kk  # one more, to see a tie at the k-th
+    cdef int64_t[::1] perm = np.empty(n, dtype=np.int64)
+    cdef int64_t[::1] lo = np.empty(2 * n, dtype=np.int64)
+    cdef int64_t[::1] hi = np.empty(2 * n, dtype=np.int64)
+    cdef int64_t[::1] left = np.empty(2 * n, dtype=np.int64)
+    cdef int[::1] dim = np.empty(2 * n, dtype=np.intc)
+    cdef double[::1] cut = np.empty(2 * n, dtype=np.float64)
+    cdef int64_t[::1] stack = np.empty(2 * n + 2, dtype=np.int64)
+    cdef double[::1] gap = np.empty(2 * n + 2, dtype=np.float64)
+    cdef double[:, ::1] sp = np.empty((n, 3), dtype=np.float64)
+    cdef double[::1] bd = np.empty(kq, dtype=np.float64)
+    cdef int64_t[::1] bi = np.empty(kq, dtype=np.int64)
+    cdef int64_t[::1] tied = tied_arr
+    cdef uint8_t[::1] res = out.view(np.uint8)
+    cdef const double* p = &points[0, 0]
+    with nogil:
+        _build_kd(p, n, &perm[0], &lo[0], &hi[0], &left[0], &dim[0], &cut[0], &stack[0])
+        for i in range(n):
+            sp[i, 0] = p[3 * perm[i]]
+            sp[i, 1] = p[3 * perm[i] + 1]
+            sp[i, 2] = p[3 * perm[i] + 2]
+        # queries in the tree's order, for locality
+        for i in range(n):
+            _knn(&sp[0, 0], &sp[i, 0], kq, &perm[0], &lo[0], &hi[0], &left[0], &dim[0], &cut[0], &stack[0],
+                 &gap[0], &bd[0], &bi[0])
+            if kq > kk and bd[kk] == bd[kk - 1]:
+                tied[n_tied] = perm[i]
+                n_tied += 1
+            else:
+                res[perm[i]] = _low_curvature_one(p, &bi[0], kk, threshold)
+    tied_arr = np.sort(tied_arr[:n_tied])
+    return out, tied_arr
+
+
+def low_curvature_of(const double[:, ::1] points, const int64_t[:, ::1] neighbors, double threshold):
+    """:func:`low_curvature`'s test for given neighbors: row ``r`` of
+    ``neighbors`` lists the neighbors of one point (indices into ``points``).
+    Returns a boolean array with one entry per row."""
+    cdef int64_t m = neighbors.shape[0], k = neighbors.shape[1], n = points.shape[0], r, j
+    if points.shape[1] != 3:
+        raise ValueError("low_curvature_of: points must have shape (n, 3)")
+    out = np.zeros(m, dtype=np.bool_)
+    if m == 0:
+        return out
+    if k < 1:
+        raise ValueError("low_curvature_of: at least one neighbor per row is needed")
+    for r in range(m):
+        for j in range(k):
+            if neighbors[r, j] < 0 or neighbors[r, j] >= n:
+                raise ValueError("low_curvature_of: neighbor index out of range")
+    cdef uint8_t[::1] res = out.view(np.uint8)
+    with nogil:
+        for r in range(m):
+            res[r] = _low_curvature_one(&points[0, 0], &neighbors[r, 0], k, threshold)
+    return out

@@ -1,4 +1,4 @@
-"""OUR-CVFH, Aldoma et al. (2012), after PCL 1.13's ``OURCVFHEstimation``, in NumPy/SciPy."""
+"""OUR-CVFH, Aldoma et al. (2012), after PCL 1.13's ``OURCVFHEstimation``, in NumPy/SciPy (its curvature filter compiled)."""
 
 import numbers
 
@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from ..utils import check_n_jobs
 from ..utils._param_validation import Interval, Options, StrOptions
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
-from ._regions import curvature, pair_features, smooth_clusters
+from ._regions import low_curvature, pair_features, smooth_clusters
 
 __all__ = ["OURCVFHTransformer"]
 
@@ -100,7 +100,7 @@ def _ourcvfh_object(points, normals, *, n_neighbors=10, curvature_threshold=0.03
         cluster_tolerance = 5.0 * float(np.median(dist[:, 1]))
         if cluster_tolerance <= 0:
             cluster_tolerance = 5.0 * float(dist[:, 1].max())
-    keep = curvature(points, n_neighbors) <= curvature_threshold
+    keep = low_curvature(points, n_neighbors, curvature_threshold)
     cos_eps = np.cos(eps_angle)
     raw = smooth_clusters(points, normals, keep, cluster_tolerance, cos_eps, min_points)
     cos_refine = np.cos(eps_angle * refine)
@@ -230,9 +230,11 @@ class OURCVFHTransformer(PointCloudDescriptor):
     on sparse clouds; an object without any cluster is described as one
     cluster of all its points (PCL falls back to a plain VFH with a
     different layout). No randomness: the output is deterministic, bit for
-    bit for any ``n_jobs``; across CPUs its curvature and reference frames
+    bit for any ``n_jobs``. Its curvature filter is compiled and decides alike
+    on every CPU; across CPUs its reference frames, octant weights and angles
     (NumPy and LAPACK) can differ in the last bit, which can move points
-    between regions (class (b) of the documentation's Reproducibility page).
+    between regions or bins (class (b) of the documentation's Reproducibility
+    page).
 
     References
     ----------

@@ -2,9 +2,9 @@
 
 The shared module of :class:`eppf.OURCVFHTransformer` and
 :class:`eppf.CVFHTransformer` (its functions are public within the package
-for that reason): the surface variation of a point's neighborhood
-(:func:`curvature`, for the curvature filter), the smooth regions grown from
-the points that pass it (:func:`smooth_clusters`), PCL's pair features of a
+for that reason): the curvature filter (:func:`low_curvature`, compiled), the
+smooth regions grown from the points that pass it (:func:`smooth_clusters`),
+PCL's pair features of a
 reference point (a region's centroid and mean normal) against every point of
 the object (:func:`pair_features`), and FLANN's single k-d tree radius search
 (:func:`radius_neighbors_flann`, compiled with CVFH's kernel on the tree
@@ -16,24 +16,30 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from . import _cvfh_fast
 from ._cvfh_fast import radius_neighbors_flann
 
-__all__ = ["curvature", "pair_features", "radius_neighbors_flann", "smooth_clusters"]
+__all__ = ["low_curvature", "pair_features", "radius_neighbors_flann", "smooth_clusters"]
 
 
-def curvature(points, k):
-    """Surface variation lambda_min / sum(lambda) of the k nearest neighbors."""
-    n = points.shape[0]
-    k = min(k, n)
-    _, idx = cKDTree(points).query(points, k=k)
-    nb = points[idx.reshape(n, k)]
-    nb = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", nb, nb)
-    ev = np.linalg.eigvalsh(cov)
-    total = ev.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        curv = np.where(total > 0, ev[:, 0] / total, 0.0)
-    return np.clip(curv, 0.0, None)
+def low_curvature(points, k, threshold):
+    """Whether each point's surface variation is at most ``threshold``.
+
+    The surface variation ``lambda_min / sum(lambda)`` of the scatter of a
+    point's ``k`` nearest neighbors (itself included), decided by the compiled
+    kernel (``+ - * /`` only, the same bits on every CPU). Where the k-th
+    nearest neighbor ties with the next one (grids, repeated points), the ``k``
+    nearest are those SciPy's k-d tree returns (as eppf's earlier NumPy filter took);
+    elsewhere they are unique.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    keep, tied = _cvfh_fast.low_curvature(points, k, threshold)
+    if tied.size:
+        k = min(k, len(points))
+        _, idx = cKDTree(points).query(points[tied], k=k)
+        keep[tied] = _cvfh_fast.low_curvature_of(points, np.ascontiguousarray(idx.reshape(len(tied), k), dtype=np.int64),
+                                                 threshold)
+    return keep
 
 
 def smooth_clusters(points, normals, keep, tolerance, cos_eps, min_points):

@@ -168,7 +168,8 @@ def test_scaled_sphere_gives_the_unit_sphere_descriptor(est):
         # near the unit sphere's descriptor: s * f rounds each coordinate (to 44
         # bits at 1e-310). OUR-CVFH's clusters are chaotic under such jitter (a
         # 1e-13 relative change moves 0.1-0.35 of its mass, by CPU, since its
-        # curvature comes from LAPACK), so the bound is for the others only.
+        # frames and weights come from LAPACK and NumPy), so the bound is for the
+        # others only.
         if not isinstance(est, OURCVFHTransformer):
             assert np.abs(X - ref).sum() < 0.02, f
 
