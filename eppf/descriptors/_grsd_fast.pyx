@@ -23,7 +23,7 @@ loop.
 """
 
 from cython.parallel cimport prange, threadid
-from libc.math cimport floorf, floor, sqrt, acos
+from libc.math cimport floorf, floor, fabs, sqrt, acos
 from libc.stdint cimport int64_t, int32_t, int8_t
 from libc.string cimport memset
 
@@ -397,3 +397,56 @@ def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double 
     return (np.asarray(s["vijk"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["cent"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["types"][0, :n_vox]).copy(), counts)
+
+
+def grid_check(const float[:, ::1] points, const int64_t[::1] offsets, float inv, double max_cells,
+               double max_index):
+    """The first object (by ``offsets``) whose single-precision points
+    ``points`` are not all finite (returned as ``(k, None)``) or whose voxel
+    grid of width ``1 / inv`` has more than ``max_cells`` cells or reaches a
+    cell index of ``max_index`` (``(k, (nx, ny, nz))``, cells per axis);
+    ``(-1, None)`` when every object is fine. Per axis, the cells are
+    ``floor(hi * inv) - floor(lo * inv) + 1`` in double precision from the
+    object's float32 extremes, their product is compared with
+    ``max_cells``, and the largest ``|coordinate| * inv`` with ``max_index``.
+    Objects have at least one point (the caller checks)."""
+    cdef Py_ssize_t n_obj = offsets.shape[0] - 1
+    cdef Py_ssize_t k, i
+    cdef int d
+    cdef float x
+    cdef float lo[3]
+    cdef float hi[3]
+    cdef double cells[3]
+    cdef double reach, dinv = inv
+    cdef bint finite
+    if points.shape[1] != 3 or n_obj < 0 or offsets[n_obj] > points.shape[0]:
+        raise ValueError("grid_check: points must have shape (n, 3) and offsets end within them")
+    with nogil:
+        for k in range(n_obj):
+            finite = True
+            for d in range(3):
+                lo[d] = points[offsets[k], d]
+                hi[d] = lo[d]
+            for i in range(offsets[k], offsets[k + 1]):
+                for d in range(3):
+                    x = points[i, d]
+                    # NaN and infinities fail (x - x is NaN for both)
+                    finite = finite & (x - x == 0)
+                    if x < lo[d]:
+                        lo[d] = x
+                    if x > hi[d]:
+                        hi[d] = x
+            if not finite:
+                with gil:
+                    return k, None
+            reach = 0.0
+            for d in range(3):
+                cells[d] = floor(<double>hi[d] * dinv) - floor(<double>lo[d] * dinv) + 1
+                if fabs(<double>lo[d]) * dinv > reach:
+                    reach = fabs(<double>lo[d]) * dinv
+                if fabs(<double>hi[d]) * dinv > reach:
+                    reach = fabs(<double>hi[d]) * dinv
+            if cells[0] * cells[1] * cells[2] > max_cells or reach >= max_index:
+                with gil:
+                    return k, (cells[0], cells[1], cells[2])
+    return -1, None
