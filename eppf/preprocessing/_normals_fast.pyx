@@ -15,13 +15,15 @@ points of one object) with OpenMP.
   search over growing shells of cells with a sorted k-list takes over. All
   paths return the same list: the k smallest squared distances, ties broken
   by the point's position in the grid order (cell, then original index).
-- The fast path's distance scan runs eight points at a time with AVX-512 or
+- The fast path's distance scan runs eight points at a time with AVX-512,
   four with AVX2 where the CPU has them (``_normals_simd.h``, chosen at
-  import), over a copy of the grid-order coordinates as x, y and z arrays,
-  and with AVX-512 its k-th selection too; the same IEEE operations in the
-  same order as the scalar loops here, so every level gives the same
-  candidates and normals bit for bit (``_set_simd_level`` picks a lower one
-  for tests).
+  import) and two elsewhere (portable vector code, any CPU), over a copy of
+  the grid-order coordinates as x, y and z arrays; with AVX-512 and AVX2 its
+  k-th selection too (bisection over bucket counts), and each covariance is
+  summed two sums per vector register at every level. The same IEEE
+  operations in the same order as the scalar loops here, so every level
+  gives the same candidates and normals bit for bit (``_set_simd_level``
+  picks a lower one for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
   neighborhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
@@ -47,6 +49,9 @@ cdef extern from "_normals_simd.h":
         EPPF_NRM_BUCKETS
     int eppf_nrm_has_avx2() noexcept nogil
     int eppf_nrm_has_avx512() noexcept nogil
+    int64_t eppf_nrm_scan_portable(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
+                                   double qx, double qy, double qz, double guess, double* cand_d2,
+                                   int64_t* cand_pos, int64_t m) noexcept nogil
     int64_t eppf_nrm_scan_avx2(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
                                double qx, double qy, double qz, double guess, double* cand_d2,
                                int64_t* cand_pos, int64_t m) noexcept nogil
@@ -503,7 +508,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     cdef int counts[_N_BUCKETS]
     cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
     cdef double to_bucket, kth
-    cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, di, gz, gz2, gy, gyz2, gx
+    cdef double qx = q[0], qy = q[1], qz = q[2], d2, di, gz, gz2, gy, gyz2, gx
     cdef int64_t xlo = c[0] - r if c[0] - r > 0 else 0
     cdef int64_t xhi = c[0] + r if c[0] + r < g.res[0] else g.res[0] - 1
     for jz in range(c[2] - r if c[2] - r > 0 else 0, (c[2] + r if c[2] + r < g.res[2] else g.res[2] - 1) + 1):
@@ -541,14 +546,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             elif _simd == 1:
                 m = eppf_nrm_scan_avx2(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
             else:
-                for p in range(b, e):
-                    dx = g.sx[p] - qx
-                    dy = g.sy[p] - qy
-                    dz = g.sz[p] - qz
-                    d2 = dx * dx + dy * dy + dz * dz
-                    cand_d2[m] = d2
-                    cand_pos[m] = p
-                    m += d2 <= guess
+                m = eppf_nrm_scan_portable(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
     if m < k:
         return _FAST_FEW
     if m > max_cand:
@@ -591,12 +589,15 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             kth_i = sel[i]
     kth = cand_d2[kth_i]
     # Keep everything up to the k-th in (d2, position) order, in position
-    # order (candidates are in ascending position).
+    # order (candidates are in ascending position): d2 <= kth up to the k-th
+    # itself, d2 < kth after it.
     j = 0
-    for i in range(m):
-        d2 = cand_d2[i]
+    for i in range(kth_i + 1):
         kpos[j] = cand_pos[i]
-        j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
+        j += cand_d2[i] <= kth
+    for i in range(kth_i + 1, m):
+        kpos[j] = cand_pos[i]
+        j += cand_d2[i] < kth
     kd2[k - 1] = kth
     return _FAST_OK if _block_done(g, q, c, r, kth) else _FAST_FAR
 

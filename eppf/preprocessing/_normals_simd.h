@@ -1,8 +1,12 @@
-/* SIMD distance scan of the normals kernel's fast neighbor search
- * (_normals_fast.pyx's ``_knn_block``), chosen at run time:
+/* SIMD distance scan and k-th selection of the normals kernel's fast
+ * neighbor search (_normals_fast.pyx's ``_knn_block``), chosen at run time:
  *
  * - AVX-512 (F): eight grid-order points at a time;
- * - AVX2: four at a time, the survivors packed with a permutation table.
+ * - AVX2: four at a time, the survivors packed with a permutation table;
+ * - portable (any CPU, the "scalar" level): two at a time in GCC/clang
+ *   vector registers (SSE2, NEON), plain loops with other compilers.
+ *
+ * and the covariance of a neighborhood (``eppf_nrm_covariance``, every level).
  *
  * ``eppf_nrm_scan_*`` offers the points at grid-order positions [b, e) to
  * the candidate list: for each, in ascending position, the squared distance
@@ -19,7 +23,7 @@
  * beyond the largest count; the loads past ``e`` are masked (AVX-512) or left
  * to a scalar tail (AVX2), so nothing beyond [b, e) is read.
  *
- * Other compilers and CPUs use the scalar loop of _normals_fast.pyx.
+ * The selection is _normals_fast.pyx's histogram code at the portable level.
  */
 #ifndef EPPF_NORMALS_SIMD_H
 #define EPPF_NORMALS_SIMD_H
@@ -73,6 +77,38 @@ static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, 
     cov[5] = cov[7] = syz_zz[0];
     cov[8] = syz_zz[1];
 }
+
+/* The portable distance scan (every CPU; the scalar loop's operations),
+ * two points per vector register: eppf_nrm_scan_avx2's contract, writing
+ * only the entries it counts plus one (cand_d2 and cand_pos need one entry
+ * of slack). */
+static inline int64_t eppf_nrm_scan_portable(const double *sx, const double *sy, const double *sz, int64_t b,
+                                             int64_t e, double qx, double qy, double qz, double guess,
+                                             double *cand_d2, int64_t *cand_pos, int64_t m)
+{
+    const eppf_nrm_v2d vqx = {qx, qx}, vqy = {qy, qy}, vqz = {qz, qz};
+    eppf_nrm_v2d dx, dy, dz, d2;
+    int64_t p = b;
+    for (; p + 2 <= e; p += 2) {
+        dx = (eppf_nrm_v2d){sx[p], sx[p + 1]} - vqx;
+        dy = (eppf_nrm_v2d){sy[p], sy[p + 1]} - vqy;
+        dz = (eppf_nrm_v2d){sz[p], sz[p + 1]} - vqz;
+        d2 = (dx * dx + dy * dy) + dz * dz;
+        cand_d2[m] = d2[0];
+        cand_pos[m] = p;
+        m += d2[0] <= guess;
+        cand_d2[m] = d2[1];
+        cand_pos[m] = p + 1;
+        m += d2[1] <= guess;
+    }
+    if (p < e) {
+        double ex = sx[p] - qx, ey = sy[p] - qy, ez = sz[p] - qz, ed2 = (ex * ex + ey * ey) + ez * ez;
+        cand_d2[m] = ed2;
+        cand_pos[m] = p;
+        m += ed2 <= guess;
+    }
+    return m;
+}
 #else
 static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, int64_t k, double *cov)
 {
@@ -102,6 +138,20 @@ static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, 
     cov[3] = cov[1];
     cov[6] = cov[2];
     cov[7] = cov[5];
+}
+
+static inline int64_t eppf_nrm_scan_portable(const double *sx, const double *sy, const double *sz, int64_t b,
+                                             int64_t e, double qx, double qy, double qz, double guess,
+                                             double *cand_d2, int64_t *cand_pos, int64_t m)
+{
+    int64_t p;
+    for (p = b; p < e; p++) {
+        double dx = sx[p] - qx, dy = sy[p] - qy, dz = sz[p] - qz, d2 = (dx * dx + dy * dy) + dz * dz;
+        cand_d2[m] = d2;
+        cand_pos[m] = p;
+        m += d2 <= guess;
+    }
+    return m;
 }
 #endif
 
