@@ -242,7 +242,7 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
         types[v] = <int8_t>_rsd_class(nrm, hits, hd2, n_hits, max_dist, nsub, plane_radius,
                                       thr, work, work + MAX_SUBDIV)
     memset(T, 0, sizeof(T))
-    # Neighbour classes: voxels come in ascending key order, so for each of
+    # Neighbor classes: voxels come in ascending key order, so for each of
     # the nine (dy, dz) rows the key of the row's dx = -1 cell grows with v,
     # and one pointer per row sweeps the keys once (the three cells of a row
     # are consecutive keys, hence consecutive entries when occupied).
