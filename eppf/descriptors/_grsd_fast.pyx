@@ -419,8 +419,11 @@ def grid_check(const float[:, ::1] points, const int64_t[::1] offsets, float inv
     cdef double cells[3]
     cdef double reach, dinv = inv
     cdef bint finite
-    if points.shape[1] != 3 or n_obj < 0 or offsets[n_obj] > points.shape[0]:
-        raise ValueError("grid_check: points must have shape (n, 3) and offsets end within them")
+    if points.shape[1] != 3 or n_obj < 0 or offsets[0] < 0 or offsets[n_obj] > points.shape[0]:
+        raise ValueError("grid_check: points must have shape (n, 3) and offsets lie within them")
+    for k in range(n_obj):
+        if offsets[k + 1] <= offsets[k]:
+            raise ValueError("grid_check: every object needs at least one point (offsets must increase)")
     with nogil:
         for k in range(n_obj):
             finite = True

@@ -313,8 +313,14 @@ def test_grid_check_matches_numpy_rule():
         Q = P.copy()
         Q[offsets[2] + 7, 1] = bad_value
         assert grid_check(Q, offsets, inv, 2.0**31 - 1, 2.0**30) == (2, None)
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(ValueError, match="lie within"):
         grid_check(P, offsets + 1, inv, 2.0**31 - 1, 2.0**30)
+    with pytest.raises(ValueError, match="lie within"):
+        grid_check(P, offsets - 1, inv, 2.0**31 - 1, 2.0**30)
+    with pytest.raises(ValueError, match="at least one point"):
+        grid_check(P, np.array([0, 5, 5, len(P)], dtype=np.int64), inv, 2.0**31 - 1, 2.0**30)
+    with pytest.raises(ValueError, match="at least one point"):
+        grid_check(P, np.array([0, 20, 5, len(P)], dtype=np.int64), inv, 2.0**31 - 1, 2.0**30)
 
 def test_reference_neighbour_is_the_tree_order_not_the_nearest():
     # 16 points (two leaves): the query's own leaf is searched first, so the
