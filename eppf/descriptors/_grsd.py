@@ -6,7 +6,7 @@ import numpy as np
 
 from ..utils._param_validation import Interval, Options
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
-from ._grsd_fast import grsd_batch
+from ._grsd_fast import grid_check, grsd_batch
 
 __all__ = ["GRSDTransformer"]
 
@@ -226,21 +226,17 @@ def _single(points, normals, offsets, width, owner, first_index):
     with np.errstate(over="ignore"):
         p32 = points.astype(np.float32)
     n32 = normals.astype(np.float32)
-    inv = np.float32(1.0) / np.float32(width)
-    for k in range(len(offsets) - 1):
-        p = p32[offsets[k] : offsets[k + 1]]
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-            raise ValueError(
-                f"{owner}: point cloud {first_index + k} has coordinates beyond single precision "
-                "after scaling; use scaling='object'"
-            )
-        cells = np.floor(hi.astype(np.float64) * inv) - np.floor(lo.astype(np.float64) * inv) + 1
-        reach = np.abs(np.concatenate([lo, hi]).astype(np.float64)).max() * float(inv)
-        if np.prod(cells) > _MAX_CELLS or reach >= _MAX_CELL_INDEX:
-            raise ValueError(
-                f"{owner}: point cloud {first_index + k} spans {int(cells[0])} x {int(cells[1])} x "
-                f"{int(cells[2])} voxels of width {width:g}; at most 2**31 - 1 voxels (PCL's VoxelGrid "
-                "limit): use a larger radius or scaling='object'"
-            )
+    bad, cells = grid_check(p32, offsets, np.float32(1.0) / np.float32(width), float(_MAX_CELLS),
+                            float(_MAX_CELL_INDEX))
+    if bad >= 0 and cells is None:
+        raise ValueError(
+            f"{owner}: point cloud {first_index + bad} has coordinates beyond single precision "
+            "after scaling; use scaling='object'"
+        )
+    if bad >= 0:
+        raise ValueError(
+            f"{owner}: point cloud {first_index + bad} spans {int(cells[0])} x {int(cells[1])} x "
+            f"{int(cells[2])} voxels of width {width:g}; at most 2**31 - 1 voxels (PCL's VoxelGrid "
+            "limit): use a larger radius or scaling='object'"
+        )
     return p32, n32

@@ -23,9 +23,8 @@ loop.
 """
 
 from cython.parallel cimport prange, threadid
-from libc.math cimport floorf, floor, sqrt, acos
+from libc.math cimport floorf, floor, fabs, sqrt, acos
 from libc.stdint cimport int64_t, int32_t, int8_t
-from libc.stdlib cimport qsort
 from libc.string cimport memset
 
 from ._flann_tree cimport build_tree, radius_search
@@ -42,18 +41,34 @@ cdef struct KeyIdx:
     int64_t idx
 
 
-cdef int _cmp_keyidx(const void* a, const void* b) noexcept nogil:
-    cdef const KeyIdx* x = <const KeyIdx*>a
-    cdef const KeyIdx* y = <const KeyIdx*>b
-    if x.key < y.key:
-        return -1
-    if x.key > y.key:
-        return 1
-    if x.idx < y.idx:
-        return -1
-    if x.idx > y.idx:
-        return 1
-    return 0
+cdef KeyIdx* _sort_by_key(KeyIdx* a, KeyIdx* b, int n, int64_t n_keys) noexcept nogil:
+    """Sort ``a[:n]`` by key, stably (so by (key, index) when the indices
+    ascend, as the voxelization writes them), keys in [0, n_keys): a least
+    significant digit radix sort, 8 bits a pass, as many passes as ``n_keys``
+    needs, between ``a`` and ``b`` (n entries each). Returns the array that
+    holds the result."""
+    cdef int64_t counts[256]
+    cdef int64_t total, c
+    cdef int i, shift = 0, d
+    cdef KeyIdx* t
+    while shift < 64 and (n_keys - 1) >> shift > 0:
+        memset(counts, 0, sizeof(counts))
+        for i in range(n):
+            counts[(a[i].key >> shift) & 255] += 1
+        total = 0
+        for d in range(256):
+            c = counts[d]
+            counts[d] = total
+            total += c
+        for i in range(n):
+            d = <int>((a[i].key >> shift) & 255)
+            b[counts[d]] = a[i]
+            counts[d] += 1
+        t = a
+        a = b
+        b = t
+        shift += 8
+    return a
 
 
 cdef inline int _clamp_cell(float t, int hi) noexcept nogil:
@@ -152,19 +167,6 @@ cdef int _rsd_class(const float* nrm, const int32_t* hits, const float* hd2, int
     return 4
 
 
-cdef int64_t _find(const int64_t* keys, int64_t n, int64_t key) noexcept nogil:
-    cdef int64_t lo = 0, hi = n - 1, mid
-    while lo <= hi:
-        mid = (lo + hi) >> 1
-        if keys[mid] < key:
-            lo = mid + 1
-        elif keys[mid] > key:
-            hi = mid - 1
-        else:
-            return mid
-    return -1
-
-
 cdef int _grsd_object(const float* p, const float* nrm, int n, float width, double max_dist,
                       int nsub, double plane_radius, const double* thr,
                       KeyIdx* ki, int64_t* ukeys, int32_t* vijk, float* cent, int8_t* types,
@@ -173,7 +175,9 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
     """One object's 21 transition counts into out; voxel classes into types.
     Returns the number of occupied voxels."""
     cdef int i, d, v, n_vox, start, cnt, dx, dy, dz, t, n_hits
-    cdef int64_t key, nk
+    cdef int64_t key, j
+    cdef int64_t row_ptr[9]
+    cdef bint row_in
     cdef float inv = (<float>1.0) / width
     cdef float mins[3]
     cdef float maxs[3]
@@ -183,7 +187,7 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
     cdef float sx, sy, sz, fc, r2
     cdef float root_box[6]
     cdef int64_t T[N_CLASSES * N_CLASSES]
-    cdef int a, b, k
+    cdef int a, b, k, r
     for d in range(3):
         mins[d] = p[d]
         maxs[d] = p[d]
@@ -204,7 +208,7 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
             cell[d] = _clamp_cell(floorf(p[3 * i + d] * inv) - <float>minb[d], dims[d] - 1)
         ki[i].key = cell[0] + <int64_t>dims[0] * (cell[1] + <int64_t>dims[1] * cell[2])
         ki[i].idx = i
-    qsort(ki, n, sizeof(KeyIdx), _cmp_keyidx)
+    ki = _sort_by_key(ki, ki + n, n, <int64_t>dims[0] * dims[1] * dims[2])
     # voxels: unique keys, centroids (float sums in point order, as PCL's VoxelGrid)
     n_vox = 0
     start = 0
@@ -238,22 +242,35 @@ cdef int _grsd_object(const float* p, const float* nrm, int n, float width, doub
         types[v] = <int8_t>_rsd_class(nrm, hits, hd2, n_hits, max_dist, nsub, plane_radius,
                                       thr, work, work + MAX_SUBDIV)
     memset(T, 0, sizeof(T))
+    # Neighbor classes: voxels come in ascending key order, so for each of
+    # the nine (dy, dz) rows the key of the row's dx = -1 cell grows with v,
+    # and one pointer per row sweeps the keys once (the three cells of a row
+    # are consecutive keys, hence consecutive entries when occupied).
+    for r in range(9):
+        row_ptr[r] = 0
     for v in range(n_vox):
-        for dz in range(-1, 2):
-            for dy in range(-1, 2):
-                for dx in range(-1, 2):
-                    if dx == 0 and dy == 0 and dz == 0:
-                        continue
-                    cell[0] = vijk[3 * v] + dx
-                    cell[1] = vijk[3 * v + 1] + dy
-                    cell[2] = vijk[3 * v + 2] + dz
-                    t = N_CLASSES - 1
-                    if (cell[0] >= 0 and cell[0] < dims[0] and cell[1] >= 0 and cell[1] < dims[1]
-                            and cell[2] >= 0 and cell[2] < dims[2]):
-                        nk = _find(ukeys, n_vox, cell[0] + <int64_t>dims[0] * (cell[1] + <int64_t>dims[1] * cell[2]))
-                        if nk >= 0:
-                            t = types[nk]
-                    T[types[v] * N_CLASSES + t] += 1
+        for r in range(9):
+            dy = r % 3 - 1
+            dz = r // 3 - 1
+            key = ukeys[v] - 1 + dims[0] * (dy + <int64_t>dims[1] * dz)
+            j = row_ptr[r]
+            while j < n_vox and ukeys[j] < key:
+                j += 1
+            row_ptr[r] = j
+            cell[1] = vijk[3 * v + 1] + dy
+            cell[2] = vijk[3 * v + 2] + dz
+            row_in = cell[1] >= 0 and cell[1] < dims[1] and cell[2] >= 0 and cell[2] < dims[2]
+            for dx in range(-1, 2):
+                if dx == 0 and r == 4:
+                    continue
+                cell[0] = vijk[3 * v] + dx
+                t = N_CLASSES - 1
+                if row_in and cell[0] >= 0 and cell[0] < dims[0]:
+                    while j < n_vox and ukeys[j] < key + 1 + dx:
+                        j += 1
+                    if j < n_vox and ukeys[j] == key + 1 + dx:
+                        t = types[j]
+                T[types[v] * N_CLASSES + t] += 1
     k = 0
     for a in range(N_CLASSES):
         for b in range(a, N_CLASSES):
@@ -278,7 +295,7 @@ def _scratch(int num_threads, int64_t max_n):
     m = max(int(max_n), 1)
     n_nodes = 2 * m
     return dict(
-        ki=np.empty((num_threads, 2 * m), dtype=np.int64),
+        ki=np.empty((num_threads, 4 * m), dtype=np.int64),  # two arrays of m (key, index) pairs
         ukeys=np.empty((num_threads, m), dtype=np.int64),
         vijk=np.empty((num_threads, 3 * m), dtype=np.int32),
         cent=np.empty((num_threads, 3 * m), dtype=np.float32),
@@ -380,3 +397,59 @@ def grsd_voxels(const float[:, ::1] points, const float[:, ::1] normals, double 
     return (np.asarray(s["vijk"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["cent"][0, : 3 * n_vox]).reshape(-1, 3).copy(),
             np.asarray(s["types"][0, :n_vox]).copy(), counts)
+
+
+def grid_check(const float[:, ::1] points, const int64_t[::1] offsets, float inv, double max_cells,
+               double max_index):
+    """The first object (by ``offsets``) whose single-precision points
+    ``points`` are not all finite (returned as ``(k, None)``) or whose voxel
+    grid of width ``1 / inv`` has more than ``max_cells`` cells or reaches a
+    cell index of ``max_index`` (``(k, (nx, ny, nz))``, cells per axis);
+    ``(-1, None)`` when every object is fine. Per axis, the cells are
+    ``floor(hi * inv) - floor(lo * inv) + 1`` in double precision from the
+    object's float32 extremes, their product is compared with
+    ``max_cells``, and the largest ``|coordinate| * inv`` with ``max_index``.
+    Objects have at least one point (the caller checks)."""
+    cdef Py_ssize_t n_obj = offsets.shape[0] - 1
+    cdef Py_ssize_t k, i
+    cdef int d
+    cdef float x
+    cdef float lo[3]
+    cdef float hi[3]
+    cdef double cells[3]
+    cdef double reach, dinv = inv
+    cdef bint finite
+    if points.shape[1] != 3 or n_obj < 0 or offsets[0] < 0 or offsets[n_obj] > points.shape[0]:
+        raise ValueError("grid_check: points must have shape (n, 3) and offsets lie within them")
+    for k in range(n_obj):
+        if offsets[k + 1] <= offsets[k]:
+            raise ValueError("grid_check: every object needs at least one point (offsets must increase)")
+    with nogil:
+        for k in range(n_obj):
+            finite = True
+            for d in range(3):
+                lo[d] = points[offsets[k], d]
+                hi[d] = lo[d]
+            for i in range(offsets[k], offsets[k + 1]):
+                for d in range(3):
+                    x = points[i, d]
+                    # NaN and infinities fail (x - x is NaN for both)
+                    finite = finite & (x - x == 0)
+                    if x < lo[d]:
+                        lo[d] = x
+                    if x > hi[d]:
+                        hi[d] = x
+            if not finite:
+                with gil:
+                    return k, None
+            reach = 0.0
+            for d in range(3):
+                cells[d] = floor(<double>hi[d] * dinv) - floor(<double>lo[d] * dinv) + 1
+                if fabs(<double>lo[d]) * dinv > reach:
+                    reach = fabs(<double>lo[d]) * dinv
+                if fabs(<double>hi[d]) * dinv > reach:
+                    reach = fabs(<double>hi[d]) * dinv
+            if cells[0] * cells[1] * cells[2] > max_cells or reach >= max_index:
+                with gil:
+                    return k, (cells[0], cells[1], cells[2])
+    return -1, None

@@ -15,13 +15,15 @@ points of one object) with OpenMP.
   search over growing shells of cells with a sorted k-list takes over. All
   paths return the same list: the k smallest squared distances, ties broken
   by the point's position in the grid order (cell, then original index).
-- The fast path's distance scan runs eight points at a time with AVX-512 or
+- The fast path's distance scan runs eight points at a time with AVX-512,
   four with AVX2 where the CPU has them (``_normals_simd.h``, chosen at
-  import), over a copy of the grid-order coordinates as x, y and z arrays,
-  and with AVX-512 its k-th selection too; the same IEEE operations in the
-  same order as the scalar loops here, so every level gives the same
-  candidates and normals bit for bit (``_set_simd_level`` picks a lower one
-  for tests).
+  import) and two elsewhere (portable vector code, any CPU), over a copy of
+  the grid-order coordinates as x, y and z arrays; with AVX-512 and AVX2 its
+  k-th selection too (bisection over bucket counts), and each covariance is
+  summed two sums per vector register at every level. The same IEEE
+  operations in the same order as the scalar loops here, so every level
+  gives the same candidates and normals bit for bit (``_set_simd_level``
+  picks a lower one for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
   neighborhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
@@ -47,6 +49,9 @@ cdef extern from "_normals_simd.h":
         EPPF_NRM_BUCKETS
     int eppf_nrm_has_avx2() noexcept nogil
     int eppf_nrm_has_avx512() noexcept nogil
+    int64_t eppf_nrm_scan_portable(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
+                                   double qx, double qy, double qz, double guess, double* cand_d2,
+                                   int64_t* cand_pos, int64_t m) noexcept nogil
     int64_t eppf_nrm_scan_avx2(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
                                double qx, double qy, double qz, double guess, double* cand_d2,
                                int64_t* cand_pos, int64_t m) noexcept nogil
@@ -55,6 +60,9 @@ cdef extern from "_normals_simd.h":
                                  int64_t* cand_pos, int64_t m) noexcept nogil
     int64_t eppf_nrm_select_avx512(const double* cand_d2, const int64_t* cand_pos, int64_t m, int64_t k,
                                    double to_bucket, int64_t* sel, int64_t* kpos) noexcept nogil
+    void eppf_nrm_covariance(const double* spts, const int64_t* kpos, int64_t k, double* cov) noexcept nogil
+    int64_t eppf_nrm_select_avx2(const double* cand_d2, const int64_t* cand_pos, int64_t m, int64_t k,
+                                 double to_bucket, int64_t* sel, int64_t* kpos) noexcept nogil
 
 # The fast path's distance scan: 0 scalar, 1 AVX2, 2 AVX-512 (the best the
 # CPU has, checked at import; ``_set_simd_level`` picks a lower one for tests).
@@ -134,7 +142,6 @@ cdef struct Scratch:
     int64_t* sel          # max_n + EPPF_NRM_SLACK  fast-path candidates of the k-th's bucket
     # Query part (sized by k).
     double* kd2           # k          the k-list's squared distances, ascending
-    double* nb            # 3 * k      gathered neighborhood
     double* guess         # 1          k-th squared distance guess for the next query
     int64_t* kpos         # k + EPPF_NRM_SLACK  the k-list's grid-order positions (+ slack
                           #            for the fast path's branch-free compaction)
@@ -149,7 +156,7 @@ def max_cells(Py_ssize_t n):
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
     at most ``max_n`` points and neighborhoods of ``k`` points."""
-    return (7 * max_n + EPPF_NRM_SLACK + 4 * k + 1,
+    return (7 * max_n + EPPF_NRM_SLACK + k + 1,
             4 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
 
 
@@ -161,8 +168,7 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     sc.sxyz = fs + 3 * max_n
     sc.cand_d2 = sc.sxyz + 3 * max_n
     sc.kd2 = sc.cand_d2 + max_n + EPPF_NRM_SLACK
-    sc.nb = sc.kd2 + k
-    sc.guess = sc.nb + 3 * k
+    sc.guess = sc.kd2 + k
     sc.sidx = its
     sc.cell_of = its + max_n
     sc.cell_start = sc.cell_of + max_n
@@ -502,7 +508,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     cdef int counts[_N_BUCKETS]
     cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
     cdef double to_bucket, kth
-    cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, di, gz, gz2, gy, gyz2, gx
+    cdef double qx = q[0], qy = q[1], qz = q[2], d2, di, gz, gz2, gy, gyz2, gx
     cdef int64_t xlo = c[0] - r if c[0] - r > 0 else 0
     cdef int64_t xhi = c[0] + r if c[0] + r < g.res[0] else g.res[0] - 1
     for jz in range(c[2] - r if c[2] - r > 0 else 0, (c[2] + r if c[2] + r < g.res[2] else g.res[2] - 1) + 1):
@@ -540,20 +546,16 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             elif _simd == 1:
                 m = eppf_nrm_scan_avx2(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
             else:
-                for p in range(b, e):
-                    dx = g.sx[p] - qx
-                    dy = g.sy[p] - qy
-                    dz = g.sz[p] - qz
-                    d2 = dx * dx + dy * dy + dz * dz
-                    cand_d2[m] = d2
-                    cand_pos[m] = p
-                    m += d2 <= guess
+                m = eppf_nrm_scan_portable(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
     if m < k:
         return _FAST_FEW
     if m > max_cand:
         return _FAST_MANY
-    if _simd == 2:
-        kth_i = eppf_nrm_select_avx512(cand_d2, cand_pos, m, k, _N_BUCKETS / guess, sel, kpos)
+    if _simd != 0:
+        if _simd == 2:
+            kth_i = eppf_nrm_select_avx512(cand_d2, cand_pos, m, k, _N_BUCKETS / guess, sel, kpos)
+        else:
+            kth_i = eppf_nrm_select_avx2(cand_d2, cand_pos, m, k, _N_BUCKETS / guess, sel, kpos)
         kd2[k - 1] = cand_d2[kth_i]
         return _FAST_OK if _block_done(g, q, c, r, kd2[k - 1]) else _FAST_FAR
     # The k-th smallest (d2, position) by a histogram of d2 over [0, guess]
@@ -587,12 +589,15 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             kth_i = sel[i]
     kth = cand_d2[kth_i]
     # Keep everything up to the k-th in (d2, position) order, in position
-    # order (candidates are in ascending position).
+    # order (candidates are in ascending position): d2 <= kth up to the k-th
+    # itself, d2 < kth after it.
     j = 0
-    for i in range(m):
-        d2 = cand_d2[i]
+    for i in range(kth_i + 1):
         kpos[j] = cand_pos[i]
-        j += (d2 < kth) | ((d2 == kth) & (i <= kth_i))
+        j += cand_d2[i] <= kth
+    for i in range(kth_i + 1, m):
+        kpos[j] = cand_pos[i]
+        j += cand_d2[i] < kth
     kd2[k - 1] = kth
     return _FAST_OK if _block_done(g, q, c, r, kth) else _FAST_FAR
 
@@ -605,9 +610,8 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     cdef Py_ssize_t i, j, p
     cdef double q[3]
     cdef int64_t c[3]
-    cdef double mx = 0.0, my = 0.0, mz = 0.0, x, y, z, kth
+    cdef double kth
     cdef double cov[9]
-    cdef double* nb = sc.nb
     cdef double guess = sc.guess[0]
     cdef int a, res = _FAST_FAR
     for a in range(3):
@@ -657,32 +661,7 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     sc.guess[0] = kth * _GUESS_FACTOR
     if not (sc.guess[0] > 1e-200):
         sc.guess[0] = g.h * g.h
-    for i in range(k):
-        p = sc.kpos[i]
-        nb[3 * i] = spts[3 * p]
-        nb[3 * i + 1] = spts[3 * p + 1]
-        nb[3 * i + 2] = spts[3 * p + 2]
-        mx += nb[3 * i]
-        my += nb[3 * i + 1]
-        mz += nb[3 * i + 2]
-    mx /= k
-    my /= k
-    mz /= k
-    for i in range(9):
-        cov[i] = 0.0
-    for i in range(k):
-        x = nb[3 * i] - mx
-        y = nb[3 * i + 1] - my
-        z = nb[3 * i + 2] - mz
-        cov[0] += x * x
-        cov[1] += x * y
-        cov[2] += x * z
-        cov[4] += y * y
-        cov[5] += y * z
-        cov[8] += z * z
-    cov[3] = cov[1]
-    cov[6] = cov[2]
-    cov[7] = cov[5]
+    eppf_nrm_covariance(spts, sc.kpos, k, cov)
     _smallest_eigvec(cov, out)
 
 

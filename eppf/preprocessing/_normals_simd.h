@@ -1,8 +1,12 @@
-/* SIMD distance scan of the normals kernel's fast neighbor search
- * (_normals_fast.pyx's ``_knn_block``), chosen at run time:
+/* SIMD distance scan and k-th selection of the normals kernel's fast
+ * neighbor search (_normals_fast.pyx's ``_knn_block``), chosen at run time:
  *
  * - AVX-512 (F): eight grid-order points at a time;
- * - AVX2: four at a time, the survivors packed with a permutation table.
+ * - AVX2: four at a time, the survivors packed with a permutation table;
+ * - portable (any CPU, the "scalar" level): two at a time in GCC/clang
+ *   vector registers (SSE2, NEON), plain loops with other compilers.
+ *
+ * and the covariance of a neighborhood (``eppf_nrm_covariance``, every level).
  *
  * ``eppf_nrm_scan_*`` offers the points at grid-order positions [b, e) to
  * the candidate list: for each, in ascending position, the squared distance
@@ -19,7 +23,7 @@
  * beyond the largest count; the loads past ``e`` are masked (AVX-512) or left
  * to a scalar tail (AVX2), so nothing beyond [b, e) is read.
  *
- * Other compilers and CPUs use the scalar loop of _normals_fast.pyx.
+ * The selection is _normals_fast.pyx's histogram code at the portable level.
  */
 #ifndef EPPF_NORMALS_SIMD_H
 #define EPPF_NORMALS_SIMD_H
@@ -32,6 +36,124 @@
 #define EPPF_NRM_SLACK 8
 /* Buckets of the fast path's selection by squared distance. */
 #define EPPF_NRM_BUCKETS 32
+
+/* The covariance of the k points of ``spts`` (x, y, z per point) at the
+ * grid-order positions ``kpos``: the mean (mx, my, mz) = (sum of the points
+ * in the order of ``kpos``) / k, then, in that order, the sums of
+ * x * x, x * y, x * z, y * y, y * z and z * z over (x, y, z) = point - mean,
+ * written row-major to ``cov`` (nine entries, symmetric). Each sum is
+ * accumulated alone, term after term, with the IEEE operations of the plain
+ * loop, so computing two sums side by side in one vector register (GCC and
+ * clang vector extensions: SSE2 on x86-64, NEON on ARM64) gives the same
+ * bits on every CPU. */
+#if defined(__GNUC__)
+typedef double eppf_nrm_v2d __attribute__((vector_size(16)));
+
+static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, int64_t k, double *cov)
+{
+    eppf_nrm_v2d mxy = {0.0, 0.0}, xy, sxx_xy = {0.0, 0.0}, sxz_yy = {0.0, 0.0}, syz_zz = {0.0, 0.0};
+    double mz = 0.0, z, dk = (double)k;
+    int64_t i;
+    for (i = 0; i < k; i++) {
+        const double *pt = spts + 3 * kpos[i];
+        xy = (eppf_nrm_v2d){pt[0], pt[1]};
+        mxy += xy;
+        mz += pt[2];
+    }
+    mxy /= (eppf_nrm_v2d){dk, dk};
+    mz /= dk;
+    for (i = 0; i < k; i++) {
+        const double *pt = spts + 3 * kpos[i];
+        xy = (eppf_nrm_v2d){pt[0], pt[1]} - mxy;
+        z = pt[2] - mz;
+        sxx_xy += (eppf_nrm_v2d){xy[0], xy[0]} * xy;
+        sxz_yy += (eppf_nrm_v2d){xy[0], xy[1]} * (eppf_nrm_v2d){z, xy[1]};
+        syz_zz += (eppf_nrm_v2d){xy[1], z} * (eppf_nrm_v2d){z, z};
+    }
+    cov[0] = sxx_xy[0];
+    cov[1] = cov[3] = sxx_xy[1];
+    cov[2] = cov[6] = sxz_yy[0];
+    cov[4] = sxz_yy[1];
+    cov[5] = cov[7] = syz_zz[0];
+    cov[8] = syz_zz[1];
+}
+
+/* The portable distance scan (every CPU; the scalar loop's operations),
+ * two points per vector register: eppf_nrm_scan_avx2's contract, writing
+ * only the entries it counts plus one (cand_d2 and cand_pos need one entry
+ * of slack). */
+static inline int64_t eppf_nrm_scan_portable(const double *sx, const double *sy, const double *sz, int64_t b,
+                                             int64_t e, double qx, double qy, double qz, double guess,
+                                             double *cand_d2, int64_t *cand_pos, int64_t m)
+{
+    const eppf_nrm_v2d vqx = {qx, qx}, vqy = {qy, qy}, vqz = {qz, qz};
+    eppf_nrm_v2d dx, dy, dz, d2;
+    int64_t p = b;
+    for (; p + 2 <= e; p += 2) {
+        dx = (eppf_nrm_v2d){sx[p], sx[p + 1]} - vqx;
+        dy = (eppf_nrm_v2d){sy[p], sy[p + 1]} - vqy;
+        dz = (eppf_nrm_v2d){sz[p], sz[p + 1]} - vqz;
+        d2 = (dx * dx + dy * dy) + dz * dz;
+        cand_d2[m] = d2[0];
+        cand_pos[m] = p;
+        m += d2[0] <= guess;
+        cand_d2[m] = d2[1];
+        cand_pos[m] = p + 1;
+        m += d2[1] <= guess;
+    }
+    if (p < e) {
+        double ex = sx[p] - qx, ey = sy[p] - qy, ez = sz[p] - qz, ed2 = (ex * ex + ey * ey) + ez * ez;
+        cand_d2[m] = ed2;
+        cand_pos[m] = p;
+        m += ed2 <= guess;
+    }
+    return m;
+}
+#else
+static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, int64_t k, double *cov)
+{
+    double mx = 0.0, my = 0.0, mz = 0.0, x, y, z, dk = (double)k;
+    int64_t i;
+    for (i = 0; i < 9; i++)
+        cov[i] = 0.0;
+    for (i = 0; i < k; i++) {
+        mx += spts[3 * kpos[i]];
+        my += spts[3 * kpos[i] + 1];
+        mz += spts[3 * kpos[i] + 2];
+    }
+    mx /= dk;
+    my /= dk;
+    mz /= dk;
+    for (i = 0; i < k; i++) {
+        x = spts[3 * kpos[i]] - mx;
+        y = spts[3 * kpos[i] + 1] - my;
+        z = spts[3 * kpos[i] + 2] - mz;
+        cov[0] += x * x;
+        cov[1] += x * y;
+        cov[2] += x * z;
+        cov[4] += y * y;
+        cov[5] += y * z;
+        cov[8] += z * z;
+    }
+    cov[3] = cov[1];
+    cov[6] = cov[2];
+    cov[7] = cov[5];
+}
+
+static inline int64_t eppf_nrm_scan_portable(const double *sx, const double *sy, const double *sz, int64_t b,
+                                             int64_t e, double qx, double qy, double qz, double guess,
+                                             double *cand_d2, int64_t *cand_pos, int64_t m)
+{
+    int64_t p;
+    for (p = b; p < e; p++) {
+        double dx = sx[p] - qx, dy = sy[p] - qy, dz = sz[p] - qz, d2 = (dx * dx + dy * dy) + dz * dz;
+        cand_d2[m] = d2;
+        cand_pos[m] = p;
+        m += d2 <= guess;
+    }
+    return m;
+}
+#endif
 
 #if EPPF_CPU_CHECKS  /* (gcc or clang on x86-64, EPPF_NO_SIMD not defined: _cpu.h) */
 #define EPPF_NRM_SIMD 1
@@ -52,6 +174,27 @@ static int eppf_nrm_has_avx2(void)
 }
 
 #if EPPF_NRM_SIMD
+
+/* The candidate of rank ``need - 1`` by (d2, index) among the n_in >= need
+ * candidates ``sel`` (in ascending index) of the k-th's bucket: the SIMD
+ * selections' last step, as in the scalar code of _normals_fast.pyx. */
+static inline int64_t eppf_nrm_rank_in_bucket(const double *cand_d2, const int64_t *sel, int64_t n_in,
+                                              int64_t need)
+{
+    int64_t i, j, rank, kth_i = sel[0];
+    double di;
+    for (i = 0; i < n_in; i++) {
+        di = cand_d2[sel[i]];
+        rank = 0;
+        for (j = 0; j < i; j++)
+            rank += cand_d2[sel[j]] <= di;
+        for (j = i + 1; j < n_in; j++)
+            rank += cand_d2[sel[j]] < di;
+        if (rank == need - 1)
+            kth_i = sel[i];
+    }
+    return kth_i;
+}
 
 __attribute__((target("avx2,avx512f,popcnt")))
 static int64_t eppf_nrm_scan_avx512(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
@@ -113,8 +256,8 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
 {
     const __m512d vscale = _mm512_set1_pd(to_bucket);
     const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
-    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i, rank;
-    double kth, di;
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i;
+    double kth;
     /* the smallest bucket bk whose count with those below reaches k (the top bucket holds the rest) */
     while (lo < hi) {
         int64_t mid = (lo + hi) / 2;
@@ -142,18 +285,7 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
             n_in += _mm_popcnt_u32((unsigned)in);
         }
     }
-    /* rank inside the bucket, by (d2, index) */
-    kth_i = sel[0];
-    for (i = 0; i < n_in; i++) {
-        di = cand_d2[sel[i]];
-        rank = 0;
-        for (j = 0; j < i; j++)
-            rank += cand_d2[sel[j]] <= di;
-        for (j = i + 1; j < n_in; j++)
-            rank += cand_d2[sel[j]] < di;
-        if (rank == need - 1)
-            kth_i = sel[i];
-    }
+    kth_i = eppf_nrm_rank_in_bucket(cand_d2, sel, n_in, need);
     kth = cand_d2[kth_i];
     /* everything up to the k-th in (d2, index) order, in position order */
     {
@@ -218,6 +350,102 @@ static int64_t eppf_nrm_scan_avx2(const double *sx, const double *sy, const doub
     return m;
 }
 
+/* Candidates [0, m) with x = d2 * scale below ``t``, four at a time (as eppf_nrm_count_below). */
+__attribute__((target("avx2,popcnt")))
+static inline int64_t eppf_nrm_count_below_avx2(const double *cand_d2, int64_t m, double scale, double t)
+{
+    const __m256d vscale = _mm256_set1_pd(scale), vt = _mm256_set1_pd(t);
+    __m256i acc = _mm256_setzero_si256(); /* minus the count per lane (a true compare is -1) */
+    int64_t i = 0, count;
+    for (; i + 4 <= m; i += 4) {
+        __m256d x = _mm256_mul_pd(_mm256_loadu_pd(cand_d2 + i), vscale);
+        acc = _mm256_add_epi64(acc, _mm256_castpd_si256(_mm256_cmp_pd(x, vt, _CMP_LT_OQ)));
+    }
+    {
+        __m128i s = _mm_add_epi64(_mm256_castsi256_si128(acc), _mm256_extracti128_si256(acc, 1));
+        count = -(_mm_cvtsi128_si64(s) + _mm_extract_epi64(s, 1));
+    }
+    for (; i < m; i++)
+        count += cand_d2[i] * scale < t;
+    return count;
+}
+
+/* eppf_nrm_select_avx512's selection four candidates at a time, the
+ * survivors packed with eppf_nrm_pack4 (same buckets, same bisection, same
+ * ranking: the same k-th and list). ``sel`` needs m + EPPF_NRM_SLACK entries,
+ * ``kpos`` k + EPPF_NRM_SLACK. */
+__attribute__((target("avx2,popcnt")))
+static int64_t eppf_nrm_select_avx2(const double *cand_d2, const int64_t *cand_pos, int64_t m, int64_t k,
+                                    double to_bucket, int64_t *sel, int64_t *kpos)
+{
+    const __m256d vscale = _mm256_set1_pd(to_bucket);
+    const __m256i iota = _mm256_set_epi64x(3, 2, 1, 0), four = _mm256_set1_epi64x(4);
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i;
+    double kth;
+    while (lo < hi) {
+        int64_t mid = (lo + hi) / 2;
+        if (eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)(mid + 1)) >= k)
+            hi = mid;
+        else
+            lo = mid + 1;
+    }
+    bk = lo;
+    below = bk == 0 ? 0 : eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)bk);
+    need = k - below;
+    {
+        const double flo = (double)bk, fhi = (double)(bk + 1);
+        const __m256d vlo = _mm256_set1_pd(flo), vhi = _mm256_set1_pd(fhi);
+        const int test_lo = bk > 0, test_hi = bk < EPPF_NRM_BUCKETS - 1;
+        __m256i idx = iota;
+        for (i = 0; i + 4 <= m; i += 4) {
+            __m256d x = _mm256_mul_pd(_mm256_loadu_pd(cand_d2 + i), vscale);
+            __m256d in = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+            int mask;
+            if (test_lo) /* not below bk: NaN joins the top bucket, as in the scalar code */
+                in = _mm256_cmp_pd(x, vlo, _CMP_NLT_UQ);
+            if (test_hi)
+                in = _mm256_and_pd(in, _mm256_cmp_pd(x, vhi, _CMP_LT_OQ));
+            mask = _mm256_movemask_pd(in);
+            _mm256_storeu_si256((__m256i *)(sel + n_in), _mm256_permutevar8x32_epi32(
+                idx, _mm256_loadu_si256((const __m256i *)eppf_nrm_pack4[mask])));
+            n_in += _mm_popcnt_u32((unsigned)mask);
+            idx = _mm256_add_epi64(idx, four);
+        }
+        for (; i < m; i++) {
+            double x = cand_d2[i] * to_bucket;
+            sel[n_in] = i;
+            n_in += (!test_lo || !(x < flo)) && (!test_hi || x < fhi);
+        }
+    }
+    kth_i = eppf_nrm_rank_in_bucket(cand_d2, sel, n_in, need);
+    kth = cand_d2[kth_i];
+    /* everything up to the k-th in (d2, index) order, in position order */
+    {
+        const __m256d vk = _mm256_set1_pd(kth);
+        const __m256i vki = _mm256_set1_epi64x(kth_i);
+        __m256i idx = iota;
+        j = 0;
+        for (i = 0; i + 4 <= m; i += 4) {
+            __m256d d2 = _mm256_loadu_pd(cand_d2 + i);
+            __m256d after = _mm256_castsi256_pd(_mm256_cmpgt_epi64(idx, vki));
+            __m256d keep = _mm256_or_pd(_mm256_cmp_pd(d2, vk, _CMP_LT_OQ),
+                                        _mm256_andnot_pd(after, _mm256_cmp_pd(d2, vk, _CMP_EQ_OQ)));
+            int mask = _mm256_movemask_pd(keep);
+            _mm256_storeu_si256((__m256i *)(kpos + j), _mm256_permutevar8x32_epi32(
+                _mm256_loadu_si256((const __m256i *)(cand_pos + i)),
+                _mm256_loadu_si256((const __m256i *)eppf_nrm_pack4[mask])));
+            j += _mm_popcnt_u32((unsigned)mask);
+            idx = _mm256_add_epi64(idx, four);
+        }
+        for (; i < m; i++) {
+            double d2 = cand_d2[i];
+            kpos[j] = cand_pos[i];
+            j += (d2 < kth) | ((d2 == kth) & (i <= kth_i));
+        }
+    }
+    return kth_i;
+}
+
 #else
 
 static int64_t eppf_nrm_scan_avx512(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
@@ -243,6 +471,13 @@ static int64_t eppf_nrm_scan_avx2(const double *sx, const double *sy, const doub
     (void)sx; (void)sy; (void)sz; (void)b; (void)e; (void)qx; (void)qy; (void)qz; (void)guess;
     (void)cand_d2; (void)cand_pos;
     return m; /* never called: eppf_nrm_has_avx2() is 0 */
+}
+
+static int64_t eppf_nrm_select_avx2(const double *cand_d2, const int64_t *cand_pos, int64_t m, int64_t k,
+                                    double to_bucket, int64_t *sel, int64_t *kpos)
+{
+    (void)cand_d2; (void)cand_pos; (void)m; (void)k; (void)to_bucket; (void)sel; (void)kpos;
+    return 0; /* never called: eppf_nrm_has_avx2() is 0 */
 }
 
 #endif

@@ -268,6 +268,60 @@ def test_kernel_matches_slow_model(seed, n):
     assert_array_equal(counts, slow_counts)
 
 
+
+@pytest.mark.parametrize("seed, side", [(3, 3.0), (4, 40.0)])
+def test_kernel_matches_slow_model_on_wide_grids(seed, side):
+    # voxel keys beyond 2**16 and 2**24 (three and four radix passes of the
+    # key sort), clusters meeting across rows and slabs of the grid, and
+    # voxels on the grid's faces
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0, side, size=(12, 3))
+    p = centres[rng.integers(0, 12, size=300)] + 0.03 * rng.normal(size=(300, 3))
+    p[:4] = [[0, 0, 0], [side, 0, 0], [0, side, side], [side, side, side]]
+    nrm = rng.normal(size=(300, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    p32, n32 = p.astype(f32), nrm.astype(f32)
+    cells, cent, types, counts = grsd_voxels(p32, n32, 0.05, 5, 0.2, THR)
+    dims = cells.max(0) + 1
+    keys = cells[:, 0] + dims[0] * (cells[:, 1] + dims[1] * cells[:, 2].astype(np.int64))
+    assert np.all(np.diff(keys) > 0) and keys.max() >= 2**16
+    slow_types, slow_counts = _slow_grsd(p32, n32, 0.05)
+    assert_array_equal(types, slow_types)
+    assert_array_equal(counts, slow_counts)
+
+
+def test_grid_check_matches_numpy_rule():
+    from eppf.descriptors._grsd_fast import grid_check
+
+    rng = np.random.default_rng(9)
+    clouds = [rng.normal(size=(n, 3)).astype(f32) for n in (1, 5, 40)]
+    offsets = np.cumsum([0] + [len(c) for c in clouds]).astype(np.int64)
+    P = np.vstack(clouds)
+    inv = f32(1.0) / f32(0.05)
+    assert grid_check(P, offsets, inv, 2.0**31 - 1, 2.0**30) == (-1, None)
+    for k, c in enumerate(clouds):
+        lo, hi = c.min(0), c.max(0)
+        cells = np.floor(hi.astype(np.float64) * inv) - np.floor(lo.astype(np.float64) * inv) + 1
+        # a cap just below this object's cell count flags it, and no earlier one
+        bad, got = grid_check(P[offsets[k]:], offsets[k:] - offsets[k], inv, float(np.prod(cells)) - 1, 2.0**30)
+        assert bad == 0 and got == tuple(cells)
+        reach = np.abs(np.concatenate([lo, hi]).astype(np.float64)).max() * float(inv)
+        assert grid_check(P[offsets[k]:], offsets[k:] - offsets[k], inv, 2.0**31, reach)[0] == 0
+        assert grid_check(P[offsets[k]:offsets[k + 1]], offsets[k:k + 2] - offsets[k], inv, 2.0**31,
+                          np.nextafter(reach, np.inf)) == (-1, None)
+    for bad_value in (np.inf, -np.inf, np.nan):
+        Q = P.copy()
+        Q[offsets[2] + 7, 1] = bad_value
+        assert grid_check(Q, offsets, inv, 2.0**31 - 1, 2.0**30) == (2, None)
+    with pytest.raises(ValueError, match="lie within"):
+        grid_check(P, offsets + 1, inv, 2.0**31 - 1, 2.0**30)
+    with pytest.raises(ValueError, match="lie within"):
+        grid_check(P, offsets - 1, inv, 2.0**31 - 1, 2.0**30)
+    with pytest.raises(ValueError, match="at least one point"):
+        grid_check(P, np.array([0, 5, 5, len(P)], dtype=np.int64), inv, 2.0**31 - 1, 2.0**30)
+    with pytest.raises(ValueError, match="at least one point"):
+        grid_check(P, np.array([0, 20, 5, len(P)], dtype=np.int64), inv, 2.0**31 - 1, 2.0**30)
+
 def test_reference_neighbour_is_the_tree_order_not_the_nearest():
     # 16 points (two leaves): the query's own leaf is searched first, so the
     # reference is the first point of that leaf, not the nearest point
