@@ -1,6 +1,6 @@
 """Benchmark of the paper's CNN variants (EPPF4DClassifier) on CPU.
 
-Five parts, each printed as a table:
+Six parts, each printed as a table:
 
 ``throughput``
     Training (forward + backward + Adam step) and inference throughput of the
@@ -13,6 +13,7 @@ Five parts, each printed as a table:
     in CPU time (robust to time-slicing on a shared machine), with its
     multiply-adds and achieved GFLOP/s against the fp32 roofline of a big
     ``torch.mm``; the Adam step fused and unfused; the whole training step.
+    ``--recommended`` profiles the smaller network of "EPPF 4D+".
 ``epoch``
     Wall and CPU time of real ``EPPF4DClassifier`` epochs over 4,000 random
     descriptors (the classifier's default batch size), with the load average.
@@ -23,6 +24,16 @@ Five parts, each printed as a table:
     the training objects describe clouds stretched per axis by random
     factors in [LOW, HIGH], and stretched copies of the test objects are
     cached as well.
+``fit``
+    Where a fit of the recommended model ("EPPF 4D+", built as ``eppf
+    experiment classification`` builds it) spends its time, for every
+    training-set size of ``--objects`` (stratified subsets of ModelNet10's
+    training split): one draw of each descriptor of the union, the whole
+    descriptor pool (draws x descriptors x objects), every network of the
+    ensemble (epochs, best epoch, seconds per epoch, validation accuracy),
+    the total per object (linear in the objects when this column is flat)
+    and prediction throughput with the descriptors included. Prints
+    progress (the classifier's epoch lines). Reads the training split only.
 ``modelnet``
     Trains each variant on the official training split with early stopping on
     a stratified validation fraction of the *training* objects, then reports
@@ -40,6 +51,7 @@ Run, e.g.::
     nice -n 10 python benchmarks/bench_cnn.py epoch --threads 2 --max-epochs 1 --variants 4d
     nice -n 10 python benchmarks/bench_cnn.py descriptors --draws 4
     nice -n 10 python benchmarks/bench_cnn.py modelnet --threads 1 --max-epochs 5 --patience 4
+    nice -n 10 python benchmarks/bench_cnn.py fit --objects 1000 2000 4000 --threads 2
 
 Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 2 to 6, so timings are noisy; see the report of issue 3):
@@ -602,13 +614,13 @@ def fit_profile(args):
               f"x {len(idx)} objects; {clf.n_estimators} network(s) of at most {clf.max_epochs} epochs", flush=True)
         print("  one draw of each descriptor:", flush=True)
         blocks = _block_seconds(pool, clouds)
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         X = pool.fit_transform(clouds).astype(np.float32)
-        pool_s = time.perf_counter() - t0
-        print(f"  pool: {pool_s:.1f} s ({pool_s / pool.n_draws:.1f} s per draw)", flush=True)
-        t0 = time.perf_counter()
+        pool_s, pool_cpu = time.perf_counter() - t0, time.process_time() - c0
+        print(f"  pool: {pool_s:.1f} s ({pool_s / pool.n_draws:.1f} s per draw), {pool_cpu:.1f} CPU s", flush=True)
+        c0, t0 = time.process_time(), time.perf_counter()
         clf.fit(X, y_all[idx])
-        train_s = time.perf_counter() - t0
+        train_s, train_cpu = time.perf_counter() - t0, time.process_time() - c0
         members = [clf.net_] + list(clf.ensemble_nets_)
         for k, net in enumerate(members, 1):
             n_epochs, best = _epochs(net)
@@ -618,19 +630,20 @@ def fit_profile(args):
         t0 = time.perf_counter()
         clf.predict_proba(pool.transform(clouds[:n_pred]))
         pred_s = time.perf_counter() - t0
-        rows.append((len(idx), pool.n_draws, blocks, pool_s, train_s, members, n_pred / pred_s))
-    print("\nProfile of a fit of EPPF 4D+ (wall seconds; epochs: trained / best, per network)")
-    names = [name for name, _ in rows[0][2]]
+        rows.append((len(idx), blocks, pool_s, train_s, pool_cpu + train_cpu, members, n_pred / pred_s))
+    print("\nProfile of a fit of EPPF 4D+ (wall seconds but 'CPU s', process CPU seconds, all threads; "
+          "epochs: trained / best, per network)")
+    names = [name for name, _ in rows[0][1]]
     print(f"{'objects':>7s} " + " ".join(f"{n + ' 1 draw':>14s}" for n in names)
-          + f" {'pool':>7s} {'train':>7s} {'s/epoch':>7s} {'epochs':>14s} {'total':>7s} {'ms/object':>9s} "
-          f"{'predict obj/s':>13s}")
-    for n, draws, blocks, pool_s, train_s, members, pred in rows:
+          + f" {'pool':>7s} {'train':>7s} {'s/epoch':>7s} {'epochs':>14s} {'total':>7s} {'CPU s':>7s} "
+          f"{'ms/object':>9s} {'predict obj/s':>13s}")
+    for n, blocks, pool_s, train_s, cpu, members, pred in rows:
         epochs = " ".join("{}/{}".format(*_epochs(m)) for m in members)
         per_epoch = np.mean([d for m in members for d in m.history[:, "dur"]])
         total = pool_s + train_s
         print(f"{n:7d} " + " ".join(f"{s:14.1f}" for _, s in blocks)
-              + f" {pool_s:7.1f} {train_s:7.1f} {per_epoch:7.1f} {epochs:>14s} {total:7.1f} {1e3 * total / n:9.1f} "
-              f"{pred:13.0f}")
+              + f" {pool_s:7.1f} {train_s:7.1f} {per_epoch:7.1f} {epochs:>14s} {total:7.1f} {cpu:7.1f} "
+              f"{1e3 * total / n:9.1f} {pred:13.0f}")
 
 
 def main(argv=None):
