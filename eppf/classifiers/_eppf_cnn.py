@@ -211,10 +211,12 @@ class EPPF4DClassifier(SkorchClassifierBase):
     as DALES's a single such network can do worse than the paper's network
     and the KL 1-NN.
 
-    Ensembles and label smoothing (beyond the paper): averaging networks of
-    different seeds (``n_estimators``) and ``label_smoothing=0.1`` each made
-    that network more accurate on DALES objects, ``batch_norm=True`` did
-    not; the recommended recipe therefore trains three networks with label
+    Ensembles, weight averaging and label smoothing (beyond the paper):
+    averaging networks of different seeds (``n_estimators``) and
+    ``label_smoothing=0.1`` each made that network more accurate on DALES
+    objects, ``batch_norm=True`` did not; with label smoothing, neither an
+    ensemble nor ``swa_epochs`` was more accurate than one network on
+    validation data, so the recommended recipe trains one network with label
     smoothing 0.1. The figures of both paragraphs are in the documentation's
     "Reproducing the paper" page ("Classification beyond the paper: EPPF
     4D+").
