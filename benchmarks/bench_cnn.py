@@ -1,6 +1,6 @@
 """Benchmark of the paper's CNN variants (EPPF4DClassifier) on CPU.
 
-Five parts, each printed as a table:
+Six parts, each printed as a table:
 
 ``throughput``
     Training (forward + backward + Adam step) and inference throughput of the
@@ -13,6 +13,7 @@ Five parts, each printed as a table:
     in CPU time (robust to time-slicing on a shared machine), with its
     multiply-adds and achieved GFLOP/s against the fp32 roofline of a big
     ``torch.mm``; the Adam step fused and unfused; the whole training step.
+    ``--recommended`` profiles the smaller network of "EPPF 4D+".
 ``epoch``
     Wall and CPU time of real ``EPPF4DClassifier`` epochs over 4,000 random
     descriptors (the classifier's default batch size), with the load average.
@@ -23,6 +24,16 @@ Five parts, each printed as a table:
     the training objects describe clouds stretched per axis by random
     factors in [LOW, HIGH], and stretched copies of the test objects are
     cached as well.
+``fit``
+    Where a fit of the recommended model ("EPPF 4D+", built as ``eppf
+    experiment classification`` builds it) spends its time, for every
+    training-set size of ``--objects`` (stratified subsets of ModelNet10's
+    training split): one draw of each descriptor of the union, the whole
+    descriptor pool (draws x descriptors x objects), every network of the
+    ensemble (epochs, best epoch, seconds per epoch, validation accuracy),
+    the total per object (linear in the objects when this column is flat)
+    and prediction throughput with the descriptors included. Prints
+    progress (the classifier's epoch lines). Reads the training split only.
 ``modelnet``
     Trains each variant on the official training split with early stopping on
     a stratified validation fraction of the *training* objects, then reports
@@ -40,6 +51,7 @@ Run, e.g.::
     nice -n 10 python benchmarks/bench_cnn.py epoch --threads 2 --max-epochs 1 --variants 4d
     nice -n 10 python benchmarks/bench_cnn.py descriptors --draws 4
     nice -n 10 python benchmarks/bench_cnn.py modelnet --threads 1 --max-epochs 5 --patience 4
+    nice -n 10 python benchmarks/bench_cnn.py fit --objects 1000 2000 4000 --threads 2
 
 Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 2 to 6, so timings are noisy; see the report of issue 3):
@@ -327,7 +339,15 @@ def profile(args):
     peak = 2 * n**3 / cpu / 1e9  # per CPU-second, the unit of every rate below
     print(f"torch {torch.__version__}, {args.threads} threads, batch {B}, mkldnn {torch.backends.mkldnn.enabled}")
     print(f"roofline: {n}x{n} fp32 mm {peak:.1f} GFLOP per CPU-second ({2 * n**3 / wall / 1e9:.1f} GFLOP/s wall)")
-    net = EPPFNet4D(n_classes=10)
+    if args.recommended:  # the "4D+" network (its 518-value side branch is a negligible dense layer)
+        from eppf.registry import RECIPE
+
+        f1, f2, f3 = RECIPE["filters"]
+        hidden = RECIPE["n_hidden"]
+    else:
+        (f1, f2, f3), hidden = (32, 64, 48), 1024
+    net = EPPFNet4D(n_classes=10, filters=(f1, f2, f3), n_hidden=hidden)
+    print(f"network: filters {(f1, f2, f3)}, {hidden} dense units")
     n1, n2, n3, n4 = net.n_bins
     folded = B * n4
     rows = []
@@ -339,28 +359,29 @@ def profile(args):
         fwd = _best_time(lambda: f(x), R)[0]
         both = _best_time(lambda: torch.autograd.grad(f(x), wrt, g), R)[0]
         rows.append((name, fwd, max(both - fwd, 0.0), macs, macs * (2 if input_grad else 1) if macs else 0))
+        print(f"  {name}: {1e3 * fwd:.1f} ms forward, {1e3 * max(both - fwd, 0.0):.1f} ms backward", flush=True)
 
     pad = lambda t: F.pad(t, (0, 1, 0, 1, 2, 2))  # noqa: E731  TF "same" for (5, 2, 2)
     w1 = net.conv1.weight[..., 0].detach().requires_grad_()
     b1 = net.conv1.bias.detach().requires_grad_()
     spatial = n1 * n2 * n3
-    layer("conv1 4D 1->32 (5,2,2,1)", lambda t: F.conv3d(pad(t), w1, b1), torch.randn(folded, 1, n1, n2, n3),
-          [w1, b1], folded * 32 * 20 * spatial, input_grad=False)
+    layer(f"conv1 4D 1->{f1} (5,2,2,1)", lambda t: F.conv3d(pad(t), w1, b1), torch.randn(folded, 1, n1, n2, n3),
+          [w1, b1], folded * f1 * 20 * spatial, input_grad=False)
     w2 = net.conv2.weight[..., 0].detach().requires_grad_()
     b2 = net.conv2.bias.detach().requires_grad_()
-    layer("conv2 4D 32->64 (5,2,2,1)", lambda t: F.conv3d(pad(t), w2, b2),
-          torch.randn(folded, 32, n1, n2, n3, requires_grad=True), [w2, b2], folded * 64 * 32 * 20 * spatial)
+    layer(f"conv2 4D {f1}->{f2} (5,2,2,1)", lambda t: F.conv3d(pad(t), w2, b2),
+          torch.randn(folded, f1, n1, n2, n3, requires_grad=True), [w2, b2], folded * f2 * f1 * 20 * spatial)
     rows_, cols_ = net.plane
-    layer("relu + reshape to plane", lambda t: torch.relu(t).reshape(B, n4, 64, n1, n2, n3).permute(0, 3, 4, 5, 1, 2)
-          .reshape(B, rows_, cols_, 64).permute(0, 3, 1, 2), torch.randn(folded, 64, n1, n2, n3, requires_grad=True), [], 0)
-    layer("conv3 2D 64->48 5x5", net.conv3, torch.randn(B, rows_, cols_, 64).permute(0, 3, 1, 2).requires_grad_(),
-          list(net.conv3.parameters()), B * 48 * 64 * 25 * rows_ * cols_)
+    layer("relu + reshape to plane", lambda t: torch.relu(t).reshape(B, n4, f2, n1, n2, n3).permute(0, 3, 4, 5, 1, 2)
+          .reshape(B, rows_, cols_, f2).permute(0, 3, 1, 2), torch.randn(folded, f2, n1, n2, n3, requires_grad=True), [], 0)
+    layer(f"conv3 2D {f2}->{f3} 5x5", net.conv3, torch.randn(B, rows_, cols_, f2).permute(0, 3, 1, 2).requires_grad_(),
+          list(net.conv3.parameters()), B * f3 * f2 * 25 * rows_ * cols_)
     layer("relu + maxpool + flatten", lambda t: torch.flatten(net.pool(torch.relu(t)), 1),
-          torch.randn(B, 48, rows_, cols_).contiguous(memory_format=torch.channels_last).requires_grad_(), [], 0)
-    layer(f"fc1 {net.n_flat}->1024 + relu + dropout", lambda t: net.dropout(torch.relu(net.fc1(t))),
-          torch.randn(B, net.n_flat, requires_grad=True), list(net.fc1.parameters()), B * net.n_flat * 1024)
-    layer("fc2 1024->10 + loss", lambda t: net.fc2(t).logsumexp(1).sum(), torch.randn(B, 1024, requires_grad=True),
-          list(net.fc2.parameters()), B * 1024 * 10)
+          torch.randn(B, f3, rows_, cols_).contiguous(memory_format=torch.channels_last).requires_grad_(), [], 0)
+    layer(f"fc1 {net.n_flat}->{hidden} + relu + dropout", lambda t: net.dropout(torch.relu(net.fc1(t))),
+          torch.randn(B, net.n_flat, requires_grad=True), list(net.fc1.parameters()), B * net.n_flat * hidden)
+    layer(f"fc2 {hidden}->10 + loss", lambda t: net.fc2(t).logsumexp(1).sum(), torch.randn(B, hidden, requires_grad=True),
+          list(net.fc2.parameters()), B * hidden * 10)
     per_epoch = 4000 / B
     print(f"\nCPU ms per batch of {B} (best of {R}); epoch = 4,000 objects = {per_epoch:.1f} batches")
     print("GF/s: GFLOP per CPU-second; % peak: of the mm roofline; s/epoch: CPU seconds")
@@ -529,9 +550,105 @@ def modelnet(args):
         )
 
 
+def _stratified_subset(y, idx, n, seed):
+    """``n`` of the objects ``idx`` (seeded, classes in their proportions), sorted."""
+    rng = np.random.default_rng(seed)
+    if n >= len(idx):
+        return np.sort(idx)
+    take = []
+    for label in np.unique(y[idx]):
+        members = idx[y[idx] == label]
+        k = max(1, int(round(n * len(members) / len(idx))))
+        take.append(rng.choice(members, min(k, len(members)), replace=False))
+    return np.sort(np.concatenate(take))[:n]
+
+
+def _block_seconds(pool, clouds):
+    """Wall seconds of one stretched draw of every block of the recipe's descriptor union."""
+    from sklearn.base import clone
+
+    stretched = clone(pool.augment).set_params(random_state=1).fit_transform(clouds) if pool.augment else clouds
+    out = []
+    for name, est in pool.transformer.transformer_list:
+        t0 = time.perf_counter()
+        clone(est).fit(clouds).transform(stretched)
+        out.append((name, time.perf_counter() - t0))
+        print(f"    {name}: {out[-1][1]:.1f} s for one draw of {len(clouds)} objects", flush=True)
+    return out
+
+
+def _epochs(net):
+    """Epochs trained and the best one (lowest validation loss, as the classifier keeps), 1-based."""
+    h = net.history
+    return len(h), int(np.argmin(h[:, "valid_loss"])) + 1
+
+
+def fit_profile(args):
+    """Where a fit of the recommended model ("EPPF 4D+") spends its time, and how it grows with the objects.
+
+    Uses the training split only (the classifier validates on its own
+    hold-out of it); the test split is not read. Prints progress as it goes.
+    """
+    import torch
+
+    from eppf.experiments._classification import TrainingSettings
+    from eppf.experiments._common import load_data, resolve_scaling
+
+    ds = load_data(require("bench_cnn fit", args.data))  # as `eppf experiment classification` loads it
+    clouds_all, y_all, train_idx = ds.clouds, np.asarray(ds.y), np.asarray(ds.train)
+    torch.set_num_threads(args.threads)
+    print(f"torch {torch.__version__}, {args.threads} threads; {len(train_idx)} training objects available; "
+          f"load average {os.getloadavg()[0]:.2f}", flush=True)
+    rows = []
+    for n in args.objects:
+        idx = _stratified_subset(y_all, train_idx, n, args.seed)
+        clouds = [clouds_all[i] for i in idx]
+        settings = TrainingSettings.resolve(
+            epochs=args.max_epochs, pointnet_epochs=None, pointnet_points=None,
+            validation_fraction=args.validation_fraction, patience=args.patience, scaling=None, quick=False,
+            n_jobs=args.threads, random_state=args.seed, precision="auto")
+        settings.scaling = resolve_scaling("auto", ds)
+        pool, clf = settings.recommended()
+        clf.set_params(verbose=1)
+        print(f"\n{len(idx)} objects: {pool.n_draws} draws x {len(pool.transformer.transformer_list)} descriptors "
+              f"x {len(idx)} objects; {clf.n_estimators} network(s) of at most {clf.max_epochs} epochs", flush=True)
+        print("  one draw of each descriptor:", flush=True)
+        blocks = _block_seconds(pool, clouds)
+        c0, t0 = time.process_time(), time.perf_counter()
+        X = pool.fit_transform(clouds).astype(np.float32)
+        pool_s, pool_cpu = time.perf_counter() - t0, time.process_time() - c0
+        print(f"  pool: {pool_s:.1f} s ({pool_s / pool.n_draws:.1f} s per draw), {pool_cpu:.1f} CPU s", flush=True)
+        c0, t0 = time.process_time(), time.perf_counter()
+        clf.fit(X, y_all[idx])
+        train_s, train_cpu = time.perf_counter() - t0, time.process_time() - c0
+        members = [clf.net_] + list(clf.ensemble_nets_)
+        for k, net in enumerate(members, 1):
+            n_epochs, best = _epochs(net)
+            print(f"  network {k}: {n_epochs} epochs, best {best}, {np.mean(net.history[:, 'dur']):.1f} s per epoch, "
+                  f"validation accuracy at the best epoch {100 * net.history[best - 1, 'valid_acc']:.1f}%", flush=True)
+        n_pred = min(args.predict_objects, len(clouds))
+        t0 = time.perf_counter()
+        clf.predict_proba(pool.transform(clouds[:n_pred]))
+        pred_s = time.perf_counter() - t0
+        rows.append((len(idx), blocks, pool_s, train_s, pool_cpu + train_cpu, members, n_pred / pred_s))
+    print("\nProfile of a fit of EPPF 4D+ (wall seconds but 'CPU s', process CPU seconds, all threads; "
+          "epochs: trained / best, per network)")
+    names = [name for name, _ in rows[0][1]]
+    print(f"{'objects':>7s} " + " ".join(f"{n + ' 1 draw':>14s}" for n in names)
+          + f" {'pool':>7s} {'train':>7s} {'s/epoch':>7s} {'epochs':>14s} {'total':>7s} {'CPU s':>7s} "
+          f"{'ms/object':>9s} {'predict obj/s':>13s}")
+    for n, blocks, pool_s, train_s, cpu, members, pred in rows:
+        epochs = " ".join("{}/{}".format(*_epochs(m)) for m in members)
+        per_epoch = np.mean([d for m in members for d in m.history[:, "dur"]])
+        total = pool_s + train_s
+        print(f"{n:7d} " + " ".join(f"{s:14.1f}" for _, s in blocks)
+              + f" {pool_s:7.1f} {train_s:7.1f} {per_epoch:7.1f} {epochs:>14s} {total:7.1f} {cpu:7.1f} "
+              f"{1e3 * total / n:9.1f} {pred:13.0f}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet"))
+    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet", "fit"))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=5)
@@ -556,7 +673,7 @@ def main(argv=None):
     parser.add_argument("--weight-decay", type=float, default=0.0)
     parser.add_argument("--augment", action="store_true")
     parser.add_argument("--recommended", action="store_true",
-                        help="epoch: time the recommended network (eppf experiment's 'EPPF 4D+') with side features")
+                        help="epoch, profile: the recommended network (eppf experiment's 'EPPF 4D+'; epoch: with side features)")
     parser.add_argument(
         "--stretch", nargs=2, type=float, metavar=("LOW", "HIGH"),
         help="descriptors: stretch the training clouds of draws 1.. by random per-axis factors in [LOW, HIGH]",
@@ -564,8 +681,13 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--verbose", type=int, default=0)
     parser.add_argument("--no-mkldnn", action="store_true", help="profile: disable oneDNN convolutions")
+    parser.add_argument("--objects", nargs="+", type=int, default=[1000, 2000, 4000],
+                        help="fit: training-set sizes to profile (stratified subsets of the training split)")
+    parser.add_argument("--predict-objects", type=int, default=500,
+                        help="fit: objects whose prediction (descriptors included) is timed")
     args = parser.parse_args(argv)
-    parts = {"throughput": throughput, "profile": profile, "epoch": epoch, "descriptors": descriptors, "modelnet": modelnet}
+    parts = {"throughput": throughput, "profile": profile, "epoch": epoch, "descriptors": descriptors, "modelnet": modelnet,
+             "fit": fit_profile}
     parts[args.part](args)
 
 

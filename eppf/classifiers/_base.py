@@ -196,13 +196,16 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         import torch
         from skorch.callbacks import EarlyStopping, LRScheduler
 
-        from ._callbacks import EpochLog, TimeBudget
+        from ._callbacks import EpochLog, TimeBudget, WeightAveraging
 
         sink = self._sink()
         callbacks = []
         if self.verbose:
             # First, so that it logs the epoch in which another callback stops training.
             callbacks.append(("epoch_log", EpochLog(sink, int(self.max_epochs))))
+        if getattr(self, "swa_epochs", 0):
+            # Before early stopping and the time budget, which may end training in on_epoch_end.
+            callbacks.append(("weight_averaging", WeightAveraging(int(self.swa_epochs), sink)))
         if validating:
             callbacks.append(
                 (
@@ -321,6 +324,9 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
             torch.manual_seed(seeds["torch"])
             net.fit(train_ds, y=None)
+        averaging = dict(net.callbacks_).get("weight_averaging")
+        if averaging is not None:  # after early stopping loaded the best epoch: the average replaces it
+            averaging.apply(net)
         # The validation set lives in train_split; drop it so it is not pickled.
         net.train_split = None
         return net

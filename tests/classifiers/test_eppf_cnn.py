@@ -644,3 +644,63 @@ def test_bad_option_values(params, msg):
     X, y = _toy(20, np.random.default_rng(0))
     with pytest.raises(ValueError, match=msg):
         EPPF4DClassifier(n_bins=N_BINS, **params).fit(X, y)
+
+
+# ------------------------------------------------------- weight averaging
+def test_swa_weights_are_the_mean_of_the_last_epochs_weights():
+    # Reference: the same training stopped after each of the averaged epochs (constant lr, no early
+    # stopping: epoch k of a longer run is the k-epoch run), its weights averaged here in float64.
+    rng = np.random.default_rng(3)
+    X, y = _toy(48, rng)
+    common = dict(n_bins=N_BINS, early_stopping=False, random_state=0, verbose=0, **SMALL)
+    swa = EPPF4DClassifier(max_epochs=4, swa_epochs=3, **common).fit(X, y)
+    runs = [EPPF4DClassifier(max_epochs=k, **common).fit(X, y) for k in (2, 3, 4)]
+    got = swa.net_.module_.state_dict()
+    for key, value in got.items():
+        expected = np.mean([r.net_.module_.state_dict()[key].double().numpy() for r in runs], axis=0)
+        assert_allclose(value.double().numpy(), expected, rtol=1e-5, atol=1e-7, err_msg=key)
+    # the last epoch's weights (what swa_epochs=0 keeps) are not the average
+    assert not torch.equal(got["fc2.weight"], runs[-1].net_.module_.state_dict()["fc2.weight"])
+    assert swa.n_epochs_ == 4 and swa.best_epoch_ == 4
+
+
+def test_swa_with_early_stopping_averages_up_to_the_last_epoch_and_is_deterministic(tmp_path, capsys):
+    import eppf
+
+    rng = np.random.default_rng(4)
+    X, y = _toy(60, rng)
+    params = dict(n_bins=N_BINS, max_epochs=6, n_iter_no_change=2, validation_fraction=0.2, swa_epochs=2,
+                  random_state=1, **SMALL)
+    a = EPPF4DClassifier(verbose=1, **params).fit(X, y)
+    n = a.n_epochs_
+    assert f"weights averaged over epochs {n - 1} to {n}" in capsys.readouterr().out
+    b = EPPF4DClassifier(verbose=0, **params).fit(X, y)
+    assert_array_equal(a.predict_proba(X), b.predict_proba(X))
+    # the snapshots are dropped once averaged; the averaged weights are the model's and are saved as such
+    assert not dict(a.net_.callbacks_)["weight_averaging"].snapshots_
+    path = tmp_path / "swa.eppf"
+    eppf.save_model(a, path)
+    loaded = eppf.load_model(path)
+    assert loaded.swa_epochs == 2
+    assert_array_equal(loaded.predict_proba(X), a.predict_proba(X))
+
+
+def test_swa_epochs_is_validated():
+    X, y = _toy(20, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="swa_epochs"):
+        EPPF4DClassifier(n_bins=N_BINS, swa_epochs=-1).fit(X, y)
+
+
+def test_model_of_the_previous_recipe_still_loads():
+    # tests/data/eppf4d_recipe_0_2.eppf: an EPPF4DClassifier with the options of the "EPPF 4D+" recipe of
+    # eppf 0.2.0 (pool input, side features, plateau schedule, label smoothing, a 2-network ensemble), saved
+    # by that release's save_model before swa_epochs existed; the .npz holds its inputs and probabilities then.
+    import os
+
+    import eppf
+
+    here = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data")
+    model = eppf.load_model(os.path.join(here, "eppf4d_recipe_0_2.eppf"))
+    recorded = np.load(os.path.join(here, "eppf4d_recipe_0_2.npz"))
+    assert model.swa_epochs == 0 and len(model.ensemble_nets_) == 1
+    assert_allclose(model.predict_proba(recorded["X"]), recorded["proba"], rtol=1e-5, atol=1e-6)

@@ -386,7 +386,9 @@ def test_train_passes_precision_to_the_cnn():
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].precision == "auto"  # recommended
     assert make_pipeline_from_args(build_parser().parse_args(base + ["--precision", "float32"]))[-1].precision \
         == "float32"
-    assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == 3  # an ensemble
+    from eppf.registry import RECIPE
+
+    assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == RECIPE["n_estimators"]
     base = base + ["--recipe", "paper"]
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].precision == "float32"
     assert make_pipeline_from_args(build_parser().parse_args(base))[-1].n_estimators == 1  # Table I's one network

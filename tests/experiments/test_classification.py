@@ -20,7 +20,7 @@ def test_recommended_parts_are_the_documented_recipe():
     assert clf.n_side_features == "auto" and clf.filters == RECIPE["filters"] and clf.n_hidden == RECIPE["n_hidden"]
     assert clf.lr_schedule == "plateau" and clf.precision == "auto" and clf.max_epochs == 7
     assert clf.n_iter_no_change == RECIPE["min_patience"]  # at least 8 epochs of patience
-    assert clf.n_estimators == RECIPE["n_estimators"] == 3  # an ensemble of three networks
+    assert clf.n_estimators == RECIPE["n_estimators"] == 1  # one network: on validation data an ensemble gained nothing
     assert clf.label_smoothing == RECIPE["label_smoothing"] == 0.1
     quick_pool, quick_clf = recommended_pipeline_parts(EPPFTransformer(), quick=True, n_iter_no_change=2)
     assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2 and quick_clf.n_estimators == 1
