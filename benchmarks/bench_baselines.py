@@ -12,47 +12,49 @@ PCL 1.13's own ESF and OUR-CVFH outputs (``pcl_<data set>.npz`` files with
 arrays ``esf`` and ``ourcvfh``, one row per object, in ``--reference-dir``)
 are scored the same way as a yardstick when given.
 
-Every object is centred on its mean and scaled so its largest bounding-box
+Every object is centered on its mean and scaled so its largest bounding-box
 side is 1 (as the PCL reference runs), and gets PCA normals over 10
-neighbours pointing away from its centroid, computed once and given to every
+neighbors pointing away from its centroid, computed once and given to every
 descriptor (normal estimation is timed separately).
 
 Before the table, the EPPF kernel is timed at every level the CPU has
-(scalar, AVX2, AVX-512 with the grouped walk, AVX-512 with the skipping
-walk; the row marked "default" is the one the kernel picks here), passes
-alternating, beside our GASD and VFH (``--eppf-kernel`` does only this, on
-ModelNet10; every level's output is checked equal to the scalar kernel's).
-``--eppf-kernel --n-time 300 --repeats 7`` on a 2-vCPU AMD EPYC (Zen 4) KVM
-guest, shared with other jobs (load average about 0.5), CPU ms per object,
-one thread, normals given, the paper's settings:
+(in one process, passes alternating; ``--eppf-kernel`` does only this, on
+ModelNet10, every level's output checked equal to the scalar kernel's)
+beside our GASD and VFH, and PCL 1.13's ESF, GASD, VFH, CVFH and GRSD are
+timed on the same objects in the same run by the harness in
+``benchmarks/pcl_harness`` (built on demand where PCL, pkg-config and a C++
+compiler are installed; left out with one line otherwise). No figure is
+quoted from another run or machine: the CPU model and the SIMD level each
+kernel ran at are printed with the figures.
 
-================================================  ======  =========  ================  ==============  ==================
-descriptor                                        kernel  transform  / our GASD (tr.)  / our VFH (tr.)  PCL ESF / kernel
-================================================  ======  =========  ================  ==============  ==================
-EPPF, scalar kernel                               1.388   1.449      18.0              14.2            6-7x
-EPPF, AVX2 kernel                                 0.680   0.745      9.3               7.3             12-15x
-EPPF, AVX-512, grouped walk                       0.460   0.496      6.2               4.9             17-22x
-EPPF, AVX-512, skipping walk (default here)       0.258   0.295      3.7               2.9             31-39x
-GASD (ours)                                       -       0.080      1.0               0.79
-VFH (ours)                                        -       0.102      1.27              1.0
-================================================  ======  =========  ================  ==============  ==================
+``--targets`` prints every ratio of the speed targets (issue 29) side by
+side in one run, one thread, 1,024 points, normals given: eppf at each
+``--levels`` level in a process of its own (``EPPF_SIMD``; e.g.
+``--levels native,avx2,scalar`` runs an AVX2-only and a portable machine's
+code on an AVX-512 one), PCL and Open3D natively, each ratio with PASS/FAIL;
+``--compare-build PATH`` adds the EPPF kernel of another checkout (with
+built extensions) at each level; ``--rst`` also prints the table for
+``docs/performance.rst``. Without ``--data-dir`` it runs on the built-in
+synthetic shapes.
 
-(PCL 1.13 on this machine kind, one thread: ESF 8-10 ms, GASD 0.29-0.45,
-VFH 0.41-0.62. The skipping walk walks each line along its dominant axis
-and skips by the empty cone ahead, with f1-f3 and its setup in one pass and
-look-ups by scalar loads.) The kernel is under 0.3 ms per object here, and
-30x ESF at its 8 ms low end needs 0.267 ms: three other runs gave 0.256,
-0.261 and 0.269. Where the kernel's time goes is in the performance page of the docs.
+``--callgrind`` counts instead the instructions per object that eppf's
+compiled code executes for each task (``valgrind --tool=callgrind``; counts do
+not depend on the machine's load), at each ``--levels`` level, and with
+``--compare-build PATH`` beside the other build's, with their ratio. valgrind
+models a CPU without AVX-512: there the kernels run at most their AVX2 code.
 
 Usage::
 
+    python benchmarks/bench_baselines.py --targets --levels native,avx2,scalar [--data-dir DIR] [--rst]
+    python benchmarks/bench_baselines.py --callgrind --levels scalar,avx2 --compare-build OTHER_CHECKOUT
     python benchmarks/bench_baselines.py --data-dir DIR       # everything
     python benchmarks/bench_baselines.py --data-dir DIR --eppf-kernel   # EPPF kernel levels, GASD, VFH
     python benchmarks/bench_baselines.py --data-dir DIR --draws 3 --descriptors esf wahl
     python benchmarks/bench_baselines.py --data-dir DIR --no-retrieval   # timings only
 
-Needs ``modelnet10_1024.npz`` and ``dales_objects.npz`` in ``--data-dir``
-(default: ``$EPPF_BENCH_DATA``, no other default); exits with status 2 and
+Apart from ``--targets`` and ``--callgrind`` (which fall back to the
+synthetic shapes), needs ``modelnet10_1024.npz`` and ``dales_objects.npz`` in
+``--data-dir`` (default: ``$EPPF_BENCH_DATA``, no other default); exits with status 2 and
 how to make them when they are absent (``scripts/make_modelnet_npz.py``).
 """
 
@@ -72,7 +74,10 @@ from eppf.metrics import leave_one_out_retrieval, retrieval_scores
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from _data import default_dir, in_dir  # noqa: E402
+import _pcl  # noqa: E402
+from _data import default_dir, in_dir, write_objects  # noqa: E402
+from _sidebyside import cpu_model, describe_levels, load_average, parse_levels  # noqa: E402
+
 DATASETS = {"modelnet10": "modelnet10_1024", "dales": "dales_objects"}
 METRICS = ("total_accuracy", "mean_class_accuracy", "macro_precision", "macro_recall", "macro_f1")
 SHORT = ("acc", "mAcc", "P", "R", "F1")
@@ -152,19 +157,44 @@ def time_descriptor(factory, clouds, repeats=1):
     return 1e3 * min(cpu) / len(clouds), 1e3 * min(wall) / len(clouds)
 
 
-def bench_vfh_gasd(clouds, repeats=3):
+def pcl_times(clouds, tasks, repeats=3):
+    """PCL 1.13's CPU ms per object for each task on these clouds (the harness, one thread), in this run.
+
+    {task: ms}; empty (with one printed line) where the harness cannot be built.
+    """
+    import tempfile
+
+    exe = _pcl.harness()
+    if exe is None:
+        return {}
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="eppf-bench-") as tmp:
+        path = os.path.join(tmp, "objects.bin")
+        write_objects(path, clouds)
+        for task in tasks:
+            print(f"PCL {task} ...", flush=True)
+            try:
+                out[task] = _pcl.time_pcl(exe, path, task, repeats=repeats)
+            except (RuntimeError, ValueError, OSError) as exc:
+                print(f"PCL {task}: not measured ({exc})", flush=True)
+    return out
+
+
+def _vs_pcl(ms, pcl, name):
+    return f"; PCL 1.13 in this run: {pcl[name]:.3f} ({ms / pcl[name]:.0%} of PCL's)" if name in pcl else ""
+
+
+def bench_vfh_gasd(clouds, repeats=3, pcl=None):
     """VFH and GASD (PCL 1.13's global descriptors): ms per object, 1 thread, normals given,
-    beside PCL's own time on the same objects (reference README: VFH 0.62, GASD 0.29 ms)."""
+    beside PCL's own time on the same objects in the same run (``pcl``: {task: ms} of :func:`pcl_times`)."""
     from eppf.descriptors._gasd import GASDTransformer
     from eppf.descriptors._vfh import VFHTransformer
 
-    for name, factory, pcl_ms in (
-        ("vfh", lambda rs: VFHTransformer(n_jobs=1), 0.62),
-        ("gasd", lambda rs: GASDTransformer(n_jobs=1), 0.29),
-    ):
+    pcl = pcl or {}
+    for name, factory in (("vfh", lambda rs: VFHTransformer(n_jobs=1)), ("gasd", lambda rs: GASDTransformer(n_jobs=1))):
         ms, wall = time_descriptor(factory, clouds, repeats)
-        print(f"{name}: {ms:.3f} ms/object at 1,024 points (CPU time; wall clock {wall:.3f}); "
-              f"PCL 1.13: {pcl_ms:.2f} ({ms / pcl_ms:.0%} of PCL's)", flush=True)
+        print(f"{name}: {ms:.3f} ms/object at 1,024 points (CPU time; wall clock {wall:.3f}){_vs_pcl(ms, pcl, name)}",
+              flush=True)
 
 
 # (name, kernel level, what it is) for the EPPF kernel comparison; levels the CPU lacks are left out.
@@ -177,10 +207,6 @@ EPPF_LEVELS = (
 )
 
 
-# PCL 1.13's ESF on this machine kind, one thread, 1,024-point ModelNet10 objects (ms per object)
-PCL_ESF_MS = (8.0, 10.0)
-
-
 def _pack(clouds):
     """The (N, 3) points, (N, 3) normals and offsets of clouds with normals, as the kernel reads them."""
     stacked = np.ascontiguousarray(np.vstack(clouds))
@@ -188,7 +214,7 @@ def _pack(clouds):
     return stacked[:, :3], stacked[:, 3:6], offsets
 
 
-def bench_eppf_kernel(clouds, repeats=5):
+def bench_eppf_kernel(clouds, repeats=5, pcl=None):
     """The EPPF kernel at every level the CPU has, beside our GASD and VFH, in one run.
 
     The paper's settings (EPPFTransformer's defaults: 20,000 pairs, 64^3
@@ -199,7 +225,9 @@ def bench_eppf_kernel(clouds, repeats=5):
     whole ``transform`` (validation, kernel, weighting). Every level must
     give the same counts, bit for bit (checked here). Returns the rows
     (name, kernel ms, transform ms) and prints them as a table with the
-    ratios to our GASD and VFH and PCL 1.13's times on this machine kind.
+    ratios to our GASD and VFH and, where ``pcl`` ({task: ms} of
+    :func:`pcl_times`, measured in this run on these objects) has them, to
+    PCL 1.13's ESF and GASD.
     """
     from eppf import EPPFTransformer, GASDTransformer, VFHTransformer
     from eppf.descriptors import _eppf_fast as core
@@ -241,18 +269,24 @@ def bench_eppf_kernel(clouds, repeats=5):
                           ("VFH (ours)", lambda rs: VFHTransformer(n_jobs=1))):
         others[name], _ = time_descriptor(factory, clouds, repeats)
     gasd, vfh = others["GASD (ours)"], others["VFH (ours)"]
+    pcl = pcl or {}
+    esf, pgasd = pcl.get("esf"), pcl.get("gasd")
     print(f"\nEPPF kernel at the paper's settings vs our GASD and VFH: {n} ModelNet10 objects of 1,024 points, "
           f"normals given, one thread, CPU ms per object, best of {repeats} (1-minute load average "
-          f"{os.getloadavg()[0]:.1f}; every EPPF level bit-identical)")
+          f"{load_average():.1f}; every EPPF level bit-identical); CPU: {cpu_model()}; "
+          f"kernels by default: {describe_levels(eppf.simd_levels())}")
     print("| descriptor | kernel ms/object | transform ms/object | transform / our GASD | transform / our VFH "
-          "| PCL ESF (8-10 ms) / kernel |")
-    print("|---|---|---|---|---|---|")
+          "| transform / PCL GASD | PCL ESF / kernel |")
+    print("|---|---|---|---|---|---|---|")
     for name, k_ms, t_ms in rows:
         print(f"| {name} | {k_ms:.3f} | {t_ms:.3f} | {t_ms / gasd:.2f} | {t_ms / vfh:.2f} "
-              f"| {PCL_ESF_MS[0] / k_ms:.0f}-{PCL_ESF_MS[1] / k_ms:.0f}x |")
+              f"| {f'{t_ms / pgasd:.2f}' if pgasd else '-'} | {f'{esf / k_ms:.0f}x' if esf else '-'} |")
     for name, ms in others.items():
-        print(f"| {name} | - | {ms:.3f} | {ms / gasd:.2f} | {ms / vfh:.2f} | |")
-    print("| PCL 1.13 ESF / GASD / VFH (this machine kind, one thread) | - | 8-10 / 0.29-0.45 / 0.41-0.62 | | | |")
+        print(f"| {name} | - | {ms:.3f} | {ms / gasd:.2f} | {ms / vfh:.2f} | "
+              f"{f'{ms / pgasd:.2f}' if pgasd else '-'} | |")
+    for task in ("esf", "gasd", "vfh"):
+        if task in pcl:
+            print(f"| PCL 1.13 {task.upper()} (this run, same objects) | - | {pcl[task]:.3f} | | | | |")
     if len(rows) > 1:
         best = rows[[lv for _, lv, _ in levels].index(default)]
         print(f"speed-up of the default kernel over the AVX2 one: {rows[1][1] / best[1]:.2f}x (kernel), "
@@ -260,24 +294,24 @@ def bench_eppf_kernel(clouds, repeats=5):
     return rows, others
 
 
-def time_grsd_cvfh(clouds, repeats=1):
-    """GRSD and CVFH beside PCL 1.13's time per object (1 thread, 1,024 points,
-    normals given; PCL's figures from the reference README), with the PCL
-    reference runs' settings, and CVFH also with PCL's defaults."""
+def time_grsd_cvfh(clouds, repeats=1, pcl=None):
+    """GRSD and CVFH beside PCL 1.13's time per object on the same objects in the same run
+    (``pcl``: {task: ms} of :func:`pcl_times`; 1 thread, 1,024 points, normals given), with the
+    PCL reference runs' settings, and CVFH also with PCL's defaults."""
     from eppf.descriptors._cvfh import CVFHTransformer
     from eppf.descriptors._grsd import GRSDTransformer
 
+    pcl = pcl or {}
     specs = (
-        ("GRSD", 2.42, lambda rs: GRSDTransformer(normalize=False, n_jobs=1)),
-        ("CVFH", 3.38, lambda rs: CVFHTransformer(
+        ("GRSD", "grsd", lambda rs: GRSDTransformer(normalize=False, n_jobs=1)),
+        ("CVFH", "cvfh", lambda rs: CVFHTransformer(
             aggregate="first", eps_angle=float(np.deg2rad(5.0)), curvature_threshold=1.0, normalize=False, n_jobs=1)),
         ("CVFH, PCL's defaults", None, lambda rs: CVFHTransformer(aggregate="first", normalize=False, n_jobs=1)),
     )
-    for name, pcl_ms, factory in specs:
+    for name, task, factory in specs:
         cpu, wall = time_descriptor(factory, clouds, repeats)
-        ref = f"; PCL 1.13: {pcl_ms:.2f}" if pcl_ms else ""
-        print(f"{name}: {cpu:.2f} ms/object at 1,024 points (CPU time, 1 thread; wall clock {wall:.2f}){ref}",
-              flush=True)
+        print(f"{name}: {cpu:.2f} ms/object at 1,024 points (CPU time, 1 thread; wall clock {wall:.2f})"
+              f"{_vs_pcl(cpu, pcl, task) if task else ''}", flush=True)
 
 
 def fmt(values):
@@ -292,7 +326,8 @@ def main(argv=None):
     ap.add_argument("--draws", type=int, default=10, help="descriptor draws for random descriptors (default 10)")
     ap.add_argument("--descriptors", nargs="+", default=list(descriptors()), choices=list(descriptors()))
     ap.add_argument("--datasets", nargs="+", default=list(DATASETS), choices=list(DATASETS))
-    ap.add_argument("--n-time", type=int, default=100, help="objects timed at 1,024 points (default 100)")
+    ap.add_argument("--n-time", type=int, default=None,
+                    help="objects timed at 1,024 points (default 100; 20 with --callgrind)")
     ap.add_argument("--repeats", type=int, default=3, help="timing passes, the best one reported (default 3)")
     ap.add_argument("--no-retrieval", action="store_true")
     ap.add_argument("--eppf-kernel", action="store_true",
@@ -301,14 +336,49 @@ def main(argv=None):
     ap.add_argument("--data-dir", default=default_dir(),
                     help="folder with modelnet10_1024.npz and dales_objects.npz (default: $EPPF_BENCH_DATA)")
     ap.add_argument("--reference-dir", default=None, help="folder with PCL's pcl_<data set>.npz outputs (optional)")
+    ap.add_argument("--no-pcl", action="store_true", help="leave PCL out (otherwise timed where its harness builds)")
+    ap.add_argument("--targets", action="store_true",
+                    help="every ratio of the speed targets side by side in one run, PASS/FAIL (see --levels)")
+    ap.add_argument("--callgrind", action="store_true",
+                    help="instructions per object of eppf's compiled code under valgrind (see --compare-build)")
+    ap.add_argument("--levels", default=None,
+                    help="with --targets or --callgrind: comma-separated EPPF_SIMD levels, each in a process of its "
+                         "own: native, avx512, avx2, scalar or all (default: native for --targets, "
+                         "scalar,avx2 for --callgrind)")
+    ap.add_argument("--compare-build", default=None, metavar="PATH",
+                    help="with --targets or --callgrind: another checkout with built extensions, timed beside this one")
+    ap.add_argument("--n-large", type=int, default=10, help="with --targets: objects grown to 10,000 points (default 10)")
+    ap.add_argument("--no-open3d", action="store_true", help="with --targets: leave Open3D out")
+    ap.add_argument("--tasks", default="eppf,eppf_kernel,normals,esf,gasd,cvfh,grsd",
+                    help="with --callgrind: the tasks counted (default: %(default)s)")
+    ap.add_argument("--rst", action="store_true", help="with --targets: also print the table as reStructuredText")
     args = ap.parse_args(argv)
     global DATA_DIR
     DATA_DIR = args.data_dir
+    if args.n_time is None:
+        args.n_time = 20 if args.callgrind else 100
+    try:
+        levels = parse_levels(args.levels or ("scalar,avx2" if args.callgrind else "native"))
+    except ValueError as exc:
+        ap.error(str(exc))
+    if args.targets:
+        import _targets
+
+        _targets.run(DATA_DIR, args.n_time, args.n_large, levels, args.repeats, compare_build=args.compare_build,
+                     pcl=not args.no_pcl, open3d=not args.no_open3d, rst=args.rst,
+                     command="python benchmarks/bench_baselines.py " + " ".join(
+                         "PATH" if os.path.isabs(a) else a for a in (argv if argv is not None else sys.argv[1:])))
+        return
+    if args.callgrind:
+        import _callgrind
+
+        _callgrind.run(DATA_DIR, args.n_time, levels, args.tasks.split(","), args.compare_build)
+        return
     if args.eppf_kernel:
         mn, _ = load("modelnet10")
         stride = max(1, len(mn) // args.n_time)
         c1k, _ = with_normals(mn[::stride][: args.n_time])
-        bench_eppf_kernel(c1k, args.repeats)
+        bench_eppf_kernel(c1k, args.repeats, {} if args.no_pcl else pcl_times(c1k, ("esf", "gasd", "vfh")))
         return
     for name in {"modelnet10", "dales"} | set(args.datasets):  # both are timed; check before any work
         in_dir("bench_baselines", DATA_DIR, DATASETS[name])
@@ -324,9 +394,10 @@ def main(argv=None):
     c10k, t_n10k = with_normals([c[:10000] for c in big])
     print(f"normals (PCA, k=10): {1e3 * t_n1k / len(c1k):.2f} ms/object at 1,024 points, "
           f"{1e3 * t_n10k / len(c10k):.2f} at 10,000", flush=True)
-    bench_vfh_gasd(c1k, args.repeats)
-    bench_eppf_kernel(c1k, args.repeats)
-    time_grsd_cvfh(c1k, args.repeats)
+    pcl = {} if args.no_pcl else pcl_times(c1k, ("esf", "gasd", "vfh", "cvfh", "grsd"), args.repeats)
+    bench_vfh_gasd(c1k, args.repeats, pcl)
+    bench_eppf_kernel(c1k, args.repeats, pcl)
+    time_grsd_cvfh(c1k, args.repeats, pcl)
     for name in list(args.descriptors):
         factory, _, metrics = specs[name]
         try:

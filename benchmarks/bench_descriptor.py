@@ -36,6 +36,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 from _data import require  # noqa: E402
+from _sidebyside import cpu_model, describe_levels  # noqa: E402
 
 DATA = None  # the --data file, set by main()
 
@@ -157,16 +158,6 @@ def bench_contention(n_objects, repeats, sizes):
     return rows
 
 
-def _kernel_name(core):
-    """The EPPF kernel level in use: scalar, AVX2 or AVX-512."""
-    levels = getattr(core, "_simd_levels", None)
-    if levels is None:
-        return "SIMD" if getattr(core, "_simd_enabled", lambda: False)() else "scalar"
-    old = core._set_simd_level(99)
-    core._set_simd_level(old)
-    return ("scalar", "AVX2", "AVX-512")[old]
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", type=int, default=200)
@@ -190,16 +181,16 @@ def main():
         return
     if args.quick:
         args.objects, args.repeats = 40, 1
-    import eppf.descriptors._eppf_fast as core
+    import eppf
     from eppf.utils._scan_fast import has_openmp
 
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+    print(f"machine: {platform.machine()}, {cpu_model()}, {os.cpu_count()} logical CPUs, "
           f"OpenMP {'on' if has_openmp() else 'off'}")
     load_before = os.getloadavg()[0]
     rows, source = bench_descriptor(args.objects, args.repeats, tuple(args.sizes))
     print(f"\nEPPF descriptor, 20,000 pairs, 64^3 grid, {args.objects} objects from {source}, best of {args.repeats}")
     print(f"(1-minute load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after; "
-          f"kernel: {_kernel_name(core)})")
+          f"kernels: {describe_levels(eppf.simd_levels())})")
     print("(wall ms per object; 'CPU ms/obj' is the process CPU time per object summed over threads: the")
     print(" per-core cost, meaningful even when other processes share the cores; normals: PCA, 20 neighbours)")
     print(f"{'points':>7} | {'threads':>7} | {'ms/obj (normals given)':>22} | {'CPU ms/obj':>10} | "

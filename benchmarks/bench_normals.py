@@ -16,53 +16,25 @@ and their ratio (Open3D / eppf). The clouds:
   points, 1,024 of them drawn without replacement (seeded);
 - ``dales 10000``: the DALES segments of 10,000 points, as stored.
 
-Each figure is the best of ``--repeats`` passes over all the clouds of a row
-(eppf and Open3D passes alternate, so both see the same load), CPU time
-(``time.process_time``) divided by the number of clouds; Open3D's normals are
-cleared before each of its calls (with normals present it would also orient
-them to the old ones), untimed. The ``p99 angle`` column is the 99th
-percentile over all points of the angle between eppf's and Open3D's normals,
-up to sign (both are exact PCA over the 20 nearest neighbours; they differ
-only by rounding, or where the 20th neighbour is tied with the 21st).
-Open3D is a benchmark-only dependency (``pip install open3d``): without it
-the Open3D columns are skipped with a printed line. ``OMP_NUM_THREADS`` is
-set to 1 before Open3D is imported, and its threads are checked against the
-wall clock (the ``open3d cpu/wall`` line: at most 1 for one thread).
-
-Measured on a 2-vCPU Intel Xeon KVM guest (Sapphire Rapids class), quiet
-(load average 1.9), with ``python benchmarks/bench_normals.py --data-dir DIR``
-(Open3D 0.20.0; the process pinned to one CPU, as the script now does)::
-
-    ms of CPU per cloud, one thread, n_neighbors=20, best of 5 passes
-    data        points clouds     eppf   open3d  ratio  p99 angle
-    -------------------------------------------------------------
-    modelnet10    1024     40    0.804    2.295   2.85   1.5e-06°
-    modelnet10   10000     40    8.028   26.095   3.25   1.7e-06°
-    dales         1024     40    0.687    2.007   2.92   1.5e-06°
-    dales        10000     21    7.314   24.757   3.38   1.5e-06°
-    open3d cpu/wall: 1.00 (above 1: more than one thread)
-
-Under a load average of 7.4 (other jobs on both vCPUs) the ratios were
-2.69 / 3.24 / 2.74 / 3.34. The previous kernel, timed in that session by
-the same command: 1.145, 10.069, 1.009 and 9.209 ms (ratios 1.93, 2.57,
-1.96, 2.74): the normals are the same bit for bit. The 3x goal holds at
-10,000 points, not yet at 1,024 (2.85-2.92x).
-
-On the 2-vCPU AMD EPYC (Zen 4) KVM guest, after the fast search's
-distance scan and k-th selection went to AVX-512 (bit-identical normals), the
-same command, with the machine shared with other jobs (load average 10.9 to
-11.7; this script runs at normal priority beside niced jobs), and the
-previous kernel (the main branch) timed by the same command right after::
-
-    data        points clouds     eppf   open3d  ratio   previous kernel: eppf  open3d  ratio
-    modelnet10    1024     40    0.572    2.266   3.96                    0.916   2.767   3.02
-    modelnet10   10000     40    7.346   27.631   3.76                    9.591  29.175   3.04
-    dales         1024     40    0.546    2.035   3.73                    1.014   2.533   2.50
-    dales        10000     21    6.621   28.854   4.36                   10.316  32.583   3.16
-
-Two earlier runs in that session, before the last two retry changes of the
-search (load averages 4.9 and 6.2), gave ratios of 3.39 to 4.52: the 3x
-goal holds at both sizes in every run.
+Each figure is the best of ``--repeats`` rounds, CPU time of a pass over
+all the clouds of a row divided by the number of clouds. eppf runs in one
+worker process per ``--levels`` level (``EPPF_SIMD`` set before eppf is
+imported; default: the CPU's own level only; ``--levels native,avx2,scalar``
+also runs an AVX2-only and a portable machine's kernels on this one, marked
+"emulated"), Open3D in a worker of its own pinned to one CPU with
+``OMP_NUM_THREADS=1`` (its normals cleared before each call, untimed: with
+normals present it would also orient them to the old ones), PCL 1.13's
+``NormalEstimation`` (k-d tree, one thread) in the harness of
+``benchmarks/pcl_harness`` (built on demand; left out with one line where
+PCL or a compiler is missing); their passes alternate round by round, so all
+see the same load. The ``p99 angle`` column is the 99th percentile over all
+points of the angle between eppf's and Open3D's normals, up to sign (both are
+exact PCA over the 20 nearest neighbors; they differ only by rounding, or
+where the 20th neighbor is tied with the 21st). Open3D is a benchmark-only
+dependency (``pip install open3d``): without it its columns are skipped with
+a printed line. The CPU model and the level each kernel ran at are printed
+with the table; figures measured on the project's machines are in the
+performance page of the documentation, one table per CPU kind.
 
 ``--table`` prints instead the older table of eppf alone: milliseconds per
 object at 1,024 / 2,048 / 10,000 points for k = 10, 20 and 30, through the
@@ -70,9 +42,9 @@ batch kernel on 1 and 2 threads and through single calls, and scipy's
 cKDTree plus ``np.linalg.eigh`` for scale, on noisy bumpy ellipsoids.
 
 Usage: ``python benchmarks/bench_normals.py [--data-dir DIR | --data modelnet10_1024.npz
---dales dales_objects.npz] [--clouds 40] [--repeats 5] [--table [--quick]]``
-(``--data-dir`` defaults to ``$EPPF_BENCH_DATA``; a data set not found is
-left out with a printed line).
+--dales dales_objects.npz] [--clouds 40] [--repeats 5] [--levels native,avx2,scalar] [--no-pcl]
+[--table [--quick]]`` (``--data-dir`` defaults to ``$EPPF_BENCH_DATA``; a data set not found is
+left out with a printed line; with no data at all the built-in synthetic shapes are used).
 """
 
 import argparse
@@ -81,34 +53,22 @@ import platform
 import sys
 import time
 
-os.environ["OMP_NUM_THREADS"] = "1"  # before any OpenMP runtime starts: one thread for both libraries
-if hasattr(os, "sched_setaffinity"):
-    # Open3D's normal estimation starts threads of its own despite OMP_NUM_THREADS (seen with 0.20.0:
-    # CPU/wall 1.7 on an idle 2-vCPU machine), so the process is pinned to one CPU: one core for both.
-    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+import tempfile
 
-import numpy as np  # noqa: E402
-from scipy.spatial import cKDTree  # noqa: E402
-from threadpoolctl import threadpool_limits  # noqa: E402
+import numpy as np
+from scipy.spatial import cKDTree
+from threadpoolctl import threadpool_limits
 
-from eppf import estimate_normals  # noqa: E402
-from eppf.preprocessing._normals import estimate_normals_batch  # noqa: E402
+from eppf import estimate_normals
+from eppf.preprocessing._normals import estimate_normals_batch
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from _data import default_dir  # noqa: E402
-
-K = 20
-
-
-def _open3d():
-    try:
-        import open3d as o3d
-    except Exception as exc:  # ImportError, or a missing system library behind it
-        print(f"open3d is not available ({type(exc).__name__}: {exc}); its columns are skipped")
-        return None
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    return o3d
+import _pcl  # noqa: E402
+from _data import benchmark_objects, default_dir, densify, write_objects  # noqa: E402
+from _sidebyside import (Worker, WorkerError, cpu_model, describe_levels, load_average, parse_levels,  # noqa: E402
+                         run_rounds)
+from _worker import K_NORMALS as K  # noqa: E402
 
 
 def _load(path):
@@ -121,13 +81,7 @@ def modelnet_sets(path, n_clouds, rng):
     n_obj = len(off) - 1
     pick = np.linspace(0, n_obj - 1, n_clouds).astype(int)
     small = [np.ascontiguousarray(pts[off[i]:off[i + 1]], dtype=np.float64) for i in pick]
-    big = []
-    for c in small:
-        _, nb = cKDTree(c).query(c, 7)
-        a = rng.integers(0, len(c), size=10_000 - len(c))
-        b = nb[a, rng.integers(1, 7, size=len(a))]
-        t = rng.random((len(a), 1))
-        big.append(np.ascontiguousarray(np.vstack([c, c[a] + t * (c[b] - c[a])])))
+    big = [densify(c, 10_000, rng) for c in small]
     return [("modelnet10", small), ("modelnet10", big)]
 
 
@@ -148,55 +102,84 @@ def dales_sets(path, n_clouds, rng):
     return out
 
 
-def _cpu_pass(fn, clouds):
-    t = time.process_time()
-    for c in clouds:
-        fn(c)
-    return time.process_time() - t
-
-
-def compare(datasets, repeats, o3d):
-    print(f"ms of CPU per cloud, one thread, n_neighbors={K}, best of {repeats} passes")
-    cols = f"{'data':<11} {'points':>6} {'clouds':>6} {'eppf':>8}"
-    if o3d is not None:
-        cols += f" {'open3d':>8} {'ratio':>6} {'p99 angle':>10}"
-    print(cols)
-    print("-" * len(cols))
-    for name, clouds in datasets:
-        ours = lambda c: estimate_normals(c, K, n_jobs=1)  # noqa: E731
-        best = {"eppf": np.inf, "open3d": np.inf}
-        if o3d is not None:
-            param = o3d.geometry.KDTreeSearchParamKNN(K)
-            pcs = [o3d.geometry.PointCloud(o3d.utility.Vector3dVector(c)) for c in clouds]
-            for pc in pcs:  # warm-up
-                pc.estimate_normals(param)
-        _cpu_pass(ours, clouds)  # warm-up
-        for _ in range(repeats):
-            best["eppf"] = min(best["eppf"], _cpu_pass(ours, clouds))
-            if o3d is not None:
-                total = 0.0
-                for pc in pcs:
-                    pc.normals = o3d.utility.Vector3dVector()
-                    t = time.process_time()
-                    pc.estimate_normals(param)
-                    total += time.process_time() - t
-                best["open3d"] = min(best["open3d"], total)
-        ms = {key: 1e3 * v / len(clouds) for key, v in best.items()}
-        line = f"{name:<11} {len(clouds[0]):>6} {len(clouds):>6} {ms['eppf']:>8.3f}"
-        if o3d is not None:
-            cos = np.concatenate([np.abs(np.sum(ours(c) * np.asarray(pc.normals), axis=1)) for c, pc in zip(clouds, pcs)])
-            sines = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
-            angle = np.degrees(np.arcsin(np.clip(np.percentile(sines, 99), 0.0, 1.0)))
-            line += f" {ms['open3d']:>8.3f} {ms['open3d'] / ms['eppf']:>6.2f} {angle:>9.1e}°"
+def compare(datasets, repeats, levels=("native",), pcl=True, open3d=True):
+    """Time eppf (one worker per level), Open3D and PCL on each data set, rounds alternating; print the table."""
+    with tempfile.TemporaryDirectory(prefix="eppf-bench-") as tmp:
+        files = []
+        for i, (name, clouds) in enumerate(datasets):
+            files.append(os.path.join(tmp, f"set{i}.bin"))
+            write_objects(files[-1], clouds)
+        workers, jobs, cols = [], [], []
+        try:
+            seen = set()
+            for lv in levels:
+                w = Worker(lv)
+                workers.append(w)
+                got = describe_levels(w.ask(op="info")["levels"])
+                if got in seen:
+                    print(f"{lv}: the kernels run as at an earlier level ({got}): left out")
+                    continue
+                seen.add(got)
+                cols.append((f"eppf {lv}", lv, w))
+                print(f"eppf {lv}: {got}", flush=True)
+                jobs += [((lv, i), f"eppf {lv} set {i}", w.timer("normals", f)) for i, f in enumerate(files)]
+            o3d = None
+            if open3d:
+                o3d = Worker("native", pin=True)
+                workers.append(o3d)
+                try:
+                    o3d.ask(op="time", task="open3d_normals", file=files[0])
+                    jobs += [(("open3d", i), f"open3d set {i}", o3d.timer("open3d_normals", f))
+                             for i, f in enumerate(files)]
+                except WorkerError as exc:
+                    print(f"open3d is not available ({exc}); its columns are skipped")
+                    o3d = None
+            exe = _pcl.harness() if pcl else None
+            if exe is not None:
+                jobs += [(("pcl", i), f"pcl set {i}", (lambda f=f: _pcl.time_pcl(exe, f, "normals", k=K) / 1e3))
+                         for i, f in enumerate(files)]
+            t = run_rounds(jobs, repeats)
+            angles = _angles(cols[0][2], o3d, files, tmp) if o3d is not None and cols else {}
+        finally:
+            for w in workers:
+                w.close()
+    print(f"\nms of CPU per cloud, one thread, n_neighbors={K}, best of {repeats} rounds; CPU: {cpu_model()}; "
+          f"load average {load_average():.1f}")
+    head = f"{'data':<11} {'points':>6} {'clouds':>6}" + "".join(f" {c[0]:>13}" for c in cols)
+    others = [("open3d", "open3d") for _ in [0] if o3d is not None] + [("pcl", "pcl") for _ in [0] if exe is not None]
+    head += "".join(f" {n:>8} {n + '/' + cols[0][0].split()[1][:6]:>13}" for n, _ in others)
+    head += f" {'p99 angle':>10}" if angles else ""
+    print(head)
+    print("-" * len(head))
+    for i, (name, clouds) in enumerate(datasets):
+        ms = {c[1]: t.ms((c[1], i)) for c in cols}
+        line = f"{name:<11} {len(clouds[0]):>6} {len(clouds):>6}" + "".join(f" {_f(ms[c[1]]):>13}" for c in cols)
+        for who, _ in others:
+            v = t.ms((who, i))
+            first = ms[cols[0][1]]
+            line += f" {_f(v):>8} {_f(v / first if v and first else None, 2):>13}"
+        if angles:
+            line += f" {angles[i]:>9.1e}°"
         print(line, flush=True)
-    if o3d is not None and datasets:
-        # One thread for Open3D: its wall time matches its CPU time.
-        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(datasets[-1][1][0]))
-        w, c = time.perf_counter(), time.process_time()
-        for _ in range(5):
-            pc.normals = o3d.utility.Vector3dVector()
-            pc.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(K))
-        print(f"open3d cpu/wall: {(time.process_time() - c) / (time.perf_counter() - w):.2f} (above 1: more than one thread)")
+    for key, msg in t.errors.items():
+        print(f"not measured: {key}: {msg}")
+
+
+def _f(v, digits=3):
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def _angles(ours, o3d, files, tmp):
+    """99th percentile of the angle between eppf's and Open3D's normals, up to sign, per file."""
+    out = {}
+    for i, f in enumerate(files):
+        a, b = os.path.join(tmp, f"a{i}.npy"), os.path.join(tmp, f"b{i}.npy")
+        ours.ask(op="rows", task="normals", file=f, out=a)
+        o3d.ask(op="rows", task="open3d_normals", file=f, out=b)
+        cos = np.abs(np.sum(np.load(a) * np.load(b), axis=1))
+        sines = np.sqrt(np.maximum(0.0, 1.0 - cos * cos))
+        out[i] = float(np.degrees(np.arcsin(np.clip(np.percentile(sines, 99), 0.0, 1.0))))
+    return out
 
 
 # ---------------------------------------------------------------- --table
@@ -213,8 +196,8 @@ def surface(rng, n):
 def reference(points, k):
     _, idx = cKDTree(points).query(points, k)
     nb = points[idx]
-    centred = nb - nb.mean(axis=1, keepdims=True)
-    return np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
+    centered = nb - nb.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(np.einsum("nki,nkj->nij", centered, centered))[1][:, :, 0]
 
 
 def best_of(fn, repeats, clock=time.perf_counter):
@@ -278,9 +261,18 @@ def main():
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--table", action="store_true", help="the older eppf-only table over k and threads")
     parser.add_argument("--quick", action="store_true", help="with --table: fewer objects and repeats")
+    parser.add_argument("--levels", default="native",
+                        help="comma-separated EPPF_SIMD levels for eppf, each in a process of its own: native, "
+                             "avx512, avx2, scalar or all (default: native)")
+    parser.add_argument("--no-pcl", action="store_true", help="leave PCL out (otherwise timed where its harness builds)")
+    parser.add_argument("--no-open3d", action="store_true", help="leave Open3D out")
     args = parser.parse_args()
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"machine: {platform.machine()}, {os.cpu_count()} logical CPUs, load average {load:.2f}")
+    try:
+        levels = parse_levels(args.levels)
+    except ValueError as exc:
+        parser.error(str(exc))
+    print(f"machine: {platform.machine()}, {cpu_model()}, {os.cpu_count()} logical CPUs, "
+          f"load average {load_average():.2f}")
     if args.table:
         table(2 if args.quick else args.repeats, args.quick)
         return
@@ -293,9 +285,10 @@ def main():
             continue
         datasets += loader(path, args.clouds, rng)
     if not datasets:
-        print("no data set found: nothing to compare (--table times synthetic clouds)")
-        return
-    compare(datasets, args.repeats, _open3d())
+        small, big, source = benchmark_objects(None, args.clouds, args.clouds)
+        print(f"no data set found: timing {source} instead")
+        datasets = [("shapes", small), ("shapes", big)]
+    compare(datasets, args.repeats, levels, pcl=not args.no_pcl, open3d=not args.no_open3d)
 
 
 if __name__ == "__main__":

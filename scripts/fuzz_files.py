@@ -8,17 +8,25 @@ Usage::
 
 Valid files of every format are written first (PCD ``ascii``, ``binary`` and
 ``binary_compressed``; PLY ASCII and binary, cloud and mesh; OFF; OBJ; STL
-ASCII and binary; XYZ, PTS; NPY; NPZ), then mutated with a fixed seed: bit
-flips, truncations, a number of the header set to 0, -1, a huge value,
-1e308 or NaN, a duplicated or removed line, and runs of random bytes
-(overwritten or inserted). Each mutant is read with
-:func:`eppf.io.read_point_cloud` (and :func:`eppf.io.read_mesh` for mesh
-formats) in a forked child limited to 4 GiB of address space
+ASCII and binary; XYZ, PTS; NPY; NPZ; and, when laspy and pye57 are
+installed, LAS with extra bytes, LAZ 1.2 (point-wise chunks) and 1.4 (layered
+chunks), and E57 with two scans), then mutated
+with a fixed seed: bit flips, truncations, a number of the header set to 0,
+-1, a huge value, 1e308 or NaN, a duplicated or removed line, runs of random
+bytes (overwritten or inserted), and a binary header field (1, 2, 4 or 8
+bytes in the first 400, where LAS, LAZ and E57 keep their counts, offsets,
+VLR lengths and extra-bytes descriptors) set to 0, all ones, a power of two or
+random bytes. An E57 mutant gets its pages' CRC-32C checksums recomputed half
+of the time, so that libE57Format parses the hostile content instead of
+refusing a bad checksum. Each mutant is read with
+:func:`eppf.io.read_point_cloud` and :func:`eppf.io.read_point_fields` (and
+:func:`eppf.io.read_mesh` for mesh formats) in a forked child limited to 4 GiB of address space
 (``RLIMIT_AS``) and a per-file timeout. Outcomes:
 
 - ``ok``: the file was read;
 - ``documented``: a ``FileFormatError`` or an ``OSError`` whose message names
-  the file;
+  the file (or, for an optional package that is missing, an ``ImportError``
+  naming it);
 - ``FAIL``: the child died of a signal, hung past the timeout, raised another
   exception type, raised an error that does not name the file, or its peak
   resident memory (``getrusage``) grew by more than 300 MB.
@@ -140,7 +148,71 @@ def seed_files(folder, rng):
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
         zf.writestr("points.npy", buf.getvalue())
     paths["deflated.npz"] = path
+    paths.update(_optional_seeds(folder, xyz, rng))
     return paths
+
+
+def _optional_seeds(folder, xyz, rng):
+    """LAS, LAZ and E57 seed files, when laspy and pye57 are installed."""
+    paths = {}
+    try:
+        import laspy
+    except ImportError:
+        laspy = None
+    if laspy is not None:
+        n = xyz.shape[0]
+        for name, fmt, version in (("extra.las", 3, "1.2"), ("tile.laz", 6, "1.4"), ("pointwise.laz", 1, "1.2")):
+            header = laspy.LasHeader(point_format=fmt, version=version)
+            header.offsets, header.scales = np.array([5e5, 4e6, 0.0]), np.array([0.01, 0.01, 0.01])
+            if name.endswith(".las"):
+                header.add_extra_dims([laspy.ExtraBytesParams("reflectance", "f4"),
+                                       laspy.ExtraBytesParams("normal", "3f8")])
+            las = laspy.LasData(header)
+            las.x, las.y, las.z = xyz[:, 0] + 5e5, xyz[:, 1] + 4e6, xyz[:, 2]
+            las.classification = rng.randint(0, 20, size=n)
+            las.intensity = rng.randint(0, 1000, size=n)
+            if name.endswith(".las"):
+                las.reflectance = rng.normal(size=n).astype("f4")
+                las.normal = rng.normal(size=(n, 3))
+            path = os.path.join(folder, name)
+            # the single-threaded backend: lazrs's parallel one would start a thread pool that the forks lack
+            las.write(path, laz_backend=laspy.LazBackend.Lazrs if name.endswith(".laz") else None)
+            paths[name] = path
+    try:
+        import pye57
+    except ImportError:
+        return paths
+    path = os.path.join(folder, "scans.e57")
+    with pye57.E57(path, mode="w") as e57:
+        for k in range(2):
+            e57.write_scan_raw({"cartesianX": xyz[:, 0], "cartesianY": xyz[:, 1], "cartesianZ": xyz[:, 2] + k,
+                                "intensity": np.linspace(0, 1, len(xyz))}, translation=np.array([k, 0.0, 0.0]))
+    paths["scans.e57"] = path
+    return paths
+
+
+def _crc32c_table():
+    table = []
+    for i in range(256):
+        c = i
+        for _ in range(8):
+            c = (c >> 1) ^ 0x82F63B78 if c & 1 else c >> 1
+        table.append(c)
+    return table
+
+
+_CRC32C = _crc32c_table()
+
+
+def e57_fix_checksums(data):
+    """Recompute the big-endian CRC-32C at the end of every 1,024-byte E57 page."""
+    b = bytearray(data)
+    for start in range(0, len(b) - 1023, 1024):
+        c = 0xFFFFFFFF
+        for x in b[start:start + 1020]:
+            c = _CRC32C[(c ^ x) & 0xFF] ^ (c >> 8)
+        b[start + 1020:start + 1024] = struct.pack(">I", c ^ 0xFFFFFFFF)
+    return bytes(b)
 
 
 # --------------------------------------------------------------------------- mutations
@@ -156,10 +228,16 @@ def _header_end(data):
 
 def mutate(data, rng):
     """One random mutation of ``data``: (kind, mutated bytes)."""
-    kind = ["flip", "truncate", "number", "number", "dup_line", "drop_line", "random_run", "insert", "flip_many"][
-        rng.randint(9)]
+    kind = ["flip", "truncate", "number", "number", "dup_line", "drop_line", "random_run", "insert", "flip_many",
+            "binary_field"][rng.randint(10)]
     b = bytearray(data)
-    if kind in ("flip", "flip_many"):
+    if kind == "binary_field":
+        width = [1, 2, 4, 8][rng.randint(4)]
+        k = rng.randint(max(1, min(len(b), 400) - width + 1))
+        value = [b"\0" * width, b"\xff" * width, (1 << (8 * width - 1)).to_bytes(width, "little"),
+                 rng.randint(0, 256, size=width, dtype=np.uint8).tobytes()][rng.randint(4)]
+        b[k:k + width] = value[:max(0, len(b) - k)]
+    elif kind in ("flip", "flip_many"):
         for _ in range(1 if kind == "flip" else rng.randint(2, 30)):
             k = rng.randint(len(b))
             b[k] ^= 1 << rng.randint(8)
@@ -198,15 +276,17 @@ def _child(path, write_fd):
     outcome = {"cls": "ok", "why": ""}
     try:
         resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE, ADDRESS_SPACE))
-        from eppf.io import FileFormatError, read_mesh, read_point_cloud, supported_extensions
+        import eppf.io
+        from eppf.io import FileFormatError, read_mesh, read_point_fields, supported_extensions
 
         base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-        readers = [read_point_cloud] + ([read_mesh] if os.path.splitext(path)[1].lower()
-                                        in supported_extensions("mesh") else [])
+        ext = os.path.splitext(path)[1].lower()
+        readers = [eppf.io.read_point_cloud] + ([read_mesh] if ext in supported_extensions("mesh") else []) + \
+            ([read_point_fields] if ext in supported_extensions("cloud") else [])
         for reader in readers:
             try:
                 reader(path)
-            except (FileFormatError, OSError) as exc:
+            except (FileFormatError, OSError, ImportError) as exc:
                 if os.path.basename(path) not in str(exc):
                     outcome = {"cls": "FAIL", "why": f"{reader.__name__}: error does not name the file: {exc}"}
                     break
@@ -287,6 +367,8 @@ def main(argv=None):
         for k in range(n_files):
             name = names[k % len(names)]
             kind, data = mutate(originals[name], rng)
+            if name.endswith(".e57") and rng.randint(2):
+                kind, data = kind + "+crc", e57_fix_checksums(data)
             stem, ext = os.path.splitext(name)
             path = os.path.join(tmp, f"fuzz{k:05d}_{stem}{ext}")
             with open(path, "wb") as fh:

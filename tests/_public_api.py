@@ -2,7 +2,8 @@
 
 import importlib
 
-PUBLIC_MODULES = ("eppf", "eppf.utils", "eppf.io", "eppf.preprocessing", "eppf.descriptors", "eppf.neighbors",
+PUBLIC_MODULES = ("eppf", "eppf.utils", "eppf.io", "eppf.preprocessing", "eppf.segmentation",
+                  "eppf.descriptors", "eppf.neighbors",
                   "eppf.classifiers", "eppf.nn", "eppf.datasets", "eppf.metrics", "eppf.plotting", "eppf.experiments",
                   "eppf.registry")
 

@@ -1,7 +1,8 @@
 """The layout's rules, checked on the source: data flows one way, modules form no cycle, and none takes another's private names.
 
 - the subpackages are layered (``utils`` at the bottom, then ``io`` and
-  ``preprocessing``, ``descriptors`` and ``nn``, ..., ``cli`` at the top):
+  ``preprocessing``, ``segmentation``, ``descriptors`` and ``nn``, ...,
+  ``cli`` at the top):
   the contract is declared in ``pyproject.toml`` (``[tool.importlinter]``)
   and checked by import-linter on grimp's import graph;
 - no two eppf modules import each other, directly or through others, at

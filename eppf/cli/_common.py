@@ -163,6 +163,11 @@ def progress_of(args):
     return not getattr(args, "no_progress", False)
 
 
+def count(n, word, plural=None):
+    """``"1 point"``, ``"2 points"``: ``n`` and ``word``, plural (``word + "s"`` unless given) unless 1."""
+    return f"{n} {word if n == 1 else (plural or word + 's')}"
+
+
 def warn(cmd, text):
     print(f"{cmd}: warning: {text}", file=sys.stderr)
 
@@ -220,7 +225,7 @@ def emit(rows, header, output, out):
             writer.writerow(header)
             for row in rows:
                 writer.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in row])
-        print(f"eppf: {len(rows)} rows -> {output}", file=out)
+        print(f"eppf: {count(len(rows), 'row')} -> {output}", file=out)
         return
     cells = [[f"{v:.4f}" if isinstance(v, float) else str(v) for v in row] for row in rows]
     widths = [max([len(h)] + [len(c[i]) for c in cells]) for i, h in enumerate(header)]
@@ -255,14 +260,32 @@ def file_seeds(random_state, root, files):
     return loader_seeds(random_state, root, files)
 
 
+#: The index CSV that ``eppf segment`` writes beside the object files, and the start of its header.
+SEGMENT_INDEX = "segments.csv"
+SEGMENT_INDEX_HEADER = "segment,file,n_points,x,y,z"
+
+
+def is_segment_index(path):
+    """True for the index of ``eppf segment`` (a CSV, which is also a point file extension): a folder of
+    segments is read without it."""
+    if os.path.basename(path) != SEGMENT_INDEX:
+        return False
+    try:
+        with open(path, newline="") as fh:
+            return fh.readline().startswith(SEGMENT_INDEX_HEADER)
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
 def find_files(item):
-    """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder."""
+    """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder. A folder's
+    ``eppf segment`` index is left out."""
     from ..datasets._folder import object_files
     from ..io import supported_extensions
 
     path = Path(item)
     if path.is_dir():
-        found = object_files(path)
+        found = [f for f in object_files(path) if not is_segment_index(f)]
         if not found:
             raise ValueError(f"no point cloud or mesh files ({' '.join(supported_extensions())}, any case) in the "
                              f"folder {item}")
@@ -318,6 +341,36 @@ def _is_npz_data_set(path):
         raise ValueError(f"cannot read {path} as .npz: {type(exc).__name__}: {exc}") from None
 
 
+#: Fewest points every descriptor needs (some need more: :func:`fewest_points`).
+MIN_POINTS = 2
+
+
+def fewest_points(*estimators):
+    """Fewest points per cloud that every one of ``estimators`` (descriptors, pipelines, their nested
+    steps) accepts: below it they raise."""
+    need = MIN_POINTS
+    for est in estimators:
+        if est is None:
+            continue
+        nested = est.get_params(deep=True).values() if hasattr(est, "get_params") else ()
+        for part in (est, *nested):
+            need = max(need, int(getattr(part, "_min_points", MIN_POINTS)))
+    return need
+
+
+def too_few_points(n, min_points, name=None):
+    """The message of a cloud (``name``, when given) of ``n`` points, fewer than the ``min_points`` a
+    descriptor needs."""
+    text = f"{count(n, 'point')}, too few to describe (at least {min_points} are needed)"
+    return text if name is None else f"{name}: {text}"
+
+
+def check_enough_points(n, min_points, name):
+    """A ValueError naming ``name`` when a cloud of ``n`` points has fewer than ``min_points``."""
+    if n < min_points:
+        raise ValueError(too_few_points(n, min_points, name))
+
+
 @dataclass
 class InputPlan:
     """The files of the command line's inputs, before any is read.
@@ -334,15 +387,19 @@ class InputPlan:
     labelled: bool = None
     name: str = ""
     cmd: str = "eppf"
+    min_points: int = MIN_POINTS
 
     def read(self, k):
-        """The cloud of entry ``k`` as float64; ValueError/OSError/KeyError when it cannot be read."""
+        """The cloud of entry ``k`` as float64; ValueError/OSError/KeyError when it cannot be read, or has
+        fewer than ``min_points`` points (a file the descriptor would refuse is skipped like an unreadable
+        one, by name, instead of stopping the command)."""
         from ..io import read_point_cloud
 
         f = self.entries[k][0]
         s = self.sampling
         cloud = read_point_cloud(f, normals=s.get("normals", "auto"), n_points=s.get("n_points"),
                                  resolution=s.get("resolution"), random_state=self.seeds[k])
+        check_enough_points(len(cloud), self.min_points, f)
         return np.asarray(cloud, dtype=np.float64)
 
     def error(self, k, exc, on_error):
@@ -389,7 +446,7 @@ def is_data_set_input(inputs):
         and _is_npz_data_set(inputs[0])
 
 
-def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None):
+def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None, min_points=MIN_POINTS):
     """The :class:`InputPlan` of files and folders (see :func:`read_inputs`); nothing is read yet."""
     inputs = [str(i) for i in inputs]
     if labelled and (len(inputs) != 1 or not os.path.isdir(inputs[0])):
@@ -413,10 +470,12 @@ def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None):
         if with_class and (labelled or len(with_class) == len(entries)):
             loose = sum(1 for f, _, _ in entries if os.path.dirname(os.path.relpath(f, root)) == "")
             if loose:
-                warn(cmd, f"{loose} files directly in {root} (outside the class subfolders) are left out")
+                warn(cmd, f"{count(loose, 'file')} directly in {root} (outside the class subfolders) "
+                          f"{'is' if loose == 1 else 'are'} left out")
             dropped = len(entries) - len(with_class) - loose
             if dropped:
-                warn(cmd, f"{dropped} files of {root} are outside its train/test folders and are left out")
+                warn(cmd, f"{count(dropped, 'file')} of {root} {'is' if dropped == 1 else 'are'} outside its "
+                          "train/test folders and left out")
             entries = with_class
             class_names = np.asarray(sorted({e[2][0] for e in entries}), dtype=str)
     # A model trained on a folder keeps that folder as its seed root: a file under it gets its training seed
@@ -437,10 +496,11 @@ def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None):
     for key, (idx, paths) in by_root.items():
         for k, seed in zip(idx, file_seeds(sampling["random_state"], key, paths)):
             seeds[k] = seed
-    return InputPlan(entries, seeds, sampling, class_names, labelled, " ".join(inputs), cmd)
+    return InputPlan(entries, seeds, sampling, class_names, labelled, " ".join(inputs), cmd, min_points)
 
 
-def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf", labelled=None):
+def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf", labelled=None,
+                min_points=MIN_POINTS):
     """Read files, folders or one ``.npz`` data set the one way (see the module docstring).
 
     Parameters
@@ -459,11 +519,14 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
     labeled : bool or None
         True: the inputs must give labels (one folder of class subfolders or
         a data set); None: labels when the input has them; False: none.
+    min_points : int
+        A cloud with fewer points (:func:`fewest_points` of the descriptor)
+        is skipped, or stops the command, like a file that cannot be read.
     """
     inputs = [str(i) for i in inputs]
     if is_data_set_input(inputs):
-        return _read_npz_data_set(inputs[0])
-    plan = plan_inputs(inputs, sampling, cmd=cmd, labelled=labelled)
+        return _drop_tiny(_read_npz_data_set(inputs[0]), min_points, on_error, cmd)
+    plan = plan_inputs(inputs, sampling, cmd=cmd, labelled=labelled, min_points=min_points)
     clouds, kept, skipped = [], [], []
     for k in progress_bar(range(len(plan.entries)), desc="reading", enabled=progress):
         try:
@@ -477,8 +540,32 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
     return plan.objects(kept, clouds, skipped)
 
 
-def load_labelled(args, sampling, cmd):
-    """Objects of ``--data`` or ``--built-in``, with labels."""
+def _drop_tiny(objects, min_points, on_error, cmd):
+    """The objects of a data set without its clouds of fewer than ``min_points`` points (or the error of the
+    first, with ``on_error="raise"``), as :func:`read_inputs` treats files."""
+    from ..streaming import nothing_read, skipped_summary
+
+    small = [k for k, c in enumerate(objects.clouds) if len(c) < min_points]
+    if not small:
+        return objects
+    names = [f"{objects.name} object {objects.ids[k]}" for k in small]
+    skipped = [(name, too_few_points(len(objects.clouds[k]), min_points, name)) for k, name in zip(small, names)]
+    if on_error == "raise":
+        raise ValueError(f"{skipped[0][1]} (--on-error skip leaves it out)")
+    n = len(objects.clouds)
+    if len(small) == n:
+        raise nothing_read(skipped, n)
+    warn(cmd, skipped_summary(skipped, n))
+    keep = np.ones(n, dtype=bool)
+    keep[small] = False
+    kept = objects.subset(keep)
+    kept.skipped = skipped
+    return kept
+
+
+def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
+    """Objects of ``--data`` or ``--built-in``, with labels; clouds of fewer than ``min_points`` points are
+    skipped as unreadable files are."""
     if getattr(args, "built_in", False):
         from ..datasets import make_shapes
 
@@ -497,7 +584,7 @@ def load_labelled(args, sampling, cmd):
     if os.path.isdir(data) and not sampling.get("root"):
         sampling = dict(sampling, root=os.path.realpath(data))
     objects = read_inputs([data], sampling, on_error=getattr(args, "on_error", "skip"),
-                          progress=progress_of(args), cmd=cmd, labelled=True)
+                          progress=progress_of(args), cmd=cmd, labelled=True, min_points=min_points)
     objects.name = data
     objects.sampling = sampling
     return objects
@@ -508,7 +595,7 @@ def check_classes(objects, cmd, need_two_per_class=False):
     counts = np.bincount(objects.labels, minlength=len(objects.class_names))
     present = np.flatnonzero(counts)
     if len(present) < 2:
-        only = objects.class_names[present[0]] if len(present) else "none"
+        only = str(objects.class_names[present[0]]) if len(present) else "none"
         raise ValueError(f"{objects.name} has one class ({only!r}); a classifier needs at least two classes")
     if need_two_per_class:
         small = [str(objects.class_names[k]) for k in present if counts[k] < 2]
@@ -528,16 +615,18 @@ def min_points_needed(est):
 
 def warn_tiny(clouds, ids, est, cmd, name, shapes=None):
     """Warn, naming the files, about clouds with fewer points than the descriptor needs (``shapes``, the
-    clouds' shapes, instead of ``clouds``)."""
+    clouds' shapes, instead of ``clouds``); returns ``{id: why}`` of those objects, for tables that mark
+    their rows."""
     need, why = min_points_needed(est)
     shapes = [np.shape(c) for c in clouds] if shapes is None else shapes
     tiny = [(str(i), int(n)) for (n, width), i in zip(shapes, ids) if n < need and not (width >= 6 and n >= 3)]
     if tiny:
-        listed = ", ".join(f"{i} ({n} points)" for i, n in tiny[:5]) + (f" and {len(tiny) - 5} more"
-                                                                         if len(tiny) > 5 else "")
-        warn(cmd, f"{len(tiny)} objects have too few points for {name}: {why}; their results are unreliable: "
-                  f"{listed}")
-    return [i for i, _ in tiny]
+        listed = ", ".join(f"{i} ({count(n, 'point')})" for i, n in tiny[:5]) + (f" and {len(tiny) - 5} more"
+                                                                                if len(tiny) > 5 else "")
+        one = len(tiny) == 1
+        warn(cmd, f"{count(len(tiny), 'object')} {'has' if one else 'have'} too few points for {name}: {why}; "
+                  f"{'its result is' if one else 'their results are'} unreliable: {listed}")
+    return {i: f"{count(n, 'point')}; {why}" for i, n in tiny}
 
 
 # ---------------------------------------------------------------------------
@@ -604,22 +693,47 @@ def model_sampling(saved, cmd):
     return dict(sampling)
 
 
-def set_runtime(model, n_jobs, progress):
-    """Set threads and progress of a loaded pipeline where it has those parameters."""
-    names = model.get_params()
-    updates = {}
-    if "descriptor__verbose" in names:
-        updates["descriptor__verbose"] = 1 if progress else 0
-    if n_jobs is not None:
-        from .. import EPPF4DClassifier, PointNetClassifier
+def _estimators(est, seen=None):
+    """``est`` and every estimator inside it: its parameters (steps, transformer lists) and its fitted
+    attributes (``transformers_``, the fitted copies that a loaded model computes with)."""
+    from sklearn.base import BaseEstimator
 
-        for key in names:
-            owner_name = key.rsplit("__", 1)[0]
-            if key.endswith("__n_jobs") and owner_name in names:
-                torch_owned = isinstance(names[owner_name], (EPPF4DClassifier, PointNetClassifier))
-                updates[key] = (None if n_jobs < 0 else n_jobs) if torch_owned else n_jobs
-    if updates:
-        model.set_params(**updates)
+    seen = set() if seen is None else seen
+    if id(est) in seen:
+        return
+    seen.add(id(est))
+    yield est
+    values = list(est.get_params(deep=False).values())
+    values += [v for k, v in vars(est).items() if k.endswith("_") and not k.startswith("_")]
+    for value in values:
+        for item in (value if isinstance(value, (list, tuple)) else [value]):
+            item = item[1] if isinstance(item, tuple) and len(item) >= 2 else item
+            if isinstance(item, BaseEstimator):
+                yield from _estimators(item, seen)
+
+
+def set_runtime(model, n_jobs, progress):
+    """Set threads and progress of a loaded model wherever it has those parameters.
+
+    Fitted copies inside the model (a descriptor pool's per-draw descriptors, a union's fitted blocks) are
+    set too: they, not the parameters, compute its predictions, and they keep the settings of training.
+    """
+    from sklearn.pipeline import Pipeline
+
+    from .. import EPPF4DClassifier, PointNetClassifier
+
+    for est in _estimators(model):
+        if not type(est).__module__.startswith(__package__.split(".")[0] + ".") or isinstance(est, Pipeline):
+            continue  # eppf's estimators only: a torch network's own verbosity is the classifier's business
+        names = est.get_params(deep=False)
+        updates = {}
+        if "verbose" in names:
+            updates["verbose"] = 1 if progress else 0
+        if "n_jobs" in names and n_jobs is not None:
+            torch_owned = isinstance(est, (EPPF4DClassifier, PointNetClassifier))
+            updates["n_jobs"] = (None if n_jobs < 0 else n_jobs) if torch_owned else n_jobs
+        if updates:
+            est.set_params(**updates)
 
 
 def class_name(saved, label):

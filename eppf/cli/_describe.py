@@ -21,7 +21,7 @@ import numpy as np
 
 from ..streaming import write_descriptors
 from ..utils._atomic import atomic_write
-from ._common import (Command, add_descriptor, add_runtime, add_sampling, check_output, descriptor_from_args,
+from ._common import (Command, add_descriptor, count, fewest_points, add_runtime, add_sampling, check_output, descriptor_from_args,
                       is_data_set_input, plan_inputs, progress_of, read_inputs, register, sampling_from_args,
                       warn_tiny)
 
@@ -65,7 +65,8 @@ def run_describe(args, out=None):
     if is_data_set_input(args.inputs):
         est = descriptor_from_args(args, progress)
         params = _saved_params(est)
-        objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd)
+        objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd,
+                              min_points=fewest_points(est))
         warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
         X = est.fit_transform(objects.clouds)
         meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
@@ -76,8 +77,8 @@ def run_describe(args, out=None):
         est = descriptor_from_args(args, False)
         n, n_features, meta = _stream(args, est, sampling, output, progress, cmd)
     seconds = time.perf_counter() - t0
-    labelled = "" if meta.labels is None else f", {len(meta.class_names)} classes"
-    print(f"eppf: {n} {args.descriptor} descriptors of {n_features} bins{labelled} -> {output} "
+    labelled = "" if meta.labels is None else f", {count(len(meta.class_names), 'class', 'classes')}"
+    print(f"eppf: {count(n, args.descriptor + ' descriptor')} of {n_features} bins{labelled} -> {output} "
           f"({1e3 * seconds / n:.2f} ms per object, {n / seconds:.0f} files per second, {seconds:.1f} s)", file=out)
     return n, n_features
 
@@ -123,7 +124,7 @@ def _save(output, X, meta, args, sampling):
 
 def _stream(args, est, sampling, output, progress, cmd):
     """Files and folders through :func:`eppf.streaming.stream_descriptors`, rows to ``output`` as they come."""
-    plan = plan_inputs(args.inputs, sampling, cmd=cmd)
+    plan = plan_inputs(args.inputs, sampling, cmd=cmd, min_points=fewest_points(est))
     params = _saved_params(est)
     names = [f for f, _, _ in plan.entries]
 

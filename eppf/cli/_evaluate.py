@@ -5,7 +5,7 @@ import sys
 import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_data_source, add_descriptor, add_runtime, add_sampling,
-                      check_output, descriptor_from_args, emit, load_labelled, load_model,
+                      check_output, count, descriptor_from_args, emit, fewest_points, load_labelled, load_model,
                       model_sampling, progress_of, register, sampling_from_args, set_runtime, warn, warn_tiny)
 
 __all__ = ["run_evaluate"]
@@ -59,12 +59,13 @@ def run_evaluate(args, out=None):
     check_output(args.output)
     saved = load_model(args.model, trust=args.trust) if args.model is not None else None
     sampling = model_sampling(saved, cmd) if saved is not None else sampling_from_args(args)
-    objects = load_labelled(args, sampling, cmd)
+    est = None if args.no_retrieval else descriptor_from_args(args)
+    objects = load_labelled(args, sampling, cmd, min_points=fewest_points(est, saved and saved["model"]))
     y = objects.labels
-    print(f"eppf: {objects.name}: {len(y)} objects, {len(objects.class_names)} classes", file=out)
+    print(f"eppf: {objects.name}: {count(len(y), 'object')}, "
+          f"{count(len(objects.class_names), 'class', 'classes')}", file=out)
     report, rows = {}, []
     if not args.no_retrieval:
-        est = descriptor_from_args(args)
         warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
         X = est.fit_transform(objects.clouds)
         metric = DESCRIPTORS[args.descriptor].metric
@@ -84,7 +85,8 @@ def run_evaluate(args, out=None):
         seen = set(saved.get("train_keys") or [])
         n_seen = sum(k in seen for k in scored.keys)
         if n_seen:
-            warn(cmd, f"{n_seen} of the {len(scored.keys)} objects scored were seen in training by {args.model}; "
+            warn(cmd, f"{n_seen} of the {count(len(scored.keys), 'object')} scored {'was' if n_seen == 1 else 'were'} "
+                      f"seen in training by {args.model}; "
                       "its score on them is optimistic (train with a held-out split, or evaluate on other files)")
         model = saved["model"]
         set_runtime(model, None, progress_of(args))

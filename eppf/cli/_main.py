@@ -9,7 +9,8 @@ one subparser per entry. Errors are reported in one line:
   ``TypeError``, ``OSError``): ``eppf <command>: error: ...``, exit status 2
   (the status argparse gives a bad option);
 - a missing optional dependency: the same line with the command that
-  installs it, exit status 2;
+  installs it (or the reader's own line naming the extra, for LAS, LAZ and
+  E57 files), exit status 2;
 - Ctrl-C: ``eppf: interrupted``, exit status 130;
 - the reader of standard output gone (``eppf predict ... | head``): no
   message, exit status 141.
@@ -24,12 +25,13 @@ from ._common import SUBCOMMANDS
 __all__ = ["build_parser", "main"]
 
 #: Subcommand modules, in the order of ``eppf --help``.
-_MODULES = ("_run", "_describe", "_retrieve", "_train", "_predict", "_evaluate", "_bench", "_experiment")
+_MODULES = ("_run", "_describe", "_retrieve", "_train", "_predict", "_segment", "_evaluate", "_bench", "_experiment")
 
 _ORDER = [m[1:] for m in _MODULES]
 
 #: Optional dependency (top-level module) -> the extra that installs it.
-_EXTRAS = {"matplotlib": "plot", "h5py": "io", "plyfile": "io", "dask": "dask", "distributed": "dask"}
+_EXTRAS = {"matplotlib": "plot", "h5py": "io", "plyfile": "io", "dask": "dask", "distributed": "dask",
+           "laspy": "las", "lazrs": "las", "pye57": "e57"}
 
 
 def _load_commands():
@@ -121,6 +123,10 @@ def _main(argv):
         if advice is None:
             raise
         print(f"{prefix}: error: {advice}", file=sys.stderr)
+        return 2
+    except ImportError as exc:
+        # a reader of an optional format (LAS, LAZ, E57) says in one line which extra installs it
+        print(f"{prefix}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         raise

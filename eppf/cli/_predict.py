@@ -1,23 +1,41 @@
-"""``eppf predict``: classify files with a saved model, read the way its training files were."""
+"""``eppf predict``: classify files with a saved model, read the way its training files were; with
+``--segment``, classify every object of a scene (split as ``eppf segment`` splits it)."""
 
+import os
 import sys
 
 import numpy as np
 
-from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_output, class_name, emit,
-                      load_model, model_sampling, progress_of, read_inputs, register, set_runtime, warn_tiny)
+from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_output, class_name, count,
+                      emit, fewest_points, load_model, model_sampling, progress_of, read_inputs, register,
+                      set_runtime, warn, warn_tiny)
+from ._segment import (FIELD_FORMATS, add_segmentation, coordinate, given_segmentation_options, segment_file,
+                       segmentation_settings, stage, summary, write_fields_atomically)
 
 __all__ = ["run_predict"]
+
+
+#: Suffixes of the labeled scene file: the formats that keep every field.
+LABELLED_SUFFIXES = tuple(f".{f}" for f in FIELD_FORMATS)
 
 
 def add_arguments(p):
     p.add_argument("inputs", nargs="+", help="point cloud or mesh files or folders (searched recursively), or "
                                              "one .npz data set; meshes are sampled as the model's training "
-                                             "meshes were")
+                                             "meshes were. With --segment: the file of one scene")
     p.add_argument("--model", required=True, metavar="MODEL", help=MODEL_HELP)
     p.add_argument("--trust", action="store_true", help=TRUST_HELP)
     p.add_argument("-o", "--output", help="write a CSV file instead of printing a table")
     add_on_error(p)
+    scene = p.add_argument_group("scenes", "classify every object of a scan (the options of 'eppf segment')")
+    scene.add_argument("--segment", action="store_true",
+                       help="split the scene into objects first and classify each: one row per segment with "
+                            "segment, n_points, the centroid x, y, z (the file's coordinates) and the class")
+    add_segmentation(scene, prefix="with --segment: ")
+    scene.add_argument("--labelled-output", metavar="OUT", default=None,
+                       help="with --segment: write the scene with every field and two more per point, 'segment' "
+                            "(-1: ground or no segment) and 'class' (the class's number in the model, as "
+                            "printed; -1: none), as .ply, .pcd, .las or .laz")
     add_runtime(p)
 
 
@@ -61,26 +79,120 @@ def run_predict(args, out=None):
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf predict")
     check_output(args.output)
+    if getattr(args, "segment", False):
+        return run_predict_scene(args, out)
+    given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else [])
+    if given:
+        raise ValueError(f"{given[0]} applies to scenes: add --segment")
     saved = load_model(args.model, trust=args.trust)
     model = saved["model"]
     set_runtime(model, args.n_jobs, progress_of(args))
     objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=args.on_error,
-                          progress=progress_of(args), cmd=cmd, labelled=False)
-    if hasattr(model, "named_steps") and "descriptor" in model.named_steps:
-        warn_tiny(objects.clouds, objects.ids, model.named_steps["descriptor"], cmd, "the model's descriptor")
+                          progress=progress_of(args), cmd=cmd, labelled=False, min_points=fewest_points(model))
+    unreliable = warn_unreliable(model, objects.clouds, objects.ids, cmd)
     labels, proba, dist, neighbour = _evidence(model, objects.clouds, saved)
-    header = ["file", "class"]
-    columns = []
+    header, columns = evidence_columns(proba, dist, neighbour)
+    rows = [(str(i), class_name(saved, lab), *[c[k] for c in columns])
+            for k, (i, lab) in enumerate(zip(objects.ids, labels))]
+    header, rows = mark_unreliable(header, rows, [unreliable.get(str(i), "") for i in objects.ids], args.output)
+    emit(rows, header, args.output, out)
+    return np.asarray(labels)
+
+
+def warn_unreliable(model, clouds, ids, cmd):
+    """Warn about the clouds too small for the model's descriptor; ``{id: why}`` of them."""
+    if hasattr(model, "named_steps") and "descriptor" in model.named_steps:
+        return warn_tiny(clouds, ids, model.named_steps["descriptor"], cmd, "the model's descriptor")
+    return {}
+
+
+def evidence_columns(proba, dist, neighbour):
+    """The header and columns of the evidence that :func:`_evidence` found."""
+    header, columns = ["file", "class"], []
     if any(p is not None for p in proba):
         header.append("probability")
         columns.append(proba)
     if any(d is not None for d in dist):
         header += ["distance", "neighbour"]
         columns += [dist, neighbour]
-    rows = [(str(i), class_name(saved, lab), *[c[k] for c in columns])
-            for k, (i, lab) in enumerate(zip(objects.ids, labels))]
+    return header, columns
+
+
+def mark_unreliable(header, rows, why, output):
+    """Rows with an ``unreliable`` column (empty, or why the row's result is unreliable): always in a CSV
+    (one header for scripts), in a printed table only when a row is marked."""
+    if not output and not any(why):
+        return header, rows
+    return header + ["unreliable"], [(*row, w) for row, w in zip(rows, why)]
+
+
+def run_predict_scene(args, out):
+    """``eppf predict --segment``: split one scene into objects and classify each (see :func:`run_predict`)."""
+    from ..utils._sampling import object_rng, resample
+    from ._common import file_seeds, too_few_points
+
+    cmd = getattr(args, "prog", "eppf predict")
+    if len(args.inputs) != 1:
+        raise ValueError(f"--segment classifies the objects of one scene; got {len(args.inputs)} inputs")
+    scene_path = str(args.inputs[0])
+    labelled = check_output(args.labelled_output, LABELLED_SUFFIXES, "--labelled-output")
+    progress = progress_of(args)
+    saved = load_model(args.model, trust=args.trust)
+    model = saved["model"]
+    set_runtime(model, args.n_jobs, progress)
+    sampling = model_sampling(saved, cmd)
+    scene = segment_file(scene_path, segmentation_settings(args), cmd, progress)
+    if scene.n_segments == 0:
+        warn(cmd, f"{scene_path}: no segment found ({summary(scene)}); a smaller --min-points or a larger "
+                  "--tolerance may find some")
+    clouds = [scene.cloud(k) for k in range(scene.n_segments)]
+    if sampling.get("n_points") is not None:  # the model's objects were resampled to n points: so are these
+        seeds = file_seeds(sampling["random_state"], os.path.dirname(scene_path) or ".",
+                           [f"{scene_path}#{k}" for k in range(scene.n_segments)])
+        clouds = [resample(c, sampling["n_points"], random_state=object_rng(s)) for c, s in zip(clouds, seeds)]
+    need = fewest_points(model)
+    small = {k: too_few_points(len(c), need) for k, c in enumerate(clouds) if len(c) < need}
+    if small:
+        listed = "; ".join(f"segment {k}: {w}" for k, w in list(small.items())[:3])
+        warn(cmd, f"{count(len(small), 'segment')} too small to describe, not classified: {listed}")
+    described = [k for k in range(len(clouds)) if k not in small]
+    kept = [clouds[k] for k in described]
+    why = {f"segment {k}": w for k, w in small.items()}
+    why.update(warn_unreliable(model, kept, [f"segment {k}" for k in described], cmd))
+    labels = proba = dist = neighbour = []
+    if kept:
+        stage(cmd, f"classifying {count(len(kept), 'segment')}", progress)
+        labels, proba, dist, neighbour = _evidence(model, kept, saved)
+    header, columns = evidence_columns(proba, dist, neighbour)
+    header = ["segment", "n_points", "x", "y", "z"] + header[1:]
+    position = {k: j for j, k in enumerate(described)}
+    classes = np.full(scene.n_segments, -1, dtype=np.int32)
+    rows = []
+    for k in range(scene.n_segments):
+        centroid = [coordinate(v) for v in scene.centroid(k)]
+        j = position.get(k)
+        if j is None:
+            cells = [""] * (len(header) - 5)
+        else:
+            classes[k] = int(labels[j])
+            cells = [class_name(saved, labels[j]), *[c[j] for c in columns]]
+        rows.append((k, len(scene.indices(k)), *centroid, *cells))
+    header, rows = mark_unreliable(header, rows, [why.get(f"segment {k}", "") for k in range(scene.n_segments)],
+                                   args.output)
     emit(rows, header, args.output, out)
-    return np.asarray(labels)
+    if labelled:
+        fields = dict(scene.fields)
+        clash = [f for f in ("segment", "class") if f in fields]
+        if clash:
+            warn(cmd, f"{scene_path} has a field {clash[0]!r}; --labelled-output replaces it")
+        point_class = np.full(len(scene.points), -1, dtype=np.int32)
+        point_class[scene.order] = classes[scene.labels[scene.order]]
+        fields.update(segment=scene.labels.astype(np.int32), **{"class": point_class})
+        write_fields_atomically(labelled, scene.points, fields)
+        codes = ", ".join(f"{k} {c}" for k, c in enumerate(saved.get("classes") or []))
+        print(f"eppf: {summary(scene)} -> {labelled} (fields 'segment' and 'class'; class numbers: {codes})",
+              file=out)
+    return classes
 
 
 register(Command(

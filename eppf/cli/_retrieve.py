@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..registry import DESCRIPTORS, make_descriptor
-from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_output, emit,
+from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_output, emit, fewest_points,
                       positive_int, progress_of, read_inputs, register, warn_tiny)
 
 __all__ = ["run_retrieve"]
@@ -100,11 +100,12 @@ def run_retrieve(args, out=None):
         sampling = json.loads(str(db["sampling"])) if "sampling" in db else \
             {"n_points": None, "resolution": None, "normals": "auto", "random_state": 0, "seed_rule": SEED_RULE}
         settings = dict(params, n_jobs=args.n_jobs, verbose=1 if progress_of(args) else 0)
-        objects = read_inputs(args.queries, sampling, on_error=args.on_error, progress=progress_of(args), cmd=cmd)
+        est = make_descriptor(descriptor, **settings)
+        objects = read_inputs(args.queries, sampling, on_error=args.on_error, progress=progress_of(args), cmd=cmd,
+                              min_points=fewest_points(est))
         q_ids = objects.ids
         if objects.labels is not None:
             q_labels = objects.class_names[objects.labels]
-        est = make_descriptor(descriptor, **settings)
         warn_tiny(objects.clouds, q_ids, est, cmd, descriptor)
         est.fit(objects.clouds)
         if "scale" in db and np.isfinite(db["scale"]) and getattr(est, "scale_", None) is not None:

@@ -14,7 +14,8 @@ import numpy as np
 from ..registry import CLASSIFIERS, DESCRIPTORS
 from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, Command, add_data_source, add_descriptor,
                       add_runtime, add_sampling, check_classes, check_output, descriptor_from_args, load_labelled,
-                      positive_int, progress_of, register, sampling_from_args, warn_tiny)
+                      count, fewest_points, positive_int, progress_of, register, sampling_from_args, set_runtime,
+                      warn_tiny)
 
 __all__ = ["make_pipeline_from_args", "run_train"]
 
@@ -132,8 +133,8 @@ def _check_saveable(model):
 
 
 def _quiet(model):
-    updates = {k: 0 for k in model.get_params() if k.endswith("__verbose")}
-    model.set_params(**updates)
+    """No progress from the saved model, its fitted copies included (a Python user loading it sees none)."""
+    set_runtime(model, None, False)
 
 
 def _scores_line(scores):
@@ -176,19 +177,20 @@ def run_train(args, out=None):
     model = make_pipeline_from_args(args)
     _check_saveable(model)
     sampling = sampling_from_args(args)
-    objects = load_labelled(args, sampling, cmd)
+    objects = load_labelled(args, sampling, cmd, min_points=fewest_points(model))
     y, class_names, name = objects.labels, objects.class_names, objects.name
     hold_out = not args.all and objects.split is None and args.test_size > 0
     check_classes(objects, cmd, need_two_per_class=hold_out)
     if args.all or (objects.split is None and args.test_size == 0):
         train = np.ones(len(y), dtype=bool)
-        print(f"eppf train: training on all {len(y)} objects (nothing held out, so no held-out score)", file=out)
+        print(f"eppf train: training on all {count(len(y), 'object')} (nothing held out, so no held-out score)",
+              file=out)
     elif objects.split is not None:
         train = objects.split == "train"
         if not train.any():
             raise ValueError(f"{name} has a split but no training objects")
-        print(f"eppf train: training on the {int(train.sum())} objects of the train split, scoring on the "
-              f"{int((~train).sum())} of the test split", file=out)
+        print(f"eppf train: training on the {count(int(train.sum()), 'object')} of the train split, scoring on "
+              f"the {int((~train).sum())} of the test split", file=out)
     else:
         from sklearn.model_selection import train_test_split
 
@@ -210,7 +212,7 @@ def run_train(args, out=None):
     if held.any():
         test_objects = objects.subset(held)
         scores = retrieval_scores(test_objects.labels, model.predict(test_objects.clouds))
-        print(f"eppf train: held-out score on {int(held.sum())} objects: {_scores_line(scores)}", file=out)
+        print(f"eppf train: held-out score on {count(int(held.sum()), 'object')}: {_scores_line(scores)}", file=out)
     params = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
               if k not in ("func", "prog")}
     saved = {"format": MODEL_FORMAT, "model": model, "eppf_version": __version__, "params": params,
@@ -219,7 +221,8 @@ def run_train(args, out=None):
     if scores is not None:
         saved["held_out_scores"] = {k: float(v) for k, v in scores.items() if np.isscalar(v)}
     save_model(saved, args.output)
-    print(f"eppf: trained {args.classifier} on {int(train.sum())} objects of {name} ({len(class_names)} classes) "
+    print(f"eppf: trained {args.classifier} on {count(int(train.sum()), 'object')} of {name} "
+          f"({count(len(class_names), 'class', 'classes')}) "
           f"in {seconds:.1f} s -> {args.output}", file=out)
     return saved
 

@@ -46,7 +46,8 @@ OFF bodies, numeric tables, LZF) are compiled.
 from ._api import read_mesh, read_point_cloud, write_mesh, write_point_cloud
 from ._common import Mesh
 from ._errors import FileFormatError
+from ._fields import read_point_fields, write_point_fields
 from ._formats import format_of, supported_extensions
 
-__all__ = ["FileFormatError", "Mesh", "format_of", "read_mesh", "read_point_cloud", "supported_extensions",
-           "write_mesh", "write_point_cloud"]
+__all__ = ["FileFormatError", "Mesh", "format_of", "read_mesh", "read_point_cloud", "read_point_fields",
+           "supported_extensions", "write_mesh", "write_point_cloud", "write_point_fields"]

@@ -101,11 +101,12 @@ def _check_vertices(mesh, path, owner):
     return mesh
 
 
-def _guard(owner, path, fmt, func, *args, **kwargs):
-    """Run a reader; every failure that is not already a FileFormatError or OSError becomes one."""
+def guard(owner, path, fmt, func, *args, **kwargs):
+    """Run a reader; every failure that is not already a FileFormatError or OSError becomes one (an ImportError
+    naming a missing optional package passes as it is)."""
     try:
         return func(*args, **kwargs)
-    except (FileFormatError, OSError):
+    except (FileFormatError, OSError, ImportError):
         raise
     except MemoryError:
         raise FileFormatError(f"{owner}: {path!r}: reading this {fmt.name} file needs more memory than is free") from None
@@ -232,7 +233,7 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     _check_random_state_arg(random_state, owner)
     path = os.fspath(path)
     fmt = lookup(path, format, owner)
-    cloud, shape = _guard(owner, path, fmt, _read_any, path, fmt, owner, normals, mesh == "sample")
+    cloud, shape = guard(owner, path, fmt, _read_any, path, fmt, owner, normals, mesh == "sample")
     if shape is not None and (mesh == "vertices" or fmt.name == "ply" and shape.faces.shape[0] == 0):
         cloud, shape = (cloud if fmt.name == "ply" else Cloud(shape.vertices, None)), None
     if shape is not None:
@@ -241,7 +242,7 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
             raise FileFormatError(f"{owner}: {path!r} has no faces, so it cannot be sampled; pass mesh='vertices'")
         count = n_points if n_points is not None or resolution is not None else MESH_POINTS
         with np.errstate(over="ignore", invalid="ignore"):
-            out = _guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
+            out = guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
                          resolution=resolution, return_normals=normals is not False,
                          random_state=_rng(random_state, owner))
         if not np.isfinite(out).all():
@@ -251,7 +252,7 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         return out
     out = _finish_cloud(cloud, path, normals, owner, remove_nan)
     if n_points is not None:
-        out = _guard(owner, path, fmt, resample, out, n_points, random_state=_rng(random_state, owner))
+        out = guard(owner, path, fmt, resample, out, n_points, random_state=_rng(random_state, owner))
     return out
 
 
@@ -314,7 +315,7 @@ def read_mesh(path, *, format=None):
     owner = "read_mesh"
     path = os.fspath(path)
     fmt = lookup(path, format, owner, kind="mesh")
-    cloud, shape = _guard(owner, path, fmt, _read_any, path, fmt, owner, "auto", True)
+    cloud, shape = guard(owner, path, fmt, _read_any, path, fmt, owner, "auto", True)
     if shape is None:  # a PLY cloud
         shape = Mesh(np.ascontiguousarray(cloud.xyz), np.empty((0, 3), dtype=np.int64))
     return _check_vertices(shape, path, owner)

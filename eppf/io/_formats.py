@@ -10,7 +10,8 @@ and faces) or ``"both"`` (PLY: a cloud, or a mesh when it has faces).
 A cloud reader is ``reader(path, data, owner, want_normals)`` returning a
 ``Cloud``; a mesh reader ``reader(path, data, owner)`` returning a ``Mesh``;
 PLY's reader returns both. ``raw=True`` readers open the file themselves
-(NumPy formats) and take ``(path, owner, want_normals)``. A cloud writer is
+(NumPy formats) and take ``(path, owner, want_normals)``; so do LAS, LAZ (laspy) and E57 (pye57), whose
+optional packages are imported only when such a file is read or written. A cloud writer is
 ``writer(path, cloud, binary=...)``, a mesh writer
 ``writer(path, vertices, faces, binary=...)``; PLY's writer is both.
 """
@@ -18,7 +19,7 @@ PLY's reader returns both. ``raw=True`` readers open the file themselves
 import os
 from collections import namedtuple
 
-from . import _npy, _obj, _off, _pcd, _ply, _stl, _xyz
+from . import _e57, _las, _npy, _obj, _off, _pcd, _ply, _stl, _xyz
 
 Format = namedtuple("Format", ["name", "extensions", "kind", "reader", "writer", "raw"])
 
@@ -31,6 +32,9 @@ FORMATS = (
     Format("xyzrgb", (".xyzrgb",), "cloud", _xyz.read_xyzrgb, None, False),
     Format("npy", (".npy",), "cloud", _npy.read_npy, _npy.write_npy, True),
     Format("npz", (".npz",), "cloud", _npy.read_npz, _npy.write_npz, True),
+    Format("las", (".las",), "cloud", _las.read_las, _las.write_las_cloud, True),
+    Format("laz", (".laz",), "cloud", _las.read_las, _las.write_laz_cloud, True),
+    Format("e57", (".e57",), "cloud", _e57.read_e57, None, True),
     Format("off", (".off",), "mesh", _off.read_off, _off.write_off, False),
     Format("obj", (".obj",), "mesh", _obj.read_obj, _obj.write_obj, False),
     Format("stl", (".stl",), "mesh", _stl.read_stl, _stl.write_stl, False),
@@ -49,7 +53,7 @@ def supported_extensions(kind=None):
     kind : {None, "cloud", "mesh"}, default=None
         None: every extension :func:`read_point_cloud` reads (point clouds
         and meshes, which it samples). ``"cloud"``: formats that store points
-        (PCD, PLY, the text tables, NPY, NPZ). ``"mesh"``: formats that
+        (PCD, PLY, the text tables, NPY, NPZ, LAS, LAZ, E57). ``"mesh"``: formats that
         store triangles, the ones :func:`read_mesh` reads (OFF, OBJ, STL,
         PLY).
 
@@ -89,7 +93,8 @@ def format_of(path):
     name : str
         One of ``"pcd"``, ``"ply"``, ``"xyz"`` (``.xyz``, ``.txt``,
         ``.csv``), ``"pts"``, ``"xyzn"``, ``"xyzrgb"``, ``"npy"``,
-        ``"npz"``, ``"off"``, ``"obj"``, ``"stl"``.
+        ``"npz"``, ``"las"``, ``"laz"``, ``"e57"``, ``"off"``, ``"obj"``,
+        ``"stl"``.
 
     Raises
     ------

@@ -139,7 +139,13 @@ def _point_count(header, path, owner):
     return wh, wline
 
 
-def read_pcd(path, data, owner, want_normals="auto"):
+def _columns(path, data, owner):
+    """Parse a PCD file: (FIELDS names, their (dtype, COUNT), n_points, DATA kind, columns, offset of the data).
+
+    ``columns`` maps every FIELDS name to its values, shape (n,) or (n, COUNT):
+    typed views of the records for binary data, float64 columns of the
+    parsed table for ASCII data.
+    """
     header, pos, lineno = _parse_header(data, path, owner)
     if "FIELDS" not in header:
         raise FileFormatError(f"{owner}: {path!r}: header has no FIELDS line")
@@ -219,10 +225,10 @@ def read_pcd(path, data, owner, want_normals="auto"):
                 raise FileFormatError(
                     f"{owner}: {path!r} line {idx[0] + 1}: expected {n_cols} values per point, got {arr.shape[1]}"
                 )
-        flat_names = []
+        cols, col = {}, 0
         for name, c in zip(fields, counts):
-            flat_names += [name] * c
-        cols = {name: arr[:, flat_names.index(name)] for name in fields}
+            cols[name] = arr[:, col] if c == 1 else arr[:, col:col + c]
+            col += c
     elif kind == "binary":
         need = n_points * dtype.itemsize
         if len(body) < need:
@@ -254,6 +260,11 @@ def read_pcd(path, data, owner, want_normals="auto"):
             cols[name] = np.frombuffer(raw, dtype=sub, count=n_points, offset=off)
             off += sub.itemsize * n_points
 
+    return fields, [(dtype.fields[name][0].base, c) for name, c in zip(dtype.names, counts)], n_points, kind, cols, pos
+
+
+def read_pcd(path, data, owner, want_normals="auto"):
+    fields, _, n_points, _, cols, _ = _columns(path, data, owner)
     def first(name):
         with np.errstate(invalid="ignore"):  # NaN to float64 is exact; its cast warning is noise
             return np.asarray(cols[name], dtype=np.float64).reshape(n_points, -1)[:, 0]
@@ -282,3 +293,104 @@ def write_pcd(path, cloud, binary=True):
             fh.write(data32.tobytes())
         else:
             np.savetxt(fh, data32, fmt="%.9g")
+
+
+# --------------------------------------------------------------------------- every field
+
+#: PCL packs color into one 4-byte field: ``rgb`` (TYPE F, the float's bits are 0xAARRGGBB) or ``rgba`` (TYPE U).
+PACKED_COLOR = ("rgb", "rgba")
+_CODES = {"f": "F", "i": "I", "u": "U"}
+
+
+def _ascii_field(values, dtype, name, path, owner):
+    """An ASCII column (parsed as float64) in its declared type; packed color as its uint32 bits."""
+    if name in PACKED_COLOR and dtype.itemsize == 4:
+        # PCL writes a float rgb as the unsigned integer of its bits; older files wrote the float itself
+        whole = np.isfinite(values).all() and (values == np.floor(values)).all() and \
+            (values.size == 0 or (values.min() >= 0 and values.max() < 2 ** 32))
+        if whole:
+            return values.astype(np.uint32)
+        return values.astype(np.float32).view(np.uint32)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return values.astype(dtype.newbyteorder("="))
+
+
+def _ascii_wide_ints(data, pos, n_points, n_cols, path, owner):
+    """The tokens of an ASCII body as an (n_points, n_cols) string array, for 8-byte integer fields
+    (which float64 cannot hold exactly above 2**53)."""
+    rows = [line.split("#", 1)[0].split() for line in data[pos:].decode("ascii", "replace").splitlines()]
+    rows = [r for r in rows if r][:n_points]
+    return np.array(rows, dtype=str).reshape(n_points, n_cols)
+
+
+def read_pcd_fields(path, data, owner):
+    """(points, fields) of a PCD file: every FIELDS entry but x y z and ``_`` padding, in the file's types."""
+    fields, types, n_points, kind, cols, pos = _columns(path, data, owner)
+    tokens = None
+    if kind == "ascii" and any(b.kind in "iu" and b.itemsize == 8 for b, _ in types):
+        tokens = _ascii_wide_ints(data, pos, n_points, sum(c for _, c in types), path, owner)
+    out, col = {}, 0
+    for name, (base, width) in zip(fields, types):
+        values = cols[name]
+        if name in ("x", "y", "z", "_"):
+            col += width
+            continue
+        if kind != "ascii":
+            if name in PACKED_COLOR and base.itemsize == 4:  # the color's bits, whatever the declared type
+                values = np.ascontiguousarray(values.view("<u4"), dtype=np.uint32)
+            else:
+                values = np.ascontiguousarray(values, dtype=base.newbyteorder("="))
+        elif tokens is not None and base.kind in "iu" and base.itemsize == 8:
+            text = tokens[:, col] if width == 1 else tokens[:, col:col + width]
+            try:
+                values = text.astype(base.newbyteorder("="))
+            except (ValueError, OverflowError):
+                raise FileFormatError(f"{owner}: {path!r}: field {name!r} holds a value that is not a {base} integer") from None
+        else:
+            values = np.ascontiguousarray(_ascii_field(values, base, name, path, owner))
+        out[name] = values
+        col += width
+    declared = {name: base for name, (base, _) in zip(fields, types)}
+    with np.errstate(invalid="ignore", over="ignore"):  # ASCII coordinates rounded to their declared type
+        points = np.column_stack([np.asarray(cols[f], dtype=declared[f]).reshape(n_points, -1)[:, 0]
+                                  .astype(np.float64) for f in "xyz"])
+    return points, out
+
+
+def write_pcd_fields(path, points, fields):
+    """A binary PCD file: x y z (float32 when that holds them exactly, else float64), then every field."""
+    coord = "f4" if exact_float32(points) else "f8"
+    spec = [("x", "<" + coord), ("y", "<" + coord), ("z", "<" + coord)]
+    head_types = [("F", int(coord[1]), 1)] * 3
+    for name, values in fields.items():
+        base = values.dtype
+        if name in PACKED_COLOR and base == np.uint32:
+            code, size = "F", 4  # PCL's rgb is a float field holding the color's bits
+        else:
+            code, size = _CODES[base.kind], base.itemsize
+        count = 1 if values.ndim == 1 else values.shape[1]
+        spec.append((name, "<" + base.str[1:], (count,)) if count != 1 else (name, "<" + base.str[1:]))
+        head_types.append((code, size, count))
+    n = points.shape[0]
+    rec = np.empty(n, dtype=np.dtype(spec))
+    for k, axis in enumerate("xyz"):
+        rec[axis] = points[:, k]
+    for name, values in fields.items():
+        rec[name] = values.reshape(rec[name].shape)  # (an (n, 1) field is COUNT 1)
+    names = ["x", "y", "z"] + list(fields)
+    head = (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
+        f"FIELDS {' '.join(names)}\nSIZE {' '.join(str(t[1]) for t in head_types)}\n"
+        f"TYPE {' '.join(t[0] for t in head_types)}\nCOUNT {' '.join(str(t[2]) for t in head_types)}\n"
+        f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA binary\n"
+    )
+    with open(path, "wb") as fh:
+        fh.write(head.encode("ascii"))
+        fh.write(rec.tobytes())
+
+
+def exact_float32(points):
+    """True when every coordinate is a float32 value (NaN and infinities included), so float32 stores it exactly."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        narrow = points.astype(np.float32).astype(np.float64)
+    return bool(np.array_equal(narrow, points, equal_nan=True))

@@ -441,3 +441,76 @@ def write_ply(path, cloud, faces=None, binary=True):
             np.savetxt(fh, vert, fmt="%.9g")
             if faces is not None:
                 np.savetxt(fh, np.column_stack([np.full(faces.shape[0], k), faces]), fmt="%d")
+
+
+# --------------------------------------------------------------------------- every field
+
+_PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint",
+              "f4": "float", "f8": "double"}
+
+
+def _typed(values, code, name, path, owner):
+    """One vertex property's values as an array of its declared type: (n,) or (n, k) for a list of one length."""
+    if isinstance(values, np.ndarray):
+        with np.errstate(invalid="ignore", over="ignore"):
+            return np.ascontiguousarray(values, dtype=np.dtype(code))
+    lengths = {len(v) for v in values} if values and not np.isscalar(values[0]) else None
+    if lengths is not None and len(lengths) > 1:
+        raise FileFormatError(f"{owner}: {path!r}: PLY vertex list property {name!r} has rows of different lengths "
+                              f"({min(lengths)} to {max(lengths)}); only lists of one length are read as a field")
+    with np.errstate(invalid="ignore", over="ignore"):
+        return np.ascontiguousarray(np.array(values, dtype=np.float64 if code[0] == "f" else None), dtype=np.dtype(code))
+
+
+def read_ply_fields(path, data, owner):
+    """(points, fields): x y z as float64 and every other ``vertex`` property in its declared type, in file order."""
+    fmt, elements, pos = _header(data, path, owner)
+    if fmt == "ascii":
+        out = _read_ascii(data, pos, elements, path, owner, {"vertex"})
+    else:
+        out = _read_binary(data, pos, elements, _FORMATS[fmt], path, owner, {"vertex"})
+    spec = {name: (count, props) for name, count, props, _ in elements}
+    if "vertex" not in spec:
+        raise FileFormatError(f"{owner}: {path!r}: PLY file has no 'vertex' element")
+    n_v, props = spec["vertex"]
+    by_name = {p.name: p for p in props}
+    missing = [f for f in "xyz" if f not in by_name or by_name[f].count_code is not None]
+    if missing:
+        raise FileFormatError(f"{owner}: {path!r}: PLY 'vertex' element lacks {missing}; it has {list(by_name)}")
+    columns = out["vertex"]
+    points = np.empty((n_v, 3))
+    fields = {}
+    for p in props:
+        values = columns.get(p.name, []) if n_v else np.empty((0,), dtype=p.code)
+        if p.name in ("x", "y", "z"):
+            points[:, "xyz".index(p.name)] = _column(values, p.code) if n_v else 0
+            continue
+        fields[p.name] = _typed(values, p.code, p.name, path, owner)
+    return points, fields
+
+
+def write_ply_fields(path, points, fields, coord):
+    """A binary little-endian PLY: one ``vertex`` element, x y z as ``coord`` (``"f4"`` or ``"f8"``), then every
+    field as a scalar property, or a list property of one length for an (n, k) field."""
+    props = [f"{_PLY_NAMES[coord]} {axis}" for axis in "xyz"]
+    spec = [(axis, "<" + coord) for axis in "xyz"]
+    for name, values in fields.items():
+        code = values.dtype.str[1:]
+        if values.ndim == 1:
+            props.append(f"{_PLY_NAMES[code]} {name}")
+            spec.append((name, "<" + code))
+        else:
+            k = values.shape[1]
+            count_type = "uchar" if k <= 255 else "int"
+            props.append(f"list {count_type} {_PLY_NAMES[code]} {name}")
+            spec += [("_n_" + name, "u1" if k <= 255 else "<i4"), (name, "<" + code, (k,))]
+    rec = np.empty(points.shape[0], dtype=np.dtype(spec))
+    for k, axis in enumerate("xyz"):
+        rec[axis] = points[:, k]
+    for name, values in fields.items():
+        if values.ndim == 2:
+            rec["_n_" + name] = values.shape[1]
+        rec[name] = values
+    with open(path, "wb") as fh:
+        fh.write(_header_text(True, [("vertex", points.shape[0], props)]))
+        fh.write(rec.tobytes())

@@ -136,3 +136,69 @@ def write_xyzn(path, cloud, binary=True):
     if cloud.shape[1] != 6:
         raise ValueError("write_point_cloud: an .xyzn file needs normals: cloud must have shape (n_points, 6)")
     np.savetxt(path, cloud, fmt="%.17g")
+
+
+# --------------------------------------------------------------------------- every field
+
+#: Column names of the fixed text layouts, after x y z (Open3D's: .xyzn normals, .xyzrgb color).
+FIXED_NAMES = {"xyzn": ("nx", "ny", "nz"), "xyzrgb": ("red", "green", "blue")}
+#: Open3D's .pts rows: x y z, then intensity and/or r g b.
+_PTS_NAMES = {4: ("intensity",), 6: ("red", "green", "blue"), 7: ("intensity", "red", "green", "blue")}
+
+
+def _header_names(data, start):
+    """The names of the first content line from byte ``start`` when it is a header of names, else None."""
+    line, pos = next_line(data, start)
+    while line is not None:
+        line = line.split(b"#", 1)[0].strip()
+        if line:
+            break
+        line, pos = next_line(data, pos)
+    if line is None:
+        return None
+    tokens = line.replace(b",", b" ").replace(b";", b" ").split()
+    try:
+        float(tokens[0])
+        return None
+    except ValueError:
+        return [t.decode("utf-8", "replace") for t in tokens]
+
+
+def read_text_fields(path, data, owner, fmt):
+    """(points, fields) of a text table: columns named by its header line (x y z found by name, else the first
+    three), by the layout of .xyzn/.xyzrgb/.pts, else ``column_4``, ``column_5``, ... (counting from 1)."""
+    start = 0
+    if fmt == "pts":
+        first, pos = next_line(data, 0)
+        if first is not None and len(first.split()) == 1:
+            try:
+                int(first.split()[0])
+                start = pos
+            except ValueError:
+                pass
+    if start:
+        read_pts(path, data, owner)  # checks the count line against the rows
+        arr = _table(path, data, owner, start=start, start_line=data[:start].count(b"\n"))[0]
+    elif fmt in FIXED_NAMES:
+        arr = _fixed(path, data, owner, fmt)
+    else:
+        arr, _ = _table(path, data, owner)
+    width = arr.shape[1]
+    names = _header_names(data, start) if fmt in ("xyz", "pts") else None
+    if names is not None:
+        if len(names) != width:
+            raise FileFormatError(f"{owner}: {path!r}: the header line names {len(names)} columns, "
+                                  f"but the rows hold {width}: {names[:12]}")
+        if len(set(names)) != len(names):
+            raise FileFormatError(f"{owner}: {path!r}: the header line names a column twice: {names[:12]}")
+    elif fmt in FIXED_NAMES:
+        names = ["x", "y", "z", *FIXED_NAMES[fmt]]
+    elif fmt == "pts" and width in _PTS_NAMES:
+        names = ["x", "y", "z", *_PTS_NAMES[width]]
+    else:
+        names = ["x", "y", "z"] + [f"column_{k + 1}" for k in range(3, width)]
+    lower = [n.lower() for n in names]
+    xyz = [lower.index(a) for a in "xyz"] if all(a in lower for a in "xyz") else [0, 1, 2]
+    points = np.ascontiguousarray(arr[:, xyz])
+    fields = {names[k]: np.ascontiguousarray(arr[:, k]) for k in range(width) if k not in xyz}
+    return points, fields

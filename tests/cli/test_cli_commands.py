@@ -116,7 +116,7 @@ def _read_csv(path):
         return list(csv.DictReader(fh))
 
 
-@pytest.mark.parametrize("command", ["run", "describe", "retrieve", "train", "predict", "evaluate", "bench"])
+@pytest.mark.parametrize("command", ["run", "describe", "retrieve", "train", "predict", "segment", "evaluate", "bench"])
 def test_every_subcommand_has_help(command, capsys):
     with pytest.raises(SystemExit) as exc:
         main([command, "--help"])

@@ -45,11 +45,11 @@ def test_subcommand_table_and_registry_choices():
     from eppf.cli import build_parser
     from eppf.registry import CLASSIFIERS, DESCRIPTORS
 
-    assert list(SUBCOMMANDS) and set(SUBCOMMANDS) == {"run", "describe", "retrieve", "train", "predict", "evaluate",
-                                                      "bench", "experiment"}
+    assert list(SUBCOMMANDS) and set(SUBCOMMANDS) == {"run", "describe", "retrieve", "train", "predict", "segment",
+                                                      "evaluate", "bench", "experiment"}
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
-    assert list(sub.choices) == ["run", "describe", "retrieve", "train", "predict", "evaluate", "bench",
+    assert list(sub.choices) == ["run", "describe", "retrieve", "train", "predict", "segment", "evaluate", "bench",
                                  "experiment"]
     for name in ("describe", "train", "evaluate", "bench"):
         action = next(a for a in sub.choices[name]._actions if a.dest == "descriptor")

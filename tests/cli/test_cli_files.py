@@ -2,7 +2,6 @@
 supported format the same way, meshes sampled exactly as load_folder samples
 them, one unreadable file skipped (or fatal with --on-error raise)."""
 
-import csv
 import os
 import re
 import struct
@@ -14,6 +13,9 @@ from eppf import EPPFTransformer
 from eppf.cli import build_parser, main, make_pipeline_from_args
 from eppf.datasets import load_folder
 from eppf.io import write_mesh, write_point_cloud
+
+from tests.cli._helpers import read_csv as _csv
+from tests.cli._helpers import run as _run
 
 N_PAIRS = "800"
 SMALL = ["--n-bins", "4", "2", "2", "2"]  # a small 4D network: fast epochs
@@ -111,18 +113,6 @@ def write_mixed_folder(root):
     bad = root / "ball" / "broken.ply"
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nend_header\n\x00")
     return sorted(files), str(bad)
-
-
-def _run(argv, capsys):
-    status = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.err
-    return status, captured.out, captured.err
-
-
-def _csv(path):
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
 
 
 @pytest.fixture()

@@ -28,6 +28,14 @@ def test_fuzz_files_short():
     for name in ("ascii.pcd", "binary.pcd", "compressed.pcd", "cloud_binary.ply", "mesh_ascii.ply", "mesh.off",
                  "mesh.obj", "ascii.stl", "binary.stl", "cloud.xyz", "count.pts", "cloud.npy", "cloud.npz"):
         assert any(line.startswith(name + " ") for line in lines), name
+    # and the optional formats, whose hostile headers (counts, offsets, extra-bytes descriptors) are refused
+    import importlib.util
+
+    optional = {"extra.las": "laspy", "tile.laz": "laspy", "pointwise.laz": "laspy", "scans.e57": "pye57"}
+    for name, module in optional.items():
+        if importlib.util.find_spec(module) is not None:
+            row = next(line for line in lines if line.startswith(name + " "))
+            assert int(row.split()[2]) > 0 and int(row.split()[3]) == 0, row
 
 
 def _harness():

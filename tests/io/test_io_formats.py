@@ -89,9 +89,10 @@ def test_missing_file_and_folder(tmp_path):
     "func, args, kwargs, exc, msg",
     [
         (read_point_cloud, ("x.foo",), {}, ValueError, "cannot tell the format of 'x.foo' from its extension '.foo'"),
-        (read_point_cloud, ("x.pcd",), {"format": "las"}, ValueError, "unknown format 'las'"),
+        (read_point_cloud, ("x.pcd",), {"format": "rcp"}, ValueError, "unknown format 'rcp'"),
         (read_point_cloud, ("x.pcd",), {"normals": "yes"}, ValueError, "normals must be 'auto', True or False"),
-        (read_mesh, ("x.las",), {}, ValueError, "cannot tell the format of 'x.las'"),
+        (read_mesh, ("x.rcp",), {}, ValueError, "cannot tell the format of 'x.rcp'"),
+        (read_mesh, ("x.las",), {}, ValueError, "'x.las' is a las file, which holds clouds, not meshes"),
         (read_mesh, ("x.pcd",), {}, ValueError, "'x.pcd' is a pcd file, which holds clouds, not meshes"),
         (write_mesh, ("x.npy", np.eye(3), [[0, 1, 2]]), {}, ValueError, "'x.npy' is a npy file, which holds clouds"),
         (read_point_cloud, ("x.pcd",), {"mesh": "faces"}, ValueError, "mesh must be 'sample' or 'vertices'"),
@@ -145,7 +146,7 @@ def test_table_discovery_and_supported_extensions_agree(tmp_path):
     assert set(supported_extensions("mesh")) == {".off", ".obj", ".stl", ".ply"}
     assert set(supported_extensions("cloud")) & set(supported_extensions("mesh")) == {".ply"}
     # load_folder's discovery finds exactly the table's extensions, in any case, and nothing else
-    exts = sorted(table) + [e.upper() for e in table] + [".las", ".ply.bak", ".pcd~", ".e57", ""]
+    exts = sorted(table) + [e.upper() for e in table] + [".rcp", ".ply.bak", ".pcd~", ".dwg", ""]
     for k, ext in enumerate(exts):
         (tmp_path / f"f{k}{ext}").write_text("x")
     found = {os.path.splitext(f)[1].lower() for f in _folder.object_files(str(tmp_path))}
@@ -166,8 +167,9 @@ def test_format_of():
 
     assert [format_of(p) for p in ("a.PLY", "b.Off", "c.txt", "d.CSV", "e.xyzn", "f.pts", "g.npz", "h.Stl")] == \
         ["ply", "off", "xyz", "xyz", "xyzn", "pts", "npz", "stl"]
-    with pytest.raises(ValueError, match=re.escape("format_of: cannot tell the format of 'x.las'")):
-        format_of("x.las")
+    assert [format_of(p) for p in ("a.LAS", "b.laz", "c.E57")] == ["las", "laz", "e57"]
+    with pytest.raises(ValueError, match=re.escape("format_of: cannot tell the format of 'x.rcp'")):
+        format_of("x.rcp")
     with pytest.raises(ValueError, match="kind must be None, 'cloud' or 'mesh'"):
         from eppf.io import supported_extensions
 

@@ -1,0 +1,66 @@
+"""Validation shared by the segmentation functions: scenes, fields, tolerances."""
+
+import numbers
+
+import numpy as np
+
+from ..utils._param_validation import Interval, validate_parameter
+from ..utils._validation import check_point_cloud
+
+__all__ = ["TOLERANCE", "check_field", "check_scene", "check_tolerance"]
+
+#: ``tolerance``: None (derived from the point spacing) or a positive distance.
+TOLERANCE = [None, Interval(numbers.Real, 0, None, closed="neither")]
+
+
+def check_scene(points, owner):
+    """The scene's coordinates as a C-contiguous float64 array of shape (n, 3).
+
+    Six-column input (points and normals) is accepted; the normals are dropped.
+    Raises TypeError/ValueError naming ``owner`` for a wrong type or shape, an
+    empty scene, a single point, NaN or infinite coordinates, a scene whose
+    points are all identical, or one whose extent overflows float64.
+    """
+    arr = check_point_cloud(points, owner=owner, min_points=2, allow_normals=True)
+    xyz = np.ascontiguousarray(arr[:, :3])
+    with np.errstate(over="ignore"):
+        extent = xyz.max(axis=0) - xyz.min(axis=0)
+    if not np.isfinite(extent).all():
+        raise ValueError(f"{owner}: the scene's extent overflows float64 (coordinates from {xyz.min():.6g} to "
+                         f"{xyz.max():.6g})")
+    return xyz
+
+
+def check_tolerance(tolerance, owner):
+    """``tolerance`` as a float (None stays None), or the validator's error naming ``owner``."""
+    validate_parameter(tolerance, TOLERANCE, name="tolerance", owner=owner)
+    return None if tolerance is None else float(tolerance)
+
+
+def check_field(values, n_points, owner, name="values"):
+    """An integer field as an int64 array of ``n_points`` entries.
+
+    Integer and boolean arrays are taken as they are; floating-point arrays only
+    when every value is a whole number (as fields written as float by some tools).
+    """
+    if isinstance(values, (str, bytes)) or values is None:
+        raise TypeError(f"{owner}: {name} must be an integer array, got {type(values).__name__}")
+    try:
+        arr = np.asarray(values)
+    except Exception as exc:
+        raise TypeError(f"{owner}: {name} could not be converted to an array: {exc}") from None
+    if arr.ndim != 1:
+        raise ValueError(f"{owner}: {name} must be one-dimensional, one value per point, got shape {arr.shape}")
+    if n_points is not None and arr.shape[0] != n_points:
+        raise ValueError(f"{owner}: {name} has {arr.shape[0]} values for {n_points} points")
+    if arr.dtype == bool or np.issubdtype(arr.dtype, np.integer):
+        if arr.dtype == np.uint64 and arr.size and arr.max() > np.iinfo(np.int64).max:
+            raise ValueError(f"{owner}: {name} holds values above 2**63 - 1, which no segment number can hold")
+        return arr.astype(np.int64)
+    if np.issubdtype(arr.dtype, np.floating):
+        whole = np.isfinite(arr) & (arr == np.round(arr)) & (np.abs(arr) < 2.0**63)
+        if not whole.all():
+            raise TypeError(f"{owner}: {name} must be an integer field, got {arr.dtype} values that are not "
+                            f"whole numbers (first at point {int(np.flatnonzero(~whole)[0])})")
+        return arr.astype(np.int64)
+    raise TypeError(f"{owner}: {name} must be an integer field, got dtype {arr.dtype}")

@@ -1,0 +1,275 @@
+"""Ground removal: a RANSAC plane, or a slope-limited lowest surface on a grid."""
+
+import numbers
+
+import numpy as np
+from sklearn.utils import check_random_state
+
+from . import _cluster_fast
+from ._checks import check_scene
+from ._cluster import default_tolerance
+from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions, validate_parameter
+
+__all__ = ["GROUND_METHODS", "ground_mask", "remove_ground"]
+
+GROUND_METHODS = ("auto", "plane", "grid")
+_CONSTRAINTS = {
+    "method": [StrOptions(GROUND_METHODS)],
+    "threshold": [None, Interval(numbers.Real, 0, None, closed="neither")],
+    "max_slope": [Interval(numbers.Real, 0, None, closed="left")],
+    "n_trials": [Interval(numbers.Integral, 1, 100000, closed="both")],
+    "random_state": RANDOM_STATE,
+}
+#: Points the RANSAC hypotheses are scored on (a fixed random subset of the scene).
+_RANSAC_SAMPLE = 50000
+#: Most least-squares refits of the RANSAC plane (each on the band its noise leaves, till it settles).
+_REFITS = 10
+#: Narrowest band of a refit, as a share of RANSAC's inlier distance (a noise-free plane).
+_FLAT = 1e-3
+#: Share of the lowest-surface cells that must lie on the plane for "auto" to keep it.
+_PLANAR_SHARE = 0.9
+
+
+def _toward_objects(local, nrm, d, threshold):
+    """The plane ``local @ nrm = d`` with its normal turned toward the side holding more of the points
+    farther than ``threshold`` from it (the objects)."""
+    dist = local @ nrm - d
+    flip = np.count_nonzero(dist <= -threshold) > np.count_nonzero(dist >= threshold)
+    return (-nrm, -d) if flip else (nrm, d)
+
+
+def _plane_ransac(points, threshold, n_trials, rng):
+    """(unit normal toward the objects, offset, robust standard deviation of the ground's noise) of the plane
+    with most points within ``threshold``, refined by least squares.
+
+    The refinement fits the points within a band around the plane, from ``threshold`` down to twice the
+    noise's standard deviation: within ``threshold`` lie the lowest parts of the objects standing on the
+    plane, which would lift and tilt it. The deviation is measured under the plane only (1.4826 times the
+    median distance of the points less than ``threshold`` under it), where there are no objects.
+    """
+    n = len(points)
+    sample = points if n <= _RANSAC_SAMPLE else points[np.sort(rng.choice(n, _RANSAC_SAMPLE, replace=False))]
+    center = sample.mean(axis=0)
+    local = sample - center
+    picks = rng.randint(0, len(sample), size=(n_trials, 3))
+    a, b, c = local[picks[:, 0]], local[picks[:, 1]], local[picks[:, 2]]
+    normals = np.cross(b - a, c - a)
+    length = np.linalg.norm(normals, axis=1)
+    ok = length > 0
+    best, best_count = None, -1
+    for k in np.flatnonzero(ok):
+        nrm = normals[k] / length[k]
+        count = int(np.count_nonzero(np.abs(local @ nrm - a[k] @ nrm) < threshold))
+        if count > best_count:
+            best, best_count = (nrm, a[k] @ nrm), count
+    if best is None:  # every triple collinear: the points lie on a line; any plane through it
+        axis = local[np.argmax(np.linalg.norm(local, axis=1))]
+        helper = np.eye(3)[np.argmin(np.abs(axis))]
+        nrm = np.cross(axis, helper)
+        best = (nrm / np.linalg.norm(nrm), 0.0)
+    nrm, d = _toward_objects(local, *best, threshold)
+    band, sigma = threshold, threshold / 4.0
+    for _ in range(_REFITS):
+        inliers = local[np.abs(local @ nrm - d) < band]
+        if len(inliers) < 3:
+            break
+        mean = inliers.mean(axis=0)
+        _, _, vt = np.linalg.svd(inliers - mean, full_matrices=False)
+        nrm, d = _toward_objects(local, vt[2], mean @ vt[2], threshold)
+        height = local @ nrm - d
+        under = height[(height < 0) & (height > -threshold)]
+        if not under.size:  # nothing under the plane: a noise-free plane
+            sigma = 0.0
+            break
+        sigma = 1.4826 * float(np.median(-under))
+        narrower = min(band, max(2.0 * sigma, _FLAT * threshold))
+        if narrower > 0.99 * band:  # settled
+            break
+        band = narrower
+    return nrm, d + center @ nrm, sigma
+
+
+def _grid_surface(points, cell, max_slope):
+    """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side).
+
+    The cells' lowest points give the surface ``S(c) = min over cells c' of
+    (zmin(c') + max_slope * |c - c'|)`` (8-neighbor chamfer distances between
+    cell centers): objects standing on the ground leave it, roofs and other
+    raised flat parts too where they are narrower than their height over
+    ``max_slope``. The ground under a point is then ``S(c)`` carried from the
+    lowest point of its cell (the cell's center for an empty cell) along the
+    surface's gradient (central differences, at most ``max_slope`` steep).
+    """
+    xy = points[:, :2] - points[:, :2].min(axis=0)
+    extent = xy.max(axis=0)
+    budget = max(4.0 * len(points), 2.0**20)  # memory linear in the points, whatever the cell
+    with np.errstate(over="ignore"):
+        cells = (extent[0] / cell + 1.0) * (extent[1] / cell + 1.0)
+    if not cells <= budget:  # wider cells, as many as the budget
+        cell = max(cell, float(np.sqrt(extent[0] + cell) * np.sqrt(extent[1] + cell) / np.sqrt(budget)))
+    shape = np.minimum(np.floor(extent / cell), budget).astype(np.int64) + 1
+    ij = np.minimum(np.floor(xy / cell), shape - 1).astype(np.int64)
+    flat = ij[:, 0] * shape[1] + ij[:, 1]
+    zmin = np.full(int(shape[0] * shape[1]), np.inf)
+    np.minimum.at(zmin, flat, points[:, 2])
+    surface = zmin.reshape(tuple(shape)).copy()
+    _cluster_fast.slope_envelope(surface, max_slope * cell, max_slope * cell * np.sqrt(2.0))
+    gradient = np.zeros((2,) + surface.shape)
+    for axis in (0, 1):
+        if surface.shape[axis] > 1:
+            gradient[axis] = np.gradient(surface, cell, axis=axis)
+    steep = np.hypot(gradient[0], gradient[1])
+    gradient *= np.minimum(1.0, max_slope / np.maximum(steep, 1e-300))
+    # where the ground surface is known: the lowest point of each cell, else the cell's center
+    anchor = (np.indices(tuple(shape)).reshape(2, -1).T + 0.5) * cell
+    lowest = np.flatnonzero(points[:, 2] == zmin[flat])
+    anchor[flat[lowest]] = xy[lowest]
+    offset = xy - anchor[flat]
+    ground = surface.reshape(-1)[flat] + gradient[0].reshape(-1)[flat] * offset[:, 0] \
+        + gradient[1].reshape(-1)[flat] * offset[:, 1]
+    return points[:, 2] - ground, flat, zmin, cell
+
+
+def grid_threshold(rise, tolerance):
+    """The grid model's threshold when none is given: the median height above the ground surface plus
+    four robust standard deviations (1.4826 times the median absolute deviation), of the points below
+    the threshold found so far (from ``tolerance``, three rounds: the objects' lower parts leave the
+    sample), kept between a quarter of ``tolerance`` and ``tolerance``."""
+    cap = tolerance
+    for _ in range(3):
+        near = rise[rise < cap]
+        if not near.size:
+            break
+        middle = float(np.median(near))
+        sigma = 1.4826 * float(np.median(np.abs(near - middle)))
+        cap = min(tolerance, max(middle + 4.0 * sigma, tolerance / 4.0))
+    return cap
+
+
+def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
+    """The ground mask of checked points (float64, (n, 3)) and the method used ("plane" or "grid").
+
+    ``tolerance`` (positive) is the distance of the point spacing: RANSAC's inlier
+    distance and the grid's cell. ``threshold`` is the height above the ground model
+    under which a point is ground; None: four of the noise's standard deviations
+    :func:`_plane_ransac` measures for the plane (kept between a quarter of ``tolerance`` and
+    ``tolerance``), :func:`grid_threshold` for the grid.
+    """
+    if method in ("plane", "auto"):
+        fit_distance = tolerance if threshold is None else threshold
+        nrm, offset, sigma = _plane_ransac(points, fit_distance, n_trials, rng)
+        height = points @ nrm - offset
+        plane = height < (min(tolerance, max(4.0 * sigma, tolerance / 4.0)) if threshold is None else threshold)
+        if method == "plane":
+            return plane, "plane"
+    rise, flat, zmin, cell = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
+    if threshold is None:
+        threshold = grid_threshold(rise, tolerance)
+    grid = rise < threshold
+    if method == "grid":
+        return grid, "grid"
+    # auto: the plane where the lowest surface is planar (a floor, flat or tilted ground), else the grid
+    lowest = np.flatnonzero((points[:, 2] == zmin[flat]) & grid)  # each ground cell's lowest point(s)
+    ground_cells = np.zeros(len(zmin), dtype=bool)
+    ground_cells[flat[lowest]] = True
+    planar = np.zeros(len(zmin), dtype=bool)
+    planar[flat[lowest]] = np.abs(height[lowest]) < threshold
+    share = np.count_nonzero(planar) / max(1, np.count_nonzero(ground_cells))
+    return (plane, "plane") if share >= _PLANAR_SHARE else (grid, "grid")
+
+
+def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_trials=100, random_state=0):
+    """Find the ground points of a scene.
+
+    Two models of the ground:
+
+    - ``"plane"``: the plane holding most points within ``threshold``, found by
+      RANSAC (``n_trials`` planes through three random points, scored on up to
+      50,000 points of the scene) and refined by least squares on the points
+      within a band around it, narrowed round after round to twice the
+      ground's noise (the lowest parts of the objects, also within
+      ``threshold`` of the plane, would lift and tilt it). "Above" is the side
+      holding more of the points off the plane (the objects); ground is every
+      point less than ``threshold`` above the plane, points below it (noise
+      under a floor) included. For floors, CAD scenes and flat or evenly
+      tilted terrain, in any orientation. Limits: the ground must be the
+      largest plane of the scene; the objects lose their parts lower than the
+      threshold, and a flat part lying on the ground (a plate, a sheet) is
+      taken for ground.
+    - ``"grid"``: for terrain that is not one plane (aerial tiles): the lowest
+      point of each cell of a horizontal grid (cells ``threshold`` wide, wider
+      where that would make more than four cells per point), and the surface
+      that rises at most ``max_slope`` (rise over run) from the lowest points
+      around it; the ground under a point is that surface carried from its
+      cell's lowest point along the surface's gradient, and ground is every
+      point less than ``threshold`` above it. The vertical axis is z.
+      Limits: a flat object of height ``h`` is taken for ground where it is
+      farther than ``h / max_slope`` from its edge (the middle of a large flat
+      roof), and terrain steeper than ``max_slope`` is partly left out of the
+      ground.
+    - ``"auto"``: the plane when the lowest points of at least 90% of the
+      grid's ground cells lie within the grid's threshold of it (a floor,
+      flat or evenly tilted ground), else the grid.
+
+    Parameters
+    ----------
+    points : array-like of shape (n_points, 3) or (n_points, 6)
+        The scene (normals, when given, are ignored); at least two points,
+        all finite.
+    method : {"auto", "plane", "grid"}, default="auto"
+        The ground model, see above.
+    threshold : float, default=None
+        Height above the ground model under which a point is ground, > 0, in
+        the units of the points; also RANSAC's inlier distance and the grid's
+        cell. None starts from the tolerance :func:`euclidean_clusters` derives
+        from the point spacing: RANSAC takes inliers within it and the grid's
+        cells are that wide; the threshold is then the ground's noise, four
+        robust standard deviations of the distances to the plane (1.4826 times
+        the median distance of the points under it, where no object is), or
+        for the grid the median height above its surface plus four robust
+        standard deviations (1.4826 times a median absolute deviation), kept
+        between a quarter of the tolerance and the tolerance.
+    max_slope : float, default=0.3
+        Steepest ground of the grid model, as rise over run (0.3 is about 17
+        degrees), >= 0.
+    n_trials : int, default=100
+        RANSAC's planes tried (between 1 and 100,000).
+    random_state : int, RandomState instance or None, default=0
+        Seed of RANSAC's draws; the default gives the same ground on every call.
+
+    Returns
+    -------
+    ground : ndarray of shape (n_points,), dtype bool
+        True for the ground points.
+
+    Raises
+    ------
+    ValueError
+        If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
+        values, are fewer than two or all identical, or a parameter is out of
+        range.
+
+    See Also
+    --------
+    segment_scene : Ground removal followed by clustering.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from eppf.segmentation import remove_ground
+    >>> rng = np.random.default_rng(0)
+    >>> floor = np.column_stack([rng.uniform(0, 10, (2000, 2)), rng.normal(0, 0.01, 2000)])
+    >>> box = rng.uniform([4, 4, 1.0], [5, 5, 2.0], size=(300, 3))
+    >>> ground = remove_ground(np.vstack([floor, box]), method="plane")
+    >>> int(ground[:2000].sum()), int(ground[2000:].sum())
+    (2000, 0)
+    """
+    owner = "remove_ground"
+    for name, value in (("method", method), ("threshold", threshold), ("max_slope", max_slope),
+                        ("n_trials", n_trials), ("random_state", random_state)):
+        validate_parameter(value, _CONSTRAINTS[name], name=name, owner=owner)
+    pts = check_scene(points, owner)
+    thr = None if threshold is None else float(threshold)
+    tol = default_tolerance(pts, owner) if thr is None else thr
+    mask, _ = ground_mask(pts, method, thr, tol, float(max_slope), int(n_trials), check_random_state(random_state))
+    return mask

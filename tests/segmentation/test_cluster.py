@@ -1,0 +1,165 @@
+"""euclidean_clusters against an independent reference: SciPy's connected components of the radius graph."""
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from eppf.segmentation import euclidean_clusters
+from tests.segmentation.conftest import floor, sphere
+
+
+def reference(points, tolerance, min_points=1, max_points=None):
+    """PCL's semantics from first principles: points closer than ``tolerance`` (strictly) are connected;
+    clusters outside [min_points, max_points] give -1; the rest numbered by size, largest first, ties by
+    smallest point index."""
+    n = len(points)
+    pairs = cKDTree(points).query_pairs(np.nextafter(tolerance, 0), output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    comp = connected_components(graph, directed=False)[1]
+    sizes = np.bincount(comp)
+    first = np.full(len(sizes), n)
+    np.minimum.at(first, comp, np.arange(n))
+    kept = [c for c in range(len(sizes)) if sizes[c] >= min_points and (max_points is None or sizes[c] <= max_points)]
+    kept.sort(key=lambda c: (-sizes[c], first[c]))
+    number = np.full(len(sizes), -1)
+    number[kept] = np.arange(len(kept))
+    return number[comp]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_scenes_match_the_reference(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 4000))
+    points = rng.uniform(0, 1, (n, 3)) * rng.uniform(0.5, 20, 3)
+    if seed % 3 == 0:  # many coincident points and points on cell boundaries
+        points = np.round(points, 1)
+    tolerance = float(rng.uniform(0.05, 1.5))
+    min_points = int(rng.integers(1, 5))
+    max_points = None if seed % 2 else int(rng.integers(min_points, n + 1))
+    np.testing.assert_array_equal(
+        euclidean_clusters(points, tolerance, min_points=min_points, max_points=max_points),
+        reference(points, tolerance, min_points, max_points))
+
+
+@pytest.mark.parametrize("scale, offset", [(1e-3, 0.0), (1.0, 0.0), (1e3, 0.0), (1.0, 4.5e6), (1e-6, 1.0)])
+def test_scales_and_projected_offsets_match_the_reference(scale, offset):
+    rng = np.random.default_rng(1)
+    points = np.vstack([sphere((0, 0, 0), 1, 500, rng), sphere((2.5, 0, 0), 1, 400, rng),
+                        rng.uniform(-3, 3, (50, 3))]) * scale + offset
+    tolerance = 0.35 * scale
+    labels = euclidean_clusters(points, tolerance)
+    np.testing.assert_array_equal(labels, reference(points, tolerance))
+    assert np.unique(labels[:500]).size == 1 and np.unique(labels[500:900]).size == 1 and labels[0] != labels[500]
+
+
+def test_derived_tolerance_separates_spheres_at_any_scale():
+    rng = np.random.default_rng(2)
+    base = np.vstack([sphere((0, 0, 0), 1, 800, rng), sphere((4, 0, 0), 1, 700, rng), sphere((0, 4, 0), 1, 600, rng)])
+    expected = np.repeat([0, 1, 2], [800, 700, 600])
+    for scale, offset in ((1.0, 0.0), (1e-3, 0.0), (1e4, 0.0), (1.0, 6e6)):
+        np.testing.assert_array_equal(euclidean_clusters(base * scale + offset), expected)
+
+
+def test_numbering_by_size_then_first_index():
+    points = np.array([[0, 0, 0], [10, 0, 0], [10.5, 0, 0], [20, 0, 0], [30, 0, 0], [30.5, 0, 0], [40, 0, 0.0]])
+    # sizes 1, 2, 1, 2, 1: the pairs first (the one at index 1 before index 4), then singles in index order
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.0), [2, 0, 0, 3, 1, 1, 4])
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.0, min_points=2), [-1, 0, 0, -1, 1, 1, -1])
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.0, max_points=1), [0, -1, -1, 1, -1, -1, 2])
+
+
+def test_strictly_closer_than_the_tolerance():
+    points = np.array([[0, 0, 0], [1, 0, 0], [2.5, 0, 0.0]])
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.0), [0, 1, 2])  # distance 1 is not < 1
+    np.testing.assert_array_equal(euclidean_clusters(points, np.nextafter(1.0, 2)), [0, 0, 1])
+
+
+def test_touching_objects_merge_and_separated_ones_do_not():
+    rng = np.random.default_rng(3)
+    a = sphere((0, 0, 0), 1, 2000, rng)
+    touching = sphere((2.0, 0, 0), 1, 2000, rng)  # the spheres meet at (1, 0, 0)
+    apart = sphere((2.6, 0, 0), 1, 2000, rng)
+    assert np.unique(euclidean_clusters(np.vstack([a, touching]), 0.15)).size == 1
+    assert np.unique(euclidean_clusters(np.vstack([a, apart]), 0.15)).size == 2
+
+
+def test_dense_plane_is_one_cluster_and_normals_are_ignored():
+    rng = np.random.default_rng(4)
+    plane = floor(10, 20000, rng)
+    labels = euclidean_clusters(plane)
+    assert (labels == 0).all()
+    with_normals = np.column_stack([plane, np.tile([0, 0, 1.0], (len(plane), 1))])
+    np.testing.assert_array_equal(euclidean_clusters(with_normals), labels)
+
+
+def test_same_labels_on_every_call_and_for_a_reordered_scene():
+    rng = np.random.default_rng(5)
+    points = np.vstack([sphere((k * 3.0, 0, 0), 1, 300 + 50 * k, rng) for k in range(4)])
+    first = euclidean_clusters(points, 0.3)
+    np.testing.assert_array_equal(euclidean_clusters(points, 0.3), first)
+    perm = rng.permutation(len(points))
+    again = euclidean_clusters(points[perm], 0.3)
+    # sizes differ, so the numbering (by size) survives the permutation
+    np.testing.assert_array_equal(again, first[perm])
+
+
+def test_float32_and_int_input():
+    points = np.array([[0, 0, 0], [1, 0, 0], [5, 0, 0]])
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.5), [0, 0, 1])
+    np.testing.assert_array_equal(euclidean_clusters(points.astype(np.float32), 1.5), [0, 0, 1])
+
+
+@pytest.mark.parametrize("points, tolerance, kind, pattern", [
+    (np.empty((0, 3)), 1.0, ValueError, r"has 0 points"),
+    (np.zeros((1, 3)), 1.0, ValueError, r"has 1 point;"),
+    (np.array([[0, 0, 0], [np.nan, 0, 0]]), 1.0, ValueError, r"NaN or infinite"),
+    (np.array([[0, 0, 0], [np.inf, 0, 0]]), 1.0, ValueError, r"NaN or infinite"),
+    (np.zeros((4, 2)), 1.0, ValueError, r"shape \(n_points, 3\)"),
+    (np.zeros(4), 1.0, ValueError, r"shape"),
+    (np.zeros((3, 3)), 1.0, ValueError, r"all 3 points identical"),
+    (np.array([[-1e308, 0, 0], [1e308, 0, 0]]), 1.0, ValueError, r"extent overflows"),
+    (np.array([[0, 0, 0], [1e9, 0, 0]]), 1e-9, ValueError, r"more than 2\*\*30 cells"),
+    (np.array([["a", "b", "c"]] * 2), 1.0, TypeError, r"must hold numbers"),
+    (np.eye(3), 0.0, ValueError, r"tolerance must be None or a float in \(0.0, inf\), got 0.0"),
+    (np.eye(3), -1.0, ValueError, r"tolerance"),
+    (np.eye(3), np.nan, ValueError, r"tolerance"),
+    (np.eye(3), np.inf, ValueError, r"tolerance"),
+    (np.eye(3), True, TypeError, r"tolerance"),
+    (np.eye(3), "1", TypeError, r"tolerance"),
+])
+def test_bad_input_is_named(points, tolerance, kind, pattern):
+    with pytest.raises(kind, match=r"^euclidean_clusters: .*" + pattern):
+        euclidean_clusters(points, tolerance)
+
+
+@pytest.mark.parametrize("kwargs, pattern", [
+    (dict(min_points=0), r"min_points must be an int >= 1, got 0"),
+    (dict(min_points=2.0), r"min_points must be an int"),
+    (dict(max_points=0), r"max_points must be None or an int >= 1"),
+    (dict(min_points=5, max_points=3), r"max_points \(3\) is smaller than min_points \(5\)"),
+])
+def test_bad_sizes_are_named(kwargs, pattern):
+    with pytest.raises(ValueError, match=r"^euclidean_clusters: " + pattern):
+        euclidean_clusters(np.eye(3), 1.0, **kwargs)
+
+
+def test_cell_coordinates_stay_in_range_for_any_double():
+    from eppf.segmentation import _cluster_fast
+
+    pts = np.array([[np.nan, np.inf, -np.inf], [1e308, -1e308, 5e-324], [0.5, 2.5, 1e20]])
+    cells = _cluster_fast.cells(pts, 0.0, 0.0, 0.0, 1.0, 8)
+    np.testing.assert_array_equal(cells, [[0, 7, 0], [7, 0, 0], [0, 2, 7]])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_derived_tolerance_is_five_median_nearest_neighbor_distances(seed):
+    from eppf.segmentation._cluster import TOLERANCE_FACTOR, default_tolerance
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 1, (3000, 3)) * [10, 3, 0.01 if seed % 2 else 4]
+    points[:200] = points[200:400]  # coincident points are left out of the nearest-neighbor distances
+    dist, _ = cKDTree(points).query(points, k=3)
+    nearest = np.where(dist[:, 1] > 0, dist[:, 1], dist[:, 2])
+    assert np.isclose(default_tolerance(points), TOLERANCE_FACTOR * np.partition(nearest, 1500)[1500], rtol=1e-12)

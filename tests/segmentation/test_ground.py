@@ -1,0 +1,186 @@
+"""remove_ground on analytic scenes: floors, tilted planes, hills, nothing but ground."""
+
+import numpy as np
+import pytest
+
+from eppf.segmentation import remove_ground
+from eppf.segmentation._cluster import default_tolerance
+from eppf.segmentation._ground import _plane_ransac, ground_mask
+from tests.segmentation.conftest import floor, sphere
+
+
+def _scene(height=None, noise=0.01, rng=None):
+    """A 20 m square of terrain (20,000 points) and 4 boxes of 400 points standing 0.3 m to 1.3 m above it."""
+    rng = rng or np.random.default_rng(0)
+    ground = floor(20.0, 20000, rng, noise=noise, height=height)
+    boxes = []
+    for cx, cy in ((4, 4), (4, 16), (16, 4), (16, 16)):
+        box = rng.uniform([cx - 0.5, cy - 0.5, 0.3], [cx + 0.5, cy + 0.5, 1.3], size=(400, 3))
+        if height is not None:
+            box[:, 2] += height(box[:, 0], box[:, 1])
+        boxes.append(box)
+    return np.vstack([ground] + boxes), len(ground)
+
+
+@pytest.mark.parametrize("method", ["auto", "plane", "grid"])
+def test_flat_floor(method):
+    points, n_ground = _scene()
+    mask = remove_ground(points, method=method)
+    assert mask[:n_ground].mean() > 0.999
+    assert not mask[n_ground:].any()
+
+
+@pytest.mark.parametrize("method", ["auto", "plane"])
+def test_tilted_plane_in_any_orientation(method):
+    points, n_ground = _scene(height=lambda x, y: 0.4 * x - 0.2 * y)
+    assert remove_ground(points, method=method)[:n_ground].mean() > 0.999
+    # the scene on its side (ground plane x = const): RANSAC finds it all the same
+    rotated = points[:, [2, 0, 1]]
+    mask = remove_ground(rotated, method="plane")
+    assert mask[:n_ground].mean() > 0.999 and mask[n_ground:].mean() < 0.05
+
+
+def test_hills_need_the_grid_and_auto_chooses_it():
+    gentle = lambda x, y: 0.8 * np.sin(x / 4.0) * np.cos(y / 5.0)  # slopes below 0.3
+    points, n_ground = _scene(height=gentle)
+    plane = remove_ground(points, method="plane")
+    grid = remove_ground(points, method="grid")
+    auto = remove_ground(points)
+    assert plane[:n_ground].mean() < 0.9  # one plane cannot follow the hills
+    assert grid[:n_ground].mean() > 0.99 and grid[n_ground:].mean() < 0.05
+    np.testing.assert_array_equal(auto, grid)
+
+
+def test_auto_reports_its_choice():
+    flat, _ = _scene()
+    hilly, _ = _scene(height=lambda x, y: 0.8 * np.sin(x / 4.0) * np.cos(y / 5.0))
+    for points, expected in ((flat, "plane"), (hilly, "grid")):
+        _, method = ground_mask(points, "auto", None, 0.3, 0.3, 100, np.random.RandomState(0))
+        assert method == expected
+
+
+@pytest.mark.parametrize("method", ["auto", "plane", "grid"])
+def test_all_ground(method):
+    points = floor(10.0, 5000, np.random.default_rng(1), noise=0.005)
+    assert remove_ground(points, method=method).all()
+
+
+def test_the_plane_threshold_follows_the_noise():
+    rng = np.random.default_rng(2)
+    ground = floor(10.0, 20000, rng, noise=0.01)
+    ball = sphere((5, 5, 0.5), 0.5, 2000, rng)  # touches the floor at its bottom
+    mask = remove_ground(np.vstack([ground, ball]), method="plane")
+    kept = ball[~mask[len(ground):]]
+    # four robust standard deviations of the noise (0.04) at most, and at least a quarter of the tolerance
+    assert mask[:len(ground)].mean() > 0.999
+    assert 0.02 < kept[:, 2].min() < 0.08
+    # a given threshold is used as it is
+    mask = remove_ground(np.vstack([ground, ball]), method="plane", threshold=0.2)
+    assert ball[~mask[len(ground):], 2].min() >= 0.2 - 0.03
+
+
+def _objects_on_a_floor(rng, noise):
+    """An 8 m floor (6,400 points, truth -1) and as many points again on 8 objects standing on it (truth 0-7),
+    their lowest parts within a point spacing of the floor: 4 boxes with a bottom plate at the floor's height,
+    4 L-brackets (a plate on the floor and a plate standing on its edge); normal noise of standard deviation
+    ``noise`` on every coordinate of the objects and on the floor's heights."""
+    parts, truth = [floor(8.0, 6400, rng, noise=noise)], [np.full(6400, -1)]
+    for k in range(8):
+        x, y = 1.0 + 2.0 * (k % 4), 2.0 + 4.0 * (k // 4)
+        if k < 4:  # a box 1 m wide and 0.5 m high: walls, top and bottom
+            cloud = rng.uniform([-0.5, -0.5, 0.0], [0.5, 0.5, 0.5], size=(800, 3))
+            face = rng.integers(0, 6, 800)
+            cloud[face < 4, face[face < 4] // 2] = np.where(face[face < 4] % 2, 0.5, -0.5)
+            cloud[face == 4, 2], cloud[face == 5, 2] = 0.0, 0.5
+        else:  # an L-bracket: a 1 m x 0.6 m plate on the floor, another standing on its edge
+            cloud = rng.uniform([-0.5, -0.3, 0.0], [0.5, 0.3, 0.6], size=(800, 3))
+            cloud[:400, 2] = 0.0
+            cloud[400:, 1] = -0.3
+        parts.append(cloud + [x, y, 0.0] + rng.normal(0, noise, cloud.shape))  # the scanner's noise
+        truth.append(np.full(800, k))
+    return np.vstack(parts), np.concatenate(truth)
+
+
+def test_the_objects_lowest_parts_neither_lift_nor_widen_the_plane():
+    # within the tolerance of the plane lie the objects' lowest parts, as many points as the floor's: the
+    # least-squares refit and the noise under the plane leave them out
+    noise = 0.01
+    points, truth = _objects_on_a_floor(np.random.default_rng(6), noise)
+    tolerance = default_tolerance(points, "test")
+    assert tolerance > 10 * noise  # the objects' lowest 10 cm within RANSAC's inlier distance
+    nrm, offset, sigma = _plane_ransac(points, tolerance, 100, np.random.RandomState(0))
+    assert nrm[2] > 1 - 1e-6 and abs(offset) < 0.2 * noise
+    assert 0.9 * noise < sigma < 1.1 * noise
+    mask = remove_ground(points, method="plane")
+    assert mask[truth == -1].mean() > 0.999
+    # the objects keep all but their lowest 5 cm (four standard deviations of the noise, and the offset)
+    objects, height = ~mask[truth >= 0], points[truth >= 0, 2]
+    assert objects[height > 5 * noise].all() and not objects[height < 3 * noise].any()
+    # the limit: a plate lying on the floor is taken for ground, the bracket keeps its standing plate
+    for k in range(4, 8):
+        bracket = ~mask[truth == k]
+        assert not bracket[:400].any() and bracket[400:].mean() > 0.9
+
+
+def test_noise_below_the_floor_is_ground():
+    rng = np.random.default_rng(3)
+    ground = floor(10.0, 10000, rng, noise=0.005)
+    below = np.column_stack([rng.uniform(0, 10, (50, 2)), rng.uniform(-2, -1, 50)])
+    objects = rng.uniform([2, 2, 0.5], [4, 4, 2.0], size=(500, 3))
+    mask = remove_ground(np.vstack([ground, below, objects]), method="plane")
+    assert mask[:10050].all() and not mask[10050:].any()
+
+
+def test_deterministic_and_seeded():
+    points, _ = _scene(height=lambda x, y: 0.1 * x)
+    first = remove_ground(points, method="plane")
+    np.testing.assert_array_equal(remove_ground(points, method="plane"), first)
+    np.testing.assert_array_equal(remove_ground(points, method="plane", random_state=np.random.RandomState(0)), first)
+
+
+def test_wide_scene_with_a_tiny_threshold_keeps_the_grid_bounded():
+    rng = np.random.default_rng(4)
+    points = np.column_stack([rng.uniform(0, 1e6, (2000, 2)), rng.normal(0, 1e-3, 2000)])
+    mask = remove_ground(points, method="grid", threshold=1e-3)  # 1e18 cells asked: the grid widens its cells
+    assert mask.mean() > 0.99
+
+
+@pytest.mark.parametrize("kwargs, kind, pattern", [
+    (dict(method="ransac"), ValueError, r"method must be one of 'auto', 'plane', 'grid', got 'ransac'"),
+    (dict(threshold=0), ValueError, r"threshold must be None or a float in \(0.0, inf\)"),
+    (dict(max_slope=-1), ValueError, r"max_slope must be a float in \[0.0, inf\)"),
+    (dict(n_trials=0), ValueError, r"n_trials must be an int in \[1, 100000\]"),
+    (dict(random_state="x"), TypeError, r"random_state must be"),
+])
+def test_bad_parameters_are_named(kwargs, kind, pattern):
+    with pytest.raises(kind, match=r"^remove_ground: " + pattern):
+        remove_ground(np.eye(3), **kwargs)
+
+
+@pytest.mark.parametrize("points, pattern", [
+    (np.empty((0, 3)), r"has 0 points"),
+    (np.zeros((1, 3)), r"has 1 point"),
+    (np.array([[0, 0, 0], [np.nan, 1, 1]]), r"NaN"),
+])
+def test_bad_scenes_are_named(points, pattern):
+    with pytest.raises(ValueError, match=r"^remove_ground: .*" + pattern):
+        remove_ground(points)
+
+
+def test_slope_envelope_is_the_exact_chamfer_envelope():
+    from eppf.segmentation import _cluster_fast
+
+    rng = np.random.default_rng(5)
+    zmin = rng.uniform(0, 5, size=(9, 13))
+    zmin[rng.random(zmin.shape) < 0.3] = np.inf  # empty cells
+    step, diagonal = 0.3, 0.3 * np.sqrt(2)
+    surface = zmin.copy()
+    _cluster_fast.slope_envelope(surface, step, diagonal)
+    i, j = np.indices(zmin.shape)
+    expected = np.empty_like(zmin)
+    for a in range(zmin.shape[0]):
+        for b in range(zmin.shape[1]):
+            di, dj = np.abs(i - a), np.abs(j - b)
+            chamfer = (np.maximum(di, dj) - np.minimum(di, dj)) * step + np.minimum(di, dj) * diagonal
+            expected[a, b] = np.min(zmin + chamfer)
+    np.testing.assert_allclose(surface, expected, rtol=1e-12)
