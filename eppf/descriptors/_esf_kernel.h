@@ -283,20 +283,31 @@ static void esf_walk_batch(const uint64_t *g3, const uint64_t *pos, const uint64
         esf_walk_lines(g3, pos, inc, cnt, occ, n);
 }
 
+/* |cos| = x clipped to [0, 1] for any double x, as ``esf_angle_bin`` needs
+ * it: NaN (from a repeated point) and values from 1 up give 1, negative ones
+ * 0 (none of the kernel's: |dot| / (|u| |v|) is never negative; the clip
+ * keeps the bound for every input, not only the kernel's). */
+static inline double esf_clip_cos(double x)
+{
+    x = x < 1.0 ? x : 1.0;
+    return x >= 0.0 ? x : 0.0;
+}
+
 /* round((n_bins - 1) arccos(c) / (pi / 2)) for c in [0, 1] without arccos:
  * the number of bin edges (cosines, decreasing, padded with -2) not below c.
  * The table gives, per cell of its argument, a lower bound that is at most
  * one short (no cell holds two edges); one comparison completes it. The
  * argument is c itself when the cells can be that fine (coarse bins), else
- * u = sqrt((1 - c) / 2) = sin(angle / 2). */
+ * u = sqrt((1 - c) / 2) = sin(angle / 2).
+ *
+ * c must lie in [0, 1] (never NaN), which bounds the table index: the caller
+ * clips it there (``esf_clip_cos``) in its vectorized loop, where the clip
+ * costs next to nothing, rather than here, once per look-up. */
 static inline int esf_angle_bin(double c, int on_cos, const int32_t *lut, double lut_scale,
                                 const double *edges)
 {
     double arg;
     int lo;
-    /* c clamped to [0, 1] (NaN to 1) before it indexes the table */
-    c = c <= 1.0 ? c : 1.0;
-    c = c >= 0.0 ? c : 0.0;
     arg = on_cos ? c : sqrt((1.0 - c) * 0.5);
     lo = lut[(int)(arg * lut_scale)];
     lo += edges[lo] >= c;
@@ -464,19 +475,15 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
     /* ... then the square roots and divisions, element-wise (vectorized) */
     for (j = 0; j < n_cand; j++) {
         double a = sqrt(A[j]), b = sqrt(B[j]), c = sqrt(C[j]);
-        double hs = (a + b + c) * 0.5, x;
+        double hs = (a + b + c) * 0.5;
         A[j] = a;
         B[j] = b;
         C[j] = c;
         H[j] = hs * (hs - a) * (hs - b) * (hs - c);
         D3[j] = sqrt(sqrt(H[j])); /* NaN for a rejected candidate, unused */
-        /* |cos| clipped to 1 (NaN, from a repeated point, becomes 1) */
-        x = c1[j] / (a * b);
-        c1[j] = x < 1.0 ? x : 1.0;
-        x = c2[j] / (c * b);
-        c2[j] = x < 1.0 ? x : 1.0;
-        x = c3[j] / (c * a);
-        c3[j] = x < 1.0 ? x : 1.0;
+        c1[j] = esf_clip_cos(c1[j] / (a * b));
+        c2[j] = esf_clip_cos(c2[j] / (c * b));
+        c3[j] = esf_clip_cos(c3[j] / (c * a));
     }
     /* the accepted ones, in draw order */
     for (j = 0; j < n_cand && s->t + nsel < s->n_triplets; j++) {

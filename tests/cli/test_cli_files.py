@@ -13,6 +13,7 @@ from eppf import EPPFTransformer
 from eppf.cli import build_parser, main, make_pipeline_from_args
 from eppf.datasets import load_folder
 from eppf.io import write_mesh, write_point_cloud
+from eppf.registry import RECIPE
 
 from tests.cli._helpers import read_csv as _csv
 from tests.cli._helpers import run as _run
@@ -252,10 +253,12 @@ def test_cnn_training_prints_one_line_per_epoch_and_predict_gives_probabilities(
                            "--test-size", "0", "--n-pairs", N_PAIRS, "--n-jobs", "1"], capsys)
     assert status == 0
     epochs = [line for line in out.splitlines() if line.startswith("epoch")]
-    # the recommended recipe trains an ensemble of three networks, two epochs each
-    assert len(epochs) == 2 * 3 and "train_loss" in epochs[0] and epochs[0].rstrip().endswith(" s")
+    # the recommended recipe trains RECIPE["n_estimators"] networks, two epochs each, numbered from 1 when several
+    n_networks = RECIPE["n_estimators"]
+    assert len(epochs) == 2 * n_networks and "train_loss" in epochs[0] and epochs[0].rstrip().endswith(" s")
     assert "valid_acc" in epochs[0]
-    assert "network 2 of 3 of the ensemble" in out and "network 3 of 3 of the ensemble" in out
+    numbered = [f"network {k} of {n_networks} of the ensemble" in out for k in range(1, n_networks + 1)]
+    assert all(numbered) if n_networks > 1 else "of the ensemble" not in out
     status, _, _ = _run(["predict", folder, "--model", model, "-o", tmp_path / "p.csv", *COMMON[2:]], capsys)
     rows = _csv(tmp_path / "p.csv")
     assert status == 0 and len(rows) == len(files)
