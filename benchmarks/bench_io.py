@@ -45,25 +45,38 @@ GPS time, color) plus two extra-bytes dimensions, written by laspy as
 :func:`eppf.io.read_point_fields` (coordinates and every field),
 :func:`eppf.io.read_point_cloud` (coordinates) and laspy itself
 (``laspy.read`` and every dimension as an array, plus ``x y z``: laspy's
-own speed, fields included), in millions of points per second. LAZ is
-decoded by lazrs's parallel backend on every core. On the 2-vCPU AMD EPYC
-(Zen 4) KVM guest, shared with other jobs (load average 9.4 to 9.9), laspy
-2.7.0 and lazrs 0.8.2, ``--las-only``::
+own speed, fields included), in millions of points per second. The
+``.las`` tile is read in this process. The ``.laz`` tile is read in a fresh
+process per thread count, once with ``RAYON_NUM_THREADS=1`` and once with
+every core (``os.cpu_count()``): laspy decodes LAZ with lazrs's parallel
+backend (``LazBackend.LazrsParallel``, its default when lazrs is installed,
+which eppf's readers keep), whose chunks (50,000 points each here) are
+decoded in parallel on rayon's global thread pool, whose size ``RAYON_NUM_THREADS`` sets for the whole
+process. On the 2-vCPU AMD EPYC (Zen 4) KVM guest, shared with other jobs
+(load average 3.9 to 4.6), laspy 2.7.0 and lazrs 0.8.2, ``--las-only``::
 
-    file  reader                Mpoints/s
-    .las  read_point_fields          21.8
-    .las  read_point_cloud           29.9
-    .las  laspy, every field          9.2
-    .laz  read_point_fields           0.9
-    .laz  read_point_cloud            0.7
-    .laz  laspy, every field          0.5
+    file  threads  reader                Mpoints/s
+    .las        -  read_point_fields          36.6
+    .las        -  read_point_cloud           52.0
+    .las        -  laspy, every field         16.9
+    .laz        1  read_point_fields           1.4
+    .laz        1  read_point_cloud            1.5
+    .laz        1  laspy, every field          1.5
+    .laz        2  read_point_fields           1.4
+    .laz        2  read_point_cloud            1.5
+    .laz        2  laspy, every field          1.4
 
 An uncompressed tile is read in one call into fresh memory, every
 whole-byte dimension is a view of the records and only the bit fields
 (return number, classification, flags) and the scaled coordinates are
 computed, so eppf reads it faster than laspy's own ``read`` does. LAZ is
-bound by lazrs's arithmetic decoding (the same in both); the figures of a
-machine this busy are a fraction of a quiet one's.
+bound by lazrs's arithmetic decoding, the same in eppf and in laspy: about
+1.5 million points per second per core for this format-3 tile with GPS
+time, color and extra bytes, so 20 million per second would take some 14
+free cores. Here the second thread gains nothing: two threads used 1.05
+CPU seconds per wall second against 0.95 for one (``getrusage``), because
+the other jobs leave this process about one core's worth of time (a quiet
+machine with more cores was not measured).
 
 EPPF's default ``scaling="fit"`` needs the data set's scale before the first
 row, so ``describe`` reads every file in a first pass and describes in a
@@ -277,8 +290,8 @@ def write_las_tile(folder, n_points, seed=0):
     return paths
 
 
-def time_las(paths, n_points, repeats=5):
-    """Million points per second of read_point_fields, read_point_cloud and laspy (best of ``repeats``)."""
+def _las_readers():
+    """(name, function of a path) of eppf's two readers and laspy's own reading of every field."""
     import laspy
 
     from eppf.io import read_point_fields
@@ -287,16 +300,48 @@ def time_las(paths, n_points, repeats=5):
         las = laspy.read(path)
         return [np.asarray(las[name]) for name in list(las.point_format.dimension_names) + ["x", "y", "z"]]
 
+    return (("read_point_fields", read_point_fields), ("read_point_cloud", read_point_cloud),
+            ("laspy, every field", laspy_every_field))
+
+
+def _best_rates(path, n_points, repeats):
+    """[(reader, million points per second)], the best of ``repeats`` reads of ``path`` by each reader."""
+    rows = []
+    for name, func in _las_readers():
+        best = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            func(path)
+            best = min(best, time.perf_counter() - t0)
+        rows.append((name, n_points / best / 1e6))
+    return rows
+
+
+def _laz_rates(path, n_points, repeats, threads):
+    """``_best_rates`` of a LAZ file in a fresh process whose lazrs decodes on ``threads`` threads.
+
+    laspy decodes LAZ with lazrs's parallel backend when it is installed (eppf's readers use laspy's
+    default), on rayon's global thread pool, whose size is fixed by ``RAYON_NUM_THREADS`` when the
+    process first uses it: hence one process per thread count.
+    """
+    env = dict(os.environ, RAYON_NUM_THREADS=str(threads))
+    out = subprocess.run([sys.executable, os.path.abspath(__file__), "--time-file", path, "--las-points",
+                          str(n_points), "--repeats", str(repeats)], env=env, check=True, capture_output=True,
+                         text=True).stdout
+    return [(name, float(rate)) for name, rate in (line.rsplit("\t", 1) for line in out.splitlines() if line)]
+
+
+def time_las(paths, n_points, repeats=5):
+    """Rows (file, threads, reader, million points per second): .las in this process, .laz decoded on one
+    thread and on every core (``os.cpu_count()``), best of ``repeats``."""
     rows = []
     for path in paths:
-        for name, func in (("read_point_fields", read_point_fields), ("read_point_cloud", read_point_cloud),
-                           ("laspy, every field", laspy_every_field)):
-            best = float("inf")
-            for _ in range(repeats):
-                t0 = time.perf_counter()
-                func(path)
-                best = min(best, time.perf_counter() - t0)
-            rows.append((os.path.splitext(path)[1], name, n_points / best / 1e6))
+        ext = os.path.splitext(path)[1]
+        if ext == ".laz":
+            for threads in dict.fromkeys((1, os.cpu_count() or 1)):
+                rows += [(ext, threads, name, rate) for name, rate in _laz_rates(path, n_points, repeats, threads)]
+        else:
+            rows += [(ext, "-", name, rate) for name, rate in _best_rates(path, n_points, repeats)]
     return rows
 
 
@@ -313,13 +358,19 @@ def main():
     p.add_argument("--n-jobs", type=int, default=2, help="--n-jobs of eppf describe (default 2)")
     p.add_argument("--extra", default="", help="more eppf describe options, e.g. \"--scaling object\"")
     p.add_argument("--cache-dir", default=None, help="keep the folders here (default: a temporary folder)")
+    p.add_argument("--time-file", default=None, help=argparse.SUPPRESS)  # a child of time_las: one LAS/LAZ file
+    p.add_argument("--repeats", type=int, default=5, help=argparse.SUPPRESS)
     args = p.parse_args()
+    if args.time_file:
+        for name, rate in _best_rates(args.time_file, args.las_points, args.repeats):
+            print(f"{name}\t{rate!r}")
+        return
     if args.las_points:
         with tempfile.TemporaryDirectory(prefix="eppf-bench-las-") as folder:
             rows = time_las(write_las_tile(folder, args.las_points), args.las_points)
-        print(f"{'file':5s} {'reader':20s} {'Mpoints/s':>10s}")
-        for ext, name, rate in rows:
-            print(f"{ext:5s} {name:20s} {rate:10.1f}", flush=True)
+        print(f"{'file':5s} {'threads':>7s}  {'reader':20s} {'Mpoints/s':>10s}")
+        for ext, threads, name, rate in rows:
+            print(f"{ext:5s} {threads!s:>7s}  {name:20s} {rate:10.1f}", flush=True)
         if args.las_only:
             return
         print()
