@@ -338,7 +338,10 @@ def _same_bits(a, b):
 
 def _axis_grid(values):
     """(scale, offset) for one axis: a decimal grid that gives ``values`` back bit for bit, else the finest
-    decimal grid whose integers fit LAS's 32 bits (from an offset at the floor of the minimum)."""
+    decimal grid whose integers fit LAS's 32 bits (from an offset at the floor of the minimum). An empty
+    file (no points) gets millimetres from 0."""
+    if values.size == 0:
+        return 0.001, 0.0
     lo, hi = float(values.min()), float(values.max())
     sample = values[:: max(1, values.shape[0] // 64)]
     offsets = [0.0] + [float(np.floor(lo / m) * m) for m in (1e6, 1e5, 1e4, 1e3, 1e2, 10.0, 1.0)]

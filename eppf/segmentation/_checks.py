@@ -7,7 +7,11 @@ import numpy as np
 from ..utils._param_validation import Interval, validate_parameter
 from ..utils._validation import check_point_cloud
 
-__all__ = ["TOLERANCE", "check_field", "check_scene", "check_tolerance"]
+__all__ = ["MAX_EXTENT", "TOLERANCE", "check_field", "check_scene", "check_tolerance"]
+
+#: The largest scene extent per axis: squared distances and the plane fit's sums of squares
+#: (up to 1e9 points) stay finite below it, with a wide margin over any real scan (1e7 m).
+MAX_EXTENT = 1e100
 
 #: ``tolerance``: None (derived from the point spacing) or a positive distance.
 TOLERANCE = [None, Interval(numbers.Real, 0, None, closed="neither")]
@@ -19,7 +23,8 @@ def check_scene(points, owner):
     Six-column input (points and normals) is accepted; the normals are dropped.
     Raises TypeError/ValueError naming ``owner`` for a wrong type or shape, an
     empty scene, a single point, NaN or infinite coordinates, a scene whose
-    points are all identical, or one whose extent overflows float64.
+    points are all identical, or one whose extent is beyond :data:`MAX_EXTENT`
+    (its squared distances would overflow float64).
     """
     arr = check_point_cloud(points, owner=owner, min_points=2, allow_normals=True)
     xyz = np.ascontiguousarray(arr[:, :3])
@@ -28,6 +33,9 @@ def check_scene(points, owner):
     if not np.isfinite(extent).all():
         raise ValueError(f"{owner}: the scene's extent overflows float64 (coordinates from {xyz.min():.6g} to "
                          f"{xyz.max():.6g})")
+    if extent.max() > MAX_EXTENT:
+        raise ValueError(f"{owner}: the scene spans {extent.max():.6g} along one axis; at most {MAX_EXTENT:g} can be "
+                         "segmented (squared distances would overflow float64): rescale the coordinates")
     return xyz
 
 

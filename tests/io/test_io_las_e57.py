@@ -78,6 +78,14 @@ def test_las_round_trip_bit_for_bit(tmp_path, ext):
     assert las.header.point_count == again.header.point_count
 
 
+@pytest.mark.parametrize("ext", ["las", "laz"])
+def test_a_scene_of_no_points_writes_an_empty_las_file(tmp_path, ext):
+    write_point_fields(tmp_path / f"e.{ext}", np.zeros((0, 3)), {"intensity": np.zeros(0, np.uint16)})
+    assert laspy.read(str(tmp_path / f"e.{ext}")).header.point_count == 0
+    points, fields = read_point_fields(tmp_path / f"e.{ext}")
+    assert points.shape == (0, 3) and fields["intensity"].shape == (0,)
+
+
 def test_las_writer_chooses_the_point_format(tmp_path):
     pts = np.array([[1.5, 2.25, 3.0], [4.0, 5.0, 6.125]])
     write_point_fields(tmp_path / "a.las", pts, {"classification": np.array([2, 31])})

@@ -1,5 +1,7 @@
 """euclidean_clusters against an independent reference: SciPy's connected components of the radius graph."""
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy.sparse import coo_matrix
@@ -120,6 +122,7 @@ def test_float32_and_int_input():
     (np.zeros(4), 1.0, ValueError, r"shape"),
     (np.zeros((3, 3)), 1.0, ValueError, r"all 3 points identical"),
     (np.array([[-1e308, 0, 0], [1e308, 0, 0]]), 1.0, ValueError, r"extent overflows"),
+    (np.array([[0, 0, 0], [1e200, 0, 0]]), 1.0, ValueError, r"spans 1e\+200 along one axis; at most 1e\+100"),
     (np.array([[0, 0, 0], [1e9, 0, 0]]), 1e-9, ValueError, r"more than 2\*\*30 cells"),
     (np.array([["a", "b", "c"]] * 2), 1.0, TypeError, r"must hold numbers"),
     (np.eye(3), 0.0, ValueError, r"tolerance must be None or a float in \(0.0, inf\), got 0.0"),
@@ -132,6 +135,17 @@ def test_float32_and_int_input():
 def test_bad_input_is_named(points, tolerance, kind, pattern):
     with pytest.raises(kind, match=r"^euclidean_clusters: .*" + pattern):
         euclidean_clusters(points, tolerance)
+
+
+def test_scenes_whose_squared_distances_overflow_are_refused_by_every_function():
+    from eppf.segmentation import remove_ground, segment_scene
+
+    scene = np.random.default_rng(0).normal(size=(200, 3)) * 1e300  # finite extent, infinite squares
+    for function in (euclidean_clusters, remove_ground, segment_scene):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # refused before any overflow warning
+            with pytest.raises(ValueError, match=rf"^{function.__name__}: the scene spans .* rescale"):
+                function(scene)
 
 
 @pytest.mark.parametrize("kwargs, pattern", [
