@@ -339,7 +339,7 @@ def _same_bits(a, b):
 def _axis_grid(values):
     """(scale, offset) for one axis: a decimal grid that gives ``values`` back bit for bit, else the finest
     decimal grid whose integers fit LAS's 32 bits (from an offset at the floor of the minimum). An empty
-    file (no points) gets millimetres from 0."""
+    file (no points) gets millimeters from 0."""
     if values.size == 0:
         return 0.001, 0.0
     lo, hi = float(values.min()), float(values.max())
