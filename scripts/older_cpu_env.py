@@ -11,7 +11,9 @@ machine. On x86-64:
   newer: the names come from the running NumPy, which renamed them in 2.x);
 - ``OPENBLAS_CORETYPE=Haswell``: OpenBLAS's AVX2 kernels, unless the variable is
   already set (some machines set it to avoid a faulty kernel: never override);
-- ``ATEN_CPU_CAPABILITY=avx2``: torch's AVX2 kernels.
+- ``ATEN_CPU_CAPABILITY=avx2``: torch's AVX2 kernels;
+- ``ONEDNN_MAX_CPU_ISA=AVX2``: oneDNN's AVX2 kernels, which torch's CPU convolutions
+  run (``ATEN_CPU_CAPABILITY`` does not reach them).
 
 Elsewhere only ``EPPF_SIMD=scalar`` is printed. ``--eppf LEVEL`` prints another
 ``EPPF_SIMD`` level instead.
@@ -44,6 +46,7 @@ def settings(eppf_level="scalar"):
     if not os.environ.get("OPENBLAS_CORETYPE"):
         out.append(("OPENBLAS_CORETYPE", "Haswell"))
     out.append(("ATEN_CPU_CAPABILITY", "avx2"))
+    out.append(("ONEDNN_MAX_CPU_ISA", "AVX2"))
     return out
 
 
