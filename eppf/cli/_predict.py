@@ -7,10 +7,10 @@ import sys
 import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_output, class_name, count,
-                      emit, fewest_points, load_model, model_sampling, progress_of, read_inputs, register,
-                      set_runtime, warn, warn_tiny)
+                      emit, fewest_points, file_seeds, load_model, model_sampling, progress_of, read_inputs,
+                      register, set_runtime, too_few_points, warn, warn_tiny)
 from ._segment import (FIELD_FORMATS, add_segmentation, coordinate, given_segmentation_options, segment_file,
-                       segmentation_settings, stage, summary, write_fields_atomically)
+                       segmentation_settings, stage, summary)
 
 __all__ = ["run_predict"]
 
@@ -128,8 +128,8 @@ def mark_unreliable(header, rows, why, output):
 
 def run_predict_scene(args, out):
     """``eppf predict --segment``: split one scene into objects and classify each (see :func:`run_predict`)."""
+    from ..io import write_point_fields
     from ..utils._sampling import object_rng, resample
-    from ._common import file_seeds, too_few_points
 
     cmd = getattr(args, "prog", "eppf predict")
     if len(args.inputs) != 1:
@@ -188,7 +188,7 @@ def run_predict_scene(args, out):
         point_class = np.full(len(scene.points), -1, dtype=np.int32)
         point_class[scene.order] = classes[scene.labels[scene.order]]
         fields.update(segment=scene.labels.astype(np.int32), **{"class": point_class})
-        write_fields_atomically(labelled, scene.points, fields)
+        write_point_fields(labelled, scene.points, fields)  # written whole or not at all
         codes = ", ".join(f"{k} {c}" for k, c in enumerate(saved.get("classes") or []))
         print(f"eppf: {summary(scene)} -> {labelled} (fields 'segment' and 'class'; class numbers: {codes})",
               file=out)

@@ -26,15 +26,13 @@ FIELD_FORMATS = ("las", "laz", "pcd", "ply")
 FALLBACK_FORMAT = "ply"
 #: Field names of a scene's normals, as the readers give them (PCD/NumPy, PLY).
 NORMAL_FIELDS = (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"))
-#: Smallest segment kept by default (segment_scene's default): smaller ones are noise or bits of ground.
-DEFAULT_MIN_POINTS = 30
 
 
 def add_segmentation(parser, prefix=""):
     """``--by``, ``--ground``, ``--tolerance``, ``--min-points`` and ``--max-points``: the same in ``eppf
     segment`` and ``eppf predict --segment`` (defaults None, resolved by :func:`segmentation_settings`, so
     that ``predict`` can tell whether one was given)."""
-    from ..segmentation._scene import GROUND
+    from ..segmentation._scene import DEFAULT_MIN_POINTS, GROUND
 
     parser.add_argument("--by", metavar="FIELD", default=None,
                         help=f"{prefix}take the segments from an integer field of the file (instance, label, "
@@ -69,9 +67,9 @@ def add_arguments(p):
 
 def segmentation_settings(args):
     """Keyword arguments of :func:`eppf.segmentation.segment_scene` from the options."""
-    return dict(by=args.by, ground=args.ground or "auto", tolerance=args.tolerance,
-                min_points=DEFAULT_MIN_POINTS if args.min_points is None else args.min_points,
-                max_points=args.max_points)
+    given = dict(by=args.by, ground=args.ground, tolerance=args.tolerance, min_points=args.min_points,
+                 max_points=args.max_points)
+    return {name: value for name, value in given.items() if value is not None}  # segment_scene's defaults
 
 
 def given_segmentation_options(args):
@@ -177,24 +175,6 @@ def summary(scene):
 def coordinate(value):
     """A coordinate for a CSV: enough digits for millimeters at 1e7 (projected LiDAR coordinates)."""
     return format(float(value), ".12g")
-
-
-def write_fields_atomically(path, points, fields, format=None):
-    """:func:`eppf.io.write_point_fields` into a temporary folder beside the target, the file renamed into
-    place when complete (an interrupted write leaves no partial file)."""
-    import shutil
-    import tempfile
-
-    from ..io import write_point_fields
-
-    path = str(path)
-    scratch = tempfile.mkdtemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".eppf-")
-    try:
-        tmp = os.path.join(scratch, os.path.basename(path))
-        write_point_fields(tmp, points, fields, format=format)
-        os.replace(tmp, path)
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def check_output_folder(folder):

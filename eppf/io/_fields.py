@@ -1,6 +1,8 @@
 """Every per-point field of a file: :func:`read_point_fields` and :func:`write_point_fields`."""
 
 import os
+import shutil
+import tempfile
 
 import numpy as np
 
@@ -264,9 +266,20 @@ def write_point_fields(path, points, fields=None, *, format=None):
         raise ValueError(f"{owner}: cannot write fields to a {fmt.name} file ({path!r}); "
                          f"write_point_fields writes {', '.join(_WRITABLE)}")
     points, fields = _check_fields(points, fields, owner, fmt.name)
-    if fmt.name == "pcd":
-        _pcd.write_pcd_fields(path, points, fields)
-    elif fmt.name == "ply":
-        _ply.write_ply_fields(path, points, fields, "f4" if _pcd.exact_float32(points) else "f8")
-    else:
-        _las.write_las(path, points, fields, owner, compressed=fmt.name == "laz")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"{owner}: cannot write {path!r}: no such folder {folder}")
+    # written under its own name in a scratch folder beside the target (laspy writes by name), then renamed
+    # into place: an interrupted or failed write leaves no partial file and any old file as it was
+    scratch = tempfile.mkdtemp(dir=folder, prefix=".eppf-")
+    try:
+        tmp = os.path.join(scratch, os.path.basename(path))
+        if fmt.name == "pcd":
+            _pcd.write_pcd_fields(tmp, points, fields)
+        elif fmt.name == "ply":
+            _ply.write_ply_fields(tmp, points, fields, "f4" if _pcd.exact_float32(points) else "f8")
+        else:
+            _las.write_las(tmp, points, fields, owner, compressed=fmt.name == "laz", shown=path)
+        os.replace(tmp, path)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)

@@ -401,8 +401,10 @@ def _choose_format(laspy, fields, owner):
     raise ValueError(f"{owner}: no LAS point format has all of the fields {named}")
 
 
-def write_las(path, points, fields, owner, compressed):
-    laspy = laspy_module(owner, path, compressed)
+def write_las(path, points, fields, owner, compressed, shown=None):
+    """Write a LAS/LAZ file; messages name ``shown`` (the user's name of a file written under another)."""
+    shown = path if shown is None else shown
+    laspy = laspy_module(owner, shown, compressed)
     fields = dict(fields)
     if not np.isfinite(points).all():
         raise ValueError(f"{owner}: LAS stores coordinates as integers on a grid: points must be finite")
@@ -440,7 +442,7 @@ def write_las(path, points, fields, owner, compressed):
     except OSError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise ValueError(f"{owner}: cannot write {path!r} ({type(exc).__name__}: {exc})") from None
+        raise ValueError(f"{owner}: cannot write {os.fspath(shown)!r} ({type(exc).__name__}: {exc})") from None
 
 
 def _cloud_fields(cloud):

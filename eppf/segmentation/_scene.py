@@ -13,6 +13,8 @@ from ..utils._param_validation import Options, StrOptions, validate_parameter
 __all__ = ["SceneSegmenter", "segment_scene"]
 
 GROUND = ("auto", "plane", "grid", "none")
+#: Smallest segment kept by default: smaller clusters are noise or bits of ground.
+DEFAULT_MIN_POINTS = 30
 #: RANSAC's settings for the ground plane of a scene (fixed: the same segments on every call).
 _N_TRIALS, _SEED, _MAX_SLOPE = 100, 0, 0.3
 
@@ -48,7 +50,8 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
     return labels, mask, tol, method
 
 
-def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None, min_points=30, max_points=None):
+def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None, min_points=DEFAULT_MIN_POINTS,
+                  max_points=None):
     """Split a scene into objects: remove the ground, then cluster (or split by a field).
 
     PCL's recipe for a scene of objects standing on a floor or on terrain
@@ -187,7 +190,7 @@ class SceneSegmenter(ClusterMixin, BaseEstimator):
         "max_points": MAX_POINTS,
     }
 
-    def __init__(self, *, by=None, ground="auto", tolerance=None, min_points=30, max_points=None):
+    def __init__(self, *, by=None, ground="auto", tolerance=None, min_points=DEFAULT_MIN_POINTS, max_points=None):
         self.by = by
         self.ground = ground
         self.tolerance = tolerance

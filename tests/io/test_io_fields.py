@@ -165,6 +165,29 @@ def test_write_argument_errors(tmp_path, fields, exc, msg):
         write_point_fields(tmp_path / "o.ply", np.zeros((3, 3)), fields)
 
 
+def test_a_failed_write_leaves_the_old_file_and_no_scratch(tmp_path, monkeypatch):
+    from eppf.io import _pcd
+
+    target = tmp_path / "scene.pcd"
+    write_point_fields(target, np.eye(3), {"label": np.arange(3, dtype=np.int32)})
+    before = target.read_bytes()
+
+    def half_then_fail(path, points, fields):
+        with open(path, "wb") as fh:
+            fh.write(b"# .PCD v0.7 - truncated")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_pcd, "write_pcd_fields", half_then_fail)
+    with pytest.raises(KeyboardInterrupt):
+        write_point_fields(target, np.zeros((5, 3)))
+    assert target.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["scene.pcd"]
+
+
+def test_write_into_a_missing_folder_names_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match=r"write_point_fields: cannot write .*o\.ply.*: no such folder"):
+        write_point_fields(tmp_path / "nowhere" / "o.ply", np.zeros((3, 3)))
+
+
 def test_write_refuses_other_formats_and_meshes(tmp_path):
     with pytest.raises(ValueError, match="cannot write fields to a xyz file"):
         write_point_fields(tmp_path / "o.xyz", np.zeros((3, 3)))
