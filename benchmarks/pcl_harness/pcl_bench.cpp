@@ -100,6 +100,24 @@ static void keep(const pcl::PointCloud<Sig>& out, std::vector<float>& row)
     for (size_t i = 0; i < row.size(); ++i) row[i] = h[i];
 }
 
+// Compute EST's descriptor of one object into row.
+template <class Signature, class Estimator>
+static void compute_into(Estimator& est, std::vector<float>& row)
+{
+    pcl::PointCloud<Signature> out;
+    est.compute(out);
+    keep(out, row);
+}
+
+// The inputs of an estimator that takes normals: the object's points and normals, and a k-d tree.
+template <class Estimator>
+static void set_inputs(Estimator& est, const Object& o, const pcl::search::KdTree<pcl::PointXYZ>::Ptr& tree)
+{
+    est.setInputCloud(o.points);
+    est.setInputNormals(o.normals);
+    est.setSearchMethod(tree);
+}
+
 // One object through TASK; its output row goes to row (sized by the caller).
 static void describe(const std::string& task, const Object& o, int k, std::vector<float>& row)
 {
@@ -119,64 +137,38 @@ static void describe(const std::string& task, const Object& o, int k, std::vecto
         }
     } else if (task == "esf") {
         pcl::ESFEstimation<pcl::PointXYZ, pcl::ESFSignature640> est;
-        pcl::PointCloud<pcl::ESFSignature640> out;
         est.setInputCloud(o.points);
-        est.compute(out);
-        keep(out, row);
+        compute_into<pcl::ESFSignature640>(est, row);
     } else if (task == "gasd") {
         pcl::GASDEstimation<pcl::PointXYZ, pcl::GASDSignature512> est;
-        pcl::PointCloud<pcl::GASDSignature512> out;
         est.setInputCloud(o.points);
-        est.compute(out);
-        keep(out, row);
+        compute_into<pcl::GASDSignature512>(est, row);
     } else if (task == "vfh") {
         pcl::VFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::VFHSignature308> est;
-        pcl::PointCloud<pcl::VFHSignature308> out;
-        est.setInputCloud(o.points);
-        est.setInputNormals(o.normals);
-        est.setSearchMethod(tree);
-        est.compute(out);
-        keep(out, row);
-    } else if (task == "cvfh") {
+        set_inputs(est, o, tree);
+        compute_into<pcl::VFHSignature308>(est, row);
+    } else if (task == "cvfh" || task == "cvfh_default") {
         pcl::CVFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::VFHSignature308> est;
-        pcl::PointCloud<pcl::VFHSignature308> out;
-        est.setInputCloud(o.points);
-        est.setInputNormals(o.normals);
-        est.setSearchMethod(tree);
-        est.setEPSAngleThreshold(eps);
-        est.setCurvatureThreshold(1.0f);
-        est.setNormalizeBins(false);
-        est.compute(out);
-        keep(out, row);
-    } else if (task == "cvfh_default") {
-        pcl::CVFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::VFHSignature308> est;
-        pcl::PointCloud<pcl::VFHSignature308> out;
-        est.setInputCloud(o.points);
-        est.setInputNormals(o.normals);
-        est.setSearchMethod(tree);
-        est.compute(out);
-        keep(out, row);
+        set_inputs(est, o, tree);
+        if (task == "cvfh") {  // the reference runs' settings; cvfh_default keeps PCL's
+            est.setEPSAngleThreshold(eps);
+            est.setCurvatureThreshold(1.0f);
+            est.setNormalizeBins(false);
+        }
+        compute_into<pcl::VFHSignature308>(est, row);
     } else if (task == "ourcvfh") {
         pcl::OURCVFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::VFHSignature308> est;
-        pcl::PointCloud<pcl::VFHSignature308> out;
-        est.setInputCloud(o.points);
-        est.setInputNormals(o.normals);
-        est.setSearchMethod(tree);
+        set_inputs(est, o, tree);
         est.setEPSAngleThreshold(eps);
         est.setCurvatureThreshold(1.0f);
         est.setAxisRatio(0.8f);
         est.setNormalizeBins(false);
-        est.compute(out);
-        keep(out, row);
+        compute_into<pcl::VFHSignature308>(est, row);
     } else if (task == "grsd") {
         pcl::GRSDEstimation<pcl::PointXYZ, pcl::Normal, pcl::GRSDSignature21> est;
-        pcl::PointCloud<pcl::GRSDSignature21> out;
-        est.setInputCloud(o.points);
-        est.setInputNormals(o.normals);
-        est.setSearchMethod(tree);
+        set_inputs(est, o, tree);
         est.setRadiusSearch(0.05);
-        est.compute(out);
-        keep(out, row);
+        compute_into<pcl::GRSDSignature21>(est, row);
     } else {
         throw std::runtime_error("unknown task " + task);
     }
