@@ -67,7 +67,6 @@ import numpy as np
 from sklearn.metrics import pairwise_distances_chunked
 
 import eppf
-from eppf import ESFTransformer, OURCVFHTransformer, WahlTransformer
 from eppf.preprocessing._normals import estimate_normals_batch
 from eppf.utils._validation import pack_point_clouds
 from eppf.metrics import leave_one_out_retrieval, retrieval_scores

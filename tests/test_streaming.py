@@ -1,7 +1,6 @@
 """eppf.describe_files and the descriptors' streaming hooks (partial_fit, _stream_part)."""
 
 import io
-import os
 import threading
 
 import numpy as np

@@ -1,6 +1,5 @@
 """Viewpoint Feature Histogram (VFH), Rusu, Bradski, Thibaux & Hsu (2010), as in PCL 1.13."""
 
-import numbers
 
 import numpy as np
 

@@ -12,7 +12,7 @@ break) and a triangle line at least 8.
 
 import numpy as np
 
-from ._common import Mesh, check_count, content, fan, next_line, parse_float_rows, text_lines
+from ._common import Mesh, content, fan, next_line, parse_float_rows, text_lines
 from ._errors import FileFormatError
 
 try:  # compiled parser for plain OFF bodies

@@ -447,7 +447,6 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
         name = type(self).__name__
         faiss.omp_set_num_threads(1)  # this thread's OpenMP setting only
         Z = self._embed(rows)
-        n_q = rows.shape[0]
         extra = 1 if loo_start is not None else 0
         m_search = min(m + extra, self.n_samples_fit_)
         if self.n_lists_ is None:

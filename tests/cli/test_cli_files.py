@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from eppf import EPPFTransformer
-from eppf.cli import build_parser, main, make_pipeline_from_args
+from eppf.cli import build_parser, make_pipeline_from_args
 from eppf.datasets import load_folder
 from eppf.io import write_mesh, write_point_cloud
 from eppf.registry import RECIPE

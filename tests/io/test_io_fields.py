@@ -3,7 +3,6 @@ compared with files and readers of other tools (PCL, plyfile, laspy, pye57), and
 
 import os
 import struct
-import sys
 
 import numpy as np
 import pytest

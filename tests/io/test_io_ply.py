@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
+from eppf.io import FileFormatError, read_mesh, read_point_cloud, write_mesh, write_point_cloud
 
 
 
