@@ -247,6 +247,7 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 """
 
 import argparse
+import contextlib
 import os
 import sys
 import time
@@ -322,12 +323,42 @@ def _best_time(fn, repeats):
     return min(cpu), min(wall)
 
 
+def _set_conv_impl(net, impl):
+    """Run every convolution of an EPPFNet4D as ``impl`` (its parameters are the same either way)."""
+    for module in (net, net.conv1, net.conv2, net.conv3):
+        module.conv_impl = impl
+    return net
+
+
+@contextlib.contextmanager
+def _networks_built_with(impl):
+    """EPPFNet4D built inside (e.g. by EPPF4DClassifier.fit) gets ``conv_impl=impl``."""
+    from eppf.nn import EPPFNet4D
+
+    defaults = EPPFNet4D.__init__.__kwdefaults__
+    before = defaults["conv_impl"]
+    defaults["conv_impl"] = impl
+    try:
+        yield
+    finally:
+        defaults["conv_impl"] = before
+
+
+def _spatial_major(*shape):
+    """A random (batch, C, *spatial) tensor laid out (*spatial, C, batch), as the spectral layers pass it on."""
+    import torch
+
+    d = len(shape) - 2
+    return torch.randn(*shape[2:], shape[1], shape[0]).permute(d + 1, d, *range(d))
+
+
 def profile(args):
-    """Per-layer forward and backward time of the 4D network, against the GEMM roofline."""
+    """Per-layer forward and backward time of the 4D network, direct and spectral, against the GEMM roofline."""
     import torch
     import torch.nn.functional as F
 
     from eppf.nn import EPPFNet4D
+    from eppf.nn._spectral import spectral_conv, spectral_cost
 
     torch.set_num_threads(args.threads)
     torch.backends.mkldnn.enabled = not args.no_mkldnn
@@ -337,7 +368,8 @@ def profile(args):
     a, b = torch.randn(n, n), torch.randn(n, n)
     cpu, wall = _best_time(lambda: a @ b, R)
     peak = 2 * n**3 / cpu / 1e9  # per CPU-second, the unit of every rate below
-    print(f"torch {torch.__version__}, {args.threads} threads, batch {B}, mkldnn {torch.backends.mkldnn.enabled}")
+    print(f"torch {torch.__version__}, {args.threads} threads, batch {B}, mkldnn {torch.backends.mkldnn.enabled}; "
+          f"load average {os.getloadavg()[0]:.2f}")
     print(f"roofline: {n}x{n} fp32 mm {peak:.1f} GFLOP per CPU-second ({2 * n**3 / wall / 1e9:.1f} GFLOP/s wall)")
     if args.recommended:  # the "4D+" network (its 518-value side branch is a negligible dense layer)
         from eppf.registry import RECIPE
@@ -347,37 +379,56 @@ def profile(args):
     else:
         (f1, f2, f3), hidden = (32, 64, 48), 1024
     net = EPPFNet4D(n_classes=10, filters=(f1, f2, f3), n_hidden=hidden)
-    print(f"network: filters {(f1, f2, f3)}, {hidden} dense units")
+    print(f"network: filters {(f1, f2, f3)}, {hidden} dense units; convolutions: {' and '.join(args.conv_impl)}",
+          flush=True)
     n1, n2, n3, n4 = net.n_bins
     folded = B * n4
     rows = []
 
-    def layer(name, f, x, params, macs, input_grad=True):
+    def layer(name, f, x, params, macs, input_grad=True, impl=None):
         out = f(x)
-        g = torch.randn_like(out)
+        g = torch.randn_like(out)  # laid out as the output
         wrt = ([x] if input_grad else []) + params
         fwd = _best_time(lambda: f(x), R)[0]
         both = _best_time(lambda: torch.autograd.grad(f(x), wrt, g), R)[0]
-        rows.append((name, fwd, max(both - fwd, 0.0), macs, macs * (2 if input_grad else 1) if macs else 0))
+        rows.append((name, fwd, max(both - fwd, 0.0), macs, macs * (2 if input_grad else 1) if macs else 0, impl))
         print(f"  {name}: {1e3 * fwd:.1f} ms forward, {1e3 * max(both - fwd, 0.0):.1f} ms backward", flush=True)
 
     pad = lambda t: F.pad(t, (0, 1, 0, 1, 2, 2))  # noqa: E731  TF "same" for (5, 2, 2)
     w1 = net.conv1.weight[..., 0].detach().requires_grad_()
     b1 = net.conv1.bias.detach().requires_grad_()
     spatial = n1 * n2 * n3
-    layer(f"conv1 4D 1->{f1} (5,2,2,1)", lambda t: F.conv3d(pad(t), w1, b1), torch.randn(folded, 1, n1, n2, n3),
+    layer(f"conv1 4D 1->{f1} (5,2,2,1) direct", lambda t: F.conv3d(pad(t), w1, b1), torch.randn(folded, 1, n1, n2, n3),
           [w1, b1], folded * f1 * 20 * spatial, input_grad=False)
     w2 = net.conv2.weight[..., 0].detach().requires_grad_()
     b2 = net.conv2.bias.detach().requires_grad_()
-    layer(f"conv2 4D {f1}->{f2} (5,2,2,1)", lambda t: F.conv3d(pad(t), w2, b2),
-          torch.randn(folded, f1, n1, n2, n3, requires_grad=True), [w2, b2], folded * f2 * f1 * 20 * spatial)
     rows_, cols_ = net.plane
-    layer("relu + reshape to plane", lambda t: torch.relu(t).reshape(B, n4, f2, n1, n2, n3).permute(0, 3, 4, 5, 1, 2)
-          .reshape(B, rows_, cols_, f2).permute(0, 3, 1, 2), torch.randn(folded, f2, n1, n2, n3, requires_grad=True), [], 0)
-    layer(f"conv3 2D {f2}->{f3} 5x5", net.conv3, torch.randn(B, rows_, cols_, f2).permute(0, 3, 1, 2).requires_grad_(),
-          list(net.conv3.parameters()), B * f3 * f2 * 25 * rows_ * cols_)
-    layer("relu + maxpool + flatten", lambda t: torch.flatten(net.pool(torch.relu(t)), 1),
-          torch.randn(B, f3, rows_, cols_).contiguous(memory_format=torch.channels_last).requires_grad_(), [], 0)
+    w3, b3 = (p.detach().requires_grad_() for p in net.conv3.conv.parameters())
+    direct2, direct3 = folded * f2 * f1 * 20 * spatial, B * f3 * f2 * 25 * rows_ * cols_
+    for impl in args.conv_impl:
+        if impl == "direct":
+            layer(f"conv2 4D {f1}->{f2} (5,2,2,1) direct", lambda t: F.conv3d(pad(t), w2, b2),
+                  torch.randn(folded, f1, n1, n2, n3, requires_grad=True), [w2, b2], direct2, impl=impl)
+            layer("relu + reshape to plane", lambda t: torch.relu(t).reshape(B, n4, f2, n1, n2, n3)
+                  .permute(0, 3, 4, 5, 1, 2).reshape(B, rows_, cols_, f2).permute(0, 3, 1, 2),
+                  torch.randn(folded, f2, n1, n2, n3, requires_grad=True), [], 0, impl=impl)
+            layer(f"conv3 2D {f2}->{f3} 5x5 direct", lambda t: F.conv2d(F.pad(t, (2, 2, 2, 2)), w3, b3),
+                  torch.randn(B, rows_, cols_, f2).permute(0, 3, 1, 2).requires_grad_(), [w3, b3], direct3, impl=impl)
+            layer("relu + maxpool + flatten", lambda t: torch.flatten(net.pool(torch.relu(t)), 1),
+                  torch.randn(B, f3, rows_, cols_).contiguous(memory_format=torch.channels_last).requires_grad_(),
+                  [], 0, impl=impl)
+        else:  # multiply-adds counted as the transforms' and the mixing's (spectral_cost), a third forward
+            layer(f"conv2 4D {f1}->{f2} (5,2,2,1) spectral", lambda t: spectral_conv(t, w2, b2),
+                  _spatial_major(folded, f1, n1, n2, n3).requires_grad_(), [w2, b2],
+                  folded * spectral_cost((n1, n2, n3), (5, 2, 2), f1, f2) // 3, impl=impl)
+            layer("relu + transpose to plane", lambda t: torch.relu(t).permute(2, 3, 4, 1, 0)
+                  .reshape(n1, n2, n3, f2, n4, B).permute(0, 1, 2, 4, 3, 5).reshape(rows_, cols_, f2, B)
+                  .permute(3, 2, 0, 1), _spatial_major(folded, f2, n1, n2, n3).requires_grad_(), [], 0, impl=impl)
+            layer(f"conv3 2D {f2}->{f3} 5x5 spectral", lambda t: spectral_conv(t, w3, b3),
+                  _spatial_major(B, f2, rows_, cols_).requires_grad_(), [w3, b3],
+                  B * spectral_cost((rows_, cols_), (5, 5), f2, f3) // 3, impl=impl)
+            layer("relu + maxpool + flatten (spatial-major)", lambda t: torch.flatten(net.pool(torch.relu(t)), 1),
+                  _spatial_major(B, f3, rows_, cols_).requires_grad_(), [], 0, impl=impl)
     layer(f"fc1 {net.n_flat}->{hidden} + relu + dropout", lambda t: net.dropout(torch.relu(net.fc1(t))),
           torch.randn(B, net.n_flat, requires_grad=True), list(net.fc1.parameters()), B * net.n_flat * hidden)
     layer(f"fc2 {hidden}->10 + loss", lambda t: net.fc2(t).logsumexp(1).sum(), torch.randn(B, hidden, requires_grad=True),
@@ -385,43 +436,47 @@ def profile(args):
     per_epoch = 4000 / B
     print(f"\nCPU ms per batch of {B} (best of {R}); epoch = 4,000 objects = {per_epoch:.1f} batches")
     print("GF/s: GFLOP per CPU-second; % peak: of the mm roofline; s/epoch: CPU seconds")
-    print(f"{'layer':36s} {'fwd ms':>7s} {'bwd ms':>7s} {'fwd GMAC':>8s} {'bwd GMAC':>8s} {'fwd GF/s':>8s} "
+    print(f"{'layer':42s} {'fwd ms':>7s} {'bwd ms':>7s} {'fwd GMAC':>8s} {'bwd GMAC':>8s} {'fwd GF/s':>8s} "
           f"{'bwd GF/s':>8s} {'% peak':>6s} {'s/epoch':>7s}")
-    total_t = total_macs = 0.0
-    for name, tf, tb, mf, mb in rows:
-        total_t += tf + tb
-        total_macs += mf + mb
+    for name, tf, tb, mf, mb, _ in rows:
         rate = lambda m, t: f"{2 * m / t / 1e9:8.1f}" if m and t > 0 else f"{'-':>8s}"  # noqa: E731
         eff = f"{100 * 2 * (mf + mb) / (tf + tb) / 1e9 / peak:6.0f}" if mf else f"{'-':>6s}"
-        print(f"{name:36s} {1e3 * tf:7.1f} {1e3 * tb:7.1f} {mf / 1e9:8.3f} {mb / 1e9:8.3f} {rate(mf, tf)} "
+        print(f"{name:42s} {1e3 * tf:7.1f} {1e3 * tb:7.1f} {mf / 1e9:8.3f} {mb / 1e9:8.3f} {rate(mf, tf)} "
               f"{rate(mb, tb)} {eff} {(tf + tb) * per_epoch:7.2f}")
+    adam = 0.0
     for fused in (False, True):
         opt = torch.optim.Adam(net.parameters(), lr=5e-4, fused=fused)
         for prm in net.parameters():
             prm.grad = torch.randn_like(prm)
         t = _best_time(opt.step, R)[0]
-        total_t += t if fused else 0.0
-        print(f"{'Adam step, fused=' + str(fused):36s} {1e3 * t:7.1f} {'':7s} {'':8s} {'':8s} {'':8s} {'':8s} {'':6s} "
+        adam = t if fused else adam
+        print(f"{'Adam step, fused=' + str(fused):42s} {1e3 * t:7.1f} {'':7s} {'':8s} {'':8s} {'':8s} {'':8s} {'':6s} "
               f"{t * per_epoch:7.2f}")
-    x, y = torch.randn(B, net.n_features), torch.randint(0, 10, (B,))
-    opt = torch.optim.Adam(net.parameters(), lr=5e-4, fused=True)
+    for impl in args.conv_impl:
+        parts = [r for r in rows if r[5] in (None, impl)]
+        total_t = sum(r[1] + r[2] for r in parts) + adam
+        total_macs = sum(r[3] + r[4] for r in parts)
+        _set_conv_impl(net, impl if impl == "direct" else "auto")
+        x, y = torch.randn(B, net.n_features), torch.randint(0, 10, (B,))
+        opt = torch.optim.Adam(net.parameters(), lr=5e-4, fused=True)
 
-    def step():
-        opt.zero_grad()
-        F.cross_entropy(net(x), y).backward()
-        opt.step()
+        def step():
+            opt.zero_grad()
+            F.cross_entropy(net(x), y).backward()
+            opt.step()
 
-    cpu, wall = _best_time(step, R)
-    print(f"sum of the parts (fused Adam): {total_t * per_epoch:.1f} CPU s per epoch")
-    print(f"whole training step: {1e3 * cpu:.0f} CPU ms, {1e3 * wall:.0f} wall ms -> "
-          f"{wall * per_epoch:.1f} s per 4,000-object epoch (wall)")
-    flops = 2 * total_macs * per_epoch
-    print(f"multiply-adds per epoch (fwd + bwd): {total_macs * per_epoch / 1e12:.2f} T: {flops / peak / 1e9:.1f} CPU s "
-          f"at the roofline, i.e. {flops / peak / 1e9 / args.threads:.1f} s wall on {args.threads} fully used cores")
+        cpu, wall = _best_time(step, R)
+        print(f"\n{impl}: sum of the parts (fused Adam): {total_t * per_epoch:.1f} CPU s per epoch")
+        print(f"{impl}: whole training step: {1e3 * cpu:.0f} CPU ms, {1e3 * wall:.0f} wall ms -> "
+              f"{cpu * per_epoch:.1f} CPU s, {wall * per_epoch:.1f} s wall per 4,000-object epoch")
+        flops = 2 * total_macs * per_epoch
+        print(f"{impl}: multiply-adds per epoch (fwd + bwd): {total_macs * per_epoch / 1e12:.2f} T: "
+              f"{flops / peak / 1e9:.1f} CPU s at the roofline, i.e. {flops / peak / 1e9 / args.threads:.1f} s wall on "
+              f"{args.threads} fully used cores", flush=True)
 
 
 def epoch(args):
-    """Wall time of real EPPF4DClassifier epochs over 4,000 random descriptors."""
+    """Wall and CPU time of real EPPF4DClassifier epochs over 4,000 random descriptors, direct and spectral."""
     import os as _os
 
     from eppf import EPPF4DClassifier
@@ -435,20 +490,36 @@ def epoch(args):
 
         X = np.hstack([X, rng.random((4000, 518), dtype=np.float32)])
         extra = dict(filters=RECIPE["filters"], n_hidden=RECIPE["n_hidden"], n_side_features="auto")
+    results = []
     for precision in args.precision:
         for conv in args.variants:
-            clf = EPPF4DClassifier(
-                conv=conv, max_epochs=args.max_epochs, early_stopping=False, batch_size=args.batch_size,
-                n_jobs=args.threads, random_state=0, precision=precision, **extra,
-            )
-            load = _os.getloadavg()[0]
-            c0, w0 = time.process_time(), time.perf_counter()
-            clf.fit(X, y)
-            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-            durations = ", ".join(f"{d:.1f}" for d in clf.net_.history[:, "dur"])
-            print(f"{conv} {precision}: {wall / clf.n_epochs_:.1f} s wall, {cpu / clf.n_epochs_:.1f} s CPU per "
-                  f"4,000-object epoch (epochs: {durations} s; {args.threads} threads, batch {args.batch_size}, "
-                  f"load average at start {load:.2f}, at end {_os.getloadavg()[0]:.2f})", flush=True)
+            for impl in (args.conv_impl if conv == "4d" else ["direct"]):
+                label = f"{conv} {precision} {impl}" + (" (recommended)" if args.recommended else "")
+                print(f"training {label}: {args.max_epochs} epoch(s) over 4,000 descriptors, {args.threads} threads, "
+                      f"batch {args.batch_size}, load average {_os.getloadavg()[0]:.2f}", flush=True)
+                clf = EPPF4DClassifier(
+                    conv=conv, max_epochs=args.max_epochs, early_stopping=False, batch_size=args.batch_size,
+                    n_jobs=args.threads, random_state=0, precision=precision, verbose=1, **extra,
+                )
+                load = _os.getloadavg()[0]
+                c0, w0 = time.process_time(), time.perf_counter()
+                with _networks_built_with("direct" if impl == "direct" else "auto"):
+                    clf.fit(X, y)
+                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+                durations = ", ".join(f"{d:.1f}" for d in clf.net_.history[:, "dur"])
+                n = min(1000, len(X))
+                c1, w1 = time.process_time(), time.perf_counter()
+                clf.predict_proba(X[:n])
+                pred_wall, pred_cpu = time.perf_counter() - w1, time.process_time() - c1
+                results.append((label, wall / clf.n_epochs_, cpu / clf.n_epochs_, 1000 * pred_wall / n,
+                                1000 * pred_cpu / n))
+                print(f"{label}: {wall / clf.n_epochs_:.1f} s wall, {cpu / clf.n_epochs_:.1f} s CPU per "
+                      f"4,000-object epoch (epochs: {durations} s; load average at start {load:.2f}, at end "
+                      f"{_os.getloadavg()[0]:.2f}); prediction {1000 * pred_wall / n:.2f} s wall, "
+                      f"{1000 * pred_cpu / n:.2f} s CPU per 1,000 descriptors", flush=True)
+    print(f"\n{'network':40s} {'s/epoch':>8s} {'CPU s':>8s} {'predict s/1000':>15s} {'CPU s':>8s}")
+    for label, wall, cpu, pwall, pcpu in results:
+        print(f"{label:40s} {wall:8.1f} {cpu:8.1f} {pwall:15.2f} {pcpu:8.2f}")
 
 
 def descriptors(args):
@@ -681,6 +752,9 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--verbose", type=int, default=0)
     parser.add_argument("--no-mkldnn", action="store_true", help="profile: disable oneDNN convolutions")
+    parser.add_argument("--conv-impl", nargs="+", default=["direct", "spectral"], choices=("direct", "spectral"),
+                        help="epoch, profile: the 4D network's convolutions, direct and/or in the frequency domain "
+                             "('spectral' trains with conv_impl='auto': the first layer direct, the others spectral)")
     parser.add_argument("--objects", nargs="+", type=int, default=[1000, 2000, 4000],
                         help="fit: training-set sizes to profile (stratified subsets of the training split)")
     parser.add_argument("--predict-objects", type=int, default=500,

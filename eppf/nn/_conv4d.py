@@ -23,7 +23,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..utils._param_validation import Interval, IntTuple, StrOptions, validate_parameter
-from ._spectral import choose_impl, spectral_conv
+from ._spectral import PATCH_MAX_TAPS, choose_impl, is_spatial_major, patch_conv, spectral_conv
 
 __all__ = ["Conv4d", "conv4d", "same_padding"]
 
@@ -95,10 +95,16 @@ def _unfold_last_axis(output, batch, n4):
 
 
 def _conv3d(input, weight, bias, conv_impl):
-    """"Same" conv3d of a (B, C, n1, n2, n3) tensor, direct or in the frequency domain."""
+    """"Same" conv3d of a (B, C, n1, n2, n3) tensor, direct or in the frequency domain.
+
+    A direct convolution of a spatial-major input (as the frequency-domain
+    layers return) with few input channels keeps that layout (:func:`patch_conv`).
+    """
     impl = choose_impl(conv_impl, input.shape[2:], weight.shape[2:], weight.shape[1], weight.shape[0])
     if impl == "spectral":
         return spectral_conv(input, weight, bias)
+    if weight.shape[1:].numel() <= PATCH_MAX_TAPS and is_spatial_major(input):
+        return patch_conv(input, weight, bias)
     return F.conv3d(_pad_first_three(input, weight.shape[2:]), weight, bias)
 
 

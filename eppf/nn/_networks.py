@@ -186,8 +186,8 @@ class _MaxPool2d(nn.MaxPool2d):
 
     A (batch, C, rows, cols) tensor laid out (rows, cols, C, batch) in memory,
     as the frequency-domain convolution returns it, is pooled in place of
-    the copy to the layout ``max_pool2d`` reads: two maxima over pairs, each
-    keeping the first of equal values (as ``max_pool2d`` does), with
+    the copy to the layout ``max_pool2d`` reads: two elementwise maxima of
+    pairs, each keeping the first of equal values (as ``max_pool2d`` does), with
     ``-inf`` rows or columns added where a size is odd (``ceil_mode``).
     Other layouts, and other pooling settings, go to ``MaxPool2d``.
     """
@@ -202,8 +202,14 @@ class _MaxPool2d(nn.MaxPool2d):
         if rows % 2 or cols % 2:
             m = torch.nn.functional.pad(m, (0, 0, 0, 0, 0, cols % 2, 0, rows % 2), value=-math.inf)
         m = m.reshape(m.shape[0] // 2, 2, m.shape[1] // 2, 2, *m.shape[2:])
-        m = m.max(3).values.max(1).values
+        m = _first_max(m[:, :, :, 0], m[:, :, :, 1])
+        m = _first_max(m[:, 0], m[:, 1])
         return m.permute(3, 2, 0, 1)
+
+
+def _first_max(a, b):
+    """Elementwise maximum that takes ``a`` (and its gradient) on equal values and ``a``'s NaN, as max_pool2d."""
+    return torch.where((a >= b) | torch.isnan(a), a, b)
 
 
 def _pairs(value, expected=2):
@@ -413,14 +419,16 @@ class EPPFNet4D(_EPPFNetBase):
     def _spectral_body(self, x):
         """The folded route with the second convolution in the frequency domain.
 
-        Folds f4 into the batch f4-major (index ``l * batch + b``) so that the
-        second layer's spatial-major result, (n1, n2, n3, C, n4, batch) in
-        memory, needs one transpose to become the plane the third layer reads
-        in the same layout: (rows, cols, C, batch).
+        Everything is laid out spatial-major, (*spatial, channels, columns):
+        the input transposed, (n1, n2, n3, n4, batch), is already the first
+        layer's input with f4 folded into the batch f4-major (column
+        ``l * batch + b``); the second layer's result, (n1, n2, n3, C, n4,
+        batch) in memory, needs one transpose to become the plane the third
+        layer reads, (rows, cols, C, batch).
         """
         batch = x.shape[0]
         n1, n2, n3, n4 = self.n_bins
-        x = x.reshape(batch, n1, n2, n3, n4).permute(4, 0, 1, 2, 3).reshape(n4 * batch, 1, n1, n2, n3)
+        x = x.t().contiguous().reshape(n1, n2, n3, 1, n4 * batch).permute(4, 3, 0, 1, 2)
         x = self._act(self.conv1.forward_folded(x), 0)
         x = self._act(self.conv2.forward_folded(x), 1)
         c = x.shape[1]

@@ -46,7 +46,7 @@ import math
 
 import torch
 
-__all__ = ["choose_impl", "direct_cost", "spectral_conv", "spectral_cost"]
+__all__ = ["choose_impl", "direct_cost", "is_spatial_major", "patch_conv", "spectral_conv", "spectral_cost"]
 
 
 def _same(k):
@@ -115,6 +115,7 @@ class _Plan:
         self.kernel = tuple(kernel)
         sizes, halved, n_freq = _layout(spatial, kernel)
         self.n_freq = tuple(n_freq)
+        self.size = math.prod(sizes)  # points of the circular convolution
         d = len(spatial)
         f64 = torch.float64
         self.forward_mats, self.inverse_mats = [], []
@@ -242,9 +243,10 @@ class _SpectralConv(torch.autograd.Function):
         c, o = weight.shape[1], weight.shape[0]
         spectrum = plan.forward_transform(x, c)
         blocks = plan.blocks(weight)
-        y = plan.inverse_transform(torch.bmm(blocks, spectrum), o)
-        if bias is not None:
-            y = y + bias.view(o, 1)
+        mixed = torch.bmm(blocks, spectrum)
+        if bias is not None:  # a constant is the zero frequency alone: N times the bias, real
+            mixed[0, :o] += plan.size * bias.view(o, 1)
+        y = plan.inverse_transform(mixed, o)
         ctx.save_for_backward(spectrum, blocks)
         ctx.plan = plan
         ctx.weight_shape = weight.shape
@@ -265,7 +267,7 @@ class _SpectralConv(torch.autograd.Function):
             if ctx.needs_input_grad[1]:
                 gw = plan.blocks_t(torch.bmm(g_spec, spectrum.transpose(1, 2)), ctx.weight_shape)
             if ctx.has_bias and ctx.needs_input_grad[2]:
-                gb = grad.reshape(-1, o, grad.shape[-1]).sum((0, 2))
+                gb = plan.size * g_spec[0, :o].sum(1)
         return gx, gw, gb, None
 
 
@@ -338,3 +340,52 @@ def _auto(spatial, kernel, in_channels, out_channels):
     saving = direct_cost(spatial, kernel, in_channels, out_channels) / spectral_cost(
         spatial, kernel, in_channels, out_channels)
     return "spectral" if saving >= AUTO_MIN_SAVING else "direct"
+
+
+def is_spatial_major(input):
+    """Whether a (batch, C, *spatial) tensor is laid out (*spatial, C, batch) in memory."""
+    d = input.dim() - 2
+    return input.permute(*range(2, 2 + d), 1, 0).is_contiguous()
+
+
+#: :func:`patch_conv` copies every input value once per tap; beyond this many
+#: taps times input channels the copy costs more than a layout change.
+PATCH_MAX_TAPS = 64
+
+
+def patch_conv(input, weight, bias=None):
+    """Direct "same" convolution of a spatial-major tensor, with its layout kept.
+
+    The input's patches (every tap of every input channel) are gathered into
+    a ``(positions, in_channels * taps, batch)`` tensor and multiplied by the
+    weight, one matrix product per position: the result is laid out
+    spatial-major like :func:`spectral_conv`'s. For layers of few input
+    channels (at most :data:`PATCH_MAX_TAPS` channels times taps), such as a
+    network's first layer in front of frequency-domain layers.
+
+    Parameters
+    ----------
+    input : torch.Tensor of shape (batch, in_channels, *spatial)
+    weight : torch.Tensor of shape (out_channels, in_channels, *kernel)
+    bias : torch.Tensor of shape (out_channels,), default=None
+
+    Returns
+    -------
+    output : torch.Tensor of shape (batch, out_channels, *spatial)
+    """
+    d = input.dim() - 2
+    kernel = weight.shape[2:]
+    o = weight.shape[0]
+    x = input.permute(*range(2, 2 + d), 1, 0)  # (*spatial, C, batch)
+    spatial, c, n = x.shape[:d], x.shape[d], x.shape[d + 1]
+    pads = [0, 0, 0, 0]
+    for k in reversed(kernel):
+        pads.extend(_same(k))
+    x = torch.nn.functional.pad(x, pads)
+    for j, k in enumerate(kernel):
+        x = x.unfold(j, k, 1)  # (*spatial, C, batch, k_1, ..., k_j)
+    patches = x.permute(*range(d), d, *range(d + 2, 2 * d + 2), d + 1).reshape(math.prod(spatial), -1, n)
+    y = torch.matmul(weight.reshape(o, -1), patches)  # (positions, O, batch)
+    if bias is not None:
+        y = y + bias.view(o, 1)
+    return y.reshape(*spatial, o, n).permute(d + 1, d, *range(d))

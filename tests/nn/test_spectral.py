@@ -10,7 +10,7 @@ import torch.nn.functional as F
 
 from eppf.nn import Conv4d, EPPFNet4D, conv4d, same_padding
 from eppf.nn._networks import _MaxPool2d
-from eppf.nn._spectral import choose_impl, direct_cost, spectral_conv, spectral_cost
+from eppf.nn._spectral import choose_impl, direct_cost, is_spatial_major, patch_conv, spectral_conv, spectral_cost
 from eppf.utils._param_validation import InvalidParameterError
 
 from .test_conv4d import _brute_force_conv4d
@@ -240,3 +240,18 @@ def test_on_cuda():
     a.eval(), b.eval()
     with torch.no_grad():
         torch.testing.assert_close(b.cuda()(x.cuda()).cpu(), a(x))
+
+
+@pytest.mark.parametrize("spatial, kernel, c_in", [((20, 4, 5), (5, 2, 2), 1), ((6, 5), (3, 4), 3), ((7,), (2,), 2)])
+def test_patch_conv_matches_direct_and_keeps_the_layout(spatial, kernel, c_in):
+    gen = torch.Generator().manual_seed(len(spatial))
+    x = torch.randn(*spatial, c_in, 5, dtype=torch.float64, generator=gen)
+    x = x.permute(len(spatial) + 1, len(spatial), *range(len(spatial)))  # spatial-major
+    w = torch.randn(4, c_in, *kernel, dtype=torch.float64, generator=gen, requires_grad=True)
+    b = torch.randn(4, dtype=torch.float64, generator=gen, requires_grad=True)
+    got, ref = patch_conv(x, w, b), _direct(x.contiguous(), w, b)
+    torch.testing.assert_close(got, ref)
+    assert is_spatial_major(got)
+    g = torch.randn(ref.shape, dtype=torch.float64, generator=gen)
+    for a, e in zip(torch.autograd.grad(got, (w, b), g), torch.autograd.grad(ref, (w, b), g)):
+        torch.testing.assert_close(a, e)
