@@ -456,23 +456,31 @@ def profile(args):
         parts = [r for r in rows if r[5] in (None, impl)]
         total_t = sum(r[1] + r[2] for r in parts) + adam
         total_macs = sum(r[3] + r[4] for r in parts)
-        _set_conv_impl(net, impl if impl == "direct" else "auto")
-        x, y = torch.randn(B, net.n_features), torch.randint(0, 10, (B,))
-        opt = torch.optim.Adam(net.parameters(), lr=5e-4, fused=True)
-
-        def step():
-            opt.zero_grad()
-            F.cross_entropy(net(x), y).backward()
-            opt.step()
-
-        cpu, wall = _best_time(step, R)
         print(f"\n{impl}: sum of the parts (fused Adam): {total_t * per_epoch:.1f} CPU s per epoch")
-        print(f"{impl}: whole training step: {1e3 * cpu:.0f} CPU ms, {1e3 * wall:.0f} wall ms -> "
-              f"{cpu * per_epoch:.1f} CPU s, {wall * per_epoch:.1f} s wall per 4,000-object epoch")
         flops = 2 * total_macs * per_epoch
         print(f"{impl}: multiply-adds per epoch (fwd + bwd): {total_macs * per_epoch / 1e12:.2f} T: "
               f"{flops / peak / 1e9:.1f} CPU s at the roofline, i.e. {flops / peak / 1e9 / args.threads:.1f} s wall on "
               f"{args.threads} fully used cores", flush=True)
+    print(f"\nwhole training step (forward, backward, fused Adam) and inference, batch {B}, best of {R}:")
+    x, y = torch.randn(B, net.n_features), torch.randint(0, 10, (B,))
+    for precision in args.precision:
+        for impl in args.conv_impl:
+            step_net = _set_conv_impl(EPPFNet4D(n_classes=10, filters=(f1, f2, f3), n_hidden=hidden,
+                                                precision=precision), impl if impl == "direct" else "auto")
+            opt = torch.optim.Adam(step_net.parameters(), lr=5e-4, fused=True)
+
+            def step():
+                opt.zero_grad()
+                F.cross_entropy(step_net(x), y).backward()
+                opt.step()
+
+            cpu, wall = _best_time(step, R)
+            step_net.eval()
+            with torch.no_grad():
+                icpu, iwall = _best_time(lambda: step_net(x), R)
+            print(f"  {precision} {impl}: {1e3 * cpu:.0f} CPU ms, {1e3 * wall:.0f} wall ms per step -> "
+                  f"{cpu * per_epoch:.1f} CPU s, {wall * per_epoch:.1f} s wall per 4,000-object epoch; inference "
+                  f"{1e3 * icpu / B:.2f} CPU s, {1e3 * iwall / B:.2f} s wall per 1,000 descriptors", flush=True)
 
 
 def epoch(args):
@@ -739,7 +747,7 @@ def main(argv=None):
     )
     parser.add_argument(
         "--precision", nargs="+", default=["float32"], choices=("float32", "bfloat16"),
-        help="epoch: every one listed; modelnet: the first",
+        help="epoch, profile (whole step): every one listed; modelnet: the first",
     )
     parser.add_argument("--weight-decay", type=float, default=0.0)
     parser.add_argument("--augment", action="store_true")

@@ -223,14 +223,15 @@ def test_pooling_in_the_spatial_major_layout_equals_max_pool2d(rows, cols):
     gen = torch.Generator().manual_seed(rows)
     m = torch.randn(rows, cols, 3, 4, dtype=torch.float64, generator=gen).relu()
     m[0, 0] = m[0, 1]  # equal values in one window: the first one takes the gradient, as in max_pool2d
+    m[2, 2, 0, 0] = float("nan")
     x = m.permute(3, 2, 0, 1).requires_grad_()
     pool = _MaxPool2d((2, 2), stride=(2, 2), ceil_mode=True)
     ref, got = F.max_pool2d(x, 2, 2, ceil_mode=True), pool(x)
-    assert torch.equal(ref, got)
+    assert torch.allclose(ref, got, rtol=0, atol=0, equal_nan=True)
     g = torch.randn(ref.shape, dtype=torch.float64, generator=gen)
     assert torch.equal(torch.autograd.grad(ref, x, g)[0], torch.autograd.grad(got, x, g)[0])
     # other layouts go to max_pool2d itself
-    assert torch.equal(pool(x.detach().contiguous()), ref.detach())
+    assert torch.allclose(pool(x.detach().contiguous()), ref.detach(), rtol=0, atol=0, equal_nan=True)
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
