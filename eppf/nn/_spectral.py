@@ -107,6 +107,17 @@ def direct_cost(spatial, kernel, in_channels, out_channels):
     return 3 * math.prod(spatial) * math.prod(kernel) * in_channels * out_channels
 
 
+def _left(matrix, t):
+    """``matrix @ t[p]`` for every ``p`` of a (P, k, R) tensor, as one matrix product per block.
+
+    (``torch.matmul`` folds a tensor that needs no gradient into one tall
+    product by transposing it: two copies of the data.)
+    """
+    if t.shape[0] == 1:
+        return torch.mm(matrix, t[0]).unsqueeze(0)
+    return torch.bmm(matrix.expand(t.shape[0], -1, -1), t)
+
+
 class _Plan:
     """Transform matrices of one (spatial, kernel) shape, on one device and dtype."""
 
@@ -163,7 +174,7 @@ class _Plan:
         t = x.reshape(1, self.spatial[0], -1)
         prefix = 1
         for j in range(d):
-            t = torch.matmul(self.forward_mats[j], t)  # (prefix, 2 n_j, rest)
+            t = _left(self.forward_mats[j], t)  # (prefix, 2 n_j, rest)
             prefix *= self.n_freq[j]
             if j + 1 < d:
                 t = t.reshape(prefix, 2 * self.spatial[j + 1], -1)
@@ -178,7 +189,7 @@ class _Plan:
         for j in reversed(range(d)):
             prefix //= self.n_freq[j]
             t = t.reshape(prefix, 2 * self.n_freq[j], -1)
-            t = torch.matmul(self.forward_mats[j].T, t)  # (prefix, rows_in_j, rest)
+            t = _left(self.forward_mats[j].T, t)  # (prefix, rows_in_j, rest)
         return t.reshape(*self.spatial, channels, cols)
 
     def inverse_transform(self, y, channels):
@@ -189,7 +200,7 @@ class _Plan:
         t = y
         for j in reversed(range(d)):
             prefix //= self.n_freq[j]
-            t = torch.matmul(self.inverse_mats[j], t.reshape(prefix, 2 * self.n_freq[j], -1))
+            t = _left(self.inverse_mats[j], t.reshape(prefix, 2 * self.n_freq[j], -1))
         return t.reshape(*self.spatial, channels, cols)
 
     def inverse_transform_t(self, g, channels):
@@ -199,7 +210,7 @@ class _Plan:
         t = g.reshape(1, self.spatial[0], -1)
         prefix = 1
         for j in range(d):
-            t = torch.matmul(self.inverse_mats[j].T, t)
+            t = _left(self.inverse_mats[j].T, t)
             prefix *= self.n_freq[j]
             if j + 1 < d:
                 t = t.reshape(prefix, 2 * self.spatial[j + 1], -1)
@@ -385,7 +396,9 @@ def patch_conv(input, weight, bias=None):
     for j, k in enumerate(kernel):
         x = x.unfold(j, k, 1)  # (*spatial, C, batch, k_1, ..., k_j)
     patches = x.permute(*range(d), d, *range(d + 2, 2 * d + 2), d + 1).reshape(math.prod(spatial), -1, n)
-    y = torch.matmul(weight.reshape(o, -1), patches)  # (positions, O, batch)
-    if bias is not None:
-        y = y + bias.view(o, 1)
+    w = weight.reshape(1, o, -1).expand(patches.shape[0], -1, -1)
+    if bias is None:
+        y = torch.bmm(w, patches)  # (positions, O, batch)
+    else:
+        y = torch.baddbmm(bias.view(1, o, 1).expand(patches.shape[0], o, n), w, patches)
     return y.reshape(*spatial, o, n).permute(d + 1, d, *range(d))
