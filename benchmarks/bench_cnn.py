@@ -12,11 +12,20 @@ Six parts, each printed as a table:
     Forward and backward time of every layer of the 4D network for one batch,
     in CPU time (robust to time-slicing on a shared machine), with its
     multiply-adds and achieved GFLOP/s against the fp32 roofline of a big
-    ``torch.mm``; the Adam step fused and unfused; the whole training step.
-    ``--recommended`` profiles the smaller network of "EPPF 4D+".
+    ``torch.mm``, for the direct and the frequency-domain convolutions side
+    by side (``--conv-impl``); the Adam step fused and unfused; the whole
+    training step and inference for every ``--precision`` and
+    implementation. ``--recommended`` profiles the smaller network of
+    "EPPF 4D+". Prints each layer as it is timed.
 ``epoch``
     Wall and CPU time of real ``EPPF4DClassifier`` epochs over 4,000 random
-    descriptors (the classifier's default batch size), with the load average.
+    descriptors (the classifier's default batch size), with the load average,
+    and prediction time per 1,000 descriptors; the 4D network with direct
+    and frequency-domain convolutions side by side (``--conv-impl``; the
+    networks the classifier builds get ``conv_impl``). Prints progress (the
+    classifier's epoch lines) and a summary table. For the AVX2 figures,
+    ``eval "$(python scripts/older_cpu_env.py)"`` and
+    ``MKL_ENABLE_INSTRUCTIONS=AVX2`` first.
 ``descriptors``
     Computes and caches EPPF descriptors of ModelNet10 (``--draws`` draws per
     object with different random pairs, per-object unit-cube scaling because
@@ -52,6 +61,14 @@ Run, e.g.::
     nice -n 10 python benchmarks/bench_cnn.py descriptors --draws 4
     nice -n 10 python benchmarks/bench_cnn.py modelnet --threads 1 --max-epochs 5 --patience 4
     nice -n 10 python benchmarks/bench_cnn.py fit --objects 1000 2000 4000 --threads 2
+
+Frequency-domain convolutions (issue 30; figures in ``docs/performance.rst``):
+``profile --threads 1 --repeats 3 --precision float32 bfloat16`` under the
+AVX2 settings above, whole training step, CPU s per 4,000-object epoch:
+the paper's 4D network 46.9 direct, 30.3 spectral (float32), 553 and 92.5
+(bfloat16, emulated); "EPPF 4D+" 12.3 and 11.2 (float32). The FFT attempt
+recorded below was 2x slower; the version kept does its transforms as small
+matrix products on a spatial-major layout.
 
 Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 2 to 6, so timings are noisy; see the report of issue 3):
