@@ -304,6 +304,8 @@ class Conv4d(nn.Module):
         Returns
         -------
         impl : {"direct", "spectral"}
+            ``conv_impl`` itself unless it is ``"auto"``, then the choice
+            that the layer's shape makes.
         """
         return choose_impl(self._impl(), tuple(spatial), self.kernel_size[:3], self.in_channels, self.out_channels)
 

@@ -339,6 +339,7 @@ def choose_impl(conv_impl, spatial, kernel, in_channels, out_channels):
     Returns
     -------
     impl : {"direct", "spectral"}
+        ``conv_impl`` itself unless it is ``"auto"``.
     """
     if conv_impl != "auto":
         return conv_impl
