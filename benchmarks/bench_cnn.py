@@ -65,8 +65,8 @@ Run, e.g.::
 Frequency-domain convolutions (issue 30; figures in ``docs/performance.rst``):
 ``profile --threads 1 --repeats 3 --precision float32 bfloat16`` under the
 AVX2 settings above, whole training step, CPU s per 4,000-object epoch:
-the paper's 4D network 46.9 direct, 30.3 spectral (float32), 553 and 92.5
-(bfloat16, emulated); "EPPF 4D+" 12.3 and 11.2 (float32). The FFT attempt
+the paper's 4D network 47.4 direct, 28.7 spectral (float32), 550 and 95.6
+(bfloat16, emulated); "EPPF 4D+" 12.0 and 9.3 (float32). The FFT attempt
 recorded below was 2x slower; the version kept does its transforms as small
 matrix products on a spatial-major layout.
 
