@@ -720,8 +720,8 @@ def eppf_counts(points_in, normals_in,
     # (one int32 more: the AVX2 walk setup reads a point's voxel as 16 bytes)
     vox_arr = np.zeros((num_threads, 3 * max_n + 1), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.walk_level >= 2 else 1), dtype=np.int64)
-    # the AVX-512 walk's cone grids and their scratch (between the grids' halves): the walk reads any
-    # of the first CODE_READ_WORDS words
+    # the skipping walks' cone grids and their scratch: level 3's (scratch between the grids' halves;
+    # the walk reads any of the first CODE_READ_WORDS words) or the portable walk's (levels 0 and 1)
     code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.walk_level == 3
                          else EPPF_PORT_WORDS if _port_walk(&prm) else 1), dtype=np.uint64)
     # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to ROWS_MAX_POINTS

@@ -13,7 +13,7 @@
  *   holds the code's bit 0 (c = 1 or 3), its second bit 1 (c = 2 or 3). Both
  *   come straight from the cone sets O_2 and O_3 with word operations (no
  *   bit spreading), so the build is a few whole-word passes that compilers
- *   vectorise. A look-up reads the 16 bytes of row (p >> 56) 64 + y, which is
+ *   vectorize. A look-up reads the 16 bytes of row (p >> 56) 64 + y, which is
  *   below EPPF_PORT_ROWS for any 64-bit position (x with the axis above it
  *   is 8 bits, y 6), so lanes past their line's end read inside the buffer.
  * - The lines of a batch are walked in rounds rather than lanes refilled from
