@@ -642,15 +642,28 @@ def _grid_arrays(const double[:, ::1] points, name):
     """Check ``points`` (finite, n >= 1) and allocate a grid's arrays (see
     :func:`_fill_grid`, :func:`_slab_bounds`): ``(cap, box, cell_of,
     cell_start, sidx, sp, slabs)`` with ``box`` the least coordinates and
-    the extents as a (2, 3) array."""
-    pts = np.asarray(points)
-    if not np.isfinite(pts).all():
+    the extents as a (2, 3) array (infinite extents beyond double range)."""
+    cdef int64_t n = points.shape[0], i
+    cdef int a
+    cdef double x
+    cdef bint finite = True
+    box = np.empty((2, 3))
+    cdef double[:, ::1] bx = box
+    with nogil:
+        for a in range(3):
+            bx[0, a] = points[0, a]
+            bx[1, a] = points[0, a]
+        for i in range(n):
+            for a in range(3):
+                x = points[i, a]
+                finite = finite and isfinite(x)
+                bx[0, a] = fmin(bx[0, a], x)
+                bx[1, a] = fmax(bx[1, a], x)
+        for a in range(3):
+            bx[1, a] = bx[1, a] - bx[0, a]
+    if not finite:
         raise ValueError(f"{name}: points must be finite")
-    n = len(pts)
     cap = GRID_CELLS_PER_POINT * n + 64
-    lo = pts.min(axis=0)
-    with np.errstate(over="ignore"):  # extents beyond double range: one cell
-        box = np.ascontiguousarray([lo, pts.max(axis=0) - lo])
     return (cap, box, np.empty(n, dtype=np.int64), np.empty(cap + 1, dtype=np.int64), np.empty(n, dtype=np.int64),
             np.empty((n, 3)), np.empty(2 * (cap + 2)))
 
