@@ -36,7 +36,7 @@
  * esf_take runs a copy of its body compiled for them (esf_take_avx2: four
  * doubles per vector for the square roots and divisions) and walks a
  * batch's lines four at a time (esf_walk_lines_avx2), and the D2/D3 values
- * are binned by esf_count_scaled_avx2. Only integer steps and plain IEEE
+ * are binned four at a time (esf_block_bins_avx2). Only integer steps and plain IEEE
  * operations are involved (no FMA), so the descriptor is bit-identical
  * either way; the tests compare both paths.
  */
@@ -353,36 +353,76 @@ static void esf_fill_ratio_bins(int n_bins, int16_t *ratio_bin)
             ratio_bin[64 * c + o] = (int16_t)(c > 0 && o <= c ? esf_round_bin((double)o / (double)c, n_bins) : 0);
 }
 
+/* bin[i] = esf_scaled_bin(v[i], vmax, scale, n_bins) for i < m, except that
+ * values near a rounding boundary get the multiplication's bin; returns
+ * whether there was any (the caller then redoes the block with
+ * esf_scaled_bin). Each value is clamped to [0, n_bins] before the
+ * conversion (NaN to 0); a value clamped to an end is an integer, so it
+ * counts as near too and esf_scaled_bin's clamps decide. */
+static inline int esf_block_bins(const double *v, int64_t m, double scale, int n_bins, int32_t *bin)
+{
+    int64_t i;
+    int near = 0;
+    const double top = (double)n_bins;
+    for (i = 0; i < m; i++) {
+        double x = v[i] * scale + 0.5, f;
+        int32_t k;
+        x = x > 0.0 ? x : 0.0;
+        x = x < top ? x : top;
+        k = (int32_t)x;
+        f = x - (double)k;
+        near |= (f < 1e-9) | (1.0 - f < 1e-9);
+        k = k < n_bins - 1 ? k : n_bins - 1;
+        bin[i] = k;
+    }
+    return near;
+}
+
+#if ESF_SIMD
+/* esf_block_bins four values at a time: the same IEEE operations (max and
+ * min give the clamps' results, NaN included: they return their second
+ * operand when the first is NaN), so the same bins and the same answer. (The
+ * compiler does not vectorize the plain loop: the clamps are branches to
+ * it.) */
+__attribute__((target("avx2")))
+static int esf_block_bins_avx2(const double *v, int64_t m, double scale, int n_bins, int32_t *bin)
+{
+    const __m256d vs = _mm256_set1_pd(scale), half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd(),
+                  top = _mm256_set1_pd((double)n_bins), eps = _mm256_set1_pd(1e-9), one = _mm256_set1_pd(1.0);
+    const __m128i kmax = _mm_set1_epi32(n_bins - 1);
+    __m256d near = _mm256_setzero_pd();
+    int64_t i;
+    for (i = 0; i + 4 <= m; i += 4) {
+        __m256d x = _mm256_add_pd(_mm256_mul_pd(_mm256_loadu_pd(v + i), vs), half), f;
+        __m128i k;
+        x = _mm256_min_pd(_mm256_max_pd(x, zero), top);
+        k = _mm256_cvttpd_epi32(x);
+        f = _mm256_sub_pd(x, _mm256_cvtepi32_pd(k));
+        near = _mm256_or_pd(near, _mm256_or_pd(_mm256_cmp_pd(f, eps, _CMP_LT_OQ),
+                                               _mm256_cmp_pd(_mm256_sub_pd(one, f), eps, _CMP_LT_OQ)));
+        _mm_storeu_si128((__m128i *)(bin + i), _mm_min_epi32(k, kmax));
+    }
+    return (_mm256_movemask_pd(near) != 0) | esf_block_bins(v + i, m - i, scale, n_bins, bin + i);
+}
+#else
+#define esf_block_bins_avx2 esf_block_bins
+#endif
+
 /* acc[cls[i] * n_bins + esf_scaled_bin(v[i], vmax, scale, n_bins)] += 1 for
- * i < n, in blocks: the bins of a block first, in a loop without branches
- * that the compiler vectorizes, with the values near a rounding boundary
- * (which take esf_scaled_bin's division) redone one by one, then the
- * counts. The values are lengths, never negative. */
-static inline __attribute__((always_inline)) void
-esf_count_scaled_impl(const double *v, const int8_t *cls, int64_t n, double vmax, double scale, int n_bins,
-                      int64_t *acc)
+ * i < n, in blocks: the bins of a block first, without branches (with AVX2
+ * when simd), the values near a rounding boundary (which take
+ * esf_scaled_bin's division) redone one by one, then the counts. The values
+ * are lengths, never negative. */
+static void esf_count_scaled(const double *v, const int8_t *cls, int64_t n, double vmax, double scale, int n_bins,
+                             int64_t *acc, int simd)
 {
     enum { BLOCK = 256 };
     int32_t bin[BLOCK];
     int64_t b, i, m;
-    const double top = (double)n_bins;
     for (b = 0; b < n; b += BLOCK) {
-        int near = 0;
+        int near;
         m = n - b < BLOCK ? n - b : BLOCK;
-        for (i = 0; i < m; i++) {
-            double x = v[b + i] * scale + 0.5;
-            int32_t k;
-            /* clamped to [0, n_bins] before the conversion (NaN to 0); a value
-             * clamped to an end is an integer, so it counts as near and the
-             * block is redone by esf_scaled_bin, whose clamps decide */
-            x = x > 0.0 ? x : 0.0;
-            x = x < top ? x : top;
-            k = (int32_t)x;
-            double f = x - (double)k;
-            near |= (f < 1e-9) | (1.0 - f < 1e-9);
-            k = k < n_bins - 1 ? k : n_bins - 1;
-            bin[i] = k;
-        }
+        near = simd ? esf_block_bins_avx2(v + b, m, scale, n_bins, bin) : esf_block_bins(v + b, m, scale, n_bins, bin);
         if (near)
             for (i = 0; i < m; i++)
                 bin[i] = esf_scaled_bin(v[b + i], vmax, scale, n_bins);
@@ -391,25 +431,8 @@ esf_count_scaled_impl(const double *v, const int8_t *cls, int64_t n, double vmax
     }
 }
 
-static void esf_count_scaled_default(const double *v, const int8_t *cls, int64_t n, double vmax, double scale,
-                                     int n_bins, int64_t *acc)
-{
-    esf_count_scaled_impl(v, cls, n, vmax, scale, n_bins, acc);
-}
-
-#if ESF_SIMD
-__attribute__((target("avx2,bmi,bmi2")))
-static void esf_count_scaled_avx2(const double *v, const int8_t *cls, int64_t n, double vmax, double scale,
-                                  int n_bins, int64_t *acc)
-{
-    esf_count_scaled_impl(v, cls, n, vmax, scale, n_bins, acc);
-}
-#else
-#define esf_count_scaled_avx2 esf_count_scaled_default
-#endif
-
 /* D3 and D2 histograms from the stored values, then weights and division by
- * the sum into out; simd: bin with esf_count_scaled_avx2. */
+ * the sum into out; simd: bin with esf_block_bins_avx2. */
 static void esf_finish(const esf_state *s, int n_bins, int simd)
 {
     static const double weights[10] = {0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 0.5, 2.0, 2.0, 1.0};
@@ -421,13 +444,8 @@ static void esf_finish(const esf_state *s, int n_bins, int simd)
     const int8_t *cls2 = s->cls2, *cls3 = s->cls3;
     const double *d2v = s->d2v, *d3v = s->d3v, maxd2 = s->maxd2, maxd3 = s->maxd3;
     const int64_t n_triplets = s->n_triplets;
-    if (simd) {
-        esf_count_scaled_avx2(d3v, cls3, n_triplets, maxd3, sc3, n_bins, acc + 3 * n_bins);
-        esf_count_scaled_avx2(d2v, cls2, 3 * n_triplets, maxd2, sc2, n_bins, acc + 6 * n_bins);
-    } else {
-        esf_count_scaled_default(d3v, cls3, n_triplets, maxd3, sc3, n_bins, acc + 3 * n_bins);
-        esf_count_scaled_default(d2v, cls2, 3 * n_triplets, maxd2, sc2, n_bins, acc + 6 * n_bins);
-    }
+    esf_count_scaled(d3v, cls3, n_triplets, maxd3, sc3, n_bins, acc + 3 * n_bins, simd);
+    esf_count_scaled(d2v, cls2, 3 * n_triplets, maxd2, sc2, n_bins, acc + 6 * n_bins, simd);
     for (i = 0; i < n_bins; i++)
         acc[9 * n_bins + i] += acc[10 * n_bins + i] + acc[11 * n_bins + i] + acc[12 * n_bins + i];
     for (i = 0; i < 3 * n_bins; i++)
