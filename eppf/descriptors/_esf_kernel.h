@@ -180,15 +180,15 @@ static void esf_setup_lines(int n, const int32_t *ax, const int32_t *ay, const i
         cnt[q] = esf_line_setup(ax[q], ay[q], az[q], bx[q], by[q], bz[q], rs, st, &pos[q], &inc[q]);
 }
 
-/* Occupied voxels among the n steps of a packed line. */
+/* Occupied voxels among the n >= 0 steps of a packed line. */
 static inline int esf_walk(const uint64_t *g3, uint64_t pos, uint64_t inc, int n)
 {
     int occ = 0;
     uint64_t end = pos + (uint64_t)n * inc;
-    do {
+    while (pos != end) {
         occ += (int)((g3[pos >> ESF_WORD_SHIFT] >> ((pos >> ESF_FRAC) & 63)) & 1);
         pos += inc;
-    } while (pos != end);
+    }
     return occ;
 }
 
@@ -213,7 +213,7 @@ static void esf_walk_lines(const uint64_t *g3, const uint64_t *pos, const uint64
 #if ESF_SIMD
 /* The same counts, four lines at a time in the lanes of AVX2 vectors (one
  * gather loads the four grid words of a step). The lines are first ordered
- * by their number of steps (a counting sort; 1 <= cnt <= 64), so the four
+ * by their number of steps (a counting sort; 0 <= cnt <= 64), so the four
  * lanes of a group need similar numbers of steps: all four walk the
  * group's smallest count without a test, then the lanes still running walk
  * on with a masked gather while the others add zero. The integer steps are
@@ -470,7 +470,7 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
     double c1[ESF_BATCH], c2[ESF_BATCH], c3[ESF_BATCH];
     int sel[ESF_BATCH];
     uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
-    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH];
+    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH], steps[3 * ESF_BATCH], known[3 * ESF_BATCH];
     int32_t ax[3 * ESF_BATCH], ay[3 * ESF_BATCH], az[3 * ESF_BATCH];
     int32_t bx[3 * ESF_BATCH], by[3 * ESF_BATCH], bz[3 * ESF_BATCH];
     const double *pts = s->pts;
@@ -525,7 +525,17 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
         bx[3 * q + 2] = cl[e3]; by[3 * q + 2] = cl[e3 + 1]; bz[3 * q + 2] = cl[e3 + 2];
     }
     esf_setup_lines(3 * nsel, ax, ay, az, bx, by, bz, k->rs, k->st, pos, inc, cnt);
-    esf_walk_batch(s->g3, pos, inc, cnt, occ, 3 * nsel, k->simd);
+    /* A line's ends are voxels of points, whose 3x3x3 neighborhoods are all
+     * occupied: so are its first two voxels and its last (all within one
+     * voxel of an end, see esf_line_setup). Only the others are walked. */
+    for (q = 0; q < 3 * nsel; q++) {
+        known[q] = cnt[q] < 3 ? cnt[q] : 3;
+        steps[q] = cnt[q] - known[q];
+        pos[q] += 2 * inc[q];
+    }
+    esf_walk_batch(s->g3, pos, inc, steps, occ, 3 * nsel, k->simd);
+    for (q = 0; q < 3 * nsel; q++)
+        occ[q] += known[q];
     /* histograms, in integers (A3 in 32nds of a voxel), without branches;
      * the state's fields in locals (the int8 stores could alias them) */
     {
