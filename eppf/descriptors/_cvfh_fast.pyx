@@ -336,15 +336,21 @@ cdef double _grid_resolution(const double* e, double h, int64_t cap, int64_t* re
 
 
 cdef int64_t _bin_points(const double* p, int64_t n, const double* lo, double inv_h, const int64_t* res,
-                         int64_t* cell_of, int64_t* counts) noexcept nogil:
-    """Each point's cell into ``cell_of``, the points per cell into
-    ``counts`` (zeroed here); returns the number of occupied cells."""
-    cdef int64_t i, c, occupied = 0, ncells = res[0] * res[1] * res[2]
+                         int64_t* cell_of, int64_t* counts, int64_t* xyz) noexcept nogil:
+    """Each point's cell into ``cell_of`` (and its cell coordinates into
+    ``xyz``, 3 per point, unless NULL), the points per cell into ``counts``
+    (zeroed here); returns the number of occupied cells."""
+    cdef int64_t i, c, cx, cy, cz, occupied = 0, ncells = res[0] * res[1] * res[2]
     memset(counts, 0, ncells * sizeof(int64_t))
     for i in range(n):
-        c = ((clamp_floor64((p[3 * i + 2] - lo[2]) * inv_h, res[2]) * res[1]
-              + clamp_floor64((p[3 * i + 1] - lo[1]) * inv_h, res[1])) * res[0]
-             + clamp_floor64((p[3 * i] - lo[0]) * inv_h, res[0]))
+        cx = clamp_floor64((p[3 * i] - lo[0]) * inv_h, res[0])
+        cy = clamp_floor64((p[3 * i + 1] - lo[1]) * inv_h, res[1])
+        cz = clamp_floor64((p[3 * i + 2] - lo[2]) * inv_h, res[2])
+        c = (cz * res[1] + cy) * res[0] + cx
+        if xyz != NULL:
+            xyz[3 * i] = cx
+            xyz[3 * i + 1] = cy
+            xyz[3 * i + 2] = cz
         cell_of[i] = c
         occupied += counts[c] == 0
         counts[c] += 1
@@ -352,19 +358,22 @@ cdef int64_t _bin_points(const double* p, int64_t n, const double* lo, double in
 
 
 cdef void _fill_grid(const double* p, int64_t n, const double* lo, const double* e, double h, int64_t cap,
-                     int64_t* res, int64_t* cell_of, int64_t* cell_start, int64_t* sidx, double* sp) noexcept nogil:
+                     int64_t* res, int64_t* cell_of, int64_t* cell_start, int64_t* sidx, double* sp,
+                     int64_t* cc) noexcept nogil:
     """Bin the points into cells of about size ``h`` (larger when there would
     be more than ``cap`` cells; one cell when ``h`` or an extent ``e`` is not
     finite) and store them cell by cell, ascending index within a cell: the
-    point stored at ``s`` is ``sidx[s]``, its coordinates ``sp[3 s:3 s + 3]``,
-    cell ``c`` holds the stored points ``cell_start[c]:cell_start[c + 1]``
-    (room for ``cap + 1``), and ``cell_of`` each point's cell."""
+    point stored at ``s`` is ``sidx[s]``, its coordinates ``sp[3 s:3 s + 3]``
+    and its cell's ``cc[3 s:3 s + 3]`` (``cc`` has room for ``6 n``: the
+    first half is scratch), cell ``c`` holds the stored points
+    ``cell_start[c]:cell_start[c + 1]`` (room for ``cap + 1``), and
+    ``cell_of`` each point's cell."""
     cdef int64_t i, c, s, t, total = 0
     cdef double inv_h = 0.0
     res[0] = res[1] = res[2] = 1
     if isfinite(h) and h > 0.0 and isfinite(e[0]) and isfinite(e[1]) and isfinite(e[2]):
         inv_h = 1.0 / _grid_resolution(e, h, cap, res)
-    _bin_points(p, n, lo, inv_h, res, cell_of, cell_start)
+    _bin_points(p, n, lo, inv_h, res, cell_of, cell_start, cc + 3 * n)
     c = res[0] * res[1] * res[2]
     for i in range(c):
         t = cell_start[i]
@@ -377,25 +386,23 @@ cdef void _fill_grid(const double* p, int64_t n, const double* lo, const double*
         sp[3 * s] = p[3 * i]
         sp[3 * s + 1] = p[3 * i + 1]
         sp[3 * s + 2] = p[3 * i + 2]
+        cc[3 * s] = cc[3 * (n + i)]
+        cc[3 * s + 1] = cc[3 * (n + i) + 1]
+        cc[3 * s + 2] = cc[3 * (n + i) + 2]
     for i in range(c, 0, -1):
         cell_start[i] = cell_start[i - 1]
     cell_start[0] = 0
 
 
-cdef inline void _cell_coords(int64_t cell, const int64_t* res, int64_t* c) noexcept nogil:
-    c[0] = cell % res[0]
-    c[1] = (cell // res[0]) % res[1]
-    c[2] = cell // (res[0] * res[1])
-
-
-cdef void _slab_bounds(const double* sp, int64_t n, const int64_t* sidx, const int64_t* cell_of,
-                       const int64_t* res, double* slabs, double** above, double** below) noexcept nogil:
+cdef void _slab_bounds(const double* sp, int64_t n, const int64_t* cc, const int64_t* res, double* slabs,
+                       double** above, double** below) noexcept nogil:
     """Point ``above[a]``/``below[a]`` into ``slabs`` (room for ``2 (res[0] +
     res[1] + res[2])``) and fill them: the least coordinate ``a`` of the
     points in the cell slabs j and up along axis ``a``, and the greatest of
     those in the slabs j and down (infinite where there are none)."""
     cdef int64_t s, i, t = 0
-    cdef int64_t c[3]
+    cdef const int64_t* c
+    cdef double x
     cdef int a
     for a in range(3):
         above[a] = &slabs[t]
@@ -404,16 +411,22 @@ cdef void _slab_bounds(const double* sp, int64_t n, const int64_t* sidx, const i
             above[a][i] = INFINITY
             below[a][i] = -INFINITY
         t += 2 * res[a]
+    # (comparisons, not fmin/fmax: library calls here, and the coordinates are never NaN)
     for s in range(n):
-        _cell_coords(cell_of[sidx[s]], res, c)
+        c = cc + 3 * s
         for a in range(3):
-            above[a][c[a]] = fmin(above[a][c[a]], sp[3 * s + a])
-            below[a][c[a]] = fmax(below[a][c[a]], sp[3 * s + a])
+            x = sp[3 * s + a]
+            if x < above[a][c[a]]:
+                above[a][c[a]] = x
+            if x > below[a][c[a]]:
+                below[a][c[a]] = x
     for a in range(3):
         for i in range(res[a] - 2, -1, -1):
-            above[a][i] = fmin(above[a][i], above[a][i + 1])
+            if above[a][i + 1] < above[a][i]:
+                above[a][i] = above[a][i + 1]
         for i in range(1, res[a]):
-            below[a][i] = fmax(below[a][i], below[a][i - 1])
+            if below[a][i - 1] > below[a][i]:
+                below[a][i] = below[a][i - 1]
 
 
 cdef inline double _slab_gap(double q, int64_t j, int64_t c, const double* above, const double* below) noexcept nogil:
@@ -601,47 +614,47 @@ cdef bint _has_close(const double* sp, const int64_t* cell_start, const int64_t*
                      double** below, int64_t s, const int64_t* c, double r2, int64_t enough) noexcept nogil:
     """Whether at least ``enough`` stored points (stored point ``s`` itself
     included) lie within squared distance ``r2`` of stored point ``s`` (in
-    cell ``c``)."""
-    cdef int64_t r = 0, jx, jy, jz, step, cell, i, count = 0
-    cdef double qx = sp[3 * s], qy = sp[3 * s + 1], qz = sp[3 * s + 2], dx, dy, dz, gx, gy, gz2, gyz2
-    cdef bint edge_z, edge_yz
-    while True:
-        for jz in range(c[2] - r if c[2] > r else 0, (c[2] + r if c[2] + r < res[2] else res[2] - 1) + 1):
-            gz2 = _slab_gap(qz, jz, c[2], above[2], below[2])
-            gz2 = gz2 * gz2
-            if gz2 > r2:
-                continue
-            edge_z = jz == c[2] - r or jz == c[2] + r
-            for jy in range(c[1] - r if c[1] > r else 0, (c[1] + r if c[1] + r < res[1] else res[1] - 1) + 1):
-                gy = _slab_gap(qy, jy, c[1], above[1], below[1])
-                gyz2 = gy * gy + gz2
-                if gyz2 > r2:
-                    continue
-                edge_yz = edge_z or jy == c[1] - r or jy == c[1] + r
-                step = 1 if edge_yz or r == 0 else 2 * r
-                jx = c[0] - r
-                while jx <= c[0] + r:
-                    if jx >= 0 and jx < res[0]:
-                        gx = _slab_gap(qx, jx, c[0], above[0], below[0])
-                        if not ((gx * gx + gy * gy) + gz2 > r2):
-                            cell = (jz * res[1] + jy) * res[0] + jx
-                            for i in range(cell_start[cell], cell_start[cell + 1]):
-                                dx = sp[3 * i] - qx
-                                dy = sp[3 * i + 1] - qy
-                                dz = sp[3 * i + 2] - qz
-                                count += (dx * dx + dy * dy) + dz * dz <= r2
-                            if count >= enough:
-                                return True
-                    jx += step
-        if _block_holds(&sp[3 * s], c, r, res, above, below, r2):
-            return False
-        r += 1
+    cell ``c``). Only the box of cells whose slabs come that close along
+    every axis is searched: a point outside it is farther along some axis."""
+    cdef int64_t lo[3]
+    cdef int64_t hi[3]
+    cdef int64_t jy, jz, row, i, j, count = 0
+    cdef double q, g, dx, dy, dz
+    cdef int a
+    for a in range(3):
+        q = sp[3 * s + a]
+        j = c[a]
+        while j > 0:
+            g = q - below[a][j - 1]
+            if g * g > r2:
+                break
+            j -= 1
+        lo[a] = j
+        j = c[a]
+        while j + 1 < res[a]:
+            g = above[a][j + 1] - q
+            if g * g > r2:
+                break
+            j += 1
+        hi[a] = j
+    for jz in range(lo[2], hi[2] + 1):
+        for jy in range(lo[1], hi[1] + 1):
+            # the row's cells are one run of stored points
+            row = (jz * res[1] + jy) * res[0]
+            for i in range(cell_start[row + lo[0]], cell_start[row + hi[0] + 1]):
+                dx = sp[3 * i] - sp[3 * s]
+                dy = sp[3 * i + 1] - sp[3 * s + 1]
+                dz = sp[3 * i + 2] - sp[3 * s + 2]
+                count += (dx * dx + dy * dy) + dz * dz <= r2
+            if count >= enough:
+                return True
+    return False
 
 
 def _grid_arrays(const double[:, ::1] points, name):
     """Check ``points`` (finite, n >= 1) and allocate a grid's arrays (see
     :func:`_fill_grid`, :func:`_slab_bounds`): ``(cap, box, cell_of,
-    cell_start, sidx, sp, slabs)`` with ``box`` the least coordinates and
+    cell_start, sidx, sp, slabs, cc)`` with ``box`` the least coordinates and
     the extents as a (2, 3) array (infinite extents beyond double range)."""
     cdef int64_t n = points.shape[0], i
     cdef int a
@@ -657,15 +670,17 @@ def _grid_arrays(const double[:, ::1] points, name):
             for a in range(3):
                 x = points[i, a]
                 finite = finite and isfinite(x)
-                bx[0, a] = fmin(bx[0, a], x)
-                bx[1, a] = fmax(bx[1, a], x)
+                if x < bx[0, a]:
+                    bx[0, a] = x
+                if x > bx[1, a]:
+                    bx[1, a] = x
         for a in range(3):
             bx[1, a] = bx[1, a] - bx[0, a]
     if not finite:
         raise ValueError(f"{name}: points must be finite")
     cap = GRID_CELLS_PER_POINT * n + 64
     return (cap, box, np.empty(n, dtype=np.int64), np.empty(cap + 1, dtype=np.int64), np.empty(n, dtype=np.int64),
-            np.empty((n, 3)), np.empty(2 * (cap + 2)))
+            np.empty((n, 3)), np.empty(2 * (cap + 2)), np.empty(6 * n, dtype=np.int64))
 
 
 def crowded_points(const double[:, ::1] points, double radius, Py_ssize_t enough):
@@ -679,7 +694,6 @@ def crowded_points(const double[:, ::1] points, double radius, Py_ssize_t enough
     cdef int64_t n = points.shape[0], cap, s, found = 0
     cdef double r2 = radius * radius * (1.0 + 1e-9)
     cdef int64_t res[3]
-    cdef int64_t cq[3]
     cdef double* above[3]
     cdef double* below[3]
     if points.shape[1] != 3:
@@ -688,20 +702,21 @@ def crowded_points(const double[:, ::1] points, double radius, Py_ssize_t enough
         raise ValueError(f"crowded_points: radius must be a number >= 0, got {radius}")
     if n == 0 or enough <= 0:
         return 0
-    cap, box, cell_of_a, cell_start_a, sidx_a, sp_a, slabs_a = _grid_arrays(points, "crowded_points")
+    cap, box, cell_of_a, cell_start_a, sidx_a, sp_a, slabs_a, cc_a = _grid_arrays(points, "crowded_points")
     cdef double[:, ::1] bx = box
     cdef int64_t[::1] cell_of = cell_of_a
     cdef int64_t[::1] cell_start = cell_start_a
     cdef int64_t[::1] sidx = sidx_a
     cdef double[:, ::1] sp = sp_a
     cdef double[::1] slabs = slabs_a
+    cdef int64_t[::1] cc = cc_a
     with nogil:
         # cells of about the radius (the cell cap makes them larger on sparse clouds)
-        _fill_grid(&points[0, 0], n, &bx[0, 0], &bx[1, 0], radius, cap, res, &cell_of[0], &cell_start[0], &sidx[0], &sp[0, 0])
-        _slab_bounds(&sp[0, 0], n, &sidx[0], &cell_of[0], res, &slabs[0], above, below)
+        _fill_grid(&points[0, 0], n, &bx[0, 0], &bx[1, 0], radius, cap, res, &cell_of[0], &cell_start[0], &sidx[0],
+                   &sp[0, 0], &cc[0])
+        _slab_bounds(&sp[0, 0], n, &cc[0], res, &slabs[0], above, below)
         for s in range(n):
-            _cell_coords(cell_of[sidx[s]], res, cq)
-            found += _has_close(&sp[0, 0], &cell_start[0], res, above, below, s, cq, r2, 3)
+            found += _has_close(&sp[0, 0], &cell_start[0], res, above, below, s, &cc[3 * s], r2, 3)
             if found >= enough:
                 break
     return found
@@ -769,7 +784,7 @@ def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
     cdef int64_t n = points.shape[0], kk, kq, n_tied = 0, cap, s
     cdef double h, occupied, guess = -1.0
     cdef int64_t res[3]
-    cdef int64_t cq[3]
+    cdef const int64_t* cq
     cdef double* above[3]
     cdef double* below[3]
     if points.shape[1] != 3:
@@ -780,7 +795,7 @@ def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
     tied_arr = np.empty(n, dtype=np.int64)
     if n == 0:
         return out, tied_arr
-    cap, box, cell_of_a, cell_start_a, sidx_a, sp_a, slabs_a = _grid_arrays(points, "low_curvature")
+    cap, box, cell_of_a, cell_start_a, sidx_a, sp_a, slabs_a, cc_a = _grid_arrays(points, "low_curvature")
     kk = min(<int64_t>k, n)
     kq = kk + 1 if kk < n else kk  # one more, to see a tie at the k-th
     cdef double[:, ::1] bx = box
@@ -789,6 +804,7 @@ def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
     cdef int64_t[::1] sidx = sidx_a
     cdef double[:, ::1] sp = sp_a
     cdef double[::1] slabs = slabs_a
+    cdef int64_t[::1] cc = cc_a
     cdef double[::1] bd = np.empty(kq, dtype=np.float64)
     cdef double[::1] cd = np.empty(2 * n, dtype=np.float64)
     cdef int64_t[::1] ci = np.empty(3 * n, dtype=np.int64)
@@ -804,13 +820,13 @@ def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
             # a first grid, then the cell size that puts about GRID_POINTS_PER_CELL
             # points in an occupied cell of a surface (its occupancy grows as h^2)
             h = _grid_resolution(e, _first_cell(e, n), cap, res)
-            occupied = <double>_bin_points(p, n, lo, 1.0 / h, res, &cell_of[0], &cell_start[0])
+            occupied = <double>_bin_points(p, n, lo, 1.0 / h, res, &cell_of[0], &cell_start[0], NULL)
             h = h * fmin(fmax(sqrt(GRID_POINTS_PER_CELL * occupied / n), 0.25), 4.0)
-        _fill_grid(p, n, lo, e, h, cap, res, &cell_of[0], &cell_start[0], &sidx[0], &sp[0, 0])
-        _slab_bounds(&sp[0, 0], n, &sidx[0], &cell_of[0], res, &slabs[0], above, below)
+        _fill_grid(p, n, lo, e, h, cap, res, &cell_of[0], &cell_start[0], &sidx[0], &sp[0, 0], &cc[0])
+        _slab_bounds(&sp[0, 0], n, &cc[0], res, &slabs[0], above, below)
         # queries cell by cell, for locality
         for s in range(n):
-            _cell_coords(cell_of[sidx[s]], res, cq)
+            cq = &cc[3 * s]
             # the previous query's k-th, a little larger, as the guess (queries come cell by cell)
             if not _grid_knn_guess(&sp[0, 0], &sidx[0], &cell_start[0], res, above, below, &sp[s, 0], cq, kq,
                                    guess * GUESS_FACTOR, &cd[0], &ci[0], n, &bd[0], &bi[0]):

@@ -36,9 +36,9 @@
  * esf_take runs a copy of its body compiled for them (esf_take_avx2: four
  * doubles per vector for the square roots and divisions) and walks a
  * batch's lines four at a time (esf_walk_lines_avx2), and the D2/D3 values
- * are binned four at a time (esf_block_bins_avx2). Only integer steps and plain IEEE
- * operations are involved (no FMA), so the descriptor is bit-identical
- * either way; the tests compare both paths.
+ * are binned four at a time (esf_block_bins_avx2). Only integer steps and
+ * plain IEEE operations are involved (no FMA), so the descriptor is
+ * bit-identical either way; the tests compare both paths.
  */
 #ifndef EPPF_ESF_KERNEL_H
 #define EPPF_ESF_KERNEL_H
