@@ -461,23 +461,15 @@ static void esf_finish(const esf_state *s, int n_bins, int simd)
         out[i] *= inv;
 }
 
-/* esf_take's body, compiled once per target below. */
-static inline __attribute__((always_inline)) int
-esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
-              int n_cand)
+/* Squared sides A = |p2 - p1|^2, B = |p3 - p1|^2, C = |p2 - p3|^2 and
+ * absolute dot products c1 = |v21 . v31|, c2 = |v23 . v31|, c3 = |v23 . v21|
+ * of the candidates' triangles (p1, p2, p3 = points i1[j], i2[j], i3[j]),
+ * sums from x to z. */
+static inline void esf_sides(const double *pts, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
+                             int n, double *A, double *B, double *C, double *c1, double *c2, double *c3)
 {
-    double A[ESF_BATCH], B[ESF_BATCH], C[ESF_BATCH], H[ESF_BATCH], D3[ESF_BATCH];
-    double c1[ESF_BATCH], c2[ESF_BATCH], c3[ESF_BATCH];
-    int sel[ESF_BATCH];
-    uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
-    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH], steps[3 * ESF_BATCH], known[3 * ESF_BATCH];
-    int32_t ax[3 * ESF_BATCH], ay[3 * ESF_BATCH], az[3 * ESF_BATCH];
-    int32_t bx[3 * ESF_BATCH], by[3 * ESF_BATCH], bz[3 * ESF_BATCH];
-    const double *pts = s->pts;
-    const int n_bins = k->n_bins;
-    int j, q, nsel = 0, fail = 0;
-    /* squared sides and dot products of every candidate (gathers) ... */
-    for (j = 0; j < n_cand; j++) {
+    int j;
+    for (j = 0; j < n; j++) {
         const double *p1 = pts + 3 * (int64_t)i1[j], *p2 = pts + 3 * (int64_t)i2[j],
                      *p3 = pts + 3 * (int64_t)i3[j];
         double v21x = p2[0] - p1[0], v21y = p2[1] - p1[1], v21z = p2[2] - p1[2];
@@ -490,6 +482,84 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
         c2[j] = fabs(v23x * v31x + v23y * v31y + v23z * v31z);
         c3[j] = fabs(v23x * v21x + v23y * v21y + v23z * v21z);
     }
+}
+
+#if ESF_SIMD
+/* esf_sides four candidates at a time (gathers of the coordinates; the same
+ * subtractions, products and sums in the same order, so the same values;
+ * |x| by clearing the sign bit, as fabs). */
+__attribute__((target("avx2")))
+static void esf_sides_avx2(const double *pts, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
+                           int n, double *A, double *B, double *C, double *c1, double *c2, double *c3)
+{
+    const __m256d sign = _mm256_set1_pd(-0.0);
+    const __m256i one = _mm256_set1_epi64x(1);
+    int j;
+    for (j = 0; j + 4 <= n; j += 4) {
+        /* offsets 3 i in 64-bit lanes (no overflow for any uint32 index) */
+        __m256i o1 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i1 + j)));
+        __m256i o2 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i2 + j)));
+        __m256i o3 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i3 + j)));
+        __m256d x1, x2, x3, y1, y2, y3, z1, z2, z3;
+        o1 = _mm256_add_epi64(_mm256_slli_epi64(o1, 1), o1);
+        o2 = _mm256_add_epi64(_mm256_slli_epi64(o2, 1), o2);
+        o3 = _mm256_add_epi64(_mm256_slli_epi64(o3, 1), o3);
+        x1 = _mm256_i64gather_pd(pts, o1, 8);
+        x2 = _mm256_i64gather_pd(pts, o2, 8);
+        x3 = _mm256_i64gather_pd(pts, o3, 8);
+        o1 = _mm256_add_epi64(o1, one);
+        o2 = _mm256_add_epi64(o2, one);
+        o3 = _mm256_add_epi64(o3, one);
+        y1 = _mm256_i64gather_pd(pts, o1, 8);
+        y2 = _mm256_i64gather_pd(pts, o2, 8);
+        y3 = _mm256_i64gather_pd(pts, o3, 8);
+        o1 = _mm256_add_epi64(o1, one);
+        o2 = _mm256_add_epi64(o2, one);
+        o3 = _mm256_add_epi64(o3, one);
+        z1 = _mm256_i64gather_pd(pts, o1, 8);
+        z2 = _mm256_i64gather_pd(pts, o2, 8);
+        z3 = _mm256_i64gather_pd(pts, o3, 8);
+        {
+            __m256d v21x = _mm256_sub_pd(x2, x1), v21y = _mm256_sub_pd(y2, y1), v21z = _mm256_sub_pd(z2, z1);
+            __m256d v31x = _mm256_sub_pd(x3, x1), v31y = _mm256_sub_pd(y3, y1), v31z = _mm256_sub_pd(z3, z1);
+            __m256d v23x = _mm256_sub_pd(x2, x3), v23y = _mm256_sub_pd(y2, y3), v23z = _mm256_sub_pd(z2, z3);
+#define ESF_DOT(ax, ay, az, bx, by, bz) \
+    _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, bx), _mm256_mul_pd(ay, by)), _mm256_mul_pd(az, bz))
+            _mm256_storeu_pd(A + j, ESF_DOT(v21x, v21y, v21z, v21x, v21y, v21z));
+            _mm256_storeu_pd(B + j, ESF_DOT(v31x, v31y, v31z, v31x, v31y, v31z));
+            _mm256_storeu_pd(C + j, ESF_DOT(v23x, v23y, v23z, v23x, v23y, v23z));
+            _mm256_storeu_pd(c1 + j, _mm256_andnot_pd(sign, ESF_DOT(v21x, v21y, v21z, v31x, v31y, v31z)));
+            _mm256_storeu_pd(c2 + j, _mm256_andnot_pd(sign, ESF_DOT(v23x, v23y, v23z, v31x, v31y, v31z)));
+            _mm256_storeu_pd(c3 + j, _mm256_andnot_pd(sign, ESF_DOT(v23x, v23y, v23z, v21x, v21y, v21z)));
+#undef ESF_DOT
+        }
+    }
+    esf_sides(pts, i1 + j, i2 + j, i3 + j, n - j, A + j, B + j, C + j, c1 + j, c2 + j, c3 + j);
+}
+#else
+#define esf_sides_avx2 esf_sides
+#endif
+
+/* esf_take's body, compiled once per target below. */
+static inline __attribute__((always_inline)) int
+esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
+              int n_cand, int simd)
+{
+    double A[ESF_BATCH], B[ESF_BATCH], C[ESF_BATCH], H[ESF_BATCH], D3[ESF_BATCH];
+    double c1[ESF_BATCH], c2[ESF_BATCH], c3[ESF_BATCH];
+    int sel[ESF_BATCH];
+    uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
+    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH], steps[3 * ESF_BATCH], known[3 * ESF_BATCH];
+    int32_t ax[3 * ESF_BATCH], ay[3 * ESF_BATCH], az[3 * ESF_BATCH];
+    int32_t bx[3 * ESF_BATCH], by[3 * ESF_BATCH], bz[3 * ESF_BATCH];
+    const double *pts = s->pts;
+    const int n_bins = k->n_bins;
+    int j, q, nsel = 0, fail = 0;
+    /* squared sides and dot products of every candidate (gathers) ... */
+    if (simd)
+        esf_sides_avx2(pts, i1, i2, i3, n_cand, A, B, C, c1, c2, c3);
+    else
+        esf_sides(pts, i1, i2, i3, n_cand, A, B, C, c1, c2, c3);
     /* ... then the square roots and divisions, element-wise (vectorized) */
     for (j = 0; j < n_cand; j++) {
         double a = sqrt(A[j]), b = sqrt(B[j]), c = sqrt(C[j]);
@@ -588,7 +658,7 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
 static int esf_take_default(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2,
                             const uint32_t *i3, int n_cand)
 {
-    return esf_take_impl(k, s, i1, i2, i3, n_cand);
+    return esf_take_impl(k, s, i1, i2, i3, n_cand, 0);
 }
 
 #if ESF_SIMD
@@ -600,7 +670,7 @@ __attribute__((target("avx2,bmi,bmi2")))
 static int esf_take_avx2(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2,
                          const uint32_t *i3, int n_cand)
 {
-    return esf_take_impl(k, s, i1, i2, i3, n_cand);
+    return esf_take_impl(k, s, i1, i2, i3, n_cand, 1);
 }
 #else
 #define esf_take_avx2 esf_take_default
