@@ -13,7 +13,10 @@ machine. On x86-64:
   already set (some machines set it to avoid a faulty kernel: never override);
 - ``ATEN_CPU_CAPABILITY=avx2``: torch's AVX2 kernels;
 - ``ONEDNN_MAX_CPU_ISA=AVX2``: oneDNN's AVX2 kernels, which torch's CPU convolutions
-  run (``ATEN_CPU_CAPABILITY`` does not reach them).
+  run (``ATEN_CPU_CAPABILITY`` does not reach them);
+- ``MKL_ENABLE_INSTRUCTIONS=AVX2``: Intel MKL's AVX2 kernels, which torch's
+  matrix products run on x86-64 (the dense layers and the frequency-domain
+  convolutions), unless the variable is already set.
 
 Elsewhere only ``EPPF_SIMD=scalar`` is printed. ``--eppf LEVEL`` prints another
 ``EPPF_SIMD`` level instead.
@@ -47,6 +50,8 @@ def settings(eppf_level="scalar"):
         out.append(("OPENBLAS_CORETYPE", "Haswell"))
     out.append(("ATEN_CPU_CAPABILITY", "avx2"))
     out.append(("ONEDNN_MAX_CPU_ISA", "AVX2"))
+    if not os.environ.get("MKL_ENABLE_INSTRUCTIONS"):
+        out.append(("MKL_ENABLE_INSTRUCTIONS", "AVX2"))
     return out
 
 
