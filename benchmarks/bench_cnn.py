@@ -646,9 +646,64 @@ def fit_profile(args):
               f"{1e3 * total / n:9.1f} {pred:13.0f}")
 
 
+def validate_draws(args):
+    """Validation accuracy of the recommended model per number of test draws, normals shared or per draw.
+
+    Reads the training split only: a stratified ``--holdout`` share of
+    ``--objects`` training objects is held out and never given to the
+    classifier (which validates on its own hold-out of the rest for early
+    stopping); the recipe is fitted on the rest, once with the normals of
+    every draw estimated on its stretched copy and once with them estimated
+    once per object and carried to the copies (``share_normals``), and the
+    held-out objects are predicted with the first 1, 2, 3, 4 and all of the
+    pool's test draws (the first ``k`` draws of a pool are those of a pool
+    of ``test_draws=k``).
+    """
+    import torch
+
+    from eppf.experiments._classification import TrainingSettings
+    from eppf.experiments._common import load_data, resolve_scaling
+
+    ds = load_data(require("bench_cnn draws", args.data))
+    clouds_all, y_all, train_idx = ds.clouds, np.asarray(ds.y), np.asarray(ds.train)
+    torch.set_num_threads(args.threads)
+    idx = _stratified_subset(y_all, train_idx, args.objects[0], args.seed)
+    held = _stratified_subset(y_all, idx, int(round(args.holdout * len(idx))), args.seed + 1)
+    fit_idx = np.setdiff1d(idx, held)
+    print(f"torch {torch.__version__}, {args.threads} threads; {len(fit_idx)} training objects, {len(held)} held "
+          f"out (seed {args.seed}); load average {os.getloadavg()[0]:.2f}", flush=True)
+    ks = sorted({1, 2, 3, 4, args.test_draws})
+    results = []
+    for share in args.normals:
+        settings = TrainingSettings.resolve(
+            epochs=args.max_epochs, pointnet_epochs=None, pointnet_points=None,
+            validation_fraction=args.validation_fraction, patience=args.patience, scaling=None, quick=False,
+            n_jobs=args.threads, random_state=args.seed, precision="auto")
+        settings.scaling = resolve_scaling("auto", ds)
+        pool, clf = settings.recommended()
+        pool.set_params(share_normals=share == "shared", test_draws=args.test_draws)
+        clf.set_params(verbose=args.verbose)
+        print(f"normals {share}: pool of {len(fit_idx)} objects ...", flush=True)
+        t0 = time.perf_counter()
+        X = pool.fit_transform([clouds_all[i] for i in fit_idx]).astype(np.float32)
+        print(f"  pool {time.perf_counter() - t0:.1f} s; training ...", flush=True)
+        t0 = time.perf_counter()
+        clf.fit(X, y_all[fit_idx])
+        print(f"  trained in {time.perf_counter() - t0:.1f} s ({len(clf.net_.history)} epochs); predicting the "
+              f"held-out objects ...", flush=True)
+        P = pool.transform([clouds_all[i] for i in held]).astype(np.float32)
+        acc = {k: 100 * np.mean(clf.predict(P[:, :k]) == y_all[held]) for k in ks}
+        print("  " + ", ".join(f"{k} draw(s) {a:.2f}%" for k, a in acc.items()), flush=True)
+        results.append((share, acc))
+    print(f"\nValidation accuracy (%) on {len(held)} held-out training objects, seed {args.seed}, by test draws")
+    print(f"{'normals':>9s} " + " ".join(f"{k:>6d}" for k in ks))
+    for share, acc in results:
+        print(f"{share:>9s} " + " ".join(f"{acc[k]:6.2f}" for k in ks))
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet", "fit"))
+    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet", "fit", "draws"))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=5)
@@ -685,9 +740,14 @@ def main(argv=None):
                         help="fit: training-set sizes to profile (stratified subsets of the training split)")
     parser.add_argument("--predict-objects", type=int, default=500,
                         help="fit: objects whose prediction (descriptors included) is timed")
+    parser.add_argument("--holdout", type=float, default=0.2,
+                        help="draws: share of the --objects training objects held out for validation")
+    parser.add_argument("--test-draws", type=int, default=8, help="draws: test draws of the pool")
+    parser.add_argument("--normals", nargs="+", choices=("per-draw", "shared"), default=["per-draw", "shared"],
+                        help="draws: the normals of the stretched copies, estimated per draw or shared")
     args = parser.parse_args(argv)
     parts = {"throughput": throughput, "profile": profile, "epoch": epoch, "descriptors": descriptors, "modelnet": modelnet,
-             "fit": fit_profile}
+             "fit": fit_profile, "draws": validate_draws}
     parts[args.part](args)
 
 

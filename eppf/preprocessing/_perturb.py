@@ -520,21 +520,25 @@ def _scale_clouds(clouds, factors, center):
         return [_scale(c, f, center) for c, f in zip(clouds, factors)]
     sizes = np.array([c.shape[0] for c in clouds])
     block = np.concatenate(clouds)
-    if (sizes == sizes[0]).all():  # one size: each cloud's factors and centroid broadcast over its points
-        n = int(sizes[0])
-        stacked = block.reshape(len(clouds), n, -1)
-        each = np.broadcast_to(factors[:, None, :], (len(clouds), n, 3)).reshape(-1, 3)
-        # (the mean over axis 1 of the stack adds in the order each cloud's own mean does)
-        centroids = stacked[:, :, :3].mean(axis=1) if center == "centroid" else None
-    else:
-        each = np.repeat(factors, sizes, axis=0)
-        centroids = np.array([c[:, :3].mean(axis=0) for c in clouds]) if center == "centroid" else None
-    origin = np.zeros(3) if centroids is None else np.repeat(centroids, sizes, axis=0)
     out = np.empty_like(block)
-    out[:, :3] = (block[:, :3] - origin) * each + origin
+    if (sizes == sizes[0]).all():
+        # one size: each cloud's factors and centroid broadcast over its points in a (clouds, points, 3) view
+        # (the stack's mean over axis 1 adds in the order each cloud's own mean does)
+        shape = (len(clouds), int(sizes[0]), block.shape[1])
+        xyz, new = block.reshape(shape)[:, :, :3], out.reshape(shape)
+        each = factors[:, None, :]
+        origin = xyz.mean(axis=1)[:, None, :] if center == "centroid" else np.zeros(3)
+    else:
+        xyz, new = block[:, :3], out
+        each = np.repeat(factors, sizes, axis=0)
+        origin = (np.repeat(np.array([c[:, :3].mean(axis=0) for c in clouds]), sizes, axis=0)
+                  if center == "centroid" else np.zeros(3))
+    new[..., :3] = (xyz - origin) * each + origin
     if block.shape[1] == 6:
-        normals = block[:, 3:] / each
-        out[:, 3:] = normals / np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]
+        normals = new[..., 3:]
+        np.divide(block.reshape(new.shape)[..., 3:], each, out=normals)
+        flat = out[:, 3:]
+        flat /= np.sqrt(np.einsum("ij,ij->i", flat, flat))[:, None]
     bounds = np.concatenate([[0], np.cumsum(sizes)]).tolist()
     return [out[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
