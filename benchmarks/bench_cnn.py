@@ -32,8 +32,17 @@ Six parts, each printed as a table:
     descriptor pool (draws x descriptors x objects), every network of the
     ensemble (epochs, best epoch, seconds per epoch, validation accuracy),
     the total per object (linear in the objects when this column is flat)
-    and prediction throughput with the descriptors included. Prints
-    progress (the classifier's epoch lines). Reads the training split only.
+    and prediction throughput with the descriptors included (a second
+    table splits it into descriptors and network, wall and CPU, per
+    object). Prints progress (the classifier's epoch lines). Reads the
+    training split only.
+``draws``
+    Validation accuracy of the recommended model for 1, 2, 3, 4 and all of
+    its test draws, with the normals of the stretched copies estimated per
+    draw or shared (estimated once per object): the protocol that chose the
+    recipe's ``test_draws`` and ``share_normals``. A stratified
+    ``--holdout`` share of the training objects is held out and never
+    trained on; the test split is not read.
 ``modelnet``
     Trains each variant on the official training split with early stopping on
     a stratified validation fraction of the *training* objects, then reports
@@ -52,6 +61,7 @@ Run, e.g.::
     nice -n 10 python benchmarks/bench_cnn.py descriptors --draws 4
     nice -n 10 python benchmarks/bench_cnn.py modelnet --threads 1 --max-epochs 5 --patience 4
     nice -n 10 python benchmarks/bench_cnn.py fit --objects 1000 2000 4000 --threads 2
+    nice -n 10 python benchmarks/bench_cnn.py draws --objects 3991 --threads 2 --seed 0
 
 Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 2 to 6, so timings are noisy; see the report of issue 3):
@@ -627,10 +637,18 @@ def fit_profile(args):
             print(f"  network {k}: {n_epochs} epochs, best {best}, {np.mean(net.history[:, 'dur']):.1f} s per epoch, "
                   f"validation accuracy at the best epoch {100 * net.history[best - 1, 'valid_acc']:.1f}%", flush=True)
         n_pred = min(args.predict_objects, len(clouds))
-        t0 = time.perf_counter()
-        clf.predict_proba(pool.transform(clouds[:n_pred]))
-        pred_s = time.perf_counter() - t0
-        rows.append((len(idx), blocks, pool_s, train_s, pool_cpu + train_cpu, members, n_pred / pred_s))
+        n_test = pool.n_draws if pool.test_draws is None else pool.test_draws
+        print(f"  predicting {n_pred} objects ({n_test} test draws each) ...", flush=True)
+        clf.predict_proba(pool.transform(clouds[:8]).astype(np.float32))  # (one-time costs: oneDNN's kernels)
+        c0, t0 = time.process_time(), time.perf_counter()
+        P = pool.transform(clouds[:n_pred]).astype(np.float32)
+        c1, t1 = time.process_time(), time.perf_counter()
+        clf.predict_proba(P)
+        c2, t2 = time.process_time(), time.perf_counter()
+        pred = (n_pred, n_test, t1 - t0, c1 - c0, t2 - t1, c2 - c1)
+        print(f"  prediction: descriptors {t1 - t0:.2f} s ({c1 - c0:.2f} CPU s), network {t2 - t1:.2f} s "
+              f"({c2 - c1:.2f} CPU s): {n_pred / (t2 - t0):.0f} objects/s", flush=True)
+        rows.append((len(idx), blocks, pool_s, train_s, pool_cpu + train_cpu, members, pred))
     print("\nProfile of a fit of EPPF 4D+ (wall seconds but 'CPU s', process CPU seconds, all threads; "
           "epochs: trained / best, per network)")
     names = [name for name, _ in rows[0][1]]
@@ -643,7 +661,15 @@ def fit_profile(args):
         total = pool_s + train_s
         print(f"{n:7d} " + " ".join(f"{s:14.1f}" for _, s in blocks)
               + f" {pool_s:7.1f} {train_s:7.1f} {per_epoch:7.1f} {epochs:>14s} {total:7.1f} {cpu:7.1f} "
-              f"{1e3 * total / n:9.1f} {pred:13.0f}")
+              f"{1e3 * total / n:9.1f} {pred[0] / (pred[2] + pred[4]):13.0f}")
+    print("\nPrediction of the fitted model, descriptors included (ms per object: wall, then process CPU, "
+          "all threads)")
+    print(f"{'fitted on':>9s} {'objects':>7s} {'draws':>5s} {'descriptors':>11s} {'CPU':>6s} {'network':>7s} "
+          f"{'CPU':>6s} {'total':>6s} {'CPU':>6s} {'objects/s':>9s}")
+    for n, *_, (n_pred, n_test, desc_s, desc_cpu, net_s, net_cpu) in rows:
+        ms = [1e3 * v / n_pred for v in (desc_s, desc_cpu, net_s, net_cpu, desc_s + net_s, desc_cpu + net_cpu)]
+        print(f"{n:9d} {n_pred:7d} {n_test:5d} {ms[0]:11.2f} {ms[1]:6.2f} {ms[2]:7.2f} {ms[3]:6.2f} {ms[4]:6.2f} "
+              f"{ms[5]:6.2f} {n_pred / (desc_s + net_s):9.0f}")
 
 
 def validate_draws(args):

@@ -286,9 +286,8 @@ def make_descriptor(name, **settings):
 
 #: The recommended recipe beyond the paper (``eppf train --recipe recommended``, "EPPF 4D+" of the
 #: classification experiment): see :func:`recommended_pipeline_parts`.
-RECIPE = dict(n_draws=8, stretch=(0.8, 1.25), filters=(16, 32, 24), n_hidden=256, min_patience=8,
-              precision="auto", n_estimators=1,
-              label_smoothing=0.1)
+RECIPE = dict(n_draws=8, stretch=(0.8, 1.25), share_normals=True, test_draws=3, filters=(16, 32, 24),
+              n_hidden=256, min_patience=8, precision="auto", n_estimators=1, label_smoothing=0.1)
 
 
 def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=None, max_epochs=30, n_iter_no_change=8,
@@ -357,7 +356,9 @@ def recommended_pipeline_parts(eppf, *, conv="4d", n_jobs=None, random_state=Non
 
     union = DescriptorUnion([("eppf", eppf), ("gasd", GASDTransformer()), ("proportions", ProportionTransformer())],
                             normalize="none", n_jobs=n_jobs)
-    pool = DescriptorPool(union, 2 if quick else RECIPE["n_draws"], augment=RandomScaling(*RECIPE["stretch"]),
+    n_draws = 2 if quick else RECIPE["n_draws"]
+    pool = DescriptorPool(union, n_draws, augment=RandomScaling(*RECIPE["stretch"]),
+                          test_draws=min(n_draws, RECIPE["test_draws"]), share_normals=RECIPE["share_normals"],
                           random_state=random_state)
     patience = n_iter_no_change if quick else max(n_iter_no_change, RECIPE["min_patience"])
     clf = EPPF4DClassifier(tuple(eppf.get_params()["n_bins"]), conv, filters=RECIPE["filters"],
