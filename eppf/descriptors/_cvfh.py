@@ -8,7 +8,7 @@ from scipy.spatial import cKDTree
 
 from ..utils._param_validation import Interval, Options, StrOptions
 from ._base import N_JOBS, N_NEIGHBORS, NORMAL_ORIENTATION, SCALING, PointCloudDescriptor
-from ._cvfh_fast import pcl_region_growing, vfh_signatures
+from ._cvfh_fast import crowded_points, pcl_region_growing, vfh_signatures
 from ._regions import low_curvature, radius_neighbors_flann, smooth_clusters
 
 __all__ = ["CVFHTransformer"]
@@ -89,7 +89,10 @@ def _cvfh_regions(points, normals, *, eps_angle, curvature_threshold, cluster_to
                     f"radius_normals and cluster_tolerance give {pairs} neighbour pairs, more than "
                     f"{MAX_PAIRS}: use smaller radii"
                 )
-        rn = _radius_normals(sub, radius_normals)
+        # Fewer than min_points points with two neighbors within radius_normals: no point
+        # count below can reach min_points, and the second normals are not needed.
+        crowded = crowded_points(sub, radius_normals, min_points) >= min_points
+        rn = _radius_normals(sub, radius_normals) if crowded else np.full((len(sub), 3), np.nan)
         finite = np.isfinite(rn[:, 0])
         if finite.sum() >= min_points and region_growing == "pcl":
             nbr, off = radius_neighbors_flann(p32[keep], float(np.float32(cluster_tolerance)))

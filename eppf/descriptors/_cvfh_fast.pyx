@@ -1,8 +1,8 @@
 # cython: language_level=3
 """Compiled kernels of CVFH (see :class:`CVFHTransformer`) and OUR-CVFH.
 
-The curvature filter (:func:`low_curvature`: k nearest neighbors on a k-d
-tree, their 3x3 scatter and a test of its smallest eigenvalue against the
+The curvature filter (:func:`low_curvature`: k nearest neighbors on a
+uniform grid, their 3x3 scatter and a test of its smallest eigenvalue against the
 threshold, with ``+ - * /`` only in a fixed order, so the same bits on every
 CPU), PCL's region growing and FLANN's radius search, and the VFH histograms.
 
@@ -14,13 +14,13 @@ pair features (f1, f2, f3) between the reference and every point, the
 distance histogram (f4 over the largest distance) and 128 viewpoint bins.
 """
 
-from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf, M_PI
+from libc.math cimport floor, acos, acosf, atan2f, sqrtf, fabsf, cbrt, sqrt, fmin, fmax, isfinite, INFINITY, M_PI
 from libc.stdint cimport int32_t, int64_t, uint8_t
 
 import numpy as np
 from libc.string cimport memset
 
-from ..utils._common cimport clamp_floor
+from ..utils._common cimport clamp_floor, clamp_floor64
 from ._flann_tree cimport build_tree, radius_search
 
 
@@ -32,7 +32,13 @@ cdef enum:
 cdef double PI = M_PI
 
 cdef enum:
-    KD_LEAF = 8   # most points in a leaf of the curvature's k-d tree
+    N_BUCKETS = 32  # buckets of the curvature search's counting sort
+    GRID_CELLS_PER_POINT = 4  # most cells of the curvature's grid per point (plus 64)
+
+# Points in an occupied cell of the curvature's grid, aimed at.
+cdef double GRID_POINTS_PER_CELL = 5.0
+# The fast path's guess: the previous query's k-th squared distance times this.
+cdef double GUESS_FACTOR = 1.6
 
 
 cdef inline float _dot4(float a0, float a1, float a2, float b0, float b1, float b2) noexcept nogil:
@@ -282,137 +288,438 @@ def radius_neighbors_flann(const float[:, ::1] points, double radius):
 
 
 # ------------------------------------------------------------ curvature filter
-# A k-d tree over double-precision points: node ``t`` holds the points
-# perm[lo[t]:hi[t]]; an inner node splits them on axis dim[t] at the value
-# cut[t] of its median point: its left child's points have that coordinate
-# <= cut[t], its right child's >= cut[t].
+# Exact k nearest neighbors on a uniform grid of cells (cell (x, y, z) is
+# number (z * res_y + y) * res_x + x): the points are stored cell by cell
+# (ascending index within a cell) and each query visits shells of cells of
+# growing Chebyshev distance around its own until no point outside the
+# visited block can be as close as its k-th. Every bound a cell or the block
+# gets is a coordinate of a stored point minus the query's (the nearest
+# coordinate of the points of the slabs of cells beyond it), rounded as the
+# point distances are, so no rounding slack is needed: a pruned point's
+# rounded squared distance is never below the bound that pruned it.
 
 
-cdef void _select(const double* p, int64_t* perm, int64_t lo, int64_t hi, int64_t m, int d) noexcept nogil:
-    """Reorder perm[lo:hi] so that perm[m] holds the point of rank m - lo by
-    coordinate d, smaller or equal ones before it and greater or equal ones
-    after it (Hoare's selection, middle pivot: deterministic)."""
-    cdef int64_t i, j, t
-    cdef double pivot
-    hi -= 1
-    while lo < hi:
-        pivot = p[3 * perm[(lo + hi) >> 1] + d]
-        i = lo
-        j = hi
-        while i <= j:
-            while p[3 * perm[i] + d] < pivot:
-                i += 1
-            while p[3 * perm[j] + d] > pivot:
-                j -= 1
-            if i <= j:
-                t = perm[i]
-                perm[i] = perm[j]
-                perm[j] = t
-                i += 1
-                j -= 1
-        if m <= j:
-            hi = j
-        elif m >= i:
-            lo = i
-        else:
-            return
+cdef inline double _first_cell(const double* e, int64_t n) noexcept nogil:
+    """About one cell per point of the bounding box (extents ``e``), flat axes ignored."""
+    cdef double e1 = e[0], e2 = e[1], e3 = e[2], t, h
+    if e1 < e2:
+        t = e1; e1 = e2; e2 = t
+    if e2 < e3:
+        t = e2; e2 = e3; e3 = t
+    if e1 < e2:
+        t = e1; e1 = e2; e2 = t
+    if not (e1 > 0.0):
+        return 1.0
+    h = cbrt(e1 * e2 * e3 / n)
+    if not (h > 0.0 and e3 >= h):
+        h = sqrt(e1 * e2 / n)
+        if not (h > 0.0 and e2 >= h):
+            h = e1 / n
+    return h
 
 
-cdef int64_t _build_kd(const double* p, int64_t n, int64_t* perm, int64_t* lo, int64_t* hi,
-                       int64_t* left, int* dim, double* cut, int64_t* stack) noexcept nogil:
-    """Build the tree (node 0 the root; the right child of an inner node ``t``
-    is ``left[t] + 1``); returns the number of nodes."""
-    cdef int64_t i, t, a, b, m, n_nodes = 1, top = 1
-    cdef int d, best
-    cdef double mn[3]
-    cdef double mx[3]
-    cdef double v
+cdef double _grid_resolution(const double* e, double h, int64_t cap, int64_t* res) noexcept nogil:
+    """Cells per axis for cell size ``h`` (enlarged until there are at most
+    ``cap`` cells); returns the cell size used."""
+    cdef double prod
+    cdef int a
+    while True:
+        prod = 1.0
+        for a in range(3):
+            prod *= floor(e[a] / h) + 1.0
+        if prod <= <double>cap:
+            break
+        h *= 1.25
+    for a in range(3):
+        res[a] = <int64_t>(floor(e[a] / h) + 1.0)
+    return h
+
+
+cdef int64_t _bin_points(const double* p, int64_t n, const double* lo, double inv_h, const int64_t* res,
+                         int64_t* cell_of, int64_t* counts, int64_t* xyz) noexcept nogil:
+    """Each point's cell into ``cell_of`` (and its cell coordinates into
+    ``xyz``, 3 per point, unless NULL), the points per cell into ``counts``
+    (zeroed here); returns the number of occupied cells."""
+    cdef int64_t i, c, cx, cy, cz, occupied = 0, ncells = res[0] * res[1] * res[2]
+    memset(counts, 0, ncells * sizeof(int64_t))
     for i in range(n):
-        perm[i] = i
-    lo[0] = 0
-    hi[0] = n
-    stack[0] = 0
-    while top > 0:
-        top -= 1
-        t = stack[top]
-        a = lo[t]
-        b = hi[t]
-        if b - a <= KD_LEAF:
-            left[t] = -1
-            continue
-        for d in range(3):
-            mn[d] = p[3 * perm[a] + d]
-            mx[d] = mn[d]
-        for i in range(a + 1, b):
-            for d in range(3):
-                v = p[3 * perm[i] + d]
-                if v < mn[d]:
-                    mn[d] = v
-                if v > mx[d]:
-                    mx[d] = v
-        best = 0
-        for d in range(1, 3):
-            if mx[d] - mn[d] > mx[best] - mn[best]:
-                best = d
-        m = a + ((b - a) >> 1)
-        _select(p, perm, a, b, m, best)
-        dim[t] = best
-        cut[t] = p[3 * perm[m] + best]
-        left[t] = n_nodes
-        lo[n_nodes] = a
-        hi[n_nodes] = m
-        lo[n_nodes + 1] = m
-        hi[n_nodes + 1] = b
-        stack[top] = n_nodes
-        stack[top + 1] = n_nodes + 1
-        top += 2
-        n_nodes += 2
-    return n_nodes
+        cx = clamp_floor64((p[3 * i] - lo[0]) * inv_h, res[0])
+        cy = clamp_floor64((p[3 * i + 1] - lo[1]) * inv_h, res[1])
+        cz = clamp_floor64((p[3 * i + 2] - lo[2]) * inv_h, res[2])
+        c = (cz * res[1] + cy) * res[0] + cx
+        if xyz != NULL:
+            xyz[3 * i] = cx
+            xyz[3 * i + 1] = cy
+            xyz[3 * i + 2] = cz
+        cell_of[i] = c
+        occupied += counts[c] == 0
+        counts[c] += 1
+    return occupied
 
 
-cdef void _knn(const double* sp, const double* q, int64_t k, const int64_t* perm, const int64_t* lo,
-               const int64_t* hi, const int64_t* left, const int* dim, const double* cut,
-               int64_t* stack, double* gap, double* bd, int64_t* bi) noexcept nogil:
-    """The k points nearest to ``q`` into ``bi`` (``sp``: the points in the
-    tree's order, ``sp[i] = p[perm[i]]``; their squared distances,
-    ``(dx^2 + dy^2) + dz^2``, into ``bd``), ordered by (squared distance,
-    index): ties are broken by the lower index, whatever the tree."""
-    cdef int64_t top = 1, t, i, j, s, found = 0, near
-    cdef double dx, dy, dz, d2, diff
-    stack[0] = 0
-    gap[0] = 0.0
-    while top > 0:
-        top -= 1
-        t = stack[top]
-        # a child whose points all lie farther than the k-th neighbor (ties
-        # with it are visited: a lower index wins them)
-        if found == k and gap[top] > bd[k - 1]:
+cdef void _fill_grid(const double* p, int64_t n, const double* lo, const double* e, double h, int64_t cap,
+                     int64_t* res, int64_t* cell_of, int64_t* cell_start, int64_t* sidx, double* sp,
+                     int64_t* cc) noexcept nogil:
+    """Bin the points into cells of about size ``h`` (larger when there would
+    be more than ``cap`` cells; one cell when ``h`` or an extent ``e`` is not
+    finite) and store them cell by cell, ascending index within a cell: the
+    point stored at ``s`` is ``sidx[s]``, its coordinates ``sp[3 s:3 s + 3]``
+    and its cell's ``cc[3 s:3 s + 3]`` (``cc`` has room for ``6 n``: the
+    first half is scratch), cell ``c`` holds the stored points
+    ``cell_start[c]:cell_start[c + 1]`` (room for ``cap + 1``), and
+    ``cell_of`` each point's cell."""
+    cdef int64_t i, c, s, t, total = 0
+    cdef double inv_h = 0.0
+    res[0] = res[1] = res[2] = 1
+    if isfinite(h) and h > 0.0 and isfinite(e[0]) and isfinite(e[1]) and isfinite(e[2]):
+        inv_h = 1.0 / _grid_resolution(e, h, cap, res)
+    _bin_points(p, n, lo, inv_h, res, cell_of, cell_start, cc + 3 * n)
+    c = res[0] * res[1] * res[2]
+    for i in range(c):
+        t = cell_start[i]
+        cell_start[i] = total
+        total += t
+    for i in range(n):
+        s = cell_start[cell_of[i]]
+        cell_start[cell_of[i]] = s + 1
+        sidx[s] = i
+        sp[3 * s] = p[3 * i]
+        sp[3 * s + 1] = p[3 * i + 1]
+        sp[3 * s + 2] = p[3 * i + 2]
+        cc[3 * s] = cc[3 * (n + i)]
+        cc[3 * s + 1] = cc[3 * (n + i) + 1]
+        cc[3 * s + 2] = cc[3 * (n + i) + 2]
+    for i in range(c, 0, -1):
+        cell_start[i] = cell_start[i - 1]
+    cell_start[0] = 0
+
+
+cdef void _slab_bounds(const double* sp, int64_t n, const int64_t* cc, const int64_t* res, double* slabs,
+                       double** above, double** below) noexcept nogil:
+    """Point ``above[a]``/``below[a]`` into ``slabs`` (room for ``2 (res[0] +
+    res[1] + res[2])``) and fill them: the least coordinate ``a`` of the
+    points in the cell slabs j and up along axis ``a``, and the greatest of
+    those in the slabs j and down (infinite where there are none)."""
+    cdef int64_t s, i, t = 0
+    cdef const int64_t* c
+    cdef double x
+    cdef int a
+    for a in range(3):
+        above[a] = &slabs[t]
+        below[a] = &slabs[t + res[a]]
+        for i in range(res[a]):
+            above[a][i] = INFINITY
+            below[a][i] = -INFINITY
+        t += 2 * res[a]
+    # (comparisons, not fmin/fmax: library calls here, and the coordinates are never NaN)
+    for s in range(n):
+        c = cc + 3 * s
+        for a in range(3):
+            x = sp[3 * s + a]
+            if x < above[a][c[a]]:
+                above[a][c[a]] = x
+            if x > below[a][c[a]]:
+                below[a][c[a]] = x
+    for a in range(3):
+        for i in range(res[a] - 2, -1, -1):
+            if above[a][i + 1] < above[a][i]:
+                above[a][i] = above[a][i + 1]
+        for i in range(1, res[a]):
+            if below[a][i - 1] > below[a][i]:
+                below[a][i] = below[a][i - 1]
+
+
+cdef inline double _slab_gap(double q, int64_t j, int64_t c, const double* above, const double* below) noexcept nogil:
+    """Lower bound on |x - q| (rounded) over the points of cell slab ``j``
+    for a query in slab ``c``: ``above[j]`` is the least coordinate of the
+    slabs j and up, ``below[j]`` the greatest of the slabs j and down."""
+    if j > c:
+        return above[j] - q
+    if j < c:
+        return q - below[j]
+    return 0.0
+
+
+cdef inline int64_t _offer(double d2, int64_t j, int64_t count, int64_t k, double* bd, int64_t* bi) noexcept nogil:
+    """Offer point ``j`` at squared distance ``d2`` to the k-list (``count``
+    entries, ordered by (squared distance, index)); returns the new count."""
+    cdef int64_t s
+    if count == k:
+        if d2 > bd[k - 1] or (d2 == bd[k - 1] and j > bi[k - 1]):
+            return count
+        s = k - 1
+    else:
+        s = count
+        count += 1
+    while s > 0 and bd[s - 1] > d2:
+        bd[s] = bd[s - 1]
+        bi[s] = bi[s - 1]
+        s -= 1
+    # equal distances (rare): the lower index first
+    while s > 0 and bd[s - 1] == d2 and bi[s - 1] > j:
+        bd[s] = bd[s - 1]
+        bi[s] = bi[s - 1]
+        s -= 1
+    bd[s] = d2
+    bi[s] = j
+    return count
+
+
+cdef inline bint _block_holds(const double* q, const int64_t* c, int64_t r, const int64_t* res,
+                              double** above, double** below, double kth) noexcept nogil:
+    """True when the block of cells within Chebyshev distance ``r`` of cell
+    ``c`` is the whole grid, or when every point outside it lies farther
+    from ``q`` than ``sqrt(kth)`` (its squared distance, rounded, above kth)."""
+    cdef bint cover = True
+    cdef double bound = INFINITY, b
+    cdef int a
+    for a in range(3):
+        if c[a] - r > 0:
+            cover = False
+            b = q[a] - below[a][c[a] - r - 1]
+            if b < bound:
+                bound = b
+        if c[a] + r < res[a] - 1:
+            cover = False
+            b = above[a][c[a] + r + 1] - q[a]
+            if b < bound:
+                bound = b
+    return cover or kth < bound * bound
+
+
+cdef bint _grid_knn_guess(const double* sp, const int64_t* sidx, const int64_t* cell_start, const int64_t* res,
+                          double** above, double** below, const double* q, const int64_t* c, int64_t k,
+                          double guess, double* cd, int64_t* ci, int64_t n_max, double* bd, int64_t* bi) noexcept nogil:
+    """Fast path of :func:`_grid_knn`: the points of the 3x3x3 block around
+    cell ``c`` within squared distance ``guess`` of ``q`` are collected
+    without branches (into ``cd``/``ci``, room for every point), and the k
+    nearest of them are the k nearest of all when there are at least k and
+    no point outside the block can be as close as the k-th. Returns whether
+    it succeeded (``bd``/``bi`` then hold the result)."""
+    cdef int64_t jy, jz, x0, x1, row, i, j, m = 0, count = 0
+    cdef int b
+    cdef int64_t counts[N_BUCKETS]
+    cdef double scale
+    cdef double* sd = cd + n_max
+    cdef int64_t* si = ci + n_max
+    cdef int64_t* cb = ci + 2 * n_max
+    cdef int64_t xlo = c[0] - 1 if c[0] > 0 else 0
+    cdef int64_t xhi = c[0] + 1 if c[0] + 1 < res[0] else res[0] - 1
+    cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, gx, gy, gy2, gz2
+    for jz in range(c[2] - 1 if c[2] > 0 else 0, (c[2] + 1 if c[2] + 1 < res[2] else res[2] - 1) + 1):
+        gz2 = _slab_gap(qz, jz, c[2], above[2], below[2])
+        gz2 = gz2 * gz2
+        if gz2 > guess:
             continue
-        while left[t] >= 0:
-            diff = q[dim[t]] - cut[t]
-            near = left[t] if diff < 0 else left[t] + 1
-            # the other child's points lie at least |diff| away along dim[t]
-            stack[top] = left[t] + 1 if diff < 0 else left[t]
-            gap[top] = diff * diff
-            top += 1
-            t = near
-        for i in range(lo[t], hi[t]):
-            j = perm[i]
-            dx = sp[3 * i] - q[0]
-            dy = sp[3 * i + 1] - q[1]
-            dz = sp[3 * i + 2] - q[2]
-            d2 = (dx * dx + dy * dy) + dz * dz
-            if found == k and (d2 > bd[k - 1] or (d2 == bd[k - 1] and j > bi[k - 1])):
+        for jy in range(c[1] - 1 if c[1] > 0 else 0, (c[1] + 1 if c[1] + 1 < res[1] else res[1] - 1) + 1):
+            gy = _slab_gap(qy, jy, c[1], above[1], below[1])
+            gy2 = gy * gy
+            if gy2 + gz2 > guess:
                 continue
-            s = found if found < k else k - 1
-            while s > 0 and (bd[s - 1] > d2 or (bd[s - 1] == d2 and bi[s - 1] > j)):
-                bd[s] = bd[s - 1]
-                bi[s] = bi[s - 1]
-                s -= 1
-            bd[s] = d2
-            bi[s] = j
-            if found < k:
-                found += 1
+            # the row's cells within the guess: one run of stored points
+            x0 = c[0]
+            if x0 > xlo:
+                gx = qx - below[0][x0 - 1]
+                if not ((gx * gx + gy2) + gz2 > guess):
+                    x0 -= 1
+            x1 = c[0]
+            if x1 < xhi:
+                gx = above[0][x1 + 1] - qx
+                if not ((gx * gx + gy2) + gz2 > guess):
+                    x1 += 1
+            row = (jz * res[1] + jy) * res[0]
+            for i in range(cell_start[row + x0], cell_start[row + x1 + 1]):
+                dx = sp[3 * i] - qx
+                dy = sp[3 * i + 1] - qy
+                dz = sp[3 * i + 2] - qz
+                d2 = (dx * dx + dy * dy) + dz * dz
+                cd[m] = d2
+                ci[m] = sidx[i]
+                m += d2 <= guess
+    if m < k:
+        return False
+    # A counting sort by bucket of squared distance (monotone in it; on a
+    # surface the buckets hold about as many each), then the k-list from the
+    # candidates up to the k-th's bucket, offered nearly in order.
+    for b in range(N_BUCKETS):
+        counts[b] = 0
+    scale = N_BUCKETS / guess
+    for i in range(m):
+        b = clamp_floor(cd[i] * scale, N_BUCKETS)
+        cb[i] = b
+        counts[b] += 1
+    j = 0
+    for b in range(N_BUCKETS):
+        i = counts[b]
+        counts[b] = j
+        j += i
+    for i in range(m):
+        j = counts[cb[i]]
+        counts[cb[i]] = j + 1
+        sd[j] = cd[i]
+        si[j] = ci[i]
+    b = 0
+    while counts[b] < k:
+        b += 1
+    for i in range(counts[b]):
+        count = _offer(sd[i], si[i], count, k, bd, bi)
+    return _block_holds(q, c, 1, res, above, below, bd[k - 1])
+
+
+cdef void _grid_knn(const double* sp, const int64_t* sidx, const int64_t* cell_start, const int64_t* res,
+                    double** above, double** below, const double* q, const int64_t* c,
+                    int64_t k, double* bd, int64_t* bi) noexcept nogil:
+    """The k points nearest to ``q`` (in cell ``c``) into ``bi`` (original
+    indices) and their squared distances ``(dx^2 + dy^2) + dz^2`` into ``bd``,
+    ordered by (squared distance, index); ``k`` must not exceed the number
+    of points. Exact search over growing shells of cells."""
+    cdef int64_t r = 0, jx, jy, jz, step, cell, i, count = 0
+    cdef double qx = q[0], qy = q[1], qz = q[2], dx, dy, dz, d2, gx, gy, gz, gz2, gyz2
+    cdef bint edge_z, edge_yz
+    while True:
+        for jz in range(c[2] - r if c[2] > r else 0, (c[2] + r if c[2] + r < res[2] else res[2] - 1) + 1):
+            gz = _slab_gap(qz, jz, c[2], above[2], below[2])
+            gz2 = gz * gz
+            if count == k and gz2 > bd[k - 1]:
+                continue
+            edge_z = jz == c[2] - r or jz == c[2] + r
+            for jy in range(c[1] - r if c[1] > r else 0, (c[1] + r if c[1] + r < res[1] else res[1] - 1) + 1):
+                gy = _slab_gap(qy, jy, c[1], above[1], below[1])
+                gyz2 = gy * gy + gz2
+                if count == k and gyz2 > bd[k - 1]:
+                    continue
+                edge_yz = edge_z or jy == c[1] - r or jy == c[1] + r
+                # inside the shell's faces only the row's two end cells are new
+                step = 1 if edge_yz or r == 0 else 2 * r
+                jx = c[0] - r
+                while jx <= c[0] + r:
+                    if jx >= 0 and jx < res[0]:
+                        gx = _slab_gap(qx, jx, c[0], above[0], below[0])
+                        # (gx^2 + gy^2) + gz^2: the association of the distances, so never above them
+                        if not (count == k and (gx * gx + gy * gy) + gz2 > bd[k - 1]):
+                            cell = (jz * res[1] + jy) * res[0] + jx
+                            for i in range(cell_start[cell], cell_start[cell + 1]):
+                                dx = sp[3 * i] - qx
+                                dy = sp[3 * i + 1] - qy
+                                dz = sp[3 * i + 2] - qz
+                                d2 = (dx * dx + dy * dy) + dz * dz
+                                count = _offer(d2, sidx[i], count, k, bd, bi)
+                    jx += step
+        if count == k and _block_holds(q, c, r, res, above, below, bd[k - 1]):
+            return
+        r += 1
+
+
+cdef bint _has_close(const double* sp, const int64_t* cell_start, const int64_t* res, double** above,
+                     double** below, int64_t s, const int64_t* c, double r2, int64_t enough) noexcept nogil:
+    """Whether at least ``enough`` stored points (stored point ``s`` itself
+    included) lie within squared distance ``r2`` of stored point ``s`` (in
+    cell ``c``). Only the box of cells whose slabs come that close along
+    every axis is searched: a point outside it is farther along some axis."""
+    cdef int64_t lo[3]
+    cdef int64_t hi[3]
+    cdef int64_t jy, jz, row, i, j, count = 0
+    cdef double q, g, dx, dy, dz
+    cdef int a
+    for a in range(3):
+        q = sp[3 * s + a]
+        j = c[a]
+        while j > 0:
+            g = q - below[a][j - 1]
+            if g * g > r2:
+                break
+            j -= 1
+        lo[a] = j
+        j = c[a]
+        while j + 1 < res[a]:
+            g = above[a][j + 1] - q
+            if g * g > r2:
+                break
+            j += 1
+        hi[a] = j
+    for jz in range(lo[2], hi[2] + 1):
+        for jy in range(lo[1], hi[1] + 1):
+            # the row's cells are one run of stored points
+            row = (jz * res[1] + jy) * res[0]
+            for i in range(cell_start[row + lo[0]], cell_start[row + hi[0] + 1]):
+                dx = sp[3 * i] - sp[3 * s]
+                dy = sp[3 * i + 1] - sp[3 * s + 1]
+                dz = sp[3 * i + 2] - sp[3 * s + 2]
+                count += (dx * dx + dy * dy) + dz * dz <= r2
+            if count >= enough:
+                return True
+    return False
+
+
+def _grid_arrays(const double[:, ::1] points, name):
+    """Check ``points`` (finite, n >= 1) and allocate a grid's arrays (see
+    :func:`_fill_grid`, :func:`_slab_bounds`): ``(cap, box, cell_of,
+    cell_start, sidx, sp, slabs, cc)`` with ``box`` the least coordinates and
+    the extents as a (2, 3) array (infinite extents beyond double range)."""
+    cdef int64_t n = points.shape[0], i
+    cdef int a
+    cdef double x
+    cdef bint finite = True
+    box = np.empty((2, 3))
+    cdef double[:, ::1] bx = box
+    with nogil:
+        for a in range(3):
+            bx[0, a] = points[0, a]
+            bx[1, a] = points[0, a]
+        for i in range(n):
+            for a in range(3):
+                x = points[i, a]
+                finite = finite and isfinite(x)
+                if x < bx[0, a]:
+                    bx[0, a] = x
+                if x > bx[1, a]:
+                    bx[1, a] = x
+        for a in range(3):
+            bx[1, a] = bx[1, a] - bx[0, a]
+    if not finite:
+        raise ValueError(f"{name}: points must be finite")
+    cap = GRID_CELLS_PER_POINT * n + 64
+    return (cap, box, np.empty(n, dtype=np.int64), np.empty(cap + 1, dtype=np.int64), np.empty(n, dtype=np.int64),
+            np.empty((n, 3)), np.empty(2 * (cap + 2)), np.empty(6 * n, dtype=np.int64))
+
+
+def crowded_points(const double[:, ::1] points, double radius, Py_ssize_t enough):
+    """How many points have at least two other points closer than ``radius``,
+    counted up to ``enough``: at least as many as any count of such points
+    made with other roundings of the distances, because a pair counts here
+    when its squared distance is at most ``radius**2 * (1 + 1e-9)``. CVFH
+    skips its second normals when this is below ``min_points``: fewer points
+    than that would get a normal. Runs without the GIL.
+    """
+    cdef int64_t n = points.shape[0], cap, s, found = 0
+    cdef double r2 = radius * radius * (1.0 + 1e-9)
+    cdef int64_t res[3]
+    cdef double* above[3]
+    cdef double* below[3]
+    if points.shape[1] != 3:
+        raise ValueError("crowded_points: points must have shape (n, 3)")
+    if not (radius >= 0.0):
+        raise ValueError(f"crowded_points: radius must be a number >= 0, got {radius}")
+    if n == 0 or enough <= 0:
+        return 0
+    cap, box, cell_of_a, cell_start_a, sidx_a, sp_a, slabs_a, cc_a = _grid_arrays(points, "crowded_points")
+    cdef double[:, ::1] bx = box
+    cdef int64_t[::1] cell_of = cell_of_a
+    cdef int64_t[::1] cell_start = cell_start_a
+    cdef int64_t[::1] sidx = sidx_a
+    cdef double[:, ::1] sp = sp_a
+    cdef double[::1] slabs = slabs_a
+    cdef int64_t[::1] cc = cc_a
+    with nogil:
+        # cells of about the radius (the cell cap makes them larger on sparse clouds)
+        _fill_grid(&points[0, 0], n, &bx[0, 0], &bx[1, 0], radius, cap, res, &cell_of[0], &cell_start[0], &sidx[0],
+                   &sp[0, 0], &cc[0])
+        _slab_bounds(&sp[0, 0], n, &cc[0], res, &slabs[0], above, below)
+        for s in range(n):
+            found += _has_close(&sp[0, 0], &cell_start[0], res, above, below, s, &cc[3 * s], r2, 3)
+            if found >= enough:
+                break
+    return found
 
 
 cdef bint _low_curvature_one(const double* p, const int64_t* nb, int64_t k, double threshold) noexcept nogil:
@@ -474,7 +781,12 @@ def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
     on the neighbors of its choice (:func:`low_curvature_of`). Runs without
     the GIL.
     """
-    cdef int64_t n = points.shape[0], i, kk, kq, n_tied = 0
+    cdef int64_t n = points.shape[0], kk, kq, n_tied = 0, cap, s
+    cdef double h, occupied, guess = -1.0
+    cdef int64_t res[3]
+    cdef const int64_t* cq
+    cdef double* above[3]
+    cdef double* below[3]
     if points.shape[1] != 3:
         raise ValueError("low_curvature: points must have shape (n, 3)")
     if k < 1:
@@ -483,39 +795,48 @@ def low_curvature(const double[:, ::1] points, Py_ssize_t k, double threshold):
     tied_arr = np.empty(n, dtype=np.int64)
     if n == 0:
         return out, tied_arr
-    if not np.isfinite(np.asarray(points)).all():
-        raise ValueError("low_curvature: points must be finite")
+    cap, box, cell_of_a, cell_start_a, sidx_a, sp_a, slabs_a, cc_a = _grid_arrays(points, "low_curvature")
     kk = min(<int64_t>k, n)
     kq = kk + 1 if kk < n else kk  # one more, to see a tie at the k-th
-    cdef int64_t[::1] perm = np.empty(n, dtype=np.int64)
-    cdef int64_t[::1] lo = np.empty(2 * n, dtype=np.int64)
-    cdef int64_t[::1] hi = np.empty(2 * n, dtype=np.int64)
-    cdef int64_t[::1] left = np.empty(2 * n, dtype=np.int64)
-    cdef int[::1] dim = np.empty(2 * n, dtype=np.intc)
-    cdef double[::1] cut = np.empty(2 * n, dtype=np.float64)
-    cdef int64_t[::1] stack = np.empty(2 * n + 2, dtype=np.int64)
-    cdef double[::1] gap = np.empty(2 * n + 2, dtype=np.float64)
-    cdef double[:, ::1] sp = np.empty((n, 3), dtype=np.float64)
+    cdef double[:, ::1] bx = box
+    cdef int64_t[::1] cell_of = cell_of_a
+    cdef int64_t[::1] cell_start = cell_start_a
+    cdef int64_t[::1] sidx = sidx_a
+    cdef double[:, ::1] sp = sp_a
+    cdef double[::1] slabs = slabs_a
+    cdef int64_t[::1] cc = cc_a
     cdef double[::1] bd = np.empty(kq, dtype=np.float64)
+    cdef double[::1] cd = np.empty(2 * n, dtype=np.float64)
+    cdef int64_t[::1] ci = np.empty(3 * n, dtype=np.int64)
     cdef int64_t[::1] bi = np.empty(kq, dtype=np.int64)
     cdef int64_t[::1] tied = tied_arr
-    cdef uint8_t[::1] res = out.view(np.uint8)
+    cdef uint8_t[::1] r = out.view(np.uint8)
     cdef const double* p = &points[0, 0]
+    cdef const double* lo = &bx[0, 0]
+    cdef const double* e = &bx[1, 0]
     with nogil:
-        _build_kd(p, n, &perm[0], &lo[0], &hi[0], &left[0], &dim[0], &cut[0], &stack[0])
-        for i in range(n):
-            sp[i, 0] = p[3 * perm[i]]
-            sp[i, 1] = p[3 * perm[i] + 1]
-            sp[i, 2] = p[3 * perm[i] + 2]
-        # queries in the tree's order, for locality
-        for i in range(n):
-            _knn(&sp[0, 0], &sp[i, 0], kq, &perm[0], &lo[0], &hi[0], &left[0], &dim[0], &cut[0], &stack[0],
-                 &gap[0], &bd[0], &bi[0])
+        h = INFINITY
+        if isfinite(e[0]) and isfinite(e[1]) and isfinite(e[2]):
+            # a first grid, then the cell size that puts about GRID_POINTS_PER_CELL
+            # points in an occupied cell of a surface (its occupancy grows as h^2)
+            h = _grid_resolution(e, _first_cell(e, n), cap, res)
+            occupied = <double>_bin_points(p, n, lo, 1.0 / h, res, &cell_of[0], &cell_start[0], NULL)
+            h = h * fmin(fmax(sqrt(GRID_POINTS_PER_CELL * occupied / n), 0.25), 4.0)
+        _fill_grid(p, n, lo, e, h, cap, res, &cell_of[0], &cell_start[0], &sidx[0], &sp[0, 0], &cc[0])
+        _slab_bounds(&sp[0, 0], n, &cc[0], res, &slabs[0], above, below)
+        # queries cell by cell, for locality
+        for s in range(n):
+            cq = &cc[3 * s]
+            # the previous query's k-th, a little larger, as the guess (queries come cell by cell)
+            if not _grid_knn_guess(&sp[0, 0], &sidx[0], &cell_start[0], res, above, below, &sp[s, 0], cq, kq,
+                                   guess * GUESS_FACTOR, &cd[0], &ci[0], n, &bd[0], &bi[0]):
+                _grid_knn(&sp[0, 0], &sidx[0], &cell_start[0], res, above, below, &sp[s, 0], cq, kq, &bd[0], &bi[0])
+            guess = bd[kq - 1]
             if kq > kk and bd[kk] == bd[kk - 1]:
-                tied[n_tied] = perm[i]
+                tied[n_tied] = sidx[s]
                 n_tied += 1
             else:
-                res[perm[i]] = _low_curvature_one(p, &bi[0], kk, threshold)
+                r[sidx[s]] = _low_curvature_one(p, &bi[0], kk, threshold)
     tied_arr = np.sort(tied_arr[:n_tied])
     return out, tied_arr
 
@@ -541,3 +862,4 @@ def low_curvature_of(const double[:, ::1] points, const int64_t[:, ::1] neighbor
         for r in range(m):
             res[r] = _low_curvature_one(&points[0, 0], &neighbors[r, 0], k, threshold)
     return out
+

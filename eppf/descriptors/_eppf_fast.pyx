@@ -23,20 +23,24 @@ Conventions (the user guide's reading of the paper):
   bin = min(n4 * occ // (L + 1), n4 - 1) in integers.
 - A bin count of 1 switches a function off (its value is never computed).
 
-Where the CPU has them (checked at import), batches of pairs (256; 1,024 at
-level 3) go through the SIMD kernels of ``_eppf_walk.h``: with AVX-512 (F,
+Batches of pairs (256; 1,024 for the skipping walks of levels 0, 1 and 3)
+go through the kernels of ``_eppf_walk.h``; where the CPU has them (checked at
+import), the SIMD ones: with AVX-512 (F,
 BW, VL, DQ, VBMI) the draws, the f1-f3 bins and the f4 walks of grids up to
 64 run eight pairs at a time (level 2: walks grouped by line length;
 level 3: f1-f3 and the walk setup in one pass, lanes refilled from a queue,
 each line walked along its dominant axis, skipping voxels proved empty by
 the empty cone ahead of them, look-ups by scalar loads; level 3 is the
-default on AMD, where gathers are slow); with AVX2 only, f1-f3 and the
-walks run four at a time (level 1). f1-f3 use the
+default on AMD, where gathers are slow). Levels 0 (portable C, every CPU)
+and 1 (AVX2) walk grids up to 64 with the same skipping algorithm in
+``_eppf_walk_port.h`` (level 1: its setup and steps four lines to a vector,
+f1-f3 four pairs at a time, no gathers). f1-f3 use the
 same IEEE operations in the same order, the walks visit the same voxels or
 prove them empty. Their bins and draws are bit-identical to the scalar code
-here, which every other case uses; ``_set_simd(False)`` forces it and
-``_set_simd_level`` picks a level (tests compare all levels with each other
-and with the NumPy reference).
+here (``_line_bin``, voxel by voxel, walks grids above 64 at every level, and
+every grid where ``_set_line_walk(True)``); ``_set_simd(False)`` forces level
+0 and ``_set_simd_level`` picks a level (tests compare all levels with each
+other, with ``_line_bin`` and with the NumPy reference).
 """
 import numpy as np
 
@@ -73,9 +77,6 @@ cdef extern from "_eppf_walk.h":
                               const double* nrm, int64_t ns, double scale, int n1, int n2, int n3, int n4,
                               double f1_density, const double* cos2, const double* cos3,
                               int32_t* B) noexcept nogil
-    void eppf_f4_batch_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox,
-                            const uint64_t* bits, int64_t g, const int32_t* thr, int n4,
-                            const double* recip_packed, int32_t* B) noexcept nogil
     void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
     void eppf_fill_grid_avx512(const double* pts, int64_t ps, int64_t n, int64_t g, uint64_t* bits,
                                int64_t* pv) noexcept nogil
@@ -103,6 +104,20 @@ cdef extern from "_eppf_walk.h":
     void eppf_f4_walkq_avx512(int nq, const int64_t* QP, const int64_t* QI, const int64_t* QM,
                               const uint64_t* code, int64_t g, const int32_t* thr, int n4, int64_t* lanes,
                               int drain, int32_t* counts) noexcept nogil
+    enum:
+        EPPF_PORT_WORDS
+        EPPF_PORT_CODE_WORDS
+    void eppf_port_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
+    int eppf_port_setup(int m, const int32_t* I, const int32_t* J, const int32_t* vox, int64_t g, const int32_t* B,
+                        const double* recip_packed, const int64_t* states, const int32_t* thr, int n4,
+                        int64_t* QP, int64_t* QI, int64_t* QS, int32_t* counts) noexcept nogil
+    void eppf_port_walk(int n, int64_t* QP, int64_t* QI, int64_t* QS, const uint64_t* code, const int32_t* thr,
+                        int n4, int64_t* done, int32_t* counts) noexcept nogil
+    int eppf_port_setup_avx2(int m, const int32_t* I, const int32_t* J, const int32_t* vox, int64_t g,
+                             const int32_t* B, const double* recip_packed, const int64_t* states, const int32_t* thr,
+                             int n4, int64_t* QP, int64_t* QI, int64_t* QS, int32_t* counts) noexcept nogil
+    void eppf_port_walk_avx2(int n, int64_t* QP, int64_t* QI, int64_t* QS, const uint64_t* code,
+                             const int32_t* thr, int n4, int64_t* done, int32_t* counts) noexcept nogil
 
 # The best kernels of ``_eppf_walk.h`` the CPU has: 0 scalar, 1 AVX2, 2 AVX-512
 # with the grouped f4 walk, 3 AVX-512 with the skipping f4 walk (f1-f3 use AVX2
@@ -125,6 +140,11 @@ cdef int _default_level():
 
 
 cdef int _level = _default_level()
+
+# Whether levels 0 and 1 take the per-pair walk of ``_line_bin`` instead of the
+# portable skipping walk (``_set_line_walk``: tests compare the two).
+cdef bint _line_walk = False
+
 
 cdef enum:
     # Consecutive zero-length pairs after which an object is declared degenerate.
@@ -184,6 +204,17 @@ def _set_simd(enabled):
     return old
 
 
+def _set_line_walk(enabled):
+    """Make levels 0 and 1 walk every f4 line voxel by voxel (``_line_bin``)
+    instead of by the portable skipping walk when ``enabled`` (tests: the
+    per-pair walk is the one the skipping walks are compared with); return
+    the previous setting."""
+    global _line_walk
+    old = _line_walk
+    _line_walk = bool(enabled)
+    return old
+
+
 def _simd_levels():
     """The kernel levels this CPU can run: 0 scalar, 1 AVX2, 2 AVX-512 (grouped
     walk), 3 AVX-512 (skipping walk)."""
@@ -227,6 +258,11 @@ cdef struct Params:
     int64_t first_states[PACKED_GRID + 1]
     int walk_level          # f4 walks: AVX2 (1), AVX-512 grouped (2) or skipping (3) (grids up to 64), scalar (0)
     int f123_level          # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
+
+
+cdef inline bint _port_walk(const Params* prm) noexcept nogil:
+    """Whether f4 goes through the portable skipping walk (levels 0 and 1, grids up to 64)."""
+    return prm.walk_level < 2 and prm.grid <= PACKED_GRID and prm.n4 > 1 and not _line_walk
 
 
 cdef inline int _voxel(double v, double lo, double inv, int grid) noexcept nogil:
@@ -386,27 +422,26 @@ cdef inline int _bin_f123(const double* pts, int64_t ps, const double* nrm, int6
     cdef double dist = sqrt(dx * dx + dy * dy + dz * dz)
     cdef double v, m1, m2, inv
     cdef int b1 = 0, b2 = 0, b3 = 0, k
+    # No branch on the data below (selects the compiler makes minimum and maximum
+    # instructions of; fabs): the pairs are random, so such branches would often
+    # be mispredicted.
     if prm.n1 > 1:
         # Clamped before the conversion, so that huge distances cannot overflow the int.
         # NaN and +inf land in the top bin, negative values (a negative scale) in bin 0.
         v = dist * scale
         v = v * prm.f1_density
-        if not (v < prm.n1 - 1):
-            b1 = prm.n1 - 1
-        elif v > 0.0:
-            b1 = <int>v
+        v = v if v < prm.n1 - 1 else <double>(prm.n1 - 1)
+        b1 = <int>(v if v > 0.0 else 0.0)
     if prm.n2 > 1:
         inv = 1.0 / dist
         m1 = (nrm[ns * i] * dx + nrm[ns * i + 1] * dy + nrm[ns * i + 2] * dz) * inv
         m2 = (nrm[ns * j] * dx + nrm[ns * j + 1] * dy + nrm[ns * j + 2] * dz) * inv
-        if m2 < m1:
-            m1 = m2
+        m1 = m2 if m2 < m1 else m1
         for k in range(prm.n2 - 1):
             b2 += m1 <= prm.cos2[k]
     if prm.n3 > 1:
-        v = nrm[ns * i] * nrm[ns * j] + nrm[ns * i + 1] * nrm[ns * j + 1] + nrm[ns * i + 2] * nrm[ns * j + 2]
-        if v < 0.0:
-            v = -v
+        # |v| (fabs turns -0.0 into +0.0, which compares the same)
+        v = fabs(nrm[ns * i] * nrm[ns * j] + nrm[ns * i + 1] * nrm[ns * j + 1] + nrm[ns * i + 2] * nrm[ns * j + 2])
         for k in range(prm.n3 - 1):
             b3 += v <= prm.cos3[k]
     if parts != NULL:
@@ -456,9 +491,9 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
-    cdef int32_t pair_i[QBATCH]
-    cdef int32_t pair_j[QBATCH]
-    cdef int32_t pair_bins[QBATCH]
+    cdef int32_t pair_i[QBATCH + 8]  # (the AVX2 walk setup reads pairs and bins in fours)
+    cdef int32_t pair_j[QBATCH + 8]
+    cdef int32_t pair_bins[QBATCH + 8]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
     # AVX-512: draw a batch's candidate pairs eight at a time; the f1-f3 pass
@@ -471,12 +506,15 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int64_t queue_pos[QBATCH + 8]
     cdef int64_t queue_inc[QBATCH + 8]
     cdef int64_t queue_state[QBATCH + 8]
+    cdef int64_t done[QBATCH + 8]  # the portable walks' finished states
     cdef int n_queued = 0
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
     if prm.f123_level != 2:
         pn = NULL
     cdef bint skipping = prm.walk_level == 3 and prm.n4 > 1 and pn != NULL  # f4 by the skipping walk (level 3)
+    cdef bint port = _port_walk(prm)  # f4 by the portable skipping walk (levels 0 and 1)
+    cdef int64_t batch = QBATCH if skipping or port else BATCH
     if prm.n4 > 1:
         _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.walk_level >= 2 else NULL)
     if pn != NULL:
@@ -484,11 +522,13 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     if skipping:
         eppf_code_grid(bits, prm.grid, code + CODE_SCRATCH, code)
         memset(lanes, 0, sizeof(lanes))
+    elif port:
+        eppf_port_code_grid(bits, prm.grid, code + EPPF_PORT_CODE_WORDS, code)
     base = 0
     while base < n_pairs:
         m = n_pairs - base
-        if m > (QBATCH if skipping else BATCH):
-            m = QBATCH if skipping else BATCH
+        if m > batch:
+            m = batch
         if vec_draw:
             eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, pair_i, pair_j)
             if skipping:
@@ -530,13 +570,21 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
             eppf_f4_walkq_avx512(n_queued, queue_pos, queue_inc, queue_state, code, prm.grid, prm.thr, prm.n4,
                                  lanes, 0, counts)
             continue
+        if port and prm.walk_level == 1:
+            n_queued = eppf_port_setup_avx2(<int>m, pair_i, pair_j, vox, prm.grid, pair_bins, prm.recip_packed,
+                                            prm.first_states, prm.thr, prm.n4, queue_pos, queue_inc, queue_state,
+                                            counts)
+            eppf_port_walk_avx2(n_queued, queue_pos, queue_inc, queue_state, code, prm.thr, prm.n4, done, counts)
+            continue
+        if port:
+            n_queued = eppf_port_setup(<int>m, pair_i, pair_j, vox, prm.grid, pair_bins, prm.recip_packed,
+                                       prm.first_states, prm.thr, prm.n4, queue_pos, queue_inc, queue_state, counts)
+            eppf_port_walk(n_queued, queue_pos, queue_inc, queue_state, code, prm.thr, prm.n4, done, counts)
+            continue
         if prm.n4 > 1:
             if prm.walk_level >= 2:
                 eppf_f4_batch_avx512(<int>m, pair_i, pair_j, pv, bits, prm.grid, prm.thr, prm.n4, prm.lohi,
                                      prm.recip_packed, pair_bins)
-            elif prm.walk_level:
-                eppf_f4_batch_avx2(<int>m, pair_i, pair_j, vox, bits, prm.grid, prm.thr, prm.n4, prm.recip_packed,
-                                   pair_bins)
             elif prm.grid == PACKED_GRID:
                 for t in range(m):
                     pair_bins[t] += _line_bin(vox + 3 * pair_i[t], vox + 3 * pair_j[t], prm, bits, PACKED_GRID, 1,
@@ -669,12 +717,13 @@ def eppf_counts(points_in, normals_in,
         return counts_arr, status_arr
     cdef int64_t max_n = np.max(np.diff(offsets))
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
-    vox_arr = np.zeros((num_threads, 3 * max_n), dtype=np.int32)
+    # (one int32 more: the AVX2 walk setup reads a point's voxel as 16 bytes)
+    vox_arr = np.zeros((num_threads, 3 * max_n + 1), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.walk_level >= 2 else 1), dtype=np.int64)
-    # the AVX-512 walk's cone grids and their scratch (between the grids' halves): the walk reads any
-    # of the first CODE_READ_WORDS words
-    code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.walk_level == 3 else 1),
-                        dtype=np.uint64)
+    # the skipping walks' cone grids and their scratch: level 3's (scratch between the grids' halves;
+    # the walk reads any of the first CODE_READ_WORDS words) or the portable walk's (levels 0 and 1)
+    code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.walk_level == 3
+                         else EPPF_PORT_WORDS if _port_walk(&prm) else 1), dtype=np.uint64)
     # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to ROWS_MAX_POINTS
     # points, larger ones are read in place)
     cdef bint use_rows = prm.f123_level == 2 and max_n <= ROWS_MAX_POINTS
@@ -765,30 +814,45 @@ def eppf_pair_features(const double[:, ::1] points, const double[:, ::1] normals
     return out_arr
 
 
-def _cone_codes(occupied):
-    """The skipping walk's cone codes of an occupancy grid (tests).
+cdef void _port_code_grid(const uint64_t* bits, int g, uint64_t[::1] buf):
+    eppf_port_code_grid(bits, g, &buf[EPPF_PORT_CODE_WORDS], &buf[0])
+
+
+def _cone_codes(occupied, portable=False):
+    """The skipping walks' cone codes of an occupancy grid (tests).
 
     ``occupied``: (g, g, g) booleans, 2 <= g <= 64, indexed [x, y, z].
     Returns a (3, g, g, g) uint8 array: entry [a, x, y, z] is min(C, 3), C
     the number of planes of the cone along axis a from voxel (x, y, z) on
-    with no occupied voxel (``eppf_code_grid`` in ``_eppf_walk_skip.h``). Needs
-    the AVX-512 kernels (level 3).
+    with no occupied voxel, as built for level 3 (``eppf_code_grid`` in
+    ``_eppf_walk_skip.h``; needs the AVX-512 kernels) or, with ``portable``,
+    for levels 0 and 1 (``eppf_port_code_grid`` in ``_eppf_walk_port.h``).
     """
     occ = np.asarray(occupied, dtype=bool)
     if (occ.ndim != 3 or occ.shape[0] != occ.shape[1] or occ.shape[0] != occ.shape[2]
             or not MIN_GRID <= occ.shape[0] <= PACKED_GRID):
         raise ValueError(f"occupied must be a (g, g, g) grid with {MIN_GRID} <= g <= {PACKED_GRID}")
-    if _max_level() < 3:
+    if not portable and _max_level() < 3:
         raise ValueError("the cone codes need the AVX-512 kernels, which this CPU lacks")
     cdef int g = occ.shape[0]
     packed = np.zeros((g, g, 8), dtype=np.uint8)
     packed[:, :, : (g + 7) // 8] = np.packbits(occ, axis=2, bitorder="little")
     cdef uint64_t[::1] bits = np.ascontiguousarray(packed.reshape(-1).view(np.uint64))
+    z = np.arange(g)
+    if portable:
+        port_arr = np.zeros(EPPF_PORT_WORDS, dtype=np.uint64)
+        port_view = port_arr
+        _port_code_grid(&bits[0], g, port_view)
+        # words 2 r and 2 r + 1, r = CODE_AXIS_WORDS a + 64 x + y: the code's bits 0 and 1 at bit z
+        rows = port_arr[: 2 * 3 * CODE_AXIS_WORDS].reshape(3, 64, 64, 2)[:, :g, :g]
+        shift = z.astype(np.uint64)
+        bit0 = (rows[..., 0, None] >> shift) & 1
+        bit1 = (rows[..., 1, None] >> shift) & 1
+        return (bit0 + 2 * bit1).astype(np.uint8)
     code_arr = np.zeros(CODE_READ_WORDS, dtype=np.uint64)
     cdef uint64_t[::1] code = code_arr
     eppf_code_grid(&bits[0], g, &code[CODE_SCRATCH], &code[0])
     # word CODE_AXIS_WORDS a + 64 x + y holds z < 32, the same word CODE_HALF on z >= 32
     halves = [code_arr[h : h + 3 * CODE_AXIS_WORDS].reshape(3, 64, 64)[:, :g, :g] for h in (0, CODE_HALF)]
     words = np.stack(halves, axis=-1)
-    z = np.arange(g)
     return ((words[..., z >> 5] >> (2 * (z & 31)).astype(np.uint64)) & 3).astype(np.uint8)

@@ -2,9 +2,15 @@
  * one file a level (this file includes them all):
  *
  * - _eppf_walk_common.h: the packed walk's layout, the batch size, the CPU
- *   checks and what the walks of levels 1 and 2 share;
+ *   checks, the skipping walks' lane state and what the walks share;
+ * - _eppf_walk_port.h, levels 0 and 1: level 3's skipping walk in portable C
+ *   (the cone codes as two bit planes, built with whole-word operations; the
+ *   lines of a batch walked in rounds of a few steps, several side by side,
+ *   no branch on the data), which level 0 runs as it is;
  * - _eppf_walk_avx2.h, level 1: AVX2, four pairs at a time: the f1-f3 bins
- *   (``eppf_f123_batch_avx2``) and the f4 line walks (``eppf_f4_batch_avx2``);
+ *   (``eppf_f123_batch_avx2``) and the portable walk's setup and steps
+ *   (``eppf_port_setup_avx2``, ``eppf_port_walk_avx2``), with no gathers
+ *   (AVX2-only AMD CPUs run them slowly);
  * - _eppf_walk_avx512.h, level 2: AVX-512 (F, BW, VL, DQ and VBMI), eight
  *   pairs at a time: the pair draws (``eppf_draw_batch_avx512``), the f1-f3
  *   bins with the check for coinciding points (``eppf_f123_batch_avx512``)
@@ -47,11 +53,14 @@
  * that many steps (at most rem) in every lane, then the rule is applied again.
  * Walking on past the point where a bin became certain (but never past the
  * line's end) cannot change that bin, which the AVX-512 walk uses to test
- * only every fourth step.
+ * only every fourth step (the skipping walks also freeze a line's state once
+ * its bin is certain, so steps past the line's end change nothing either).
  *
  * The SIMD code is compiled with target attributes and chosen at run time
  * (``eppf_walk_has_avx2`` / ``eppf_walk_has_avx512``); other compilers and
- * CPUs use the scalar code of _eppf_fast.pyx. No floating point is involved in
+ * CPUs use the portable code (_eppf_walk_port.h, and _eppf_fast.pyx's scalar
+ * code, whose voxel-by-voxel ``_line_bin`` walks the grids above 64 at every
+ * level). No floating point is involved in
  * the walks beyond the setup, which uses the same expressions as _eppf_fast.pyx.
  */
 #ifndef EPPF_WALK_H
@@ -61,5 +70,11 @@
 #include "_eppf_walk_avx2.h"    /* level 1 */
 #include "_eppf_walk_avx512.h"  /* level 2, and the AVX-512 parts of level 3 */
 #include "_eppf_walk_skip.h"    /* level 3 */
+#include "_eppf_walk_port.h"    /* levels 0 and 1: the portable skipping walk */
+
+#if !EPPF_WALK_SIMD
+#define eppf_port_setup_avx2 eppf_port_setup
+#define eppf_port_walk_avx2 eppf_port_walk
+#endif
 
 #endif /* EPPF_WALK_H */

@@ -64,10 +64,44 @@ static int eppf_walk_prefers_skips(void)
     return eppf_cpu_has(EPPF_CPU_AMD);
 }
 
+/* AVX2, and BMI2 (level 1's build of the portable walk uses its shifts). */
 static int eppf_walk_has_avx2(void)
 {
-    return eppf_cpu_has(EPPF_CPU_AVX2);
+    return eppf_cpu_has(EPPF_CPU_AVX2 | EPPF_CPU_BMI2);
 }
+
+/* The f4 bin of occ occupied voxels on a line of T voxels: how many of the
+   thresholds thr[T n4 + b], b = 1..n4-1, occ reaches. */
+static inline int eppf_f4_bin(const int32_t *thr, int n4, int64_t T, int64_t occ)
+{
+    const int32_t *th = thr + T * n4;
+    int b = 0, j;
+    for (j = 1; j < n4; j++)
+        b += occ >= th[j];
+    return b;
+}
+
+/* The skipping walks' lane state (``eppf_f4_walkq_avx512``, the portable
+   ``eppf_port_walk``): four signed bytes R, U, O, X. */
+#define EPPF_ST(r, u, o, x) ((int64_t)(((uint64_t)(uint8_t)(r)) | ((uint64_t)(uint8_t)(u) << 8)       \
+                                       | ((uint64_t)(uint8_t)(o) << 16) | ((uint64_t)(uint8_t)(x) << 24)))
+/* st[T] = the state of a line of T voxels before its first step, T = 1..64
+   (0 for T > g + 1, past ``thr``'s rows [T, b], T = 0..g + 1, and for T = 0). */
+static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
+{
+    int T;
+    for (T = 0; T <= EPPF_WALK_MAX_GRID; T++) {
+        st[T] = 0;
+        if (T >= 1 && T <= g + 1) {
+            const int lo = thr[T * n4 + 1], hi = thr[T * n4 + n4 - 1];
+            st[T] = EPPF_ST(T - 3, T - lo, hi - 3, lo - 3);
+        }
+    }
+}
+
+/* The words of one axis's cone grid (one half of it at level 3): 64 rows (x)
+   of 64 words (y), whatever g. */
+#define EPPF_CODE_AXIS_WORDS 4096
 
 #if EPPF_WALK_SIMD
 /* The pairs with inner voxels (L > 1) in walk order, longest line first, into
@@ -94,17 +128,6 @@ static int eppf_f4_order(int m, const int32_t *Ls, int *order)
             order[start[L]++] = t;
     }
     return n_walk;
-}
-
-/* The f4 bin of occ occupied voxels on a line of T voxels: how many of the
-   thresholds thr[T n4 + b], b = 1..n4-1, occ reaches. */
-static inline int eppf_f4_bin(const int32_t *thr, int n4, int64_t T, int64_t occ)
-{
-    const int32_t *th = thr + T * n4;
-    int b = 0, j;
-    for (j = 1; j < n4; j++)
-        b += occ >= th[j];
-    return b;
 }
 
 /* f4 bins of the lines without inner voxels (L <= 1): occ = T = L + 1, all voxels occupied. */

@@ -7,6 +7,7 @@
 
 #include "_eppf_walk_common.h"
 #include "_eppf_walk_avx512.h"
+#include "_eppf_walk_port.h" /* the cone steps of the generic build */
 
 /* Pairs per batch of the skipping walk (level 3), which needs no sorting:
    fewer, longer calls (its lanes carry over between them). */
@@ -15,24 +16,6 @@
    set of eight lanes (six sets, 64 words each), three vectors of eight int64
    (words 0-23) and the mask of lanes in use (word 56). */
 #define EPPF_LANES_WORDS 384
-/* The skipping walk's lane state (``eppf_f4_walkq_avx512``): four signed
-   bytes R, U, O, X. */
-#define EPPF_ST(r, u, o, x) ((int64_t)(((uint64_t)(uint8_t)(r)) | ((uint64_t)(uint8_t)(u) << 8)       \
-                                       | ((uint64_t)(uint8_t)(o) << 16) | ((uint64_t)(uint8_t)(x) << 24)))
-/* st[T] = the state of a line of T voxels before its first step, T = 1..64
-   (0 for T > g + 1, past ``thr``'s rows [T, b], T = 0..g + 1, and for T = 0). */
-static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
-{
-    int T;
-    for (T = 0; T <= EPPF_WALK_MAX_GRID; T++) {
-        st[T] = 0;
-        if (T >= 1 && T <= g + 1) {
-            const int lo = thr[T * n4 + 1], hi = thr[T * n4 + n4 - 1];
-            st[T] = EPPF_ST(T - 3, T - lo, hi - 3, lo - 3);
-        }
-    }
-}
-
 /* The cone grids behind the AVX-512 walk's skips. A line walked along its
  * dominant axis a, in the direction in which that coordinate grows, moves it
  * by exactly one voxel a step and every other coordinate by at most one, so
@@ -48,11 +31,9 @@ static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
  * walk's word index then comes from one multiply-add of bytes, see
  * ``eppf_f4_walkq_avx512``). The sets O_m of voxels with C < m: O_1 the
  * occupied ones, O_{m+1} = O_1 or the voxels whose next plane's 3^2 box
- * meets O_m (``eppf_cone_step``). ``bits``: g^2 words, one per (x, y) row,
+ * meets O_m (``eppf_port_cone_step``). ``bits``: g^2 words, one per (x, y) row,
  * z bits (none past z = g - 1); ``work``: 4 g^2 words of scratch, which may
  * be ``code + EPPF_CODE_SCRATCH`` (between the two halves); 2 <= g <= 64. */
-/* The words of one half of one axis's grid: 64 rows (x) of 64 words (y), whatever g. */
-#define EPPF_CODE_AXIS_WORDS 4096
 /* Where the z >= 32 halves start: 2**16, since the skipping walk's word index
    takes z >> 5 as its upper 16-bit field. */
 #define EPPF_CODE_HALF 65536
@@ -66,69 +47,6 @@ static void eppf_walk_states(const int32_t *thr, int n4, int64_t g, int64_t *st)
 #if EPPF_CODE_SCRATCH + 4 * EPPF_CODE_AXIS_WORDS > EPPF_CODE_HALF || EPPF_CODE_WORDS > EPPF_CODE_READ_WORDS
 #error "the cone grids' scratch must fit between their halves, the grids inside the read bound"
 #endif
-/* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
-   inside the grid) or-ed: the y +- 1 part of a 3^2 box; 2 <= g <= 64. */
-EPPF_AVX512_FN
-static void eppf_rows_pm1(const uint64_t *in, uint64_t *out, int64_t g)
-{
-    int64_t x, y;
-    for (x = 0; x < g; x++) {
-        const uint64_t *t = in + x * g;
-        uint64_t *u = out + x * g;
-        u[0] = t[0] | t[1];
-        for (y = 1; y < g - 1; y++)
-            u[y] = t[y - 1] | t[y] | t[y + 1];
-        u[g - 1] = t[g - 2] | t[g - 1];
-    }
-}
-
-/* ``out`` = ``bits`` or the voxels whose next plane along ``axis`` meets
-   ``o`` in its 3^2 box; a and b: g^2 words of scratch each. */
-EPPF_AVX512_FN
-static void eppf_cone_step(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a, uint64_t *b,
-                           int64_t g, int axis)
-{
-    const uint64_t gm = g == 64 ? ~(uint64_t)0 : (((uint64_t)1 << g) - 1);
-    int64_t x, y, r;
-    if (axis == 2) {
-        /* the 3^2 box in (x, y), then the next z (bit z + 1) */
-        eppf_rows_pm1(o, b, g);
-        for (y = 0; y < g; y++)
-            out[y] = bits[y] | ((b[y] | b[g + y]) >> 1);
-        for (x = 1; x < g - 1; x++)
-            for (y = 0; y < g; y++)
-                out[x * g + y] = bits[x * g + y] | ((b[(x - 1) * g + y] | b[x * g + y] | b[(x + 1) * g + y]) >> 1);
-        for (y = 0; y < g; y++)
-            out[(g - 1) * g + y] = bits[(g - 1) * g + y] | ((b[(g - 2) * g + y] | b[(g - 1) * g + y]) >> 1);
-        return;
-    }
-    /* z +- 1 within the grid */
-    for (r = 0; r < g * g; r++)
-        a[r] = (o[r] | (o[r] << 1) | (o[r] >> 1)) & gm;
-    if (axis == 0) {
-        /* y +- 1, then the next x */
-        eppf_rows_pm1(a, b, g);
-        for (r = 0; r < (g - 1) * g; r++)
-            out[r] = bits[r] | b[r + g];
-        for (; r < g * g; r++)
-            out[r] = bits[r];
-    } else {
-        /* x +- 1, then the next y */
-        for (y = 0; y < g; y++)
-            b[y] = a[y] | a[g + y];
-        for (x = 1; x < g - 1; x++)
-            for (y = 0; y < g; y++)
-                b[x * g + y] = a[(x - 1) * g + y] | a[x * g + y] | a[(x + 1) * g + y];
-        for (y = 0; y < g; y++)
-            b[(g - 1) * g + y] = a[(g - 2) * g + y] | a[(g - 1) * g + y];
-        for (x = 0; x < g; x++) {
-            for (y = 0; y < g - 1; y++)
-                out[x * g + y] = bits[x * g + y] | b[x * g + y + 1];
-            out[x * g + g - 1] = bits[x * g + g - 1];
-        }
-    }
-}
-
 /* The low 32 bits of x spread to the even bits of the result. */
 EPPF_AVX512_FN
 static inline uint64_t eppf_spread32(uint64_t x)
@@ -209,7 +127,7 @@ static inline void eppf_cone_emit8(const uint64_t *bits, const uint64_t *o, uint
         _mm512_storeu_si512(out + w, u3);
     }
 }
-/* out = bits | D_axis(o) for g = 64 (``eppf_cone_step``), or its code words
+/* out = bits | D_axis(o) for g = 64 (``eppf_port_cone_step``), or its code words
    (code not NULL, o = O_2: see eppf_cone_emit8); a: 192 words of scratch */
 __attribute__((target(EPPF_AVX512_TARGET ",gfni")))
 static void eppf_cone_step64(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a, int axis,
@@ -286,8 +204,8 @@ static void eppf_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint
 #endif
     for (axis = 0; axis < 3; axis++) {
         uint64_t *c = code + EPPF_CODE_AXIS_WORDS * axis;
-        eppf_cone_step(bits, bits, o2, a, b, g, axis);
-        eppf_cone_step(bits, o2, o3, a, b, g, axis);
+        eppf_port_cone_step(bits, bits, o2, a, b, g, axis);
+        eppf_port_cone_step(bits, o2, o3, a, b, g, axis);
         for (r = 0; r < g * g; r++) {
             const uint64_t b0 = (o2[r] & ~bits[r]) | ~o3[r];  /* c = 1 or 3 */
             const uint64_t b1 = ~o2[r];                       /* c = 2 or 3 */

@@ -57,6 +57,8 @@ cdef extern from "_esf_kernel.h" nogil:
     int esf_take(const esf_const* k, esf_state* s, const uint32_t* i1, const uint32_t* i2,
                  const uint32_t* i3, int n_cand)
     void esf_finish(const esf_state* s, int n_bins, int simd)
+    void esf_count_scaled(const double* v, const int8_t* cls, int64_t n, double vmax, double scale, int n_bins,
+                          int64_t* acc, int simd)
     int esf_line_setup(int32_t a0, int32_t a1, int32_t a2, int32_t b0, int32_t b1, int32_t b2,
                        const int32_t* rs, const int32_t* st, uint64_t* pos_out, uint64_t* inc_out)
     int esf_walk(const uint64_t* g3, uint64_t pos, uint64_t inc, int n)
@@ -632,3 +634,23 @@ def esf_line_counts(const int32_t[:, ::1] occupied, const int32_t[:, ::1] starts
             m = min(3 * ESF_BATCH, n_lines - b)
             esf_walk_batch(&g3[0], &pos[b], &inc[b], <int*>&cnt[b], <int*>&occ[b], <int>m, _esf_simd)
     return np.asarray(occ), np.asarray(cnt)
+
+
+def esf_scaled_counts(const double[::1] values, const int8_t[::1] classes, double vmax, int n_bins, bint simd):
+    """The D2/D3 binning of the batched kernel, for the tests: ``(3, n_bins)``
+    counts of ``round(values / vmax * (n_bins - 1))`` (clipped, NaN to bin 0)
+    per class (0, 1 or 2), with the AVX2 binning when ``simd`` and the CPU
+    has it."""
+    cdef int64_t n = values.shape[0], i
+    if classes.shape[0] != n or n_bins < 1 or not vmax > 0:
+        raise ValueError("esf_scaled_counts: one class per value, n_bins >= 1 and vmax > 0 are needed")
+    for i in range(n):
+        if not 0 <= classes[i] <= 2:
+            raise ValueError("esf_scaled_counts: classes must be 0, 1 or 2")
+    acc = np.zeros((3, n_bins), dtype=np.int64)
+    cdef int64_t[:, ::1] a = acc
+    if n:
+        esf_count_scaled(&values[0], &classes[0], n, vmax, (n_bins - 1) / vmax, n_bins, &a[0, 0],
+                         simd and esf_has_avx2() != 0)
+    return acc
+

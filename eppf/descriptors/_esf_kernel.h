@@ -36,9 +36,9 @@
  * esf_take runs a copy of its body compiled for them (esf_take_avx2: four
  * doubles per vector for the square roots and divisions) and walks a
  * batch's lines four at a time (esf_walk_lines_avx2), and the D2/D3 values
- * are binned by esf_count_scaled_avx2. Only integer steps and plain IEEE
- * operations are involved (no FMA), so the descriptor is bit-identical
- * either way; the tests compare both paths.
+ * are binned four at a time (esf_block_bins_avx2). Only integer steps and
+ * plain IEEE operations are involved (no FMA), so the descriptor is
+ * bit-identical either way; the tests compare both paths.
  */
 #ifndef EPPF_ESF_KERNEL_H
 #define EPPF_ESF_KERNEL_H
@@ -180,15 +180,15 @@ static void esf_setup_lines(int n, const int32_t *ax, const int32_t *ay, const i
         cnt[q] = esf_line_setup(ax[q], ay[q], az[q], bx[q], by[q], bz[q], rs, st, &pos[q], &inc[q]);
 }
 
-/* Occupied voxels among the n steps of a packed line. */
+/* Occupied voxels among the n >= 0 steps of a packed line. */
 static inline int esf_walk(const uint64_t *g3, uint64_t pos, uint64_t inc, int n)
 {
     int occ = 0;
     uint64_t end = pos + (uint64_t)n * inc;
-    do {
+    while (pos != end) {
         occ += (int)((g3[pos >> ESF_WORD_SHIFT] >> ((pos >> ESF_FRAC) & 63)) & 1);
         pos += inc;
-    } while (pos != end);
+    }
     return occ;
 }
 
@@ -213,7 +213,7 @@ static void esf_walk_lines(const uint64_t *g3, const uint64_t *pos, const uint64
 #if ESF_SIMD
 /* The same counts, four lines at a time in the lanes of AVX2 vectors (one
  * gather loads the four grid words of a step). The lines are first ordered
- * by their number of steps (a counting sort; 1 <= cnt <= 64), so the four
+ * by their number of steps (a counting sort; 0 <= cnt <= 64), so the four
  * lanes of a group need similar numbers of steps: all four walk the
  * group's smallest count without a test, then the lanes still running walk
  * on with a masked gather while the others add zero. The integer steps are
@@ -353,36 +353,76 @@ static void esf_fill_ratio_bins(int n_bins, int16_t *ratio_bin)
             ratio_bin[64 * c + o] = (int16_t)(c > 0 && o <= c ? esf_round_bin((double)o / (double)c, n_bins) : 0);
 }
 
+/* bin[i] = esf_scaled_bin(v[i], vmax, scale, n_bins) for i < m, except that
+ * values near a rounding boundary get the multiplication's bin; returns
+ * whether there was any (the caller then redoes the block with
+ * esf_scaled_bin). Each value is clamped to [0, n_bins] before the
+ * conversion (NaN to 0); a value clamped to an end is an integer, so it
+ * counts as near too and esf_scaled_bin's clamps decide. */
+static inline int esf_block_bins(const double *v, int64_t m, double scale, int n_bins, int32_t *bin)
+{
+    int64_t i;
+    int near = 0;
+    const double top = (double)n_bins;
+    for (i = 0; i < m; i++) {
+        double x = v[i] * scale + 0.5, f;
+        int32_t k;
+        x = x > 0.0 ? x : 0.0;
+        x = x < top ? x : top;
+        k = (int32_t)x;
+        f = x - (double)k;
+        near |= (f < 1e-9) | (1.0 - f < 1e-9);
+        k = k < n_bins - 1 ? k : n_bins - 1;
+        bin[i] = k;
+    }
+    return near;
+}
+
+#if ESF_SIMD
+/* esf_block_bins four values at a time: the same IEEE operations (max and
+ * min give the clamps' results, NaN included: they return their second
+ * operand when the first is NaN), so the same bins and the same answer. (The
+ * compiler does not vectorize the plain loop: the clamps are branches to
+ * it.) */
+__attribute__((target("avx2")))
+static int esf_block_bins_avx2(const double *v, int64_t m, double scale, int n_bins, int32_t *bin)
+{
+    const __m256d vs = _mm256_set1_pd(scale), half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd(),
+                  top = _mm256_set1_pd((double)n_bins), eps = _mm256_set1_pd(1e-9), one = _mm256_set1_pd(1.0);
+    const __m128i kmax = _mm_set1_epi32(n_bins - 1);
+    __m256d near = _mm256_setzero_pd();
+    int64_t i;
+    for (i = 0; i + 4 <= m; i += 4) {
+        __m256d x = _mm256_add_pd(_mm256_mul_pd(_mm256_loadu_pd(v + i), vs), half), f;
+        __m128i k;
+        x = _mm256_min_pd(_mm256_max_pd(x, zero), top);
+        k = _mm256_cvttpd_epi32(x);
+        f = _mm256_sub_pd(x, _mm256_cvtepi32_pd(k));
+        near = _mm256_or_pd(near, _mm256_or_pd(_mm256_cmp_pd(f, eps, _CMP_LT_OQ),
+                                               _mm256_cmp_pd(_mm256_sub_pd(one, f), eps, _CMP_LT_OQ)));
+        _mm_storeu_si128((__m128i *)(bin + i), _mm_min_epi32(k, kmax));
+    }
+    return (_mm256_movemask_pd(near) != 0) | esf_block_bins(v + i, m - i, scale, n_bins, bin + i);
+}
+#else
+#define esf_block_bins_avx2 esf_block_bins
+#endif
+
 /* acc[cls[i] * n_bins + esf_scaled_bin(v[i], vmax, scale, n_bins)] += 1 for
- * i < n, in blocks: the bins of a block first, in a loop without branches
- * that the compiler vectorizes, with the values near a rounding boundary
- * (which take esf_scaled_bin's division) redone one by one, then the
- * counts. The values are lengths, never negative. */
-static inline __attribute__((always_inline)) void
-esf_count_scaled_impl(const double *v, const int8_t *cls, int64_t n, double vmax, double scale, int n_bins,
-                      int64_t *acc)
+ * i < n, in blocks: the bins of a block first, without branches (with AVX2
+ * when simd), the values near a rounding boundary (which take
+ * esf_scaled_bin's division) redone one by one, then the counts. The values
+ * are lengths, never negative. */
+static void esf_count_scaled(const double *v, const int8_t *cls, int64_t n, double vmax, double scale, int n_bins,
+                             int64_t *acc, int simd)
 {
     enum { BLOCK = 256 };
     int32_t bin[BLOCK];
     int64_t b, i, m;
-    const double top = (double)n_bins;
     for (b = 0; b < n; b += BLOCK) {
-        int near = 0;
+        int near;
         m = n - b < BLOCK ? n - b : BLOCK;
-        for (i = 0; i < m; i++) {
-            double x = v[b + i] * scale + 0.5;
-            int32_t k;
-            /* clamped to [0, n_bins] before the conversion (NaN to 0); a value
-             * clamped to an end is an integer, so it counts as near and the
-             * block is redone by esf_scaled_bin, whose clamps decide */
-            x = x > 0.0 ? x : 0.0;
-            x = x < top ? x : top;
-            k = (int32_t)x;
-            double f = x - (double)k;
-            near |= (f < 1e-9) | (1.0 - f < 1e-9);
-            k = k < n_bins - 1 ? k : n_bins - 1;
-            bin[i] = k;
-        }
+        near = simd ? esf_block_bins_avx2(v + b, m, scale, n_bins, bin) : esf_block_bins(v + b, m, scale, n_bins, bin);
         if (near)
             for (i = 0; i < m; i++)
                 bin[i] = esf_scaled_bin(v[b + i], vmax, scale, n_bins);
@@ -391,25 +431,8 @@ esf_count_scaled_impl(const double *v, const int8_t *cls, int64_t n, double vmax
     }
 }
 
-static void esf_count_scaled_default(const double *v, const int8_t *cls, int64_t n, double vmax, double scale,
-                                     int n_bins, int64_t *acc)
-{
-    esf_count_scaled_impl(v, cls, n, vmax, scale, n_bins, acc);
-}
-
-#if ESF_SIMD
-__attribute__((target("avx2,bmi,bmi2")))
-static void esf_count_scaled_avx2(const double *v, const int8_t *cls, int64_t n, double vmax, double scale,
-                                  int n_bins, int64_t *acc)
-{
-    esf_count_scaled_impl(v, cls, n, vmax, scale, n_bins, acc);
-}
-#else
-#define esf_count_scaled_avx2 esf_count_scaled_default
-#endif
-
 /* D3 and D2 histograms from the stored values, then weights and division by
- * the sum into out; simd: bin with esf_count_scaled_avx2. */
+ * the sum into out; simd: bin with esf_block_bins_avx2. */
 static void esf_finish(const esf_state *s, int n_bins, int simd)
 {
     static const double weights[10] = {0.5, 0.5, 0.5, 0.5, 0.5, 1.0, 0.5, 2.0, 2.0, 1.0};
@@ -421,13 +444,8 @@ static void esf_finish(const esf_state *s, int n_bins, int simd)
     const int8_t *cls2 = s->cls2, *cls3 = s->cls3;
     const double *d2v = s->d2v, *d3v = s->d3v, maxd2 = s->maxd2, maxd3 = s->maxd3;
     const int64_t n_triplets = s->n_triplets;
-    if (simd) {
-        esf_count_scaled_avx2(d3v, cls3, n_triplets, maxd3, sc3, n_bins, acc + 3 * n_bins);
-        esf_count_scaled_avx2(d2v, cls2, 3 * n_triplets, maxd2, sc2, n_bins, acc + 6 * n_bins);
-    } else {
-        esf_count_scaled_default(d3v, cls3, n_triplets, maxd3, sc3, n_bins, acc + 3 * n_bins);
-        esf_count_scaled_default(d2v, cls2, 3 * n_triplets, maxd2, sc2, n_bins, acc + 6 * n_bins);
-    }
+    esf_count_scaled(d3v, cls3, n_triplets, maxd3, sc3, n_bins, acc + 3 * n_bins, simd);
+    esf_count_scaled(d2v, cls2, 3 * n_triplets, maxd2, sc2, n_bins, acc + 6 * n_bins, simd);
     for (i = 0; i < n_bins; i++)
         acc[9 * n_bins + i] += acc[10 * n_bins + i] + acc[11 * n_bins + i] + acc[12 * n_bins + i];
     for (i = 0; i < 3 * n_bins; i++)
@@ -443,23 +461,15 @@ static void esf_finish(const esf_state *s, int n_bins, int simd)
         out[i] *= inv;
 }
 
-/* esf_take's body, compiled once per target below. */
-static inline __attribute__((always_inline)) int
-esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
-              int n_cand)
+/* Squared sides A = |p2 - p1|^2, B = |p3 - p1|^2, C = |p2 - p3|^2 and
+ * absolute dot products c1 = |v21 . v31|, c2 = |v23 . v31|, c3 = |v23 . v21|
+ * of the candidates' triangles (p1, p2, p3 = points i1[j], i2[j], i3[j]),
+ * sums from x to z. */
+static inline void esf_sides(const double *pts, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
+                             int n, double *A, double *B, double *C, double *c1, double *c2, double *c3)
 {
-    double A[ESF_BATCH], B[ESF_BATCH], C[ESF_BATCH], H[ESF_BATCH], D3[ESF_BATCH];
-    double c1[ESF_BATCH], c2[ESF_BATCH], c3[ESF_BATCH];
-    int sel[ESF_BATCH];
-    uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
-    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH];
-    int32_t ax[3 * ESF_BATCH], ay[3 * ESF_BATCH], az[3 * ESF_BATCH];
-    int32_t bx[3 * ESF_BATCH], by[3 * ESF_BATCH], bz[3 * ESF_BATCH];
-    const double *pts = s->pts;
-    const int n_bins = k->n_bins;
-    int j, q, nsel = 0, fail = 0;
-    /* squared sides and dot products of every candidate (gathers) ... */
-    for (j = 0; j < n_cand; j++) {
+    int j;
+    for (j = 0; j < n; j++) {
         const double *p1 = pts + 3 * (int64_t)i1[j], *p2 = pts + 3 * (int64_t)i2[j],
                      *p3 = pts + 3 * (int64_t)i3[j];
         double v21x = p2[0] - p1[0], v21y = p2[1] - p1[1], v21z = p2[2] - p1[2];
@@ -472,6 +482,84 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
         c2[j] = fabs(v23x * v31x + v23y * v31y + v23z * v31z);
         c3[j] = fabs(v23x * v21x + v23y * v21y + v23z * v21z);
     }
+}
+
+#if ESF_SIMD
+/* esf_sides four candidates at a time (gathers of the coordinates; the same
+ * subtractions, products and sums in the same order, so the same values;
+ * |x| by clearing the sign bit, as fabs). */
+__attribute__((target("avx2")))
+static void esf_sides_avx2(const double *pts, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
+                           int n, double *A, double *B, double *C, double *c1, double *c2, double *c3)
+{
+    const __m256d sign = _mm256_set1_pd(-0.0);
+    const __m256i one = _mm256_set1_epi64x(1);
+    int j;
+    for (j = 0; j + 4 <= n; j += 4) {
+        /* offsets 3 i in 64-bit lanes (no overflow for any uint32 index) */
+        __m256i o1 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i1 + j)));
+        __m256i o2 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i2 + j)));
+        __m256i o3 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i3 + j)));
+        __m256d x1, x2, x3, y1, y2, y3, z1, z2, z3;
+        o1 = _mm256_add_epi64(_mm256_slli_epi64(o1, 1), o1);
+        o2 = _mm256_add_epi64(_mm256_slli_epi64(o2, 1), o2);
+        o3 = _mm256_add_epi64(_mm256_slli_epi64(o3, 1), o3);
+        x1 = _mm256_i64gather_pd(pts, o1, 8);
+        x2 = _mm256_i64gather_pd(pts, o2, 8);
+        x3 = _mm256_i64gather_pd(pts, o3, 8);
+        o1 = _mm256_add_epi64(o1, one);
+        o2 = _mm256_add_epi64(o2, one);
+        o3 = _mm256_add_epi64(o3, one);
+        y1 = _mm256_i64gather_pd(pts, o1, 8);
+        y2 = _mm256_i64gather_pd(pts, o2, 8);
+        y3 = _mm256_i64gather_pd(pts, o3, 8);
+        o1 = _mm256_add_epi64(o1, one);
+        o2 = _mm256_add_epi64(o2, one);
+        o3 = _mm256_add_epi64(o3, one);
+        z1 = _mm256_i64gather_pd(pts, o1, 8);
+        z2 = _mm256_i64gather_pd(pts, o2, 8);
+        z3 = _mm256_i64gather_pd(pts, o3, 8);
+        {
+            __m256d v21x = _mm256_sub_pd(x2, x1), v21y = _mm256_sub_pd(y2, y1), v21z = _mm256_sub_pd(z2, z1);
+            __m256d v31x = _mm256_sub_pd(x3, x1), v31y = _mm256_sub_pd(y3, y1), v31z = _mm256_sub_pd(z3, z1);
+            __m256d v23x = _mm256_sub_pd(x2, x3), v23y = _mm256_sub_pd(y2, y3), v23z = _mm256_sub_pd(z2, z3);
+#define ESF_DOT(ax, ay, az, bx, by, bz) \
+    _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, bx), _mm256_mul_pd(ay, by)), _mm256_mul_pd(az, bz))
+            _mm256_storeu_pd(A + j, ESF_DOT(v21x, v21y, v21z, v21x, v21y, v21z));
+            _mm256_storeu_pd(B + j, ESF_DOT(v31x, v31y, v31z, v31x, v31y, v31z));
+            _mm256_storeu_pd(C + j, ESF_DOT(v23x, v23y, v23z, v23x, v23y, v23z));
+            _mm256_storeu_pd(c1 + j, _mm256_andnot_pd(sign, ESF_DOT(v21x, v21y, v21z, v31x, v31y, v31z)));
+            _mm256_storeu_pd(c2 + j, _mm256_andnot_pd(sign, ESF_DOT(v23x, v23y, v23z, v31x, v31y, v31z)));
+            _mm256_storeu_pd(c3 + j, _mm256_andnot_pd(sign, ESF_DOT(v23x, v23y, v23z, v21x, v21y, v21z)));
+#undef ESF_DOT
+        }
+    }
+    esf_sides(pts, i1 + j, i2 + j, i3 + j, n - j, A + j, B + j, C + j, c1 + j, c2 + j, c3 + j);
+}
+#else
+#define esf_sides_avx2 esf_sides
+#endif
+
+/* esf_take's body, compiled once per target below. */
+static inline __attribute__((always_inline)) int
+esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2, const uint32_t *i3,
+              int n_cand, int simd)
+{
+    double A[ESF_BATCH], B[ESF_BATCH], C[ESF_BATCH], H[ESF_BATCH], D3[ESF_BATCH];
+    double c1[ESF_BATCH], c2[ESF_BATCH], c3[ESF_BATCH];
+    int sel[ESF_BATCH];
+    uint64_t pos[3 * ESF_BATCH], inc[3 * ESF_BATCH];
+    int cnt[3 * ESF_BATCH], occ[3 * ESF_BATCH], steps[3 * ESF_BATCH], known[3 * ESF_BATCH];
+    int32_t ax[3 * ESF_BATCH], ay[3 * ESF_BATCH], az[3 * ESF_BATCH];
+    int32_t bx[3 * ESF_BATCH], by[3 * ESF_BATCH], bz[3 * ESF_BATCH];
+    const double *pts = s->pts;
+    const int n_bins = k->n_bins;
+    int j, q, nsel = 0, fail = 0;
+    /* squared sides and dot products of every candidate (gathers) ... */
+    if (simd)
+        esf_sides_avx2(pts, i1, i2, i3, n_cand, A, B, C, c1, c2, c3);
+    else
+        esf_sides(pts, i1, i2, i3, n_cand, A, B, C, c1, c2, c3);
     /* ... then the square roots and divisions, element-wise (vectorized) */
     for (j = 0; j < n_cand; j++) {
         double a = sqrt(A[j]), b = sqrt(B[j]), c = sqrt(C[j]);
@@ -507,7 +595,17 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
         bx[3 * q + 2] = cl[e3]; by[3 * q + 2] = cl[e3 + 1]; bz[3 * q + 2] = cl[e3 + 2];
     }
     esf_setup_lines(3 * nsel, ax, ay, az, bx, by, bz, k->rs, k->st, pos, inc, cnt);
-    esf_walk_batch(s->g3, pos, inc, cnt, occ, 3 * nsel, k->simd);
+    /* A line's ends are voxels of points, whose 3x3x3 neighborhoods are all
+     * occupied: so are its first two voxels and its last (all within one
+     * voxel of an end, see esf_line_setup). Only the others are walked. */
+    for (q = 0; q < 3 * nsel; q++) {
+        known[q] = cnt[q] < 3 ? cnt[q] : 3;
+        steps[q] = cnt[q] - known[q];
+        pos[q] += 2 * inc[q];
+    }
+    esf_walk_batch(s->g3, pos, inc, steps, occ, 3 * nsel, k->simd);
+    for (q = 0; q < 3 * nsel; q++)
+        occ[q] += known[q];
     /* histograms, in integers (A3 in 32nds of a voxel), without branches;
      * the state's fields in locals (the int8 stores could alias them) */
     {
@@ -560,7 +658,7 @@ esf_take_impl(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32
 static int esf_take_default(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2,
                             const uint32_t *i3, int n_cand)
 {
-    return esf_take_impl(k, s, i1, i2, i3, n_cand);
+    return esf_take_impl(k, s, i1, i2, i3, n_cand, 0);
 }
 
 #if ESF_SIMD
@@ -572,7 +670,7 @@ __attribute__((target("avx2,bmi,bmi2")))
 static int esf_take_avx2(const esf_const *k, esf_state *s, const uint32_t *i1, const uint32_t *i2,
                          const uint32_t *i3, int n_cand)
 {
-    return esf_take_impl(k, s, i1, i2, i3, n_cand);
+    return esf_take_impl(k, s, i1, i2, i3, n_cand, 1);
 }
 #else
 #define esf_take_avx2 esf_take_default

@@ -86,6 +86,39 @@ def test_kernel_search_and_tie_detection_against_brute_force():
         assert (len(tied) > 0) == (pts is not noisy)
 
 
+def _check_search_against_brute_force(pts, k, threshold=0.05):
+    """The kernel's tie detection and decisions against brute-force neighbors."""
+    passes, tied = _cvfh_fast.low_curvature(pts, k, threshold)
+    with np.errstate(over="ignore", invalid="ignore"):  # the huge cloud's distances overflow to inf
+        d = pts[:, None, :] - pts[None, :, :]
+        d2 = np.sort((d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2], axis=1)
+        k = min(k, len(pts))
+        idx = _knn_brute(pts, k)
+    if k < len(pts):
+        assert_array_equal(tied, np.flatnonzero(d2[:, k] == d2[:, k - 1]))
+    free = np.setdiff1d(np.arange(len(pts)), tied)
+    idx = idx[free]
+    assert_array_equal(passes[free], _cvfh_fast.low_curvature_of(pts, np.ascontiguousarray(idx), threshold))
+    return tied
+
+
+def test_grid_search_on_awkward_layouts():
+    # the grid search's paths: extents beyond double range (one cell), far-apart clusters and a
+    # thin line (many empty cells, the cell cap), repeated points (zero distances), sizes of a few
+    # points, against brute-force neighbors (the decisions for given neighbors are tested below)
+    rng = np.random.default_rng(7)
+    huge = rng.normal(size=(60, 3)) * 1e307
+    huge[:2] = [[1.7e308, 0, 0], [-1.7e308, 0, 0]]
+    clusters = np.vstack([rng.normal(size=(80, 3)) * 1e-3 + c for c in ([0, 0, 0], [50, 0, 0], [0, 0, 1e4])])
+    line = np.column_stack([rng.uniform(-1, 1, 300), np.zeros(300), rng.normal(size=300) * 1e-9])
+    line[0] = [0.0, 1e6, 0.0]
+    dup = np.repeat(rng.normal(size=(40, 3)), 6, axis=0)
+    for pts in (huge, clusters, line, dup, rng.normal(size=(3, 3)), rng.normal(size=(12, 3))):
+        for k in (1, 5, 10, 30):
+            _check_search_against_brute_force(np.ascontiguousarray(pts), k)
+    assert len(_check_search_against_brute_force(dup, 10)) == len(dup)  # every point ties at the 10th
+
+
 def test_low_curvature_of_given_neighbors():
     rng = np.random.default_rng(6)
     pts = rng.normal(size=(50, 3))

@@ -14,7 +14,7 @@ import eppf.utils._chunks
 import eppf.descriptors._cvfh as cvfh_module
 from eppf.datasets import make_shapes
 from eppf.descriptors._cvfh import CVFHTransformer, _cvfh_object, _cvfh_regions
-from eppf.descriptors._cvfh_fast import vfh_signatures
+from eppf.descriptors._cvfh_fast import crowded_points, vfh_signatures
 from eppf.descriptors._regions import pair_features
 
 PHI = 1.0  # angle between the two planes' normals (radians)
@@ -280,6 +280,44 @@ def test_beyond_single_precision():
     est = CVFHTransformer(scaling="none").fit([_cloud() * 1e300])
     with pytest.raises(ValueError, match="CVFHTransformer: point cloud 0 has coordinates (beyond single precision|out of the magnitude range)"):
         est.transform([_cloud() * 1e300])
+
+
+def _crowded_brute(points, radius):
+    """Points with at least two other points closer than ``radius`` (brute force)."""
+    with np.errstate(over="ignore"):  # far points' distances overflow to inf
+        d = points[:, None, :] - points[None, :, :]
+        d2 = (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
+    return int(((d2 < radius * radius).sum(axis=1) >= 3).sum())
+
+
+def test_crowded_points_against_brute_force():
+    # The count that lets CVFH skip its second normals: equal to brute force away from the radius,
+    # never below it (pairs within 1e-9 of the radius count), stopped at `enough`; on sparse and
+    # dense clouds, repeated points, far-apart clusters (empty cells) and huge extents (one cell).
+    rng = np.random.default_rng(11)
+    sphere = rng.normal(size=(400, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    far = np.vstack([rng.normal(size=(60, 3)) * 0.01, rng.normal(size=(60, 3)) * 0.01 + [1e3, 0, 0]])
+    dup = np.repeat(rng.uniform(size=(30, 3)), 3, axis=0)
+    for pts in (sphere, far, dup, rng.uniform(size=(300, 3)), rng.uniform(size=(2, 3))):
+        for radius in (0.02, 0.05, 0.1, 0.3, 5.0):
+            want = _crowded_brute(pts, radius)
+            assert crowded_points(pts, radius, len(pts)) == want
+            assert crowded_points(pts, radius, 7) == min(want, 7)
+    assert crowded_points(dup, 0.0, len(dup)) == len(dup)  # radius 0: the repeats are at distance 0
+    # a pair at exactly the radius counts (an upper bound), one clearly beyond it does not
+    trio = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.5, 0.0]])
+    assert crowded_points(trio, 0.5, 3) == 1 and _crowded_brute(trio, 0.5) == 0
+    assert crowded_points(trio, 0.5 * (1 - 1e-6), 3) == 0
+    huge = rng.normal(size=(50, 3)) * 1e150  # and two points whose distance overflows: one cell
+    huge[0, 0] = 1.7e308
+    huge[1, 0] = -1.7e308
+    assert crowded_points(huge, 1e150, 50) == _crowded_brute(huge / 1e150, 1.0) > 10
+    assert crowded_points(np.zeros((0, 3)), 0.1, 5) == 0
+    with pytest.raises(ValueError, match="finite"):
+        crowded_points(np.full((3, 3), np.nan), 0.1, 5)
+    with pytest.raises(ValueError, match="radius"):
+        crowded_points(sphere, np.nan, 5)
 
 
 def test_kernel_rejects_inconsistent_shapes():

@@ -15,6 +15,7 @@ from tests import eppf_reference as ref
 from eppf import FUNCTIONS, EPPFTransformer, KLNearestNeighbors
 from eppf.descriptors._eppf_fast import (
     _cone_codes,
+    _set_line_walk,
     _set_simd,
     _set_simd_level,
     _simd_levels,
@@ -115,6 +116,16 @@ def _counts_at(level, *args):
         _set_simd_level(old)
 
 
+def _line_counts(*args):
+    """Counts of the scalar kernel walking every f4 line voxel by voxel (``_line_bin``): the walk
+    that every level's skipping walk (portable at levels 0 and 1, AVX-512 at level 3) is compared with."""
+    old = _set_line_walk(True)
+    try:
+        return _counts_at(0, *args)
+    finally:
+        _set_line_walk(old)
+
+
 # Grids 64 and <= 64 take the SIMD walks (where the CPU has them), 100 the generic
 # walk; odd pair counts leave partial batches of 256 (1,024 for the skipping walk) and
 # partial groups of 4 and 8 lanes.
@@ -160,8 +171,8 @@ def test_simd_and_scalar_walks_give_identical_counts(grid, n4):
     points, normals, offsets = _packed(clouds)
     seeds = object_seeds(grid, len(clouds))
     args = (points, normals, offsets, np.ones(len(clouds)), seeds, 3001, (4, 1, 1, n4), grid, ref.F1_MAX, 1)
-    slow, _ = _counts_at(0, *args)
-    for level in LEVELS[1:]:
+    slow, _ = _line_counts(*args)
+    for level in LEVELS:
         fast, _ = _counts_at(level, *args)
         assert_array_equal(fast, slow)
     assert (slow.reshape(len(clouds), 4, n4)[:, :, 1:].sum() > 0)  # not every pair in the bottom f4 bin
@@ -183,8 +194,8 @@ def test_walks_on_lattices_give_identical_counts(spacing, n4):
     points, normals, offsets = _packed([cloud])
     args = (points, normals, offsets, np.ones(1), object_seeds(spacing, 1), 5000, (2, 1, 1, n4), 64,
             ref.F1_MAX, 1)
-    slow, _ = _counts_at(0, *args)
-    for level in LEVELS[1:]:
+    slow, _ = _line_counts(*args)
+    for level in LEVELS:
         assert_array_equal(_counts_at(level, *args)[0], slow)
     # dense enough lattices put some lines above the bottom f4 bin
     assert spacing > 4 or slow.reshape(2, n4)[:, 1:].sum() > 0
@@ -208,16 +219,19 @@ def _cone_codes_reference(occupied):
     return out
 
 
-@pytest.mark.skipif(3 not in LEVELS, reason="the cone codes need the AVX-512 kernels")
+@pytest.mark.parametrize("portable", [False, True])
 @pytest.mark.parametrize("grid", [64, 63, 33, 32, 17, 2])
 @pytest.mark.parametrize("density", [0.002, 0.05, 0.5])
-def test_cone_codes_match_reference(grid, density):
-    # The skipping walk's proof of empty voxels: every code of all three cone grids, at the
-    # grid's faces too, against the definition (64 takes the in-register build, others the generic one).
+def test_cone_codes_match_reference(grid, density, portable):
+    # The skipping walks' proof of empty voxels: every code of all three cone grids, at the
+    # grid's faces too, against the definition (level 3: 64 takes the in-register build, others
+    # the generic one; levels 0 and 1: the portable build, on every CPU).
+    if not portable and 3 not in LEVELS:
+        pytest.skip("the AVX-512 cone codes need the AVX-512 kernels")
     rng = np.random.default_rng(int(grid * 1000 * density))
     occupied = rng.uniform(size=(grid, grid, grid)) < density
     occupied[0, 0, 0] = occupied[-1, -1, -1] = True
-    got = _cone_codes(occupied)
+    got = _cone_codes(occupied, portable)
     want = _cone_codes_reference(occupied)
     assert_array_equal(got, want)
     if density < 0.01 and grid >= 32:
@@ -342,9 +356,9 @@ def test_every_level_counts_every_pair_of_non_finite_clouds(grid):
     seeds = object_seeds(11, 2)
     for scale in (1.0, np.inf, np.nan, -1.0):
         args = (points, normals, offsets, np.full(2, scale), seeds, 777, (5, 4, 3, 3), grid, ref.F1_MAX, 1)
-        want, _ = _counts_at(0, *args)
+        want, _ = _line_counts(*args)
         assert (want.sum(axis=1) == 777).all()
-        for level in LEVELS[1:]:
+        for level in LEVELS:
             assert_array_equal(_counts_at(level, *args)[0], want)
 
 
@@ -375,11 +389,11 @@ def test_levels_agree_on_the_voxel_grid_of_edge_case_clouds():
     seeds = object_seeds(8, len(clouds))
     for grid in (2, 17, 64):
         args = (points, normals, offsets, np.ones(len(clouds)), seeds, 900, (5, 4, 3, 3), grid, ref.F1_MAX, 1)
-        want, status = _counts_at(0, *args)
+        want, status = _line_counts(*args)
         assert not status.any()
         for k in (0, 4, 5, 11):  # finite clouds against the NumPy reference
             assert_array_equal(want[k], _reference_counts(clouds[k], seeds[k], 900, 1.0, (5, 4, 3, 3), grid))
-        for level in LEVELS[1:]:
+        for level in LEVELS:
             assert_array_equal(_counts_at(level, *args)[0], want)
 
 
@@ -401,11 +415,11 @@ def test_levels_agree_on_strided_mixed_size_objects_with_odd_normals_and_two_thr
     seeds = object_seeds(5, len(clouds))
     scales = rng.uniform(0.5, 2.0, size=len(clouds))
     args = (block[:, :3], block[:, 3:], offsets, scales, seeds, 1003, (7, 4, 5, 3), 64, ref.F1_MAX, 2)
-    want, _ = _counts_at(0, *args)
+    want, _ = _line_counts(*args)
     for k, c in enumerate(clouds):
         if k != 2:  # the reference assumes finite normals
             assert_array_equal(want[k], _reference_counts(c, seeds[k], 1003, scales[k], (7, 4, 5, 3), 64))
-    for level in LEVELS[1:]:
+    for level in LEVELS:
         assert_array_equal(_counts_at(level, *args)[0], want)
         one, _ = _counts_at(level, *args[:-1], 1)
         assert_array_equal(one, want)
@@ -427,10 +441,10 @@ def test_levels_agree_on_dense_lattices_for_every_f4_bin_count(n4):
     seeds = object_seeds(21, 1)
     n_bins = (2, 1, 1, n4)
     args = (points, normals, offsets, np.ones(1), seeds, 1500, n_bins, 64, ref.F1_MAX, 1)
-    want, _ = _counts_at(0, *args)
+    want, _ = _line_counts(*args)
     assert_array_equal(want[0], _reference_counts(cloud, seeds[0], 1500, 1.0, n_bins, 64))
     assert want[0].reshape(-1, n4)[:, -1].sum() > 100  # many lines in the top bin
-    for level in LEVELS[1:]:
+    for level in LEVELS:
         assert_array_equal(_counts_at(level, *args)[0], want)
 
 
@@ -442,9 +456,9 @@ def test_levels_agree_on_an_object_too_large_for_the_row_copy():
     points, normals, offsets = _packed(clouds)
     seeds = object_seeds(3, 2)
     args = (points, normals, offsets, np.full(2, 0.8), seeds, 700, (5, 4, 3, 3), 64, ref.F1_MAX, 1)
-    want, _ = _counts_at(0, *args)
+    want, _ = _line_counts(*args)
     assert_array_equal(want[1], _reference_counts(clouds[1], seeds[1], 700, 0.8, (5, 4, 3, 3), 64))
-    for level in LEVELS[1:]:
+    for level in LEVELS:
         assert_array_equal(_counts_at(level, *args)[0], want)
 
 

@@ -334,6 +334,29 @@ def test_packed_line_walk_matches_bresenham_for_every_length_and_slope():
         assert_array_equal(b_occ, got_occ[perm])
 
 
+@pytest.mark.parametrize("n_bins", [1, 7, 64, 300])
+def test_scaled_binning_with_and_without_simd(n_bins):
+    # D2/D3 binning (four at a time with AVX2, a scalar tail; blocks with a value near a bin boundary
+    # redone by division) against NumPy's division, clamps and NaN included, over several blocks
+    from eppf.descriptors._esf_fast import esf_scaled_counts
+
+    rng = np.random.default_rng(n_bins)
+    vmax = 1.7
+    boundary = (np.arange(n_bins) + 0.5) / max(n_bins - 1, 1) * vmax  # exact bin boundaries
+    special = np.array([0.0, -0.0, -1.0, vmax, 2 * vmax, np.inf, -np.inf, np.nan, 1e300])
+    for n, with_special in ((1, False), (3, False), (255, False), (1001, False), (1001, True), (3000, True)):
+        v = rng.uniform(0, vmax, n)
+        if with_special:
+            v[rng.choice(n, 20, replace=False)] = rng.choice(np.concatenate([special, boundary]), 20)
+        cls = rng.integers(0, 3, n).astype(np.int8)
+        with np.errstate(invalid="ignore"):
+            x = np.nan_to_num(v / vmax * (n_bins - 1) + 0.5, nan=0.0, posinf=n_bins, neginf=0.0)
+        ref = np.zeros((3, n_bins), np.int64)
+        np.add.at(ref, (cls, np.clip(np.floor(x), 0, n_bins - 1).astype(np.int64)), 1)
+        for simd in (False, True):
+            assert_array_equal(esf_scaled_counts(v, cls, vmax, n_bins, simd), ref)
+
+
 @pytest.mark.parametrize("n_points", [5, 1024])
 def test_simd_line_walks_give_identical_descriptors(n_points):
     # The walk kernels are chosen at run time; the descriptor must not depend on it.

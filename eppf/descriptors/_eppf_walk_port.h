@@ -1,0 +1,280 @@
+/* Levels 0 and 1 of _eppf_walk.h: level 3's skipping walk in portable C.
+ *
+ * The same cone codes c = min(C, 3) as ``eppf_code_grid`` (see
+ * _eppf_walk_skip.h), the same packed positions (each line walked along its
+ * dominant axis, in the direction in which that coordinate grows, the axis
+ * in bits 62-63), the same lane states (bytes R, U, O, X, the pair's f1-f3
+ * bin above) and the same stopping rule, with plain 64-bit integer
+ * operations only: no gathers, nothing a compiler for ARM64 or any other
+ * CPU lacks. What differs:
+ *
+ * - The codes are kept as two bit planes of z bits, two words per (x, y) row
+ *   and axis, rather than interleaved 2-bit fields: the row's first word
+ *   holds the code's bit 0 (c = 1 or 3), its second bit 1 (c = 2 or 3). Both
+ *   come straight from the cone sets O_2 and O_3 with word operations (no
+ *   bit spreading), so the build is a few whole-word passes that compilers
+ *   vectorize. A look-up reads the 16 bytes of row (p >> 56) 64 + y, which is
+ *   below EPPF_PORT_ROWS for any 64-bit position (x with the axis above it
+ *   is 8 bits, y 6), so lanes past their line's end read inside the buffer.
+ * - The lines of a batch are walked in rounds rather than lanes refilled from
+ *   a queue: each round takes every line still in the list EPPF_PORT_STEPS
+ *   steps further, without a test, then keeps the lines whose bin is not yet
+ *   certain (in place, in order) and lists the states of the others. A
+ *   line's state stops changing once its bin is certain (its R, U or O byte
+ *   negative), so the steps it takes past that point, inside or past its
+ *   line, change nothing. No branch depends on the data but the loop's end,
+ *   and the steps of successive lines are independent, so an out-of-order
+ *   CPU overlaps their look-ups.
+ *
+ * Level 0 runs this code as it is; level 1 builds the same grids with it and
+ * runs the AVX2 forms of the setup and the walk (``eppf_port_setup_avx2``,
+ * ``eppf_port_walk_avx2`` in _eppf_walk_avx2.h), which give the same lines,
+ * steps and states.
+ */
+#ifndef EPPF_WALK_PORT_H
+#define EPPF_WALK_PORT_H
+
+#include "_eppf_walk_common.h"
+
+/* Rows of the portable walk's cone grids: the row index (p >> 56) 64 + y of any position. */
+#define EPPF_PORT_ROWS 16384
+/* The cone grids of the portable walk: two words a row. */
+#define EPPF_PORT_CODE_WORDS (2 * EPPF_PORT_ROWS)
+/* Their build's scratch: four g^2-word grids. */
+#define EPPF_PORT_SCRATCH_WORDS (4 * EPPF_CODE_AXIS_WORDS)
+/* The buffer a thread needs for both. */
+#define EPPF_PORT_WORDS (EPPF_PORT_CODE_WORDS + EPPF_PORT_SCRATCH_WORDS)
+/* Steps a round takes every line (a line's look-ups: about 9 on surface
+   scans; each round wastes half a round's steps on average on the lines that
+   finish in it). */
+#define EPPF_PORT_STEPS 4
+/* Lines walked side by side. */
+#define EPPF_PORT_LINES 4
+/* The portable walk keeps each of a state's bytes R, U, O, X plus 128 (the
+   byte's sign bit flipped), so that one 64-bit subtraction updates all four
+   without a borrow between them: a byte's value stays within -128..127
+   (R, U and O stop at -3 at the least, X at -3 - T / n4), so its biased
+   form never drops below 0. Bit 7 of R, U and O all set: the bin is still
+   uncertain. */
+#define EPPF_PORT_BIAS 0x80808080
+#define EPPF_PORT_LIVE 0x808080
+
+/* Count the pairs of the nd finished states ``done`` of the portable walks
+   (biased bytes, EPPF_PORT_BIAS), each at its f1-f3 bin plus f4 bin. */
+static void eppf_port_count_done(int nd, const int64_t *done, const int32_t *thr, int n4, int32_t *counts)
+{
+    int i;
+    for (i = 0; i < nd; i++) {
+        const int64_t st = done[i];
+        const int32_t b = (int32_t)((st >> 32) & 0xFFFFFF);
+        if (n4 > 3) {
+            const int64_t T = ((st >> 56) & 63) + 1;
+            const int occ = thr[T * n4 + n4 - 1] - 1 - ((int)((st >> 16) & 0xFF) - 128); /* hi - 1 - O */
+            counts[b + eppf_f4_bin(thr, n4, T, occ)]++;
+        } else {
+            /* n4 = 2: occ >= hi (O < 0: bit 23 clear); n4 = 3: also occ >= lo (X < 0: bit 31 clear) */
+            counts[b + (~(st >> 23) & 1) + (n4 == 3 ? (~(st >> 31) & 1) : 0)]++;
+        }
+    }
+}
+
+/* Walk the n lines of the list (QP, QI, QS, overwritten) over the cone grids
+ * ``code`` (``code_grid``) until every line's bin is certain, and count each
+ * pair at its f1-f3 bin plus f4 bin (the states' meaning: _eppf_walk_skip.h).
+ * ``done``: room for n states. Lines go EPPF_PORT_LINES at a time, their
+ * steps interleaved, so that their look-ups (in the L2 cache: the grids are
+ * 192 KiB at g = 64) overlap. */
+static void eppf_port_walk(int n, int64_t *QP, int64_t *QI, int64_t *QS, const uint64_t *code, const int32_t *thr,
+                           int n4, int64_t *done, int32_t *counts)
+{
+    /* by c + 4 live: what a step takes from the state, and the steps it moves (none once the bin is certain) */
+    static const int64_t delta[8] = { 0, 0, 0, 0, EPPF_ST(1, 0, 1, 1), EPPF_ST(1, 1, 0, 0), EPPF_ST(2, 2, 0, 0),
+                                      EPPF_ST(3, 3, 0, 0) };
+    static const uint64_t steps[8] = { 0, 0, 0, 0, 1, 1, 2, 3 };
+    int nd = 0;
+/* One step of line l: the code c at row (x + 64 a) 64 + y (below EPPF_PORT_ROWS for any p; its two
+   words at 2 row), bit z. */
+#define EPPF_PORT_STEP(l)                                                                          \
+    do {                                                                                           \
+        const uint64_t *w_ = code + (((p[l] >> 56) << 7) + ((p[l] >> (EPPF_PK_YSHIFT - 1)) & 126)); \
+        const unsigned z_ = (unsigned)(p[l] >> EPPF_PK_ZSHIFT) & 63;                                \
+        const unsigned j_ = (unsigned)((w_[0] >> z_) & 1) | (unsigned)(((w_[1] >> z_) & 1) << 1)     \
+                            | ((unsigned)((st[l] & EPPF_PORT_LIVE) == EPPF_PORT_LIVE) << 2);        \
+        st[l] -= delta[j_];                                                                        \
+        p[l] += steps[j_] * inc[l];                                                                \
+    } while (0)
+/* Line l of the group at t: kept (its bin still uncertain) or listed as done. */
+#define EPPF_PORT_SORT(l)                                                                          \
+    do {                                                                                           \
+        const int fin_ = (st[l] & EPPF_PORT_LIVE) != EPPF_PORT_LIVE;                                \
+        done[nd] = st[l];                                                                          \
+        nd += fin_;                                                                                \
+        QP[keep] = (int64_t)p[l];                                                                  \
+        QI[keep] = (int64_t)inc[l];                                                                \
+        QS[keep] = st[l];                                                                          \
+        keep += 1 - fin_;                                                                          \
+    } while (0)
+    while (n > 0) {
+        int t = 0, keep = 0, k, l;
+        for (; t + EPPF_PORT_LINES <= n; t += EPPF_PORT_LINES) {
+            uint64_t p[EPPF_PORT_LINES], inc[EPPF_PORT_LINES];
+            int64_t st[EPPF_PORT_LINES];
+            for (l = 0; l < EPPF_PORT_LINES; l++) {
+                p[l] = (uint64_t)QP[t + l];
+                inc[l] = (uint64_t)QI[t + l];
+                st[l] = QS[t + l];
+            }
+            for (k = 0; k < EPPF_PORT_STEPS; k++)
+                for (l = 0; l < EPPF_PORT_LINES; l++)
+                    EPPF_PORT_STEP(l);
+            for (l = 0; l < EPPF_PORT_LINES; l++)
+                EPPF_PORT_SORT(l);
+        }
+        for (; t < n; t++) {
+            uint64_t p[1], inc[1];
+            int64_t st[1];
+            p[0] = (uint64_t)QP[t];
+            inc[0] = (uint64_t)QI[t];
+            st[0] = QS[t];
+            for (k = 0; k < EPPF_PORT_STEPS; k++)
+                EPPF_PORT_STEP(0);
+            EPPF_PORT_SORT(0);
+        }
+        n = keep;
+    }
+#undef EPPF_PORT_STEP
+#undef EPPF_PORT_SORT
+    eppf_port_count_done(nd, done, thr, n4, counts);
+}
+
+
+/* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
+   inside the grid) or-ed: the y +- 1 part of a 3^2 box; 2 <= g <= 64. */
+static void eppf_port_rows_pm1(const uint64_t *in, uint64_t *out, int64_t g)
+{
+    int64_t x, y;
+    for (x = 0; x < g; x++) {
+        const uint64_t *t = in + x * g;
+        uint64_t *u = out + x * g;
+        u[0] = t[0] | t[1];
+        for (y = 1; y < g - 1; y++)
+            u[y] = t[y - 1] | t[y] | t[y + 1];
+        u[g - 1] = t[g - 2] | t[g - 1];
+    }
+}
+
+/* ``out`` = ``bits`` or the voxels whose next plane along ``axis`` meets
+   ``o`` in its 3^2 box (``eppf_code_grid``'s O_{m+1} from O_m = o); a and b:
+   g^2 words of scratch each; 2 <= g <= 64. */
+static void eppf_port_cone_step(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a,
+                                    uint64_t *b, int64_t g, int axis)
+{
+    const uint64_t gm = g == 64 ? ~(uint64_t)0 : (((uint64_t)1 << g) - 1);
+    int64_t x, y, r;
+    if (axis == 2) {
+        /* the 3^2 box in (x, y), then the next z (bit z + 1) */
+        eppf_port_rows_pm1(o, b, g);
+        for (y = 0; y < g; y++)
+            out[y] = bits[y] | ((b[y] | b[g + y]) >> 1);
+        for (x = 1; x < g - 1; x++)
+            for (y = 0; y < g; y++)
+                out[x * g + y] = bits[x * g + y] | ((b[(x - 1) * g + y] | b[x * g + y] | b[(x + 1) * g + y]) >> 1);
+        for (y = 0; y < g; y++)
+            out[(g - 1) * g + y] = bits[(g - 1) * g + y] | ((b[(g - 2) * g + y] | b[(g - 1) * g + y]) >> 1);
+        return;
+    }
+    /* z +- 1 within the grid */
+    for (r = 0; r < g * g; r++)
+        a[r] = (o[r] | (o[r] << 1) | (o[r] >> 1)) & gm;
+    if (axis == 0) {
+        /* y +- 1, then the next x */
+        eppf_port_rows_pm1(a, b, g);
+        for (r = 0; r < (g - 1) * g; r++)
+            out[r] = bits[r] | b[r + g];
+        for (; r < g * g; r++)
+            out[r] = bits[r];
+    } else {
+        /* x +- 1, then the next y */
+        for (y = 0; y < g; y++)
+            b[y] = a[y] | a[g + y];
+        for (x = 1; x < g - 1; x++)
+            for (y = 0; y < g; y++)
+                b[x * g + y] = a[(x - 1) * g + y] | a[x * g + y] | a[(x + 1) * g + y];
+        for (y = 0; y < g; y++)
+            b[(g - 1) * g + y] = a[(g - 2) * g + y] | a[(g - 1) * g + y];
+        for (x = 0; x < g; x++) {
+            for (y = 0; y < g - 1; y++)
+                out[x * g + y] = bits[x * g + y] | b[x * g + y + 1];
+            out[x * g + g - 1] = bits[x * g + g - 1];
+        }
+    }
+}
+
+/* The portable walk's cone grids from ``bits`` (g^2 words, one per (x, y)
+ * row, z bits, none past z = g - 1): words 2 r and 2 r + 1 of ``code``, r =
+ * 4096 a + 64 x + y, hold bit 0 and bit 1 of c = min(C, 3) at bit z, C as in
+ * ``eppf_code_grid``; 2 <= g <= 64.
+ * ``work``: EPPF_PORT_SCRATCH_WORDS words. Words of rows past g are left as
+ * they are (no line reads them before its bin is certain). */
+static void eppf_port_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
+{
+    uint64_t *o2 = work, *o3 = work + g * g, *a = work + 2 * g * g, *b = work + 3 * g * g;
+    int64_t x, y;
+    int axis;
+    for (axis = 0; axis < 3; axis++) {
+        uint64_t *c = code + 2 * EPPF_CODE_AXIS_WORDS * axis;
+        eppf_port_cone_step(bits, bits, o2, a, b, g, axis);
+        eppf_port_cone_step(bits, o2, o3, a, b, g, axis);
+        for (x = 0; x < g; x++)
+            for (y = 0; y < g; y++) {
+                const int64_t r = x * g + y;
+                c[2 * (64 * x + y)] = (o2[r] & ~bits[r]) | ~o3[r]; /* c = 1 or 3 */
+                c[2 * (64 * x + y) + 1] = ~o2[r];                  /* c = 2 or 3 */
+            }
+    }
+}
+
+/* The f4 walk setup of the pairs (ii[t], jj[t]), t < m, their voxels in
+ * ``vox`` ((n, 3), ``_fill_grid``), their f1-f3 bins times n4 in B: lines
+ * with inner voxels (L > 1) join the list (QP, QI, QS; their number is
+ * returned) in the form of ``eppf_f123q_avx512``'s queue; the others are
+ * counted at once (occ = T = L + 1, every voxel occupied). The packed start
+ * and increment are _eppf_fast.pyx's ``_line_bin``'s (the same correctly
+ * rounded 2**14 / L and llrint); ``states``: ``eppf_walk_states``. */
+static int eppf_port_setup(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
+                               const int32_t *B, const double *recip_packed, const int64_t *states,
+                               const int32_t *thr, int n4, int64_t *QP, int64_t *QI, int64_t *QS, int32_t *counts)
+{
+    const int64_t half = EPPF_PK_S / 2 + g;
+    int t, nq = 0;
+    for (t = 0; t < m; t++) {
+        const int32_t *va = vox + 3 * (int64_t)ii[t], *vb = vox + 3 * (int64_t)jj[t];
+        const int64_t dx = vb[0] - va[0], dy = vb[1] - va[1], dz = vb[2] - va[2];
+        const int64_t ax = dx < 0 ? -dx : dx, ay = dy < 0 ? -dy : dy, az = dz < 0 ? -dz : dz;
+        int64_t L = ax > ay ? ax : ay, p, inc, da, axis, back;
+        double q;
+        L = az > L ? az : L;
+        if (L <= 1) {
+            counts[B[t] + eppf_f4_bin(thr, n4, L + 1, L + 1)]++;
+            continue;
+        }
+        q = recip_packed[L];
+        inc = llrint((double)dx * q) * EPPF_PK_X + llrint((double)dy * q) * EPPF_PK_Y + llrint((double)dz * q);
+        p = (va[0] * EPPF_PK_S + half) * EPPF_PK_X + (va[1] * EPPF_PK_S + half) * EPPF_PK_Y + va[2] * EPPF_PK_S
+            + half + inc;
+        /* along the dominant axis (the first on a tie), in the direction in which it grows: from the
+           last inner voxel, by -inc, where it falls (no branch: the direction is random) */
+        axis = ax == L ? 0 : ay == L ? 1 : 2;
+        da = axis == 0 ? dx : axis == 1 ? dy : dz;
+        back = -(int64_t)(da < 0);
+        p += ((L - 2) * inc) & back;
+        inc = (inc ^ back) - back;
+        QP[nq] = (int64_t)((uint64_t)p + ((uint64_t)axis << 62));
+        QI[nq] = inc;
+        QS[nq] = (states[L + 1] ^ EPPF_PORT_BIAS) + (((int64_t)B[t] + (n4 > 3 ? L << 24 : 0)) << 32);
+        nq++;
+    }
+    return nq;
+}
+
+#endif /* EPPF_WALK_PORT_H */
