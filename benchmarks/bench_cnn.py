@@ -41,8 +41,17 @@ Six parts, each printed as a table:
     descriptor pool (draws x descriptors x objects), every network of the
     ensemble (epochs, best epoch, seconds per epoch, validation accuracy),
     the total per object (linear in the objects when this column is flat)
-    and prediction throughput with the descriptors included. Prints
-    progress (the classifier's epoch lines). Reads the training split only.
+    and prediction throughput with the descriptors included (a second
+    table splits it into descriptors and network, wall and CPU, per
+    object). Prints progress (the classifier's epoch lines). Reads the
+    training split only.
+``draws``
+    Validation accuracy of the recommended model for 1, 2, 3, 4 and all of
+    its test draws, with the normals of the stretched copies estimated per
+    draw or shared (estimated once per object): the protocol that chose the
+    recipe's ``test_draws`` and ``share_normals``. A stratified
+    ``--holdout`` share of the training objects is held out and never
+    trained on; the test split is not read.
 ``modelnet``
     Trains each variant on the official training split with early stopping on
     a stratified validation fraction of the *training* objects, then reports
@@ -61,6 +70,7 @@ Run, e.g.::
     nice -n 10 python benchmarks/bench_cnn.py descriptors --draws 4
     nice -n 10 python benchmarks/bench_cnn.py modelnet --threads 1 --max-epochs 5 --patience 4
     nice -n 10 python benchmarks/bench_cnn.py fit --objects 1000 2000 4000 --threads 2
+    nice -n 10 python benchmarks/bench_cnn.py draws --objects 3991 --threads 2 --seed 0
 
 Frequency-domain convolutions (issue 30; figures in ``docs/performance.rst``):
 ``profile --threads 1 --repeats 3 --precision float32 bfloat16`` under the
@@ -723,10 +733,18 @@ def fit_profile(args):
             print(f"  network {k}: {n_epochs} epochs, best {best}, {np.mean(net.history[:, 'dur']):.1f} s per epoch, "
                   f"validation accuracy at the best epoch {100 * net.history[best - 1, 'valid_acc']:.1f}%", flush=True)
         n_pred = min(args.predict_objects, len(clouds))
-        t0 = time.perf_counter()
-        clf.predict_proba(pool.transform(clouds[:n_pred]))
-        pred_s = time.perf_counter() - t0
-        rows.append((len(idx), blocks, pool_s, train_s, pool_cpu + train_cpu, members, n_pred / pred_s))
+        n_test = pool.n_draws if pool.test_draws is None else pool.test_draws
+        print(f"  predicting {n_pred} objects ({n_test} test draws each) ...", flush=True)
+        clf.predict_proba(pool.transform(clouds[:8]).astype(np.float32))  # (one-time costs: oneDNN's kernels)
+        c0, t0 = time.process_time(), time.perf_counter()
+        P = pool.transform(clouds[:n_pred]).astype(np.float32)
+        c1, t1 = time.process_time(), time.perf_counter()
+        clf.predict_proba(P)
+        c2, t2 = time.process_time(), time.perf_counter()
+        pred = (n_pred, n_test, t1 - t0, c1 - c0, t2 - t1, c2 - c1)
+        print(f"  prediction: descriptors {t1 - t0:.2f} s ({c1 - c0:.2f} CPU s), network {t2 - t1:.2f} s "
+              f"({c2 - c1:.2f} CPU s): {n_pred / (t2 - t0):.0f} objects/s", flush=True)
+        rows.append((len(idx), blocks, pool_s, train_s, pool_cpu + train_cpu, members, pred))
     print("\nProfile of a fit of EPPF 4D+ (wall seconds but 'CPU s', process CPU seconds, all threads; "
           "epochs: trained / best, per network)")
     names = [name for name, _ in rows[0][1]]
@@ -739,12 +757,75 @@ def fit_profile(args):
         total = pool_s + train_s
         print(f"{n:7d} " + " ".join(f"{s:14.1f}" for _, s in blocks)
               + f" {pool_s:7.1f} {train_s:7.1f} {per_epoch:7.1f} {epochs:>14s} {total:7.1f} {cpu:7.1f} "
-              f"{1e3 * total / n:9.1f} {pred:13.0f}")
+              f"{1e3 * total / n:9.1f} {pred[0] / (pred[2] + pred[4]):13.0f}")
+    print("\nPrediction of the fitted model, descriptors included (ms per object: wall, then process CPU, "
+          "all threads)")
+    print(f"{'fitted on':>9s} {'objects':>7s} {'draws':>5s} {'descriptors':>11s} {'CPU':>6s} {'network':>7s} "
+          f"{'CPU':>6s} {'total':>6s} {'CPU':>6s} {'objects/s':>9s}")
+    for n, *_, (n_pred, n_test, desc_s, desc_cpu, net_s, net_cpu) in rows:
+        ms = [1e3 * v / n_pred for v in (desc_s, desc_cpu, net_s, net_cpu, desc_s + net_s, desc_cpu + net_cpu)]
+        print(f"{n:9d} {n_pred:7d} {n_test:5d} {ms[0]:11.2f} {ms[1]:6.2f} {ms[2]:7.2f} {ms[3]:6.2f} {ms[4]:6.2f} "
+              f"{ms[5]:6.2f} {n_pred / (desc_s + net_s):9.0f}")
+
+
+def validate_draws(args):
+    """Validation accuracy of the recommended model per number of test draws, normals shared or per draw.
+
+    Reads the training split only: a stratified ``--holdout`` share of
+    ``--objects`` training objects is held out and never given to the
+    classifier (which validates on its own hold-out of the rest for early
+    stopping); the recipe is fitted on the rest, once with the normals of
+    every draw estimated on its stretched copy and once with them estimated
+    once per object and carried to the copies (``share_normals``), and the
+    held-out objects are predicted with the first 1, 2, 3, 4 and all of the
+    pool's test draws (the first ``k`` draws of a pool are those of a pool
+    of ``test_draws=k``).
+    """
+    import torch
+
+    from eppf.experiments._classification import TrainingSettings
+    from eppf.experiments._common import load_data, resolve_scaling
+
+    ds = load_data(require("bench_cnn draws", args.data))
+    clouds_all, y_all, train_idx = ds.clouds, np.asarray(ds.y), np.asarray(ds.train)
+    torch.set_num_threads(args.threads)
+    idx = _stratified_subset(y_all, train_idx, args.objects[0], args.seed)
+    held = _stratified_subset(y_all, idx, int(round(args.holdout * len(idx))), args.seed + 1)
+    fit_idx = np.setdiff1d(idx, held)
+    print(f"torch {torch.__version__}, {args.threads} threads; {len(fit_idx)} training objects, {len(held)} held "
+          f"out (seed {args.seed}); load average {os.getloadavg()[0]:.2f}", flush=True)
+    ks = sorted({1, 2, 3, 4, args.test_draws})
+    results = []
+    for share in args.normals:
+        settings = TrainingSettings.resolve(
+            epochs=args.max_epochs, pointnet_epochs=None, pointnet_points=None,
+            validation_fraction=args.validation_fraction, patience=args.patience, scaling=None, quick=False,
+            n_jobs=args.threads, random_state=args.seed, precision="auto")
+        settings.scaling = resolve_scaling("auto", ds)
+        pool, clf = settings.recommended()
+        pool.set_params(share_normals=share == "shared", test_draws=args.test_draws)
+        clf.set_params(verbose=args.verbose)
+        print(f"normals {share}: pool of {len(fit_idx)} objects ...", flush=True)
+        t0 = time.perf_counter()
+        X = pool.fit_transform([clouds_all[i] for i in fit_idx]).astype(np.float32)
+        print(f"  pool {time.perf_counter() - t0:.1f} s; training ...", flush=True)
+        t0 = time.perf_counter()
+        clf.fit(X, y_all[fit_idx])
+        print(f"  trained in {time.perf_counter() - t0:.1f} s ({len(clf.net_.history)} epochs); predicting the "
+              f"held-out objects ...", flush=True)
+        P = pool.transform([clouds_all[i] for i in held]).astype(np.float32)
+        acc = {k: 100 * np.mean(clf.predict(P[:, :k]) == y_all[held]) for k in ks}
+        print("  " + ", ".join(f"{k} draw(s) {a:.2f}%" for k, a in acc.items()), flush=True)
+        results.append((share, acc))
+    print(f"\nValidation accuracy (%) on {len(held)} held-out training objects, seed {args.seed}, by test draws")
+    print(f"{'normals':>9s} " + " ".join(f"{k:>6d}" for k in ks))
+    for share, acc in results:
+        print(f"{share:>9s} " + " ".join(f"{acc[k]:6.2f}" for k in ks))
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet", "fit"))
+    parser.add_argument("part", choices=("throughput", "profile", "epoch", "descriptors", "modelnet", "fit", "draws"))
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=5)
@@ -784,9 +865,14 @@ def main(argv=None):
                         help="fit: training-set sizes to profile (stratified subsets of the training split)")
     parser.add_argument("--predict-objects", type=int, default=500,
                         help="fit: objects whose prediction (descriptors included) is timed")
+    parser.add_argument("--holdout", type=float, default=0.2,
+                        help="draws: share of the --objects training objects held out for validation")
+    parser.add_argument("--test-draws", type=int, default=8, help="draws: test draws of the pool")
+    parser.add_argument("--normals", nargs="+", choices=("per-draw", "shared"), default=["per-draw", "shared"],
+                        help="draws: the normals of the stretched copies, estimated per draw or shared")
     args = parser.parse_args(argv)
     parts = {"throughput": throughput, "profile": profile, "epoch": epoch, "descriptors": descriptors, "modelnet": modelnet,
-             "fit": fit_profile}
+             "fit": fit_profile, "draws": validate_draws}
     parts[args.part](args)
 
 

@@ -193,24 +193,7 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         so estimating them on the whole block or on the objects without
         normals gives the same values.
         """
-        from ..preprocessing._normals import estimate_normals_batch
-
-        points, offsets, has = clouds.points, clouds.offsets, clouds.has_normals
-        if clouds.normals is not None and has.all():
-            return points, clouds.normals, offsets
-        owner = type(self).__name__
-        if clouds.normals is None:
-            normals = estimate_normals_batch(points, offsets, n_neighbors, orientation, n_threads, owner=owner)
-            return points, normals, offsets
-        missing = np.flatnonzero(~has)
-        sub = np.concatenate([points[offsets[k]:offsets[k + 1]] for k in missing])
-        sub_off = np.zeros(len(missing) + 1, dtype=np.int64)
-        np.cumsum(offsets[missing + 1] - offsets[missing], out=sub_off[1:])
-        est = estimate_normals_batch(sub, sub_off, n_neighbors, orientation, n_threads, owner=owner)
-        normals = clouds.normals.copy()
-        for j, k in enumerate(missing):
-            normals[offsets[k]:offsets[k + 1]] = est[sub_off[j]:sub_off[j + 1]]
-        return points, normals, offsets
+        return points_and_normals(clouds, n_neighbors, orientation, n_threads, owner=type(self).__name__)
 
     def _fit_scale(self, clouds):
         """With ``scaling="fit"``, 1 / the largest bounding-box side of any cloud; else 1."""
@@ -459,6 +442,34 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         tags.requires_fit = True
         tags.non_deterministic = "random_state" in self.get_params(deep=False) and self.random_state is None
         return tags
+
+
+def points_and_normals(clouds, n_neighbors, orientation, n_threads, *, owner):
+    """``points``, ``normals`` (N, 3) and ``offsets`` of validated packed clouds, PCA normals where missing.
+
+    Clouds given with normals keep them; the others get PCA normals from
+    ``n_neighbors`` neighbors (:func:`eppf.preprocessing.estimate_normals`),
+    oriented by ``orientation``. Each object's normals depend on it alone,
+    so estimating them on the whole block or on the objects without
+    normals gives the same values. ``owner`` names the caller in errors.
+    """
+    from ..preprocessing._normals import estimate_normals_batch
+
+    points, offsets, has = clouds.points, clouds.offsets, clouds.has_normals
+    if clouds.normals is not None and has.all():
+        return points, clouds.normals, offsets
+    if clouds.normals is None:
+        normals = estimate_normals_batch(points, offsets, n_neighbors, orientation, n_threads, owner=owner)
+        return points, normals, offsets
+    missing = np.flatnonzero(~has)
+    sub = np.concatenate([points[offsets[k]:offsets[k + 1]] for k in missing])
+    sub_off = np.zeros(len(missing) + 1, dtype=np.int64)
+    np.cumsum(offsets[missing + 1] - offsets[missing], out=sub_off[1:])
+    est = estimate_normals_batch(sub, sub_off, n_neighbors, orientation, n_threads, owner=owner)
+    normals = clouds.normals.copy()
+    for j, k in enumerate(missing):
+        normals[offsets[k]:offsets[k + 1]] = est[sub_off[j]:sub_off[j + 1]]
+    return points, normals, offsets
 
 
 def _describe_chunk(est, clouds, *args, params):

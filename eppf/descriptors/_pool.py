@@ -7,7 +7,10 @@ from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted
 
+from ..utils import check_n_jobs, check_packed_clouds
 from ..utils._param_validation import RANDOM_STATE, Interval, Options, validate_parameter, validate_params
+from ..utils._validation import condition_point_clouds
+from ._base import points_and_normals
 
 __all__ = ["DescriptorPool", "descriptor_pool"]
 
@@ -134,6 +137,20 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
         Whether draws ``1 ..`` of ``transform`` describe perturbed copies too
         (test-time augmentation); False describes the clouds as given in
         every draw.
+    share_normals : bool, default=False
+        Estimate the normals of the clouds given without normals once per
+        call, on the clouds as given, and hand every draw the clouds with
+        those normals (columns 3-5), instead of every draw's transformer
+        estimating them again on its perturbed copy. ``augment`` must carry
+        normals along: :class:`eppf.preprocessing.RandomScaling` maps each
+        by the inverse factors (for a stretch ``S``, ``S^-1 n`` made unit:
+        the exact normal of the stretched surface, and the exact PCA normal
+        of a stretched planar neighborhood). The normals are the
+        transformer's own: PCA normals from its ``n_neighbors`` neighbors,
+        oriented by its ``normal_orientation`` (nested parameters included;
+        every block that has them must agree). One normal estimation per
+        object instead of one per draw; draw 0 describes the same normals
+        the transformer would estimate itself.
     random_state : int, RandomState instance or None, default=None
         Seed of the per-draw seeds; an int gives the same pools on every call.
 
@@ -169,12 +186,13 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
     """
 
     def __init__(self, transformer, n_draws=8, *, augment=None, test_draws=None, test_augment=True,
-                 random_state=None):
+                 share_normals=False, random_state=None):
         self.transformer = transformer
         self.n_draws = n_draws
         self.augment = augment
         self.test_draws = test_draws
         self.test_augment = test_augment
+        self.share_normals = share_normals
         self.random_state = random_state
 
     _parameter_constraints = {
@@ -183,6 +201,7 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
         "augment": ["no_validation"],
         "test_draws": [*_N_DRAWS, None],
         "test_augment": [Options(bool)],
+        "share_normals": [Options(bool)],
         "random_state": RANDOM_STATE,
     }
 
@@ -200,6 +219,45 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
                     f"{owner}: {role} must be a scikit-learn style estimator with {' and '.join(methods)} and a "
                     f"random_state parameter, got {type(est).__name__}"
                 )
+        if self.share_normals:
+            self._normal_settings()
+
+    def _normal_settings(self):
+        """``(n_neighbors, normal_orientation, n_threads)`` of the transformer's normals, for ``share_normals``."""
+        owner = type(self).__name__
+        params = self.transformer.get_params(deep=True)
+        settings = {}
+        for key, value in params.items():
+            if key == "n_neighbors" or key.endswith("__n_neighbors"):
+                prefix = key[: -len("n_neighbors")]
+                # (EPPFGASDTransformer has no normal_orientation: its EPPF block keeps the default)
+                settings[prefix or "transformer"] = (value, params.get(prefix + "normal_orientation", "centroid"))
+        if not settings:
+            raise ValueError(f"{owner}: share_normals=True but the transformer {type(self.transformer).__name__} "
+                             "estimates no normals (it has no n_neighbors parameter)")
+        if len(set(settings.values())) > 1:
+            found = "; ".join(f"{name.rstrip('_')}: n_neighbors={k!r}, normal_orientation={o!r}"
+                              for name, (k, o) in settings.items())
+            raise ValueError(f"{owner}: share_normals=True needs one normal setting, but the transformer's blocks "
+                             f"differ ({found})")
+        n_neighbors, orientation = next(iter(settings.values()))
+        return int(n_neighbors), orientation, check_n_jobs(params.get("n_jobs"), owner=owner)
+
+    def _with_shared_normals(self, X):
+        """The clouds with normals (n_i, 6): their own, or the transformer's PCA normals of the clouds as given."""
+        owner = type(self).__name__
+        n_neighbors, orientation, n_threads = self._normal_settings()
+        clouds = check_packed_clouds(X, owner=owner, n_threads=n_threads)
+        if clouds.normals is not None and clouds.has_normals.all():
+            return list(clouds)
+        points = clouds.points.copy()
+        # the normals of the conditioned copy (an exact power of two away: the same normals), as the
+        # descriptors estimate them
+        condition_point_clouds(clouds, owner=owner)
+        normals = points_and_normals(clouds, n_neighbors, orientation, n_threads, owner=owner)[1]
+        block = np.hstack([points, normals])
+        bounds = clouds.offsets.tolist()
+        return [block[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
     def _seeds(self):
         # Columns: descriptor seed and augmentation seed of each training draw, then of each test draw.
@@ -209,6 +267,8 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
             rng.randint(np.iinfo(np.int32).max, size=(int(n_test), 2))
 
     def _draws(self, X, transformers, aug_seeds, augment):
+        if getattr(self, "share_normals", False):  # (pools pickled before the option existed have none)
+            X = self._with_shared_normals(X)
         draws = []
         for r, aug_seed in enumerate(aug_seeds):
             clouds = X

@@ -19,7 +19,7 @@ _NAMES = ("pca_mid_over_major", "pca_minor_over_major", "horizontal_minor_over_m
 
 
 def _log_ratio(a, b, tiny):
-    return float(np.log((a + tiny) / (b + tiny)))
+    return np.log((a + tiny) / (b + tiny))
 
 
 def proportions(points, up_axis=2, coverage=0.96):
@@ -54,9 +54,56 @@ def proportions(points, up_axis=2, coverage=0.96):
     lo = (1.0 - coverage) / 2.0
     ext = np.quantile(q, 1.0 - lo, axis=0) - np.quantile(q, lo, axis=0)
     return np.array([
-        _log_ratio(s[1], s[0], tiny), _log_ratio(s[2], s[0], tiny), _log_ratio(h[1], h[0], tiny),
-        _log_ratio(up, h[0], tiny), _log_ratio(ext[1], ext[0], tiny), _log_ratio(ext[2], ext[0], tiny),
+        float(_log_ratio(s[1], s[0], tiny)), float(_log_ratio(s[2], s[0], tiny)), float(_log_ratio(h[1], h[0], tiny)),
+        float(_log_ratio(up, h[0], tiny)), float(_log_ratio(ext[1], ext[0], tiny)),
+        float(_log_ratio(ext[2], ext[0], tiny)),
     ])
+
+
+def _proportions_stacked(P, up_axis, coverage):
+    """:func:`proportions` of ``m`` clouds of ``n`` points each, ``P`` of shape (m, n, 3), in whole-array
+    operations: every step is the reference's, taken along one more axis (the covariances and the
+    projections by one matrix product per cloud, the eigen-decompositions by LAPACK cloud by cloud, the
+    robust extents from one partition of the projections laid out point-last), so the rows are bit for
+    bit the reference's (a test checks it), at a fraction of its cost per object."""
+    m, n, _ = P.shape
+    p = P - P.mean(axis=1, keepdims=True)
+    tiny = 1e-9 * np.abs(p).max(axis=(1, 2)) + 1e-300
+    cov = np.matmul(p.transpose(0, 2, 1), p) / max(n, 1)
+    w, v = np.linalg.eigh(cov)
+    w, v = np.maximum(w[:, ::-1], 0.0), v[:, :, ::-1]
+    s = np.sqrt(w)
+    horiz = [a for a in range(3) if a != up_axis]
+    h = np.sqrt(np.maximum(np.linalg.eigvalsh(cov[:, horiz][:, :, horiz])[:, ::-1], 0.0))
+    up = np.sqrt(np.maximum(cov[:, up_axis, up_axis], 0.0))
+    q = np.ascontiguousarray(np.matmul(p, v).transpose(0, 2, 1))
+    lo = (1.0 - coverage) / 2.0
+    bounds = np.quantile(q, [lo, 1.0 - lo], axis=2)
+    ext = bounds[1] - bounds[0]
+    return np.stack([
+        _log_ratio(s[:, 1], s[:, 0], tiny), _log_ratio(s[:, 2], s[:, 0], tiny), _log_ratio(h[:, 1], h[:, 0], tiny),
+        _log_ratio(up, h[:, 0], tiny), _log_ratio(ext[:, 1], ext[:, 0], tiny), _log_ratio(ext[:, 2], ext[:, 0], tiny),
+    ], axis=1)
+
+
+def _proportions_packed(points, offsets, up_axis, coverage):
+    """The rows of packed clouds (object ``k`` is ``points[offsets[k]:offsets[k + 1]]``): clouds of one
+    size together through :func:`_proportions_stacked`, a cloud of a size of its own through
+    :func:`proportions`."""
+    sizes = np.diff(offsets)
+    if len(sizes) > 1 and (sizes == sizes[0]).all():  # one size (resampled data): a view, no gathering
+        return _proportions_stacked(points[offsets[0]:offsets[-1]].reshape(len(sizes), sizes[0], 3), up_axis,
+                                    coverage)
+    out = np.empty((len(sizes), len(_NAMES)))
+    for size in np.unique(sizes):
+        members = np.flatnonzero(sizes == size)
+        if len(members) == 1:
+            k = members[0]
+            out[k] = proportions(points[offsets[k]:offsets[k + 1]], up_axis, coverage)
+            continue
+        rows = offsets[members][:, None] + np.arange(size)
+        out[members] = _proportions_stacked(points[rows], up_axis, coverage)
+    return out
 
 
 class ProportionTransformer(PointCloudDescriptor):
@@ -132,4 +179,4 @@ class ProportionTransformer(PointCloudDescriptor):
 
     def _describe(self, clouds, params, *per_object, first_index):
         up_axis, coverage = params
-        return np.stack([proportions(np.asarray(c, dtype=np.float64)[:, :3], up_axis, coverage) for c in clouds])
+        return _proportions_packed(clouds.points, clouds.offsets, up_axis, coverage)

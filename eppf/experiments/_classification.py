@@ -191,13 +191,18 @@ class TrainingSettings:
                                   f"5e-4, dropout 0.5; `{params_text(self.make_model('4d'))}`")
         if "4d+" in models:
             pool, clf = self.recommended()
+            n_test = pool.n_draws if pool.test_draws is None else pool.test_draws
+            copies = {1: "the plain copy of each test object", 2: "a plain and a stretched copy of each test object"}
             lines["EPPF 4D+"] = (
                 f"the recommended recipe beyond the paper: {pool.n_draws} descriptor draws per object (draws 1.. of "
                 f"copies stretched per axis in [{RECIPE['stretch'][0]}, {RECIPE['stretch'][1]}], a fresh draw every "
-                "epoch), EPPF + GASD + 6 proportion ratios (side features) per draw, "
+                "epoch), EPPF + GASD + 6 proportion ratios (side features) per draw"
+                + (", the normals estimated once per object and carried to its stretched copies"
+                   if pool.share_normals else "") + ", "
                 + (f"an ensemble of {clf.n_estimators} networks (own seeds, one validation hold-out), "
                    if clf.n_estimators > 1 else "")
-                + f"probabilities averaged over a plain and {pool.n_draws - 1} stretched copies of each test object"
+                + ("probabilities of " if n_test == 1 else "probabilities averaged over ")
+                + copies.get(n_test, f"a plain and {n_test - 1} stretched copies of each test object")
                 + (" and over the networks" if clf.n_estimators > 1 else "") + f"; `{params_text(clf)}`")
         if any(m in models for m in ("2d", "3d", "4d", "kl")):
             lines["EPPF descriptor"] = (f"one draw, fitted on the training objects; `{params_text(self.descriptor())}`; "

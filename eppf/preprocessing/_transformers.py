@@ -2,6 +2,7 @@
 
 import numbers
 
+import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 
 from . import _perturb
@@ -295,6 +296,32 @@ class RandomScaling(_CloudTransformer):
         return _perturb.random_scaling(
             cloud, self.low, self.high, anisotropic=self.anisotropic, center=self.center, random_state=rng
         )
+
+    def transform(self, X):
+        """Stretch every cloud.
+
+        Each cloud's factors come from its own seed, as
+        :func:`~eppf.preprocessing._perturb.random_scaling` draws them; the
+        stretching itself runs over all clouds at once (the same values as
+        cloud by cloud, faster for many small clouds).
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds, normals in the last three columns.
+
+        Returns
+        -------
+        X_new : list of ndarray
+            New float64 clouds; the input is not modified. Normals follow
+            their points.
+        """
+        self._check_params()
+        clouds = check_point_clouds(X, owner=type(self).__name__)
+        low, high, anisotropic = float(self.low), float(self.high), bool(self.anisotropic)
+        factors = np.array([_perturb._scaling_factors(object_rng(seed), low, high, anisotropic)
+                            for seed in object_seeds(self.random_state, len(clouds))])
+        return _perturb._scale_clouds(clouds, factors, self.center)
 
 
 class Resampler(_CloudTransformer):

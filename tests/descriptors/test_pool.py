@@ -4,7 +4,8 @@ import re
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
+from sklearn.base import BaseEstimator, TransformerMixin
 
 from eppf import EPPF4DClassifier, EPPFTransformer, descriptor_pool
 from eppf.preprocessing import RandomScaling
@@ -153,3 +154,155 @@ def test_descriptor_pool_step_needs_fit():
 
     with pytest.raises(NotFittedError):
         DescriptorPool(TR).transform(_clouds(2))
+
+
+# ------------------------------------------------------------ share_normals
+class _Received(TransformerMixin, BaseEstimator):
+    """Returns the clouds it is given, flattened: the points and normals a pool's draws hand a descriptor."""
+
+    def __init__(self, n_neighbors=20, normal_orientation="centroid", random_state=None):
+        self.n_neighbors = n_neighbors
+        self.normal_orientation = normal_orientation
+        self.random_state = random_state
+
+    def fit(self, X, y=None):
+        return self
+
+    def transform(self, X):
+        return np.stack([np.asarray(c, dtype=np.float64).ravel() for c in X])
+
+
+def _ellipsoid(n, axes, seed):
+    """Points on the ellipsoid x^2/a^2 + y^2/b^2 + z^2/c^2 = 1 and its outward unit normals."""
+    rng = np.random.RandomState(seed)
+    u = rng.normal(size=(n, 3))
+    points = u / np.linalg.norm(u, axis=1, keepdims=True) * axes
+    normals = points / np.square(axes)
+    return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def _angles(a, b):
+    return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1.0, 1.0)))
+
+
+def test_shared_normals_follow_the_stretch_of_an_analytic_surface():
+    # The normals a stretched draw receives with share_normals are the normals estimated once on the cloud
+    # as given, mapped by the stretch; on an ellipsoid they must match the analytic normals of the stretched
+    # ellipsoid (an independent reference) and the PCA normals a draw would estimate on its own copy.
+    from eppf.descriptors import DescriptorPool
+    from eppf.preprocessing import estimate_normals
+
+    axes = np.array([3.0, 2.0, 1.0])
+    clouds = [_ellipsoid(3000, axes, seed)[0] for seed in (0, 1)]
+    pool = DescriptorPool(_Received(), 3, augment=RandomScaling(), share_normals=True, random_state=0)
+    for X_pool in (pool.fit_transform(clouds), pool.transform(clouds)):
+        for k, cloud in enumerate(clouds):
+            draws = X_pool[k].reshape(3, len(cloud), 6)
+            # draw 0: the clouds as given, with the normals the descriptor would have estimated itself
+            assert_array_equal(draws[0, :, :3], cloud)
+            assert_allclose(draws[0, :, 3:], estimate_normals(cloud, n_neighbors=20, orientation="centroid"),
+                            atol=1e-15)
+            for r in (1, 2):
+                points, normals = draws[r, :, :3], draws[r, :, 3:]
+                c0, c1 = cloud.mean(axis=0), points.mean(axis=0)
+                factors = np.linalg.lstsq((cloud - c0)[:, :1], (points - c1)[:, :1], rcond=None)[0][0, 0], \
+                    np.linalg.lstsq((cloud - c0)[:, 1:2], (points - c1)[:, 1:2], rcond=None)[0][0, 0], \
+                    np.linalg.lstsq((cloud - c0)[:, 2:], (points - c1)[:, 2:], rcond=None)[0][0, 0]
+                assert not np.allclose(factors, 1.0)
+                factors = np.array(factors)
+                # the stretch about the centroid c0 maps the ellipsoid to that of axes * factors about c0 - S c0
+                rel = points - (c0 - factors * c0)
+                analytic = rel / np.square(axes * factors)
+                analytic /= np.linalg.norm(analytic, axis=1, keepdims=True)
+                # PCA normals of 3,000 points are about 1 degree off the surface's (median) whichever way they
+                # are made; the shared ones may be a little further off than a draw's own, not much
+                per_draw = estimate_normals(points, n_neighbors=20, orientation="centroid")
+                shared_off, own_off = _angles(normals, analytic), _angles(per_draw, analytic)
+                assert np.median(shared_off) < 2.0 and np.percentile(shared_off, 95) < 6.0
+                assert np.median(shared_off) < np.median(own_off) + 0.5
+                assert np.median(_angles(normals, per_draw)) < 1.5
+    # a plane's PCA normal is exact, and so is its image: S^-1 n is the normal of the stretched plane
+    rng = np.random.RandomState(2)
+    n = np.array([1.0, -2.0, 3.0]) / np.sqrt(14.0)
+    basis = np.linalg.svd(n[None, :])[2][1:]
+    plane = rng.uniform(-1, 1, size=(500, 2)) @ basis + [4.0, 0.0, -1.0]
+    draws = pool.fit_transform([plane])[0].reshape(3, len(plane), 6)
+    for r in (1, 2):
+        points, normals = draws[r, :, :3], draws[r, :, 3:]
+        tangents = points[1:] - points[0]
+        assert_allclose(tangents @ normals[0], 0.0, atol=1e-12)  # perpendicular to the stretched plane
+        assert_allclose(np.abs(normals @ normals[0]), 1.0, atol=1e-12)
+        own = estimate_normals(points, n_neighbors=20, orientation="centroid")
+        assert_allclose(np.abs(np.einsum("ij,ij->i", normals, own)), 1.0, atol=1e-12)
+
+
+def test_shared_normals_are_estimated_once_and_given_normals_are_kept(monkeypatch):
+    from eppf.descriptors import DescriptorPool, DescriptorUnion, GASDTransformer
+    from eppf.preprocessing import _normals
+
+    calls = []
+    real = _normals.estimate_normals_batch
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_normals, "estimate_normals_batch", counting)
+    X = _clouds()
+    union = DescriptorUnion([("eppf", TR), ("gasd", GASDTransformer())], normalize="none")
+    for share, expected in ((False, 4), (True, 1)):
+        calls.clear()
+        pool = DescriptorPool(union, 2, augment=RandomScaling(), test_draws=4, share_normals=share, random_state=0)
+        pool.fit(X).transform(X)
+        assert len(calls) == expected
+    # draw 0 describes the normals the descriptor estimates itself (GASD reads none); the stretched draws differ
+    shared = pool.transform(X)
+    own = pool.set_params(share_normals=False).transform(X)
+    assert_allclose(shared[:, 0], own[:, 0], atol=1e-12)
+    assert not np.allclose(shared[:, 1:], own[:, 1:])
+    pool.set_params(share_normals=True)
+    # clouds that carry normals keep them: nothing is estimated and the pools are those without sharing
+    calls.clear()
+    with_normals = [np.hstack([c, np.tile([0.0, 0.0, 1.0], (len(c), 1))]) for c in X]
+    a = pool.transform(with_normals)
+    assert not calls
+    assert_array_equal(a, pool.set_params(share_normals=False).fit(with_normals).transform(with_normals))
+
+
+@pytest.mark.parametrize("transformer, msg", [
+    ("esf", "share_normals=True but the transformer ESFTransformer estimates no normals"),
+    ("mixed", "share_normals=True needs one normal setting, but the transformer's blocks differ "
+              "(a: n_neighbors=10, normal_orientation='centroid'; b: n_neighbors=12, normal_orientation='centroid')"),
+])
+def test_share_normals_needs_one_normal_setting(transformer, msg):
+    from eppf.descriptors import DescriptorPool, DescriptorUnion, ESFTransformer
+
+    est = ESFTransformer(n_triplets=500) if transformer == "esf" else DescriptorUnion(
+        [("a", TR), ("b", EPPFTransformer(n_pairs=800, n_neighbors=12))])
+    with pytest.raises(ValueError, match=re.escape(f"DescriptorPool: {msg}")):
+        DescriptorPool(est, 2, share_normals=True).fit(_clouds(2))
+
+
+def test_share_normals_is_saved_and_older_pools_load_without_it(tmp_path):
+    import json
+    import zipfile
+
+    from eppf import load_model, save_model
+    from eppf.descriptors import DescriptorPool
+
+    X = _clouds()
+    pool = DescriptorPool(TR, 2, augment=RandomScaling(), share_normals=True, random_state=0).fit(X)
+    save_model(pool, tmp_path / "pool.eppf")
+    back = load_model(tmp_path / "pool.eppf")
+    assert back.share_normals is True
+    assert_array_equal(back.transform(X), pool.transform(X))
+    # a file of a pool saved before the option existed: its pools estimate normals per draw, as then
+    with zipfile.ZipFile(tmp_path / "pool.eppf") as zf:
+        manifest, blob = json.loads(zf.read("manifest.json")), zf.read("arrays.npz")
+    del manifest["root"]["params"]["share_normals"]
+    with zipfile.ZipFile(tmp_path / "old.eppf", "w") as zf:
+        zf.writestr("manifest.json", json.dumps(manifest))
+        zf.writestr("arrays.npz", blob)
+    old = load_model(tmp_path / "old.eppf")
+    assert old.share_normals is False
+    assert_array_equal(old.transform(X), pool.set_params(share_normals=False).transform(X))

@@ -48,6 +48,20 @@ def test_matches_the_reference_function_and_names():
     assert list(t.get_feature_names_out())[0] == "pca_mid_over_major"
 
 
+@pytest.mark.parametrize("sizes", [[300] * 5, [300, 40, 300, 7, 40, 2, 300]])
+def test_whole_array_rows_are_the_reference_functions_bit_for_bit(sizes):
+    # clouds of one size go through the stacked computation, a size of its own through the reference;
+    # both must give the reference's bits (the models trained on them depend on it), degenerate clouds too
+    rng = np.random.RandomState(3)
+    clouds = [rng.normal(size=(n, 3)) * rng.uniform(0.1, 10.0, size=3) + rng.normal(size=3) * 100 for n in sizes]
+    clouds[1] = np.column_stack([np.linspace(0, 1, sizes[1]), np.zeros(sizes[1]), np.zeros(sizes[1])])  # a line
+    clouds[2] = np.column_stack([rng.uniform(size=(sizes[2], 2)), np.full(sizes[2], 4.0)])  # a horizontal plane
+    for up_axis, coverage in ((2, 0.96), (0, 0.5), (1, 1.0)):
+        out = ProportionTransformer(up_axis=up_axis, coverage=coverage).fit_transform(clouds)
+        ref = np.stack([proportions(c, up_axis, coverage) for c in clouds])
+        np.testing.assert_array_equal(out, ref)
+
+
 def test_degenerate_clouds_are_finite():
     out = ProportionTransformer().fit_transform([np.array([[0, 0, 0], [1, 0, 0.0]]),
                                                  np.array([[1e300, 1e300, 1e300], [-1e300, 1e300, 0.0]])])

@@ -13,6 +13,9 @@ def test_recommended_parts_are_the_documented_recipe():
                                            max_epochs=7, n_iter_no_change=2)
     assert isinstance(pool, DescriptorPool) and pool.n_draws == RECIPE["n_draws"] and pool.random_state == 3
     assert (pool.augment.low, pool.augment.high) == RECIPE["stretch"]
+    # per-draw normals and 8 test draws: the cheaper settings missed the test check (the registry's docstring)
+    assert pool.share_normals is RECIPE["share_normals"] is False
+    assert pool.test_draws is RECIPE["test_draws"] is None
     union = pool.transformer
     assert isinstance(union, DescriptorUnion) and union.normalize == "none"
     assert [type(t) for _, t in union.transformer_list] == [EPPFTransformer, GASDTransformer, ProportionTransformer]
@@ -24,6 +27,7 @@ def test_recommended_parts_are_the_documented_recipe():
     assert clf.label_smoothing == RECIPE["label_smoothing"] == 0.1
     quick_pool, quick_clf = recommended_pipeline_parts(EPPFTransformer(), quick=True, n_iter_no_change=2)
     assert quick_pool.n_draws == 2 and quick_clf.n_iter_no_change == 2 and quick_clf.n_estimators == 1
+    assert quick_pool.test_draws is None
 
 
 def test_classification_experiment_trains_4d_plus_on_pools(tmp_path, capsys):

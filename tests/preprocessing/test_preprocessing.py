@@ -126,6 +126,29 @@ def test_random_scaling_matches_the_function():
         assert_allclose(new, scale(cloud, factors), atol=1e-12)
 
 
+@pytest.mark.parametrize("params", [dict(), dict(low=0.5, high=2.0, center="origin"), dict(anisotropic=False)])
+def test_random_scaling_of_many_clouds_is_the_cloud_by_cloud_function_bit_for_bit(params):
+    # the transformer stretches all clouds in whole-array operations; each must be exactly what
+    # random_scaling gives that cloud with its own seed (the descriptor pools of saved models depend on it)
+    from eppf.preprocessing._perturb import random_scaling
+    from eppf.utils import object_seeds
+    from eppf.utils._sampling import object_rng
+
+    rng = np.random.RandomState(7)
+    sized = [rng.normal(size=(n, 3)) * 50 + 3 for n in (5, 300, 300, 41, 2)]
+    with_normals = _clouds(5, n_points=37)
+    mixed = [with_normals[0], sized[1], with_normals[2]]
+    for X in (sized, with_normals, mixed):
+        out = RandomScaling(random_state=3, **params).fit_transform(X)
+        seeds = object_seeds(3, len(X))
+        for cloud, new, seed in zip(X, out, seeds):
+            ref = random_scaling(cloud, params.get("low", 0.8), params.get("high", 1.25),
+                                 anisotropic=params.get("anisotropic", True), center=params.get("center", "centroid"),
+                                 random_state=object_rng(seed))
+            assert new.shape == cloud.shape
+            assert_array_equal(new, ref)
+
+
 def test_resampler_sizes():
     small, large = _clouds(1, n_points=10)[0], _clouds(1, n_points=500)[0]
     out_small, out_large = Resampler(64, random_state=0).transform([small, large])
