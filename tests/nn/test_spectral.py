@@ -139,6 +139,30 @@ def test_paper_network_chooses_per_layer_and_keeps_its_parameters():
     assert "conv_impl='auto'" in repr(auto.conv2)
 
 
+def test_auto_keeps_narrow_layers_and_lower_precision_direct():
+    # the recommended network's layers mix too few channel pairs to gain
+    net = EPPFNet4D(filters=(16, 32, 24), n_hidden=256)
+    assert [net.conv2.impl_for((20, 4, 5)), net.conv3.impl_for(net.plane)] == ["direct", "direct"]
+    assert choose_impl("auto", (40, 30), (5, 5), 32, 64) == "spectral"  # 2,048 pairs: the bound itself
+    assert choose_impl("auto", (40, 30), (5, 5), 31, 64) == "direct"
+    # under (bfloat16) autocast "auto" is direct; an explicit choice is kept
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        assert choose_impl("auto", (40, 30), (5, 5), 64, 48) == "direct"
+        assert choose_impl("spectral", (40, 30), (5, 5), 64, 48) == "spectral"
+    assert choose_impl("auto", (40, 30), (5, 5), 64, 48) == "spectral"
+
+
+def test_bfloat16_auto_network_equals_direct_one():
+    torch.manual_seed(0)
+    ref = EPPFNet4D(n_bins=(6, 3, 4, 2), filters=(32, 64, 48), n_hidden=16, conv_impl="direct",
+                    precision="bfloat16").eval()
+    net = EPPFNet4D(n_bins=(6, 3, 4, 2), filters=(32, 64, 48), n_hidden=16, precision="bfloat16").eval()
+    net.load_state_dict(ref.state_dict())
+    x = torch.rand(4, 144)
+    with torch.no_grad():
+        assert torch.equal(net(x), ref(x))
+
+
 def test_float32_network_close_to_direct():
     torch.manual_seed(0)
     a = EPPFNet4D(conv_impl="direct").eval()
