@@ -1,6 +1,6 @@
 /* ESF's per-triplet work for grids up to 64 voxels, in batches.
  *
- * Used by eppf/_baselines.pyx, which draws the candidate triplets with the
+ * Used by _esf_fast.pyx, which draws the candidate triplets with the
  * shared per-object generator and hands them over ESF_BATCH at a time. Each
  * batch goes through separate loops (geometry of every candidate, then the
  * accepted ones in draw order, their line set-up, the line walks, the
