@@ -91,6 +91,12 @@ class EPPF4DClassifier(SkorchClassifierBase):
         Batch normalization between every convolution and its ReLU.
     label_smoothing : float, default=0.0
         Label smoothing of the cross-entropy loss, in [0, 1).
+    conv_impl : {"auto", "direct", "spectral"}, default="auto"
+        How the 4D network (``conv="4d"``) computes its convolutions:
+        directly or the same convolutions in the frequency domain (equal up
+        to rounding; see :class:`eppf.nn.EPPFNet4D`). ``"auto"`` chooses per
+        layer: the frequency domain for the paper's wide layers in float32,
+        direct otherwise. Ignored by the 3D and 2D networks.
     n_estimators : int, default=1
         Networks trained (beyond the paper): with more than one, ``fit``
         trains a small ensemble, every member on the same validation
@@ -266,6 +272,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         side_hidden=128,
         batch_norm=False,
         label_smoothing=0.0,
+        conv_impl="auto",
         n_estimators=1,
         swa_epochs=0,
         precision="auto",
@@ -293,6 +300,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         self.side_hidden = side_hidden
         self.batch_norm = batch_norm
         self.label_smoothing = label_smoothing
+        self.conv_impl = conv_impl
         self.n_estimators = n_estimators
         self.swa_epochs = swa_epochs
         self.precision = precision
@@ -315,6 +323,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         "side_hidden": [Interval(numbers.Integral, 1, None, closed="left")],
         "batch_norm": [Options(bool)],
         "label_smoothing": [Interval(numbers.Real, 0, 1, closed="left")],
+        "conv_impl": [StrOptions(["auto", "direct", "spectral"])],
         "n_estimators": [Interval(numbers.Integral, 1, None, closed="left")],
         "swa_epochs": [Interval(numbers.Integral, 0, None, closed="left")],
     }
@@ -426,7 +435,10 @@ class EPPF4DClassifier(SkorchClassifierBase):
 
         from ..nn import EPPFNet2D, EPPFNet3D, EPPFNet4D
 
+        # A model saved before conv_impl existed runs "auto" (the same results up to rounding).
+        conv_impl = {"module__conv_impl": getattr(self, "conv_impl", "auto")} if self.conv == "4d" else {}
         return dict(
+            **conv_impl,
             module={"4d": EPPFNet4D, "3d": EPPFNet3D, "2d": EPPFNet2D}[self.conv],
             module__n_bins=self._n_bins,
             module__n_classes=n_classes,

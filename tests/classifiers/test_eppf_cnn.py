@@ -704,3 +704,30 @@ def test_model_of_the_previous_recipe_still_loads():
     recorded = np.load(os.path.join(here, "eppf4d_recipe_0_2.npz"))
     assert model.swa_epochs == 0 and len(model.ensemble_nets_) == 1
     assert_allclose(model.predict_proba(recorded["X"]), recorded["proba"], rtol=1e-5, atol=1e-6)
+
+
+def test_conv_impl_reaches_the_4d_network_and_survives_save_and_load(tmp_path):
+    import eppf
+
+    rng = np.random.default_rng(0)
+    X, y = _toy(40, rng)
+    fits = {}
+    for impl in ("direct", "spectral"):
+        clf = EPPF4DClassifier(n_bins=N_BINS, conv_impl=impl, precision="float32", max_epochs=2,
+                               early_stopping=False, random_state=0, **SMALL).fit(X, y)
+        assert clf.net_.module_.conv_impl == impl
+        assert clf.net_.module_.conv2.impl_for(N_BINS[:3]) == impl
+        fits[impl] = clf
+    # the same training in both computations, equal up to float32 rounding
+    assert_allclose(fits["spectral"].predict_proba(X), fits["direct"].predict_proba(X), atol=1e-5)
+    path = tmp_path / "m.eppf"
+    eppf.save_model(fits["spectral"], path)
+    loaded = eppf.load_model(path)
+    assert loaded.conv_impl == "spectral" and loaded.net_.module_.conv_impl == "spectral"
+    assert_array_equal(loaded.predict_proba(X), fits["spectral"].predict_proba(X))
+    # the 3D and 2D networks have no such choice and ignore it
+    clf3 = EPPF4DClassifier(n_bins=N_BINS, conv="3d", conv_impl="spectral", max_epochs=1, early_stopping=False,
+                            random_state=0, **SMALL).fit(X, y)
+    assert not hasattr(clf3.net_.module_, "conv_impl")
+    with pytest.raises(ValueError, match="conv_impl must be one of"):
+        EPPF4DClassifier(n_bins=N_BINS, conv_impl="fft", **SMALL).fit(X, y)
