@@ -21,8 +21,8 @@ Six parts, each printed as a table:
     Wall and CPU time of real ``EPPF4DClassifier`` epochs over 4,000 random
     descriptors (the classifier's default batch size), with the load average,
     and prediction time per 1,000 descriptors; the 4D network with direct
-    and frequency-domain convolutions side by side (``--conv-impl``; the
-    networks the classifier builds get ``conv_impl``). Prints progress (the
+    and frequency-domain convolutions side by side (``--conv-impl``, passed
+    as the classifier's ``conv_impl``). Prints progress (the
     classifier's epoch lines) and a summary table. For the AVX2 figures,
     ``eval "$(python scripts/older_cpu_env.py)"`` and
     ``MKL_ENABLE_INSTRUCTIONS=AVX2`` first.
@@ -274,7 +274,6 @@ Figures measured on the shared 2-core AMD EPYC VM (other jobs running, load
 """
 
 import argparse
-import contextlib
 import os
 import sys
 import time
@@ -351,24 +350,11 @@ def _best_time(fn, repeats):
 
 
 def _set_conv_impl(net, impl):
-    """Run every convolution of an EPPFNet4D as ``impl`` (its parameters are the same either way)."""
-    for module in (net, net.conv1, net.conv2, net.conv3):
+    """Run the second and third convolutions of an EPPFNet4D as ``impl``, the single-channel first one directly."""
+    for module in (net, net.conv2, net.conv3):
         module.conv_impl = impl
+    net.conv1.conv_impl = "direct"
     return net
-
-
-@contextlib.contextmanager
-def _networks_built_with(impl):
-    """EPPFNet4D built inside (e.g. by EPPF4DClassifier.fit) gets ``conv_impl=impl``."""
-    from eppf.nn import EPPFNet4D
-
-    defaults = EPPFNet4D.__init__.__kwdefaults__
-    before = defaults["conv_impl"]
-    defaults["conv_impl"] = impl
-    try:
-        yield
-    finally:
-        defaults["conv_impl"] = before
 
 
 def _spatial_major(*shape):
@@ -493,7 +479,7 @@ def profile(args):
     for precision in args.precision:
         for impl in args.conv_impl:
             step_net = _set_conv_impl(EPPFNet4D(n_classes=10, filters=(f1, f2, f3), n_hidden=hidden,
-                                                precision=precision), impl if impl == "direct" else "auto")
+                                                precision=precision), impl)
             opt = torch.optim.Adam(step_net.parameters(), lr=5e-4, fused=True)
 
             def step():
@@ -534,12 +520,11 @@ def epoch(args):
                       f"batch {args.batch_size}, load average {_os.getloadavg()[0]:.2f}", flush=True)
                 clf = EPPF4DClassifier(
                     conv=conv, max_epochs=args.max_epochs, early_stopping=False, batch_size=args.batch_size,
-                    n_jobs=args.threads, random_state=0, precision=precision, verbose=1, **extra,
+                    n_jobs=args.threads, random_state=0, precision=precision, verbose=1, conv_impl=impl, **extra,
                 )
                 load = _os.getloadavg()[0]
                 c0, w0 = time.process_time(), time.perf_counter()
-                with _networks_built_with("direct" if impl == "direct" else "auto"):
-                    clf.fit(X, y)
+                clf.fit(X, y)
                 wall, cpu = time.perf_counter() - w0, time.process_time() - c0
                 durations = ", ".join(f"{d:.1f}" for d in clf.net_.history[:, "dur"])
                 n = min(1000, len(X))
@@ -860,7 +845,8 @@ def main(argv=None):
     parser.add_argument("--no-mkldnn", action="store_true", help="profile: disable oneDNN convolutions")
     parser.add_argument("--conv-impl", nargs="+", default=["direct", "spectral"], choices=("direct", "spectral"),
                         help="epoch, profile: the 4D network's convolutions, direct and/or in the frequency domain "
-                             "('spectral' trains with conv_impl='auto': the first layer direct, the others spectral)")
+                             "(profile: 'spectral' runs the first, single-channel layer directly and the others in the frequency "
+                             "domain; epoch: the classifier's conv_impl, so every layer)")
     parser.add_argument("--objects", nargs="+", type=int, default=[1000, 2000, 4000],
                         help="fit: training-set sizes to profile (stratified subsets of the training split)")
     parser.add_argument("--predict-objects", type=int, default=500,
