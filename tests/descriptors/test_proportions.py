@@ -62,6 +62,17 @@ def test_whole_array_rows_are_the_reference_functions_bit_for_bit(sizes):
         np.testing.assert_array_equal(out, ref)
 
 
+def test_threads_split_the_clouds_and_keep_the_bits():
+    # n_jobs splits a call's clouds into runs, one a thread (at least 16 clouds each): the same rows bit for bit,
+    # for clouds of one size and of mixed sizes, with runs that cut through a group of equal sizes
+    rng = np.random.RandomState(5)
+    for sizes in ([50] * 200, list(rng.choice([9, 50, 51], size=301))):
+        clouds = [rng.normal(size=(n, 3)) * rng.uniform(0.1, 10.0, size=3) for n in sizes]
+        ref = np.stack([proportions(c, 2, 0.96) for c in clouds])
+        for n_jobs in (1, 2, 3, -1):
+            np.testing.assert_array_equal(ProportionTransformer(n_jobs=n_jobs).fit_transform(clouds), ref)
+
+
 def test_degenerate_clouds_are_finite():
     out = ProportionTransformer().fit_transform([np.array([[0, 0, 0], [1, 0, 0.0]]),
                                                  np.array([[1e300, 1e300, 1e300], [-1e300, 1e300, 0.0]])])
