@@ -20,7 +20,7 @@ from libc.stdint cimport int32_t, int64_t, uint8_t
 import numpy as np
 from libc.string cimport memset
 
-from ..utils._common cimport clamp_floor, clamp_floor64
+from ..utils._common cimport clamp_floor, clamp_floor64, counts_to_starts
 from ._flann_tree cimport build_tree, radius_search
 
 
@@ -368,17 +368,14 @@ cdef void _fill_grid(const double* p, int64_t n, const double* lo, const double*
     first half is scratch), cell ``c`` holds the stored points
     ``cell_start[c]:cell_start[c + 1]`` (room for ``cap + 1``), and
     ``cell_of`` each point's cell."""
-    cdef int64_t i, c, s, t, total = 0
+    cdef int64_t i, c, s
     cdef double inv_h = 0.0
     res[0] = res[1] = res[2] = 1
     if isfinite(h) and h > 0.0 and isfinite(e[0]) and isfinite(e[1]) and isfinite(e[2]):
         inv_h = 1.0 / _grid_resolution(e, h, cap, res)
     _bin_points(p, n, lo, inv_h, res, cell_of, cell_start, cc + 3 * n)
     c = res[0] * res[1] * res[2]
-    for i in range(c):
-        t = cell_start[i]
-        cell_start[i] = total
-        total += t
+    counts_to_starts(cell_start, c)
     for i in range(n):
         s = cell_start[cell_of[i]]
         cell_start[cell_of[i]] = s + 1
@@ -548,11 +545,7 @@ cdef bint _grid_knn_guess(const double* sp, const int64_t* sidx, const int64_t* 
         b = clamp_floor(cd[i] * scale, N_BUCKETS)
         cb[i] = b
         counts[b] += 1
-    j = 0
-    for b in range(N_BUCKETS):
-        i = counts[b]
-        counts[b] = j
-        j += i
+    counts_to_starts(counts, N_BUCKETS)
     for i in range(m):
         j = counts[cb[i]]
         counts[cb[i]] = j + 1

@@ -27,6 +27,7 @@ from libc.math cimport floorf, floor, fabs, sqrt, acos
 from libc.stdint cimport int64_t, int32_t, int8_t
 from libc.string cimport memset
 
+from ..utils._common cimport counts_to_starts
 from ._flann_tree cimport build_tree, radius_search
 
 import numpy as np
@@ -48,18 +49,13 @@ cdef KeyIdx* _sort_by_key(KeyIdx* a, KeyIdx* b, int n, int64_t n_keys) noexcept 
     needs, between ``a`` and ``b`` (n entries each). Returns the array that
     holds the result."""
     cdef int64_t counts[256]
-    cdef int64_t total, c
     cdef int i, shift = 0, d
     cdef KeyIdx* t
     while shift < 64 and (n_keys - 1) >> shift > 0:
         memset(counts, 0, sizeof(counts))
         for i in range(n):
             counts[(a[i].key >> shift) & 255] += 1
-        total = 0
-        for d in range(256):
-            c = counts[d]
-            counts[d] = total
-            total += c
+        counts_to_starts(counts, 256)
         for i in range(n):
             d = <int>((a[i].key >> shift) & 255)
             b[counts[d]] = a[i]

@@ -63,6 +63,17 @@ cdef inline int64_t clamp_floor64(double t, int64_t n) noexcept nogil:
     return <int64_t>t
 
 
+cdef inline int64_t counts_to_starts(int64_t* counts, int64_t n) noexcept nogil:
+    """Turn ``counts[:n]`` into where each bucket starts (the exclusive prefix sums) in place, the
+    first step of a counting sort; returns the total."""
+    cdef int64_t i, c, total = 0
+    for i in range(n):
+        c = counts[i]
+        counts[i] = total
+        total += c
+    return total
+
+
 cdef inline double pow2_scale(const double* pts, Py_ssize_t n) noexcept nogil:
     """A power of two that brings the largest |coordinate| of ``n`` xyz rows to [0.5, 1): exact to apply.
 
