@@ -668,6 +668,19 @@ def _block_seconds(pool, clouds):
     return out
 
 
+def _recommended(args, ds):
+    """The recommended pool and classifier, unfitted, as ``eppf experiment classification`` builds them for ``ds``."""
+    from eppf.experiments._classification import TrainingSettings
+    from eppf.experiments._common import resolve_scaling
+
+    settings = TrainingSettings.resolve(
+        epochs=args.max_epochs, pointnet_epochs=None, pointnet_points=None,
+        validation_fraction=args.validation_fraction, patience=args.patience, scaling=None, quick=False,
+        n_jobs=args.threads, random_state=args.seed, precision="auto")
+    settings.scaling = resolve_scaling("auto", ds)
+    return settings.recommended()
+
+
 def _epochs(net):
     """Epochs trained and the best one (lowest validation loss, as the classifier keeps), 1-based."""
     h = net.history
@@ -682,8 +695,7 @@ def fit_profile(args):
     """
     import torch
 
-    from eppf.experiments._classification import TrainingSettings
-    from eppf.experiments._common import load_data, resolve_scaling
+    from eppf.experiments._common import load_data
 
     ds = load_data(require("bench_cnn fit", args.data))  # as `eppf experiment classification` loads it
     clouds_all, y_all, train_idx = ds.clouds, np.asarray(ds.y), np.asarray(ds.train)
@@ -694,12 +706,7 @@ def fit_profile(args):
     for n in args.objects:
         idx = _stratified_subset(y_all, train_idx, n, args.seed)
         clouds = [clouds_all[i] for i in idx]
-        settings = TrainingSettings.resolve(
-            epochs=args.max_epochs, pointnet_epochs=None, pointnet_points=None,
-            validation_fraction=args.validation_fraction, patience=args.patience, scaling=None, quick=False,
-            n_jobs=args.threads, random_state=args.seed, precision="auto")
-        settings.scaling = resolve_scaling("auto", ds)
-        pool, clf = settings.recommended()
+        pool, clf = _recommended(args, ds)
         clf.set_params(verbose=1)
         print(f"\n{len(idx)} objects: {pool.n_draws} draws x {len(pool.transformer.transformer_list)} descriptors "
               f"x {len(idx)} objects; {clf.n_estimators} network(s) of at most {clf.max_epochs} epochs", flush=True)
@@ -768,8 +775,7 @@ def validate_draws(args):
     """
     import torch
 
-    from eppf.experiments._classification import TrainingSettings
-    from eppf.experiments._common import load_data, resolve_scaling
+    from eppf.experiments._common import load_data
 
     ds = load_data(require("bench_cnn draws", args.data))
     clouds_all, y_all, train_idx = ds.clouds, np.asarray(ds.y), np.asarray(ds.train)
@@ -782,12 +788,7 @@ def validate_draws(args):
     ks = sorted({1, 2, 3, 4, args.test_draws})
     results = []
     for share in args.normals:
-        settings = TrainingSettings.resolve(
-            epochs=args.max_epochs, pointnet_epochs=None, pointnet_points=None,
-            validation_fraction=args.validation_fraction, patience=args.patience, scaling=None, quick=False,
-            n_jobs=args.threads, random_state=args.seed, precision="auto")
-        settings.scaling = resolve_scaling("auto", ds)
-        pool, clf = settings.recommended()
+        pool, clf = _recommended(args, ds)
         pool.set_params(share_normals=share == "shared", test_draws=args.test_draws)
         clf.set_params(verbose=args.verbose)
         print(f"normals {share}: pool of {len(fit_idx)} objects ...", flush=True)
