@@ -47,6 +47,9 @@ cdef extern from "_normals_simd.h":
     enum:
         EPPF_NRM_SLACK
         EPPF_NRM_BUCKETS
+        EPPF_NRM_LANES
+        EPPF_NRM_EIG_VEC
+    double EPPF_NRM_GAP_RATIO
     int eppf_nrm_has_avx2() noexcept nogil
     int eppf_nrm_has_avx512() noexcept nogil
     int64_t eppf_nrm_scan_portable(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
@@ -63,6 +66,9 @@ cdef extern from "_normals_simd.h":
     void eppf_nrm_covariance(const double* spts, const int64_t* kpos, int64_t k, double* cov) noexcept nogil
     int64_t eppf_nrm_select_avx2(const double* cand_d2, const int64_t* cand_pos, int64_t m, int64_t k,
                                  double to_bucket, int64_t* sel, int64_t* kpos) noexcept nogil
+    unsigned eppf_nrm_eig8_portable(const double* c, double* out) noexcept nogil
+    unsigned eppf_nrm_eig8_avx2(const double* c, double* out) noexcept nogil
+    unsigned eppf_nrm_eig8_avx512(const double* c, double* out) noexcept nogil
 
 # The fast path's distance scan: 0 scalar, 1 AVX2, 2 AVX-512 (the best the
 # CPU has, checked at import; ``_set_simd_level`` picks a lower one for tests).
@@ -90,6 +96,10 @@ def _set_simd_level(int level):
 cdef enum:
     _N_BUCKETS = EPPF_NRM_BUCKETS
 
+# Neighborhoods whose eigenvectors are solved together (one per vector lane).
+cdef enum:
+    _LANES = EPPF_NRM_LANES
+
 # Outcomes of the fast path.
 cdef enum:
     _FAST_OK = 0
@@ -106,7 +116,7 @@ cdef enum:
 
 # Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
 # the closed-form eigenvector is replaced by Jacobi's.
-cdef double _GAP_RATIO = 1e-3
+cdef double _GAP_RATIO = EPPF_NRM_GAP_RATIO
 # Grid cell size over the estimated radius of a k-neighborhood.
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
@@ -146,6 +156,15 @@ cdef struct Scratch:
     int64_t* kpos         # k + EPPF_NRM_SLACK  the k-list's grid-order positions (+ slack
                           #            for the fast path's branch-free compaction)
     unsigned char* cand_b # max_n      fast-path candidate buckets (in the int64 row's tail)
+
+
+cdef struct Batch:
+    # Covariances waiting for the eigenvector solver, one per lane: the
+    # entries c00, c01, c02, c11, c12, c22 (``_LANES`` lanes each), and where
+    # each lane's normal goes.
+    double c[6 * _LANES]
+    double* dst[_LANES]
+    int count
 
 
 def max_cells(Py_ssize_t n):
@@ -603,10 +622,11 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
 
 
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
-                        Py_ssize_t s, Py_ssize_t k, Scratch* sc, double* out) noexcept nogil:
-    """Normal of grid-order point ``s`` written to ``out`` (unoriented). The
-    covariance sums the k nearest in ascending grid position, whichever path
-    found them, so the result does not depend on the search path."""
+                        Py_ssize_t s, Py_ssize_t k, Scratch* sc, Batch* bt, double* out) noexcept nogil:
+    """Normal of grid-order point ``s``, to be written to ``out`` (unoriented)
+    when batch ``bt`` is solved. The covariance sums the k nearest in
+    ascending grid position, whichever path found them, so the result does
+    not depend on the search path."""
     cdef Py_ssize_t i, j, p
     cdef double q[3]
     cdef int64_t c[3]
@@ -662,7 +682,70 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     if not (sc.guess[0] > 1e-200):
         sc.guess[0] = g.h * g.h
     eppf_nrm_covariance(spts, sc.kpos, k, cov)
-    _smallest_eigvec(cov, out)
+    _batch_add(bt, cov, out)
+
+
+cdef inline void _lane_cov(const Batch* bt, int j, double* cov) noexcept nogil:
+    """The symmetric 3x3 covariance of lane ``j`` (row-major)."""
+    cov[0] = bt.c[j]
+    cov[1] = cov[3] = bt.c[_LANES + j]
+    cov[2] = cov[6] = bt.c[2 * _LANES + j]
+    cov[4] = bt.c[3 * _LANES + j]
+    cov[5] = cov[7] = bt.c[4 * _LANES + j]
+    cov[8] = bt.c[5 * _LANES + j]
+
+
+cdef void _batch_solve(Batch* bt) noexcept nogil:
+    """Write the unit eigenvector of the smallest eigenvalue of every waiting
+    covariance to its destination and empty the batch: ``_smallest_eigvec``'s
+    arithmetic in vector lanes (``eppf_nrm_eig8_*``, the same bits), Jacobi
+    for the lanes it hands back."""
+    cdef double res[3 * _LANES]
+    cdef double cov[9]
+    cdef unsigned bad
+    cdef int j, i
+    if bt.count == 0:
+        return
+    if EPPF_NRM_EIG_VEC == 0:
+        for j in range(bt.count):
+            _lane_cov(bt, j, cov)
+            _smallest_eigvec(cov, bt.dst[j])
+        bt.count = 0
+        return
+    for j in range(bt.count, _LANES):
+        for i in range(6):
+            bt.c[i * _LANES + j] = 0.0
+    if _simd == 2:
+        bad = eppf_nrm_eig8_avx512(bt.c, res)
+    elif _simd == 1:
+        bad = eppf_nrm_eig8_avx2(bt.c, res)
+    else:
+        bad = eppf_nrm_eig8_portable(bt.c, res)
+    for j in range(bt.count):
+        if (bad >> j) & 1u:
+            _lane_cov(bt, j, cov)
+            _jacobi_smallest(cov, bt.dst[j])
+        else:
+            bt.dst[j][0] = res[j]
+            bt.dst[j][1] = res[_LANES + j]
+            bt.dst[j][2] = res[2 * _LANES + j]
+    bt.count = 0
+
+
+cdef inline void _batch_add(Batch* bt, const double* cov, double* dst) noexcept nogil:
+    """Queue covariance ``cov`` (symmetric, row-major) for the solver, its
+    normal to go to ``dst``; solve when every lane is taken."""
+    cdef int j = bt.count
+    bt.c[j] = cov[0]
+    bt.c[_LANES + j] = cov[1]
+    bt.c[2 * _LANES + j] = cov[2]
+    bt.c[3 * _LANES + j] = cov[4]
+    bt.c[4 * _LANES + j] = cov[5]
+    bt.c[5 * _LANES + j] = cov[8]
+    bt.dst[j] = dst
+    bt.count = j + 1
+    if bt.count == _LANES:
+        _batch_solve(bt)
 
 
 cdef void _jacobi_smallest(const double* cov, double* out) noexcept nogil:
@@ -895,9 +978,11 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     """All normals of one object, serially, in one thread's scratch rows."""
     cdef Grid g
     cdef Scratch sc
+    cdef Batch bt
     cdef Py_ssize_t s, kk = k if k < n else n
     if n == 0:
         return
+    bt.count = 0
     _split_scratch(fs, its, max_n, k, &sc)
     # The cell cap of the object's own size (4 n + 64), not of the largest
     # object's: the grid, hence the neighbors' order and the sums, are those
@@ -905,17 +990,30 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start)
     sc.guess[0] = INFINITY
     for s in range(n):
-        _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, out + 3 * sc.sidx[s])
+        _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, &bt, out + 3 * sc.sidx[s])
+    _batch_solve(&bt)
     _orient(pts, n, mode, viewpoint, out)
 
 
-cdef void _shared_grid_normal(const Grid* g, const Scratch* shared, Py_ssize_t s, Py_ssize_t k,
-                              double* fs, int64_t* its, Py_ssize_t n, double* out) noexcept nogil:
-    """Normal of grid-order point ``s`` of a grid built in ``shared``, with
-    this thread's scratch rows for the query buffers."""
+# Grid-order points per task of :func:`normals_single`'s threads.
+cdef Py_ssize_t _SINGLE_CHUNK = 32
+
+
+cdef void _shared_grid_normals(const Grid* g, const Scratch* shared, Py_ssize_t chunk, Py_ssize_t k,
+                               double* fs, int64_t* its, Py_ssize_t n, double* out) noexcept nogil:
+    """Normals of the grid-order points of chunk ``chunk`` (``_SINGLE_CHUNK``
+    points, fewer in the last) of a grid built in ``shared``, with this
+    thread's scratch rows for the query buffers."""
     cdef Scratch sc
+    cdef Batch bt
+    cdef Py_ssize_t s, end = (chunk + 1) * _SINGLE_CHUNK
+    if end > n:
+        end = n
+    bt.count = 0
     _split_scratch(fs, its, n, k, &sc)
-    _point_normal(g, shared.spts, shared.cell_start, s, k, &sc, out + 3 * shared.sidx[s])
+    for s in range(chunk * _SINGLE_CHUNK, end):
+        _point_normal(g, shared.spts, shared.cell_start, s, k, &sc, &bt, out + 3 * shared.sidx[s])
+    _batch_solve(&bt)
 
 
 def _check_scratch(fscratch, iscratch, Py_ssize_t max_n, Py_ssize_t k, int num_threads, name):
@@ -961,7 +1059,7 @@ cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     ``i_stride`` int64 per thread."""
     cdef Py_ssize_t cap = 4 * n + 64
     cdef Py_ssize_t kk = k if k < n else n
-    cdef Py_ssize_t s, tid, t
+    cdef Py_ssize_t c, tid, t, n_chunks = (n + _SINGLE_CHUNK - 1) // _SINGLE_CHUNK
     cdef Grid g
     cdef Scratch shared
     cdef Scratch sc
@@ -973,12 +1071,12 @@ cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
             _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)
             sc.guess[0] = INFINITY
         if num_threads == 1:
-            for s in range(n):
-                _shared_grid_normal(&g, &shared, s, kk, fs, its, n, obase)
+            for c in range(n_chunks):
+                _shared_grid_normals(&g, &shared, c, kk, fs, its, n, obase)
         else:
-            for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
+            for c in prange(n_chunks, num_threads=num_threads, schedule="dynamic", chunksize=1):
                 tid = threadid()
-                _shared_grid_normal(&g, &shared, s, kk, fs + tid * f_stride, its + tid * i_stride, n, obase)
+                _shared_grid_normals(&g, &shared, c, kk, fs + tid * f_stride, its + tid * i_stride, n, obase)
         _orient(pts, n, mode, viewpoint, obase)
 
 
@@ -1069,15 +1167,19 @@ def normals_cloud(const double[:, ::1] points, Py_ssize_t k, int mode,
     return out_arr
 
 
-def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
+def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False, bint lanes=False):
     """Unit eigenvector of the smallest eigenvalue of each symmetric 3x3
-    matrix, by the kernel's solver or, with ``jacobi=True``, by its Jacobi
-    fallback alone (exposed for tests)."""
+    matrix, by the kernel's solver one matrix at a time, with
+    ``lanes=True`` by its vector-lane form at the level in use (symmetric
+    matrices only: it reads the upper triangle), or with ``jacobi=True`` by
+    its Jacobi fallback alone (exposed for tests)."""
     cdef Py_ssize_t i, n = covs.shape[0]
     cdef double buf[9]
     cdef int a, b
+    cdef Batch bt
     out_arr = np.empty((n, 3), dtype=np.float64)
     cdef double[:, ::1] out = out_arr
+    bt.count = 0
     with nogil:
         for i in range(n):
             for a in range(3):
@@ -1085,6 +1187,9 @@ def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
                     buf[3 * a + b] = covs[i, a, b]
             if jacobi:
                 _jacobi_smallest(buf, &out[i, 0])
+            elif lanes:
+                _batch_add(&bt, buf, &out[i, 0])
             else:
                 _smallest_eigvec(buf, &out[i, 0])
+        _batch_solve(&bt)
     return out_arr
