@@ -15,19 +15,24 @@ points of one object) with OpenMP.
   search over growing shells of cells with a sorted k-list takes over. All
   paths return the same list: the k smallest squared distances, ties broken
   by the point's position in the grid order (cell, then original index).
-- The fast path's distance scan runs eight points at a time with AVX-512,
-  four with AVX2 where the CPU has them (``_normals_simd.h``, chosen at
-  import) and two elsewhere (portable vector code, any CPU), over a copy of
-  the grid-order coordinates as x, y and z arrays; with AVX-512 and AVX2 its
-  k-th selection too (bisection over bucket counts), and each covariance is
-  summed two sums per vector register at every level. The same IEEE
-  operations in the same order as the scalar loops here, so every level
-  gives the same candidates and normals bit for bit (``_set_simd_level``
-  picks a lower one for tests).
+- The fast path scans the 3x3x3 block's points gathered once per cell (the
+  queries go in grid order, so a cell's queries come one after another),
+  the rows beyond the guess skipped. The distance scan runs eight points at
+  a time with AVX-512, four with AVX2 where the CPU has them
+  (``_normals_simd.h``, chosen at import) and two elsewhere (portable vector
+  code, any CPU), over x, y and z arrays; with AVX-512 and AVX2 its k-th
+  selection too (bisection over bucket counts). The same IEEE operations in
+  the same order as the scalar loops here, so every level gives the same
+  candidates and normals bit for bit (``_set_simd_level`` picks a lower one
+  for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
   neighborhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
-  spectra.
+  spectra (``_smallest_eigvec``). Eight neighborhoods are solved at once,
+  one per vector lane, covariance included (``_normals_lanes.h``): each
+  lane's operations are those of the one-at-a-time code (``_smallest_eigvec``
+  and ``eppf_nrm_covariance``, the sums in ascending grid position), so the
+  bits are too, at every level.
 
 Every normal depends only on its own object's coordinates and k, never on the
 thread that computed it or on the order in which points were visited, so the
@@ -69,6 +74,9 @@ cdef extern from "_normals_simd.h":
     unsigned eppf_nrm_eig8_portable(const double* c, double* out) noexcept nogil
     unsigned eppf_nrm_eig8_avx2(const double* c, double* out) noexcept nogil
     unsigned eppf_nrm_eig8_avx512(const double* c, double* out) noexcept nogil
+    void eppf_nrm_cov8_portable(const double* nb, int64_t k, double* c) noexcept nogil
+    void eppf_nrm_cov8_avx2(const double* nb, int64_t k, double* c) noexcept nogil
+    void eppf_nrm_cov8_avx512(const double* nb, int64_t k, double* c) noexcept nogil
 
 # The fast path's distance scan: 0 scalar, 1 AVX2, 2 AVX-512 (the best the
 # CPU has, checked at import; ``_set_simd_level`` picks a lower one for tests).
@@ -156,15 +164,29 @@ cdef struct Scratch:
     int64_t* kpos         # k + EPPF_NRM_SLACK  the k-list's grid-order positions (+ slack
                           #            for the fast path's branch-free compaction)
     unsigned char* cand_b # max_n      fast-path candidate buckets (in the int64 row's tail)
+    # The 3x3x3 block of cells around the last query's cell, gathered: the
+    # points of its rows (runs of grid order) one after another, so in
+    # ascending grid position.
+    double* blk           # 3 * max_n  their x, y and z arrays (max_n apart)
+    int64_t* blk_pos      # max_n      their grid-order positions
+    int64_t blk_cell      #            the cell it surrounds (-1: none yet)
+    int64_t blk_n         #            its number of points
+    int64_t blk_stride    #            max_n
+    int64_t blk_row[10]   #            where each of its nine rows starts (dz, then dy,
+                          #            from -1 to 1; empty outside the grid), then its end
+    double* nb            # 3 * k * _LANES  the eigenvector batch's neighbors (Batch.nb)
 
 
 cdef struct Batch:
-    # Covariances waiting for the eigenvector solver, one per lane: the
-    # entries c00, c01, c02, c11, c12, c22 (``_LANES`` lanes each), and where
-    # each lane's normal goes.
+    # Neighborhoods waiting for the eigenvector solver, one per lane: their
+    # k points staged in ``nb`` (the layout of _normals_lanes.h; NULL where
+    # the covariances are given), the covariances' entries c00, c01, c02,
+    # c11, c12, c22 (``_LANES`` lanes each), and where each lane's normal goes.
     double c[6 * _LANES]
     double* dst[_LANES]
     int count
+    double* nb
+    Py_ssize_t k
 
 
 def max_cells(Py_ssize_t n):
@@ -175,8 +197,8 @@ def max_cells(Py_ssize_t n):
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
     at most ``max_n`` points and neighborhoods of ``k`` points."""
-    return (7 * max_n + EPPF_NRM_SLACK + k + 1,
-            4 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
+    return (10 * max_n + EPPF_NRM_SLACK + k + 1 + 3 * k * EPPF_NRM_LANES,
+            5 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
 
 
 cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_ssize_t k,
@@ -195,6 +217,12 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     sc.sel = sc.cand_pos + max_n + EPPF_NRM_SLACK
     sc.kpos = sc.sel + max_n + EPPF_NRM_SLACK
     sc.cand_b = <unsigned char*>(sc.kpos + k + EPPF_NRM_SLACK)
+    sc.blk = sc.guess + 1
+    sc.nb = sc.blk + 3 * max_n
+    sc.blk_pos = sc.kpos + k + EPPF_NRM_SLACK + (max_n + 7) // 8
+    sc.blk_cell = -1
+    sc.blk_n = 0
+    sc.blk_stride = max_n
 
 
 cdef inline double _pow2_below(double m) noexcept nogil:
@@ -522,12 +550,9 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     undefined) it says why: _FAST_FEW (fewer than k within the guess),
     _FAST_MANY (more than ``_MAX_CAND_PER_K * k``) or _FAST_FAR (the k-th
     lies too far to prove that the block holds the k nearest)."""
-    cdef int64_t jy, jz, row, x0, x1, p, b, e
-    cdef Py_ssize_t m = 0, i, j, rank, max_cand = _MAX_CAND_PER_K * k
-    cdef int counts[_N_BUCKETS]
-    cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
-    cdef double to_bucket, kth
-    cdef double qx = q[0], qy = q[1], qz = q[2], d2, di, gz, gz2, gy, gyz2, gx
+    cdef int64_t jy, jz, row, x0, x1, b, e
+    cdef Py_ssize_t m = 0, max_cand = _MAX_CAND_PER_K * k
+    cdef double qx = q[0], qy = q[1], qz = q[2], gz, gz2, gy, gyz2, gx
     cdef int64_t xlo = c[0] - r if c[0] - r > 0 else 0
     cdef int64_t xhi = c[0] + r if c[0] + r < g.res[0] else g.res[0] - 1
     for jz in range(c[2] - r if c[2] - r > 0 else 0, (c[2] + r if c[2] + r < g.res[2] else g.res[2] - 1) + 1):
@@ -566,6 +591,21 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
                 m = eppf_nrm_scan_avx2(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
             else:
                 m = eppf_nrm_scan_portable(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
+    return _select_k(g, q, c, r, k, guess, m, cand_d2, cand_pos, sel, kd2, kpos, cand_b)
+
+
+cdef int _select_k(const Grid* g, const double* q, const int64_t* c, int64_t r, Py_ssize_t k, double guess,
+                   Py_ssize_t m, const double* cand_d2, const int64_t* cand_pos, int64_t* sel, double* kd2,
+                   int64_t* kpos, unsigned char* cand_b) noexcept nogil:
+    """The fast path's selection among the ``m`` candidates (squared
+    distances at most ``guess``, in ascending position) of the block of
+    cells within Chebyshev distance ``r`` of the query's cell: outputs and
+    return value as :func:`_knn_block`'s (``kpos`` holds the candidates'
+    ``cand_pos`` entries)."""
+    cdef Py_ssize_t i, j, rank, max_cand = _MAX_CAND_PER_K * k
+    cdef int counts[_N_BUCKETS]
+    cdef Py_ssize_t bk, below, need, n_in, kth_i
+    cdef double to_bucket, kth, di
     if m < k:
         return _FAST_FEW
     if m > max_cand:
@@ -621,6 +661,91 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     return _FAST_OK if _block_done(g, q, c, r, kth) else _FAST_FAR
 
 
+cdef void _gather_block(const Grid* g, const int64_t* cell_start, const int64_t* c, int64_t cell,
+                        Scratch* sc) noexcept nogil:
+    """Copy the points of the 3x3x3 block of cells around cell ``c`` (index
+    ``cell``) to ``sc``'s block arrays, row after row: ascending grid
+    position, at most all the object's points (the rows' runs are disjoint)."""
+    cdef int64_t dy, dz, jy, jz, row, p, b, e, nb = 0
+    cdef int64_t xlo = c[0] - 1 if c[0] > 0 else 0
+    cdef int64_t xhi = c[0] + 1 if c[0] + 1 < g.res[0] else g.res[0] - 1
+    cdef double* bx = sc.blk
+    cdef double* by = sc.blk + sc.blk_stride
+    cdef double* bz = sc.blk + 2 * sc.blk_stride
+    for dz in range(3):
+        jz = c[2] + dz - 1
+        for dy in range(3):
+            jy = c[1] + dy - 1
+            sc.blk_row[3 * dz + dy] = nb
+            if jz < 0 or jz >= g.res[2] or jy < 0 or jy >= g.res[1]:
+                continue
+            row = (jz * g.res[1] + jy) * g.res[0]
+            b = cell_start[row + xlo]
+            e = cell_start[row + xhi + 1]
+            for p in range(b, e):
+                bx[nb] = g.sx[p]
+                by[nb] = g.sy[p]
+                bz[nb] = g.sz[p]
+                sc.blk_pos[nb] = p
+                nb += 1
+    sc.blk_row[9] = nb
+    sc.blk_n = nb
+    sc.blk_cell = cell
+
+
+cdef inline Py_ssize_t _scan_block(const Scratch* sc, int64_t b, int64_t e, const double* q, double guess,
+                                   Py_ssize_t m) noexcept nogil:
+    """Offer the gathered block's points [b, e) to the candidate list (the
+    level's distance scan); return the new count."""
+    cdef const double* bx = sc.blk
+    if _simd == 2:
+        return eppf_nrm_scan_avx512(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
+                                    guess, sc.cand_d2, sc.cand_pos, m)
+    if _simd == 1:
+        return eppf_nrm_scan_avx2(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
+                                  guess, sc.cand_d2, sc.cand_pos, m)
+    return eppf_nrm_scan_portable(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
+                                  guess, sc.cand_d2, sc.cand_pos, m)
+
+
+cdef int _knn_near(const Grid* g, const int64_t* cell_start, const double* q, const int64_t* c,
+                   Py_ssize_t k, double guess, Scratch* sc) noexcept nogil:
+    """:func:`_knn_block` for the 3x3x3 block (``r = 1``), over its points
+    gathered once for all queries of a cell (``_gather_block``): the rows
+    within the guess (by the same bounds), merged into runs where they
+    follow one another, instead of one scan per row trimmed at its ends. The
+    points it adds lie beyond the guess, so the candidates, hence the
+    outputs, are the same."""
+    cdef int64_t cell = (c[2] * g.res[1] + c[1]) * g.res[0] + c[0]
+    cdef double gz2[3]
+    cdef double gy2[3]
+    cdef double gap
+    cdef int64_t rb = 0, re = 0
+    cdef Py_ssize_t m = 0, i
+    cdef int t, res
+    if cell != sc.blk_cell:
+        _gather_block(g, cell_start, c, cell, sc)
+    for t in range(3):
+        gap = _gap(q[2], g.lo[2], g.h, c[2], c[2] + t - 1) - g.margin
+        gz2[t] = gap * gap if gap > 0.0 else 0.0
+        gap = _gap(q[1], g.lo[1], g.h, c[1], c[1] + t - 1) - g.margin
+        gy2[t] = gap * gap if gap > 0.0 else 0.0
+    for t in range(9):
+        if not (gz2[t // 3] + gy2[t % 3] <= guess):
+            continue
+        if sc.blk_row[t] != re:
+            m = _scan_block(sc, rb, re, q, guess, m)
+            rb = sc.blk_row[t]
+        re = sc.blk_row[t + 1]
+    m = _scan_block(sc, rb, re, q, guess, m)
+    res = _select_k(g, q, c, 1, k, guess, m, sc.cand_d2, sc.cand_pos, sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+    if res == _FAST_OK:
+        # block indices to grid positions (ascending, as the block is)
+        for i in range(k):
+            sc.kpos[i] = sc.blk_pos[sc.kpos[i]]
+    return res
+
+
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
                         Py_ssize_t s, Py_ssize_t k, Scratch* sc, Batch* bt, double* out) noexcept nogil:
     """Normal of grid-order point ``s``, to be written to ``out`` (unoriented)
@@ -638,23 +763,18 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
         q[a] = spts[3 * s + a]
         c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
     if guess < INFINITY:
-        res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
-                         sc.kd2, sc.kpos, sc.cand_b, 1)
+        res = _knn_near(g, cell_start, q, c, k, guess, sc)
         # One more try with a guess four times larger or smaller (any
         # positive guess gives the same, exact list) and, when that
         # overshoots, one with the guess in between, before the shells.
         if res == _FAST_FEW:
-            res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            res = _knn_near(g, cell_start, q, c, k, 4.0 * guess, sc)
             if res == _FAST_MANY:
-                res = _knn_block(g, spts, cell_start, q, c, k, 2.0 * guess, sc.cand_d2, sc.cand_pos,
-                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+                res = _knn_near(g, cell_start, q, c, k, 2.0 * guess, sc)
         elif res == _FAST_MANY:
-            res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            res = _knn_near(g, cell_start, q, c, k, 0.25 * guess, sc)
             if res == _FAST_FEW:
-                res = _knn_block(g, spts, cell_start, q, c, k, 0.5 * guess, sc.cand_d2, sc.cand_pos,
-                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+                res = _knn_near(g, cell_start, q, c, k, 0.5 * guess, sc)
         if res == _FAST_FAR:
             # The k found bound the k-th distance from above: the 5x5x5 block
             # within that distance holds at least k, often enough to prove it.
@@ -681,8 +801,11 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     sc.guess[0] = kth * _GUESS_FACTOR
     if not (sc.guess[0] > 1e-200):
         sc.guess[0] = g.h * g.h
-    eppf_nrm_covariance(spts, sc.kpos, k, cov)
-    _batch_add(bt, cov, out)
+    if EPPF_NRM_EIG_VEC == 0:
+        eppf_nrm_covariance(spts, sc.kpos, k, cov)
+        _smallest_eigvec(cov, out)
+    else:
+        _batch_stage(bt, spts, sc.kpos, out)
 
 
 cdef inline void _lane_cov(const Batch* bt, int j, double* cov) noexcept nogil:
@@ -706,7 +829,18 @@ cdef void _batch_solve(Batch* bt) noexcept nogil:
     cdef int j, i
     if bt.count == 0:
         return
-    if EPPF_NRM_EIG_VEC == 0:
+    if bt.nb != NULL:
+        # the covariances of the staged neighborhoods (unused lanes: zeros)
+        for j in range(bt.count, _LANES):
+            for i in range(3 * bt.k):
+                bt.nb[_LANES * i + j] = 0.0
+        if _simd == 2:
+            eppf_nrm_cov8_avx512(bt.nb, bt.k, bt.c)
+        elif _simd == 1:
+            eppf_nrm_cov8_avx2(bt.nb, bt.k, bt.c)
+        else:
+            eppf_nrm_cov8_portable(bt.nb, bt.k, bt.c)
+    elif EPPF_NRM_EIG_VEC == 0:
         for j in range(bt.count):
             _lane_cov(bt, j, cov)
             _smallest_eigvec(cov, bt.dst[j])
@@ -730,6 +864,24 @@ cdef void _batch_solve(Batch* bt) noexcept nogil:
             bt.dst[j][1] = res[_LANES + j]
             bt.dst[j][2] = res[2 * _LANES + j]
     bt.count = 0
+
+
+cdef inline void _batch_stage(Batch* bt, const double* spts, const int64_t* kpos, double* dst) noexcept nogil:
+    """Queue the neighborhood of the ``bt.k`` points of ``spts`` at grid
+    positions ``kpos`` (in that order) for the solver, its normal to go to
+    ``dst``; solve when every lane is taken."""
+    cdef int j = bt.count
+    cdef Py_ssize_t i, k = bt.k
+    cdef int64_t p
+    for i in range(k):
+        p = 3 * kpos[i]
+        bt.nb[_LANES * i + j] = spts[p]
+        bt.nb[_LANES * (k + i) + j] = spts[p + 1]
+        bt.nb[_LANES * (2 * k + i) + j] = spts[p + 2]
+    bt.dst[j] = dst
+    bt.count = j + 1
+    if bt.count == _LANES:
+        _batch_solve(bt)
 
 
 cdef inline void _batch_add(Batch* bt, const double* cov, double* dst) noexcept nogil:
@@ -982,8 +1134,10 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     cdef Py_ssize_t s, kk = k if k < n else n
     if n == 0:
         return
-    bt.count = 0
     _split_scratch(fs, its, max_n, k, &sc)
+    bt.count = 0
+    bt.nb = sc.nb
+    bt.k = kk
     # The cell cap of the object's own size (4 n + 64), not of the largest
     # object's: the grid, hence the neighbors' order and the sums, are those
     # of the object alone (:func:`normals_single`), whatever it is packed with.
@@ -1009,8 +1163,10 @@ cdef void _shared_grid_normals(const Grid* g, const Scratch* shared, Py_ssize_t 
     cdef Py_ssize_t s, end = (chunk + 1) * _SINGLE_CHUNK
     if end > n:
         end = n
-    bt.count = 0
     _split_scratch(fs, its, n, k, &sc)
+    bt.count = 0
+    bt.nb = sc.nb
+    bt.k = k
     for s in range(chunk * _SINGLE_CHUNK, end):
         _point_normal(g, shared.spts, shared.cell_start, s, k, &sc, &bt, out + 3 * shared.sidx[s])
     _batch_solve(&bt)
@@ -1180,6 +1336,7 @@ def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False, bint lanes
     out_arr = np.empty((n, 3), dtype=np.float64)
     cdef double[:, ::1] out = out_arr
     bt.count = 0
+    bt.nb = NULL
     with nogil:
         for i in range(n):
             for a in range(3):

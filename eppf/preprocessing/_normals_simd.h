@@ -1,12 +1,17 @@
 /* SIMD distance scan and k-th selection of the normals kernel's fast
- * neighbor search (_normals_fast.pyx's ``_knn_block``), chosen at run time:
+ * neighbor search (_normals_fast.pyx's ``_knn_near`` and ``_knn_block``),
+ * chosen at run time:
  *
  * - AVX-512 (F): eight grid-order points at a time;
  * - AVX2: four at a time, the survivors packed with a permutation table;
  * - portable (any CPU, the "scalar" level): two at a time in GCC/clang
  *   vector registers (SSE2, NEON), plain loops with other compilers.
  *
- * and the covariance of a neighborhood (``eppf_nrm_covariance``, every level).
+ * the covariance of a neighborhood (``eppf_nrm_covariance``: the order of
+ * operations the lanes of _normals_lanes.h follow, and the kernel's own
+ * code where the compiler has no vector extensions), and, included once per
+ * level, the covariances and eigenvectors of eight neighborhoods at a time
+ * (_normals_lanes.h).
  *
  * ``eppf_nrm_scan_*`` offers the points at grid-order positions [b, e) to
  * the candidate list: for each, in ascending position, the squared distance
@@ -78,23 +83,10 @@ static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, 
     cov[8] = syz_zz[1];
 }
 
-/* Eigenvectors of eight neighborhoods at once, one per vector lane: the
- * arithmetic of _normals_fast.pyx's ``_smallest_eigvec`` (the closed-form
- * eigenvalues by Newton's method on 4 x^3 - 3 x = r, then the longest cross
- * product of two rows of C - lambda_min I), operation for operation, on
- * eight lanes side by side. The scalar code's branches become per-lane
- * selections: a lane's Newton iterates stop moving exactly when the scalar
- * loop's would (the loop runs until every lane has stopped, at most 200
- * steps), and the lanes that the scalar code hands to Jacobi (p not > 0,
- * nearly equal smallest eigenvalues, a zero or NaN cross product) are
- * returned as a bit mask for the caller to solve with it. Only +, -, *, /
- * and sqrt, correctly rounded and not contracted: each lane gives the scalar
- * code's bits on every CPU, at any vector width the compiler splits the
- * eight lanes into.
- *
- * ``c`` holds the six distinct entries c00, c01, c02, c11, c12, c22, eight
- * lanes each (48 doubles); ``out`` gets the x, y and z components, eight
- * lanes each (24 doubles; lanes of the mask are undefined). */
+/* Normals of eight neighborhoods at once, one per vector lane, in
+ * _normals_lanes.h (included once per SIMD level): the covariances
+ * (``eppf_nrm_cov8_*``) and the eigenvector of the smallest eigenvalue
+ * (``eppf_nrm_eig8_*``), each the scalar code's operations lane for lane. */
 #define EPPF_NRM_LANES 8
 /* Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
  * the closed-form eigenvector is replaced by Jacobi's. */
@@ -102,120 +94,31 @@ static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, 
 
 #if defined(__GNUC__)
 #define EPPF_NRM_EIG_VEC 1
+typedef double eppf_nrm_v4d __attribute__((vector_size(32)));
 typedef double eppf_nrm_v8d __attribute__((vector_size(64)));
+typedef long long eppf_nrm_v2l __attribute__((vector_size(16)));
+typedef long long eppf_nrm_v4l __attribute__((vector_size(32)));
 typedef long long eppf_nrm_v8l __attribute__((vector_size(64)));
-/* mask ? x : y, lane by lane (a mask lane is all ones or zero) */
-#define EPPF_NRM_SEL(m, x, y) ((eppf_nrm_v8d)((((eppf_nrm_v8l)(x)) & (m)) | (((eppf_nrm_v8l)(y)) & ~(m))))
-#define EPPF_NRM_SQRT8(v)                            \
-    do {                                             \
-        int l_;                                      \
-        for (l_ = 0; l_ < EPPF_NRM_LANES; l_++)      \
-            (v)[l_] = __builtin_sqrt((v)[l_]);       \
-    } while (0)
 
-/* The body of every level's solver (inlined into each, compiled for its target). */
-static inline __attribute__((always_inline)) unsigned eppf_nrm_eig8_body(const double *c, double *out)
-{
-    eppf_nrm_v8d a00, a01, a02, a11, a12, a22, q, p1, d0, d1, d2, p2, p, b00, b11, b22, b01, b02, b12, r;
-    eppf_nrm_v8d a, b, fa, fb, na, nb, x1, x2, x3, lam, m00, m11, m22;
-    eppf_nrm_v8d c0x, c0y, c0z, c1x, c1y, c1z, c2x, c2y, c2z, n0, n1, n2, nsq, nrm;
-    eppf_nrm_v8l bad, mva, mvb, s0, s1;
-    unsigned mask = 0;
-    int step, l;
-    __builtin_memcpy(&a00, c, sizeof a00);
-    __builtin_memcpy(&a01, c + EPPF_NRM_LANES, sizeof a01);
-    __builtin_memcpy(&a02, c + 2 * EPPF_NRM_LANES, sizeof a02);
-    __builtin_memcpy(&a11, c + 3 * EPPF_NRM_LANES, sizeof a11);
-    __builtin_memcpy(&a12, c + 4 * EPPF_NRM_LANES, sizeof a12);
-    __builtin_memcpy(&a22, c + 5 * EPPF_NRM_LANES, sizeof a22);
-    q = ((a00 + a11) + a22) / 3.0;
-    p1 = ((a01 * a01) + (a02 * a02)) + (a12 * a12);
-    d0 = a00 - q;
-    d1 = a11 - q;
-    d2 = a22 - q;
-    p2 = (((d0 * d0) + (d1 * d1)) + (d2 * d2)) + (2.0 * p1);
-    p = p2 / 6.0;
-    EPPF_NRM_SQRT8(p);
-    bad = ~(p > 0.0);
-    b00 = d0 / p;
-    b11 = d1 / p;
-    b22 = d2 / p;
-    b01 = a01 / p;
-    b02 = a02 / p;
-    b12 = a12 / p;
-    r = 0.5 * (((b00 * ((b11 * b22) - (b12 * b12))) - (b01 * ((b01 * b22) - (b12 * b02))))
-               + (b02 * ((b01 * b12) - (b11 * b02))));
-    r = EPPF_NRM_SEL(r < -1.0, (eppf_nrm_v8d){} - 1.0, r);
-    r = EPPF_NRM_SEL(r > 1.0, (eppf_nrm_v8d){} + 1.0, r);
-    /* _cubic_roots */
-    a = 0.8661 + (r / 6.0);
-    b = -0.8661 + (r / 6.0);
-    a = EPPF_NRM_SEL(a > 1.0, (eppf_nrm_v8d){} + 1.0, a);
-    b = EPPF_NRM_SEL(b < -1.0, (eppf_nrm_v8d){} - 1.0, b);
-    mva = mvb = (eppf_nrm_v8l){} - 1;
-    for (step = 0; step < 200; step++) {
-        long long any = 0;
-        fa = ((12.0 * a) * a) - 3.0;
-        na = EPPF_NRM_SEL(fa > 0.0, a - ((((((4.0 * a) * a) - 3.0) * a) - r) / fa), a);
-        mva &= na < a;
-        a = EPPF_NRM_SEL(mva, na, a);
-        fb = ((12.0 * b) * b) - 3.0;
-        nb = EPPF_NRM_SEL(fb > 0.0, b - ((((((4.0 * b) * b) - 3.0) * b) - r) / fb), b);
-        mvb &= nb > b;
-        b = EPPF_NRM_SEL(mvb, nb, b);
-        for (l = 0; l < EPPF_NRM_LANES; l++)
-            any |= mva[l] | mvb[l];
-        if (!any)
-            break;
-    }
-    x1 = a;
-    x3 = b;
-    x2 = -(x1 + x3);
-    bad |= (x2 - x3) < (EPPF_NRM_GAP_RATIO * (x1 - x3));
-    lam = q + ((2.0 * p) * x3);
-    m00 = a00 - lam;
-    m11 = a11 - lam;
-    m22 = a22 - lam;
-    c0x = (a01 * a12) - (a02 * m11);
-    c0y = (a02 * a01) - (m00 * a12);
-    c0z = (m00 * m11) - (a01 * a01);
-    c1x = (a01 * m22) - (a02 * a12);
-    c1y = (a02 * a02) - (m00 * m22);
-    c1z = (m00 * a12) - (a01 * a02);
-    c2x = (m11 * m22) - (a12 * a12);
-    c2y = (a12 * a02) - (a01 * m22);
-    c2z = (a01 * a12) - (m11 * a02);
-    n0 = ((c0x * c0x) + (c0y * c0y)) + (c0z * c0z);
-    n1 = ((c1x * c1x) + (c1y * c1y)) + (c1z * c1z);
-    n2 = ((c2x * c2x) + (c2y * c2y)) + (c2z * c2z);
-    s0 = (n0 >= n1) & (n0 >= n2);
-    s1 = ~s0 & (n1 >= n2);
-    nsq = EPPF_NRM_SEL(s0, n0, EPPF_NRM_SEL(s1, n1, n2));
-    nrm = nsq;
-    EPPF_NRM_SQRT8(nrm);
-    bad |= ~(nrm > 0.0);
-    c0x = EPPF_NRM_SEL(s0, c0x, EPPF_NRM_SEL(s1, c1x, c2x)) / nrm;
-    c0y = EPPF_NRM_SEL(s0, c0y, EPPF_NRM_SEL(s1, c1y, c2y)) / nrm;
-    c0z = EPPF_NRM_SEL(s0, c0z, EPPF_NRM_SEL(s1, c1z, c2z)) / nrm;
-    __builtin_memcpy(out, &c0x, sizeof c0x);
-    __builtin_memcpy(out + EPPF_NRM_LANES, &c0y, sizeof c0y);
-    __builtin_memcpy(out + 2 * EPPF_NRM_LANES, &c0z, sizeof c0z);
-    for (l = 0; l < EPPF_NRM_LANES; l++)
-        mask |= (unsigned)(bad[l] != 0) << l;
-    return mask;
-}
-
-/* The portable level's solver (baseline vector code of the target: SSE2, NEON). */
-static unsigned eppf_nrm_eig8_portable(const double *c, double *out)
-{
-    return eppf_nrm_eig8_body(c, out);
-}
+/* The portable level's (baseline vector code of the target: SSE2, NEON). */
+#define EPPF_NRM_L_NAME(f) f##_portable
+#define EPPF_NRM_L_ATTR
+#define EPPF_NRM_L_VT eppf_nrm_v2d
+#define EPPF_NRM_L_VL eppf_nrm_v2l
+#define EPPF_NRM_L_W 2
+#include "_normals_lanes.h"
 #else
 #define EPPF_NRM_EIG_VEC 0
+/* never called: the kernel solves lane by lane without EPPF_NRM_EIG_VEC */
 static unsigned eppf_nrm_eig8_portable(const double *c, double *out)
 {
     (void)c; (void)out;
-    return 0; /* never called: the kernel solves lane by lane without EPPF_NRM_EIG_VEC */
+    return 0;
+}
+
+static void eppf_nrm_cov8_portable(const double *nb, int64_t k, double *c)
+{
+    (void)nb; (void)k; (void)c;
 }
 #endif
 
@@ -449,12 +352,13 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
     return kth_i;
 }
 
-/* The eigenvector solver (eppf_nrm_eig8_body) in AVX-512 registers. */
-__attribute__((target("avx2,avx512f,popcnt")))
-static unsigned eppf_nrm_eig8_avx512(const double *c, double *out)
-{
-    return eppf_nrm_eig8_body(c, out);
-}
+/* The lane solvers (_normals_lanes.h) in AVX-512 registers. */
+#define EPPF_NRM_L_NAME(f) f##_avx512
+#define EPPF_NRM_L_ATTR __attribute__((target("avx2,avx512f,popcnt")))
+#define EPPF_NRM_L_VT eppf_nrm_v8d
+#define EPPF_NRM_L_VL eppf_nrm_v8l
+#define EPPF_NRM_L_W 8
+#include "_normals_lanes.h"
 
 /* Lane permutations (as eight 32-bit indices) that move the lanes of a 4-bit mask to the front. */
 static const int32_t eppf_nrm_pack4[16][8] = {
@@ -464,12 +368,13 @@ static const int32_t eppf_nrm_pack4[16][8] = {
     {4, 5, 6, 7, 0, 1, 2, 3}, {0, 1, 4, 5, 6, 7, 2, 3}, {2, 3, 4, 5, 6, 7, 0, 1}, {0, 1, 2, 3, 4, 5, 6, 7},
 };
 
-/* The eigenvector solver (eppf_nrm_eig8_body) in AVX2 registers. */
-__attribute__((target("avx2,popcnt")))
-static unsigned eppf_nrm_eig8_avx2(const double *c, double *out)
-{
-    return eppf_nrm_eig8_body(c, out);
-}
+/* The lane solvers (_normals_lanes.h) in AVX2 registers. */
+#define EPPF_NRM_L_NAME(f) f##_avx2
+#define EPPF_NRM_L_ATTR __attribute__((target("avx2,popcnt")))
+#define EPPF_NRM_L_VT eppf_nrm_v4d
+#define EPPF_NRM_L_VL eppf_nrm_v4l
+#define EPPF_NRM_L_W 4
+#include "_normals_lanes.h"
 
 __attribute__((target("avx2,popcnt")))
 static int64_t eppf_nrm_scan_avx2(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
@@ -613,6 +518,16 @@ static unsigned eppf_nrm_eig8_avx2(const double *c, double *out)
 {
     (void)c; (void)out;
     return 0; /* never called: eppf_nrm_has_avx2() is 0 */
+}
+
+static void eppf_nrm_cov8_avx512(const double *nb, int64_t k, double *c)
+{
+    (void)nb; (void)k; (void)c; /* never called: eppf_nrm_has_avx512() is 0 */
+}
+
+static void eppf_nrm_cov8_avx2(const double *nb, int64_t k, double *c)
+{
+    (void)nb; (void)k; (void)c; /* never called: eppf_nrm_has_avx2() is 0 */
 }
 
 static int64_t eppf_nrm_scan_avx512(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
