@@ -288,18 +288,19 @@ cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap)
     return prod
 
 
-cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cell_of,
+cdef int64_t _count_cells(const double* tpts, Py_ssize_t n, Grid* g, int64_t* cell_of,
                           int64_t* counts) noexcept nogil:
-    """Cell of every point and points per cell (in ``counts[c + 1]``);
-    return the number of occupied cells."""
+    """Cell of every point (grid coordinates ``tpts``, x, y, z per point) and
+    points per cell (in ``counts[c + 1]``); return the number of occupied
+    cells."""
     cdef Py_ssize_t i
     cdef int64_t c, cx, cy, cz, occupied = 0
     for c in range(g.ncells + 1):
         counts[c] = 0
     for i in range(n):
-        cx = _cell_coord(_tr(g, pts[3 * i], 0), g.lo[0], g.inv_h, g.res[0])
-        cy = _cell_coord(_tr(g, pts[3 * i + 1], 1), g.lo[1], g.inv_h, g.res[1])
-        cz = _cell_coord(_tr(g, pts[3 * i + 2], 2), g.lo[2], g.inv_h, g.res[2])
+        cx = _cell_coord(tpts[3 * i], g.lo[0], g.inv_h, g.res[0])
+        cy = _cell_coord(tpts[3 * i + 1], g.lo[1], g.inv_h, g.res[1])
+        cz = _cell_coord(tpts[3 * i + 2], g.lo[2], g.inv_h, g.res[2])
         c = (cz * g.res[1] + cy) * g.res[0] + cx
         cell_of[i] = c
         occupied += counts[c + 1] == 0
@@ -309,11 +310,12 @@ cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cel
 
 cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t cap,
                       Grid* g, double* spts, double* sxyz, Py_ssize_t stride, int64_t* sidx,
-                      int64_t* cell_of, int64_t* cell_start) noexcept nogil:
+                      int64_t* cell_of, int64_t* cell_start, double* tpts) noexcept nogil:
     """Move and rescale the object into the unit cube, choose the cell size,
     bin the points and store them sorted by cell (stable: ascending original
     index within a cell), in ``spts`` (x, y, z per point) and in ``sxyz``
-    (x, y and z arrays, ``stride`` apart)."""
+    (x, y and z arrays, ``stride`` apart). ``tpts`` (3 n doubles) holds the
+    grid coordinates in the input order meanwhile."""
     cdef Py_ssize_t i, a
     cdef double hi[3]
     cdef double e[3]
@@ -353,6 +355,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     for a in range(3):
         g.lo[a] = 0.0
         e[a] = (hi[a] - g.shift[a]) * g.scale2
+    for i in range(n):
+        for a in range(3):
+            tpts[3 * i + a] = _tr(g, pts[3 * i + a], a)
     # First guess: about one cell per point of the bounding box, flat axes
     # ignored.
     t = <double>n
@@ -378,10 +383,10 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     # a k-neighborhood. The local dimension d (1 for curves, 2 for surfaces,
     # 3 for volumes) is read from how occupancy changes with the cell size.
     h0 = g.h
-    pc0 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
+    pc0 = <double>n / <double>_count_cells(tpts, n, g, cell_of, cell_start)
     _set_resolution(g, e, h0 * 1.5, cap)
     h1 = g.h
-    pc1 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
+    pc1 = <double>n / <double>_count_cells(tpts, n, g, cell_of, cell_start)
     d = 2.0
     if pc1 > pc0 and h1 > h0:
         d = log(pc1 / pc0) / log(h1 / h0)
@@ -399,7 +404,7 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     if tmp > 8.0:
         tmp = 8.0
     _set_resolution(g, e, h1 * tmp, cap)
-    _count_cells(pts, n, g, cell_of, cell_start)
+    _count_cells(tpts, n, g, cell_of, cell_start)
     for c in range(g.ncells):
         cell_start[c + 1] += cell_start[c]
     for i in range(n):
@@ -407,9 +412,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
         r = cell_start[c]
         cell_start[c] = r + 1
         sidx[r] = i
-        spts[3 * r] = _tr(g, pts[3 * i], 0)
-        spts[3 * r + 1] = _tr(g, pts[3 * i + 1], 1)
-        spts[3 * r + 2] = _tr(g, pts[3 * i + 2], 2)
+        spts[3 * r] = tpts[3 * i]
+        spts[3 * r + 1] = tpts[3 * i + 1]
+        spts[3 * r + 2] = tpts[3 * i + 2]
         g.sx[r] = spts[3 * r]
         g.sy[r] = spts[3 * r + 1]
         g.sz[r] = spts[3 * r + 2]
@@ -1141,7 +1146,7 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     # The cell cap of the object's own size (4 n + 64), not of the largest
     # object's: the grid, hence the neighbors' order and the sums, are those
     # of the object alone (:func:`normals_single`), whatever it is packed with.
-    _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start)
+    _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start, sc.blk)
     sc.guess[0] = INFINITY
     for s in range(n):
         _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, &bt, out + 3 * sc.sidx[s])
@@ -1222,7 +1227,7 @@ cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     _split_scratch(fs, its, n, k, &shared)
     with nogil:
         _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sxyz, n, shared.sidx,
-                    shared.cell_of, shared.cell_start)
+                    shared.cell_of, shared.cell_start, shared.blk)
         for t in range(num_threads):
             _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)
             sc.guess[0] = INFINITY
