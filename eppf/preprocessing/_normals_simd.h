@@ -219,6 +219,25 @@ static int eppf_nrm_has_avx2(void)
 
 #if EPPF_NRM_SIMD
 
+/* The SIMD selections' bisection for the k-th's bucket over [lo, hi] (``count_mid``:
+ * the number of candidates in the buckets up to mid); leaves the bucket in ``bk`` and
+ * the count of the buckets below it in ``below`` (0 to begin with), kept from the
+ * pass that moved lo last instead of counted by one more pass. */
+#define EPPF_NRM_BISECT(count_mid)                 \
+    do {                                           \
+        while (lo < hi) {                          \
+            int64_t mid = (lo + hi) / 2, c_;       \
+            c_ = (count_mid);                      \
+            if (c_ >= k) {                         \
+                hi = mid;                          \
+            } else {                               \
+                lo = mid + 1;                      \
+                below = c_;                        \
+            }                                      \
+        }                                          \
+        bk = lo;                                   \
+    } while (0)
+
 /* The candidate of rank ``need - 1`` by (d2, index) among the n_in >= need
  * candidates ``sel`` (in ascending index) of the k-th's bucket: the SIMD
  * selections' last step, as in the scalar code of _normals_fast.pyx. */
@@ -300,18 +319,11 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
 {
     const __m512d vscale = _mm512_set1_pd(to_bucket);
     const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
-    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i;
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below = 0, need, n_in = 0, i, j, kth_i;
     double kth;
-    /* the smallest bucket bk whose count with those below reaches k (the top bucket holds the rest) */
-    while (lo < hi) {
-        int64_t mid = (lo + hi) / 2;
-        if (eppf_nrm_count_below(cand_d2, m, vscale, (double)(mid + 1)) >= k)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    bk = lo;
-    below = bk == 0 ? 0 : eppf_nrm_count_below(cand_d2, m, vscale, (double)bk);
+    /* the smallest bucket bk whose count with those below reaches k (the top bucket holds the rest),
+     * and that count without bk's (``below``, kept for lo: 0 for lo = 0) */
+    EPPF_NRM_BISECT(eppf_nrm_count_below(cand_d2, m, vscale, (double)(mid + 1)));
     need = k - below;
     {
         const __m512d vlo = _mm512_set1_pd((double)bk), vhi = _mm512_set1_pd((double)(bk + 1));
@@ -440,17 +452,9 @@ static int64_t eppf_nrm_select_avx2(const double *cand_d2, const int64_t *cand_p
 {
     const __m256d vscale = _mm256_set1_pd(to_bucket);
     const __m256i iota = _mm256_set_epi64x(3, 2, 1, 0), four = _mm256_set1_epi64x(4);
-    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i;
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below = 0, need, n_in = 0, i, j, kth_i;
     double kth;
-    while (lo < hi) {
-        int64_t mid = (lo + hi) / 2;
-        if (eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)(mid + 1)) >= k)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    bk = lo;
-    below = bk == 0 ? 0 : eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)bk);
+    EPPF_NRM_BISECT(eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)(mid + 1)));
     need = k - below;
     {
         const double flo = (double)bk, fhi = (double)(bk + 1);
