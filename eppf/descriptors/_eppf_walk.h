@@ -73,7 +73,6 @@
 #include "_eppf_walk_port.h"    /* levels 0 and 1: the portable skipping walk */
 
 #if !EPPF_WALK_SIMD
-#define eppf_port_setup_avx2 eppf_port_setup
 #define eppf_port_walk_avx2 eppf_port_walk
 #endif
 

@@ -15,30 +15,6 @@
 #define EPPF_META_LO 21
 #define EPPF_META_HI 42
 #define EPPF_META_MASK 0x1FFFFF
-/* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
-#define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
-
-/* The rows of ``eppf_f123_batch_avx512``'s ``pn``: point k's x, y, z,
- * nx, ny, nz, its packed voxel pv[k] (the bits of the int64 in a double's
- * place; 0 where pv is NULL) and an unused double at pn[8 k], so that one
- * 64-byte load reads a point, its normal and its voxel. */
-static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns,
-                           const int64_t *pv, double *pn)
-{
-    int64_t k;
-    for (k = 0; k < n; k++) {
-        double *r = pn + 8 * k;
-        const int64_t v = pv ? pv[k] : 0;
-        r[0] = pts[ps * k];
-        r[1] = pts[ps * k + 1];
-        r[2] = pts[ps * k + 2];
-        r[3] = nrm[ns * k];
-        r[4] = nrm[ns * k + 1];
-        r[5] = nrm[ns * k + 2];
-        memcpy(r + 6, &v, sizeof v);
-        r[7] = 0.0;
-    }
-}
 
 #if EPPF_WALK_SIMD
 /* The points, normals and packed voxels at rows r[0..7] of
