@@ -110,6 +110,7 @@ cdef extern from "_eppf_walk.h":
         EPPF_PORT_WORDS
         EPPF_PORT_CODE_WORDS
     void eppf_port_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
+    void eppf_port_code_grid_avx2(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
     int eppf_port_setup(int m, const int32_t* I, const int32_t* J, const int32_t* vox, int64_t g, const int32_t* B,
                         const double* recip_packed, const int64_t* states, const int32_t* thr, int n4,
                         int64_t* QP, int64_t* QI, int64_t* QS, int32_t* counts) noexcept nogil
@@ -523,6 +524,8 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     if skipping:
         eppf_code_grid(bits, prm.grid, code + CODE_SCRATCH, code)
         memset(lanes, 0, sizeof(lanes))
+    elif port and prm.walk_level == 1:
+        eppf_port_code_grid_avx2(bits, prm.grid, code + EPPF_PORT_CODE_WORDS, code)
     elif port:
         eppf_port_code_grid(bits, prm.grid, code + EPPF_PORT_CODE_WORDS, code)
     base = 0

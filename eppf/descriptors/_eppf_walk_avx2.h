@@ -350,6 +350,8 @@ static void eppf_port_walk_avx2(int n, int64_t *QP, int64_t *QI, int64_t *QS, co
     const __m256i zero = _mm256_setzero_si256();
     const __m256i m63 = _mm256_set1_epi64x(63), one = _mm256_set1_epi64x(1), four = _mm256_set1_epi64x(4);
     const __m256i live = _mm256_set1_epi64x(EPPF_PORT_LIVE);
+    /* a position's row times two, ((p >> 56) << 7) + ((p >> 34) & 126), is ((p >> 49) & mx) + ((p >> 34) & my) */
+    const __m256i mx = _mm256_set1_epi64x(0x7F80), my = _mm256_set1_epi64x(126);
     int nd = 0;
 /* One step of the four lines of vector v (EPPF_PORT_STEP of _eppf_walk_port.h). The position's
    chain of operations is kept short (it bounds how fast a line goes): the row offsets leave the
@@ -357,8 +359,8 @@ static void eppf_port_walk_avx2(int n, int64_t *QP, int64_t *QI, int64_t *QS, co
    no multiply (lines whose bin is certain move on too; their state stays). */
 #define EPPF_VSTEP(v)                                                                                  \
     do {                                                                                               \
-        const __m256i r_ = _mm256_add_epi64(_mm256_slli_epi64(_mm256_srli_epi64(p##v, 56), 7),         \
-                                            _mm256_slli_epi64(_mm256_and_si256(_mm256_srli_epi64(p##v, EPPF_PK_YSHIFT), m63), 1)); \
+        const __m256i r_ = _mm256_add_epi64(_mm256_and_si256(_mm256_srli_epi64(p##v, 49), mx),         \
+                                            _mm256_and_si256(_mm256_srli_epi64(p##v, EPPF_PK_YSHIFT - 1), my)); \
         const __m128i rh_ = _mm256_extracti128_si256(r_, 1);                                           \
         const __m256i w_ = _mm256_inserti128_si256(                                                    \
             _mm256_castsi128_si256(_mm_loadu_si128((const __m128i *)(code + _mm256_extract_epi64(r_, 0)))), \
