@@ -33,8 +33,9 @@ each line walked along its dominant axis, skipping voxels proved empty by
 the empty cone ahead of them, look-ups by scalar loads; level 3 is the
 default on AMD, where gathers are slow). Levels 0 (portable C, every CPU)
 and 1 (AVX2) walk grids up to 64 with the same skipping algorithm in
-``_eppf_walk_port.h`` (level 1: its setup and steps four lines to a vector,
-f1-f3 four pairs at a time, no gathers). f1-f3 use the
+``_eppf_walk_port.h`` (level 1: the draws four at a time, then f1-f3 and
+the walk setup in one pass, four pairs at a time, as at level 3, and the
+walk's steps four lines to a vector; no gathers). f1-f3 use the
 same IEEE operations in the same order, the walks visit the same voxels or
 prove them empty. Their bins and draws are bit-identical to the scalar code
 here (``_line_bin``, voxel by voxel, walks grids above 64 at every level, and
@@ -257,7 +258,7 @@ cdef struct Params:
     # the skipping walk's first state of a line of T voxels (eppf_walk_states), T = 0..PACKED_GRID
     int64_t first_states[PACKED_GRID + 1]
     int walk_level          # f4 walks: AVX2 (1), AVX-512 grouped (2) or skipping (3) (grids up to 64), scalar (0)
-    int f123_level          # draws and f1-f3 bins: AVX-512 (2), f1-f3 in AVX2 (1), scalar (0)
+    int f123_level          # draws and f1-f3 bins (and levels 1 and 3's walk setup): AVX-512 (2), AVX2 (1), scalar (0)
 
 
 cdef inline bint _port_walk(const Params* prm) noexcept nogil:
@@ -483,15 +484,17 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     the next pair's instead of stalling behind a voxel walk. At level 3 one
     pass over a batch bins f1-f3 and queues the lines (``eppf_f123q_avx512``),
     the f4 walk counts the pairs itself, and lines still being walked at the
-    end of a batch carry over (in ``lanes``) to the next one. Unless ``pn`` is
-    NULL, the AVX-512 f1-f3 read the points, normals and packed voxels from a
-    copy of them there, one 64-byte row a point (``eppf_pack_rows``); level 3
-    needs it and, where it is NULL (objects too large for the copy), takes the
-    grouped walk of level 2 (the same counts).
+    end of a batch carry over (in ``lanes``) to the next one; level 1's one
+    pass (``eppf_f123q_avx2``) queues a batch's lines for the portable walk's
+    AVX2 form. Unless ``pn`` is NULL, the SIMD f1-f3 read the points, normals
+    and voxels from a copy of them there, one 64-byte row a point
+    (``eppf_pack_rows``); level 3 needs it and, where it is NULL (objects too
+    large for the copy), takes the grouped walk of level 2, level 1 reads the
+    arrays in place (the same counts).
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
-    cdef int32_t pair_i[QBATCH + 8]  # (the AVX2 walk setup reads pairs and bins in fours)
+    cdef int32_t pair_i[QBATCH + 8]  # (the AVX2 draws write, its f1-f3 pass reads, pairs in fours)
     cdef int32_t pair_j[QBATCH + 8]
     cdef int32_t pair_bins[QBATCH + 8]
     cdef int occ, total
@@ -719,14 +722,14 @@ def eppf_counts(points_in, normals_in,
         return counts_arr, status_arr
     cdef int64_t max_n = np.max(np.diff(offsets))
     grids_arr = np.zeros((num_threads, words), dtype=np.uint64)
-    # (one int32 more: the AVX2 walk setup reads a point's voxel as 16 bytes)
+    # (one int32 more: level 1's walk setup reads a point's voxel as 16 bytes where it has no rows)
     vox_arr = np.zeros((num_threads, 3 * max_n + 1), dtype=np.int32)
     pv_arr = np.zeros((num_threads, max_n if prm.walk_level >= 2 else 1), dtype=np.int64)
     # the skipping walks' cone grids and their scratch: level 3's (scratch between the grids' halves;
     # the walk reads any of the first CODE_READ_WORDS words) or the portable walk's (levels 0 and 1)
     code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.walk_level == 3
                          else EPPF_PORT_WORDS if _port_walk(&prm) else 1), dtype=np.uint64)
-    # the AVX-512 f1-f3's rows of points and normals (8 doubles a point; objects up to ROWS_MAX_POINTS
+    # the SIMD f1-f3's rows of points, normals and voxels (8 doubles a point; objects up to ROWS_MAX_POINTS
     # points, larger ones are read in place)
     cdef bint use_rows = prm.f123_level >= 1 and max_n <= ROWS_MAX_POINTS
     # (each thread's rows start on a 64-byte boundary, so that no row straddles two cache lines)

@@ -1,6 +1,9 @@
-/* Level 1 of _eppf_walk.h: AVX2, four pairs at a time: the f1-f3 bins
- * (``eppf_f123_batch_avx2``) and the f4 line walks of a batch, grouped by
- * line length (``eppf_f4_batch_avx2``). */
+/* Level 1 of _eppf_walk.h: AVX2, four pairs at a time, the AVX-512 levels'
+ * approach at half their width and without gathers (slow on AVX2-only AMD
+ * CPUs): the pair draws (``eppf_draw_batch_avx2``), one pass over a batch
+ * for the coincidence check, the f1-f3 bins and the portable walk's setup,
+ * reading ``eppf_pack_rows``' rows (``eppf_f123q_avx2``), and the portable
+ * walk four lines to a vector (``eppf_port_walk_avx2``). */
 #ifndef EPPF_WALK_AVX2_H
 #define EPPF_WALK_AVX2_H
 

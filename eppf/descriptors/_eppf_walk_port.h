@@ -26,8 +26,9 @@
  *   and the steps of successive lines are independent, so an out-of-order
  *   CPU overlaps their look-ups.
  *
- * Level 0 runs this code as it is; level 1 builds the same grids with it and
- * runs the AVX2 forms of the setup and the walk (``eppf_port_setup_avx2``,
+ * Level 0 runs this code as it is; level 1 builds the same grids with it
+ * (compiled for AVX2: ``eppf_port_code_grid_avx2``) and runs the AVX2 forms
+ * of the setup and the walk (``eppf_f123q_avx2``, which also bins f1-f3, and
  * ``eppf_port_walk_avx2`` in _eppf_walk_avx2.h), which give the same lines,
  * steps and states.
  */
