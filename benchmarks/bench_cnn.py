@@ -857,7 +857,18 @@ def main(argv=None):
     parser.add_argument("--test-draws", type=int, default=8, help="draws: test draws of the pool")
     parser.add_argument("--normals", nargs="+", choices=("per-draw", "shared"), default=["per-draw", "shared"],
                         help="draws: the normals of the stretched copies, estimated per draw or shared")
+    parser.add_argument("--heap", choices=("keep", "default"), default="keep",
+                        help="'keep': glibc keeps large freed blocks in the heap, as the eppf command sets it "
+                             "(eppf.utils._malloc); 'default': glibc's own thresholds")
     args = parser.parse_args(argv)
+    if args.heap == "keep":
+        from eppf.utils._malloc import keep_freed_memory
+
+        kept = keep_freed_memory()
+        print("heap: large freed blocks kept (as the eppf command)" if kept
+              else "heap: the C library's own settings (not glibc, or set in the environment)")
+    else:
+        print("heap: the C library's own settings (--heap default)")
     parts = {"throughput": throughput, "profile": profile, "epoch": epoch, "descriptors": descriptors, "modelnet": modelnet,
              "fit": fit_profile, "draws": validate_draws}
     parts[args.part](args)

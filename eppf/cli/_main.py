@@ -20,6 +20,7 @@ import argparse
 import importlib
 import sys
 
+from ..utils._malloc import keep_freed_memory
 from ._common import SUBCOMMANDS
 
 __all__ = ["build_parser", "main"]
@@ -94,7 +95,18 @@ def main(argv=None):
         0 on success; 2 on bad input or a missing optional dependency, with
         one ``eppf <command>: error: ...`` line on stderr; 130 when
         interrupted with Ctrl-C (with ``eppf: interrupted``).
+
+    Notes
+    -----
+    Run as the command (``argv`` None: the ``eppf`` script, ``python -m
+    eppf``), it first lets glibc keep large freed blocks in the process's
+    heap (:func:`eppf.utils._malloc.keep_freed_memory`; training steps then
+    reuse memory instead of faulting in fresh pages), unless the
+    environment sets glibc's malloc variables. Called with an ``argv``
+    list from a Python program, it leaves that program's allocator alone.
     """
+    if argv is None:
+        keep_freed_memory()
     try:
         return _main(argv)
     except KeyboardInterrupt:

@@ -146,7 +146,8 @@ def native_bfloat16(device="cpu", *, cpuinfo=None):
     ----------
     device : str or torch.device, default="cpu"
         ``"cpu"``: true for x86 CPUs with AVX512_BF16 or AMX-BF16 and ARM
-        CPUs with BF16. ``"cuda"`` (any index): true for GPUs of compute
+        CPUs with BF16, unless ``ONEDNN_MAX_CPU_ISA`` holds oneDNN below
+        them (:func:`onednn_isa_below_bf16`). ``"cuda"`` (any index): true for GPUs of compute
         capability 8.0 or later (``torch.cuda.is_bf16_supported`` without
         emulation). Any other device type: false.
     cpuinfo : str, default=None
@@ -186,8 +187,40 @@ def native_bfloat16(device="cpu", *, cpuinfo=None):
             return bool(torch.cuda.is_bf16_supported())
     if device.type != "cpu":
         return False
+    if cpuinfo is None and onednn_isa_below_bf16():
+        return False  # oneDNN, which computes torch's CPU convolutions, was told not to use it
     features = _cpuinfo_features(cpuinfo) if cpuinfo is not None else _cpu_features()
     return bool(features and NATIVE_BF16_FEATURES & set(features))
+
+
+#: oneDNN's instruction-set caps (``ONEDNN_MAX_CPU_ISA``) under which it has no
+#: bfloat16 dot products: a CPU with AVX512_BF16 then emulates bfloat16.
+_ISA_WITHOUT_BF16 = frozenset({"SSE41", "AVX", "AVX2", "AVX2_VNNI", "AVX2_VNNI_2", "AVX512_CORE",
+                               "AVX512_CORE_VNNI"})
+
+
+def onednn_isa_below_bf16(environ=None):
+    """Whether this process caps oneDNN below the instruction sets that compute bfloat16.
+
+    ``ONEDNN_MAX_CPU_ISA`` (or its older name ``DNNL_MAX_CPU_ISA``) set to,
+    e.g., ``AVX2`` makes a CPU with AVX512_BF16 run torch's convolutions as
+    an AVX2-only CPU would, emulating bfloat16; ``precision="auto"`` then
+    chooses float32, as it would on that CPU.
+
+    Parameters
+    ----------
+    environ : mapping, default=None
+        Environment to read (``os.environ`` when None).
+
+    Returns
+    -------
+    below : bool
+    """
+    import os
+
+    environ = os.environ if environ is None else environ
+    isa = environ.get("ONEDNN_MAX_CPU_ISA", environ.get("DNNL_MAX_CPU_ISA", ""))
+    return isa.strip().upper() in _ISA_WITHOUT_BF16
 
 
 def resolve_precision(precision, device="cpu", *, owner=None):

@@ -61,6 +61,15 @@ CPU part\t: 0xd0c
 """
 
 
+@pytest.fixture(autouse=True)
+def _onednn_uncapped(monkeypatch, request):
+    # The tests read the CPU's features; a oneDNN cap in the environment (an older-CPU run)
+    # is tested on its own below.
+    if "onednn" not in request.node.name:
+        monkeypatch.delenv("ONEDNN_MAX_CPU_ISA", raising=False)
+        monkeypatch.delenv("DNNL_MAX_CPU_ISA", raising=False)
+
+
 @pytest.fixture
 def fresh_warning(monkeypatch):
     """The once-per-process emulation warning not yet given."""
@@ -133,7 +142,7 @@ def test_auto_on_this_machine_agrees_with_the_kernels_flags():
     except OSError:
         pytest.skip("no /proc/cpuinfo on this system")
     expected = bool(words & {"avx512_bf16", "amx_bf16", "bf16"})
-    assert native_bfloat16() is expected
+    assert native_bfloat16() is expected  # (the fixture lifts any oneDNN cap)
     assert resolve_precision("auto") == ("bfloat16" if expected else "float32")
 
 
@@ -199,3 +208,29 @@ def test_check_precision_takes_auto_only_where_allowed():
     assert check_precision("auto", allow_auto=True) == "auto"
     with pytest.raises(ValueError, match="precision must be 'float32' or 'bfloat16', got 'auto'"):
         check_precision("auto")
+
+
+@pytest.mark.parametrize("env, below", [
+    ({}, False),
+    ({"ONEDNN_MAX_CPU_ISA": "AVX2"}, True),
+    ({"ONEDNN_MAX_CPU_ISA": "avx512_core"}, True),  # AVX-512 without BF16 dot products
+    ({"DNNL_MAX_CPU_ISA": "AVX2"}, True),  # the older name
+    ({"ONEDNN_MAX_CPU_ISA": "AVX512_CORE_BF16"}, False),
+    ({"ONEDNN_MAX_CPU_ISA": "ALL"}, False),
+])
+def test_onednn_cap_below_bf16(env, below):
+    assert _precision.onednn_isa_below_bf16(env) is below
+
+
+def test_onednn_cap_makes_auto_float32(monkeypatch):
+    # a CPU with AVX512_BF16 whose oneDNN is held to AVX2 emulates bfloat16: "auto" is float32 there
+    monkeypatch.setattr(_precision, "_cpu_features", lambda: {"avx2", "avx512f", "avx512_bf16"})
+    monkeypatch.delenv("DNNL_MAX_CPU_ISA", raising=False)
+    monkeypatch.delenv("ONEDNN_MAX_CPU_ISA", raising=False)
+    assert native_bfloat16() is True
+    assert resolve_precision("auto") == "bfloat16"
+    monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX2")
+    assert native_bfloat16() is False
+    assert resolve_precision("auto") == "float32"
+    # a description of another machine is not this process's oneDNN
+    assert native_bfloat16(cpuinfo="flags\t: avx2 avx512_bf16\n") is True
