@@ -92,7 +92,9 @@ def read_point_fields(path, *, format=None):
         - NumPy: ``normal_x normal_y normal_z`` for an (n, 6) array.
 
         Normals keep the file's own names: PCD ``normal_x normal_y
-        normal_z``, PLY ``nx ny nz`` (or ``normal_x ...``).
+        normal_z``, PLY ``nx ny nz`` (or ``normal_x ...``), E57
+        ``nor:normalX nor:normalY nor:normalZ`` (turned by the scan's pose
+        rotation, like the points, and then float64).
 
     Raises
     ------
