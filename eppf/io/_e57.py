@@ -20,14 +20,14 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud, check_file
+from ._common import NORMAL_NAME_SETS, Cloud, check_file
 from ._errors import FileFormatError
 
 #: Records read from a scan at a time.
 PIECE = 1 << 20
 _HEADER = 48
 _CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
-_NORMALS = ("nor:normalX", "nor:normalY", "nor:normalZ")  # the E57 surface-normals extension
+_NORMALS = NORMAL_NAME_SETS[2]  # the E57 surface-normals extension
 _SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
 
 

@@ -8,14 +8,14 @@ import numpy as np
 
 from . import _e57, _las, _pcd, _ply, _xyz
 from ._api import guard
-from ._common import read_bytes
+from ._common import NORMAL_NAMES, read_bytes
 from ._errors import FileFormatError
 from ._formats import lookup
 
 __all__ = ["read_point_fields", "write_point_fields"]
 
 _WRITABLE = ("pcd", "ply", "las", "laz")
-_NORMALS = ("normal_x", "normal_y", "normal_z")
+_NORMALS = NORMAL_NAMES
 
 
 def _read(path, fmt, owner):
