@@ -7,10 +7,11 @@
  *   (the cone codes as two bit planes, built with whole-word operations; the
  *   lines of a batch walked in rounds of a few steps, several side by side,
  *   no branch on the data), which level 0 runs as it is;
- * - _eppf_walk_avx2.h, level 1: AVX2, four pairs at a time: the f1-f3 bins
- *   (``eppf_f123_batch_avx2``) and the portable walk's setup and steps
- *   (``eppf_port_setup_avx2``, ``eppf_port_walk_avx2``), with no gathers
- *   (AVX2-only AMD CPUs run them slowly);
+ * - _eppf_walk_avx2.h, level 1: AVX2, four pairs at a time: the pair draws
+ *   (``eppf_draw_batch_avx2``), the f1-f3 bins with the coincidence check
+ *   and the portable walk's setup in one pass (``eppf_f123q_avx2``) and its
+ *   steps (``eppf_port_walk_avx2``), with no gathers (AVX2-only AMD CPUs run
+ *   them slowly);
  * - _eppf_walk_avx512.h, level 2: AVX-512 (F, BW, VL, DQ and VBMI), eight
  *   pairs at a time: the pair draws (``eppf_draw_batch_avx512``), the f1-f3
  *   bins with the check for coinciding points (``eppf_f123_batch_avx512``)
@@ -73,7 +74,6 @@
 #include "_eppf_walk_port.h"    /* levels 0 and 1: the portable skipping walk */
 
 #if !EPPF_WALK_SIMD
-#define eppf_port_setup_avx2 eppf_port_setup
 #define eppf_port_walk_avx2 eppf_port_walk
 #endif
 

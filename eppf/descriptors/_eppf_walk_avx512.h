@@ -15,30 +15,6 @@
 #define EPPF_META_LO 21
 #define EPPF_META_HI 42
 #define EPPF_META_MASK 0x1FFFFF
-/* splitmix64's increment: the generator's state after k draws is seed + k * gamma. */
-#define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
-
-/* The rows of ``eppf_f123_batch_avx512``'s ``pn``: point k's x, y, z,
- * nx, ny, nz, its packed voxel pv[k] (the bits of the int64 in a double's
- * place; 0 where pv is NULL) and an unused double at pn[8 k], so that one
- * 64-byte load reads a point, its normal and its voxel. */
-static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns,
-                           const int64_t *pv, double *pn)
-{
-    int64_t k;
-    for (k = 0; k < n; k++) {
-        double *r = pn + 8 * k;
-        const int64_t v = pv ? pv[k] : 0;
-        r[0] = pts[ps * k];
-        r[1] = pts[ps * k + 1];
-        r[2] = pts[ps * k + 2];
-        r[3] = nrm[ns * k];
-        r[4] = nrm[ns * k + 1];
-        r[5] = nrm[ns * k + 2];
-        memcpy(r + 6, &v, sizeof v);
-        r[7] = 0.0;
-    }
-}
 
 #if EPPF_WALK_SIMD
 /* The points, normals and packed voxels at rows r[0..7] of
@@ -233,8 +209,8 @@ static void eppf_fill_grid_avx512(const double *pts, int64_t ps, int64_t n, int6
 }
 
 /* The f1-f3 bins, times n4, of eight pairs from their points p and normals
- * n (x, y, z vectors): ``eppf_f123_batch_avx2``'s IEEE operations in the
- * same order, so the same bins. The normals are read only where n2 > 1 or
+ * n (x, y, z vectors): ``eppf_bins123_4``'s (and _eppf_fast.pyx's
+ * ``_bin_f123``'s) IEEE operations in the same order, so the same bins. The normals are read only where n2 > 1 or
  * n3 > 1. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static inline __m256i eppf_bins123_8(const __m512d *pi, const __m512d *ni, const __m512d *pj, const __m512d *nj,
@@ -282,8 +258,8 @@ static inline __mmask8 eppf_same8(const __m512d *pi, const __m512d *pj)
            & _mm512_cmp_pd_mask(pi[2], pj[2], _CMP_EQ_OQ);
 }
 
-/* ``eppf_f123_batch_avx2`` eight pairs at a time (``eppf_bins123_8``), which
- * also checks the pairs as ``_draw_pair`` does: returns the first t whose two
+/* The f1-f3 bins, times n4, of the pairs (ii[t], jj[t]), t < m, eight at a
+ * time (``eppf_bins123_8``), which also checks the pairs as ``_draw_pair`` does: returns the first t whose two
  * points coincide, or m when none does. B[t] is written for every t. Where
  * ``pn`` is not NULL, the points and normals are read from its rows
  * (``eppf_pack_rows``: the same values, one load a point). */
@@ -329,7 +305,7 @@ static int eppf_f123_batch_avx512(int m, const int32_t *ii, const int32_t *jj, c
  * in voxels. The packed difference of two such
  * words holds the three lane differences d S exactly (each below 2**20 in
  * size), recovered by sign-extending 21-bit fields. The same integer results
- * as ``eppf_f4_setup_avx2``: the increments' scale 2**14 / L is the same
+ * as _eppf_fast.pyx's ``_line_bin``: the increments' scale 2**14 / L is the same
  * correctly rounded division (the value of ``recip_packed[L]``), and
  * lo | hi of T = L + 1 voxels is ``lohi[T]``, looked up in registers:
  * ``tab`` holds lohi[1..63] at 1..63 and lohi[64] at 0 (T >= 3 on every
@@ -398,7 +374,8 @@ static inline void eppf_lohi_tab_avx512(const int64_t *lohi, __m512i *tab)
     tab[0] = _mm512_mask_mov_epi64(tab[0], 1, _mm512_set1_epi64(lohi[64]));
 }
 
-/* ``eppf_f4_setup_avx2`` eight pairs at a time (``eppf_setup8_avx512``). */
+/* The walk setup of the pairs (ii[t], jj[t]), t < m, eight at a time
+   (``eppf_setup8_avx512``): P, INC, L and the counters (META) of each line. */
 __attribute__((target(EPPF_AVX512_TARGET)))
 static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, const int64_t *pv,
                                  const int64_t *lohi, const double *recip_packed, int64_t *P, int64_t *INC,
@@ -423,8 +400,8 @@ static void eppf_f4_setup_avx512(int m, const int32_t *ii, const int32_t *jj, co
     }
 }
 
-/* The AVX-512 walk: eight lanes, the same stopping rule and bins as
- * ``eppf_f4_batch_avx2`` (same arguments). One step of a lane is a few
+/* The grouped AVX-512 walk (level 2): eight lanes, the stopping rule of
+ * _eppf_walk.h's header and ``_line_bin``'s bins, added to B. One step of a lane is a few
  * byte operations on the packed position: VBMI's multishift copies the integer
  * parts of y, x, z to bytes 0, 1, 2 of the lane, a multiply-add of bytes 0
  * and 1 by (1, g) gives the row x g + y, byte 2 the bit; lanes past their steps

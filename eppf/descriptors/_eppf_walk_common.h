@@ -36,6 +36,9 @@
 /* Pairs per batch (the walks sort a batch by line length: a longer batch
    groups the lanes better, up to about this size). */
 #define EPPF_WALK_BATCH 256
+/* splitmix64's increment: the generator's state after k draws is seed + k * gamma
+   (the SIMD draws take four or eight successive draws side by side). */
+#define EPPF_SM_GAMMA 0x9E3779B97F4A7C15ULL
 
 #define EPPF_AVX512_TARGET "avx2,avx512f,avx512bw,avx512vl,avx512dq,avx512vbmi"
 /* Plain C compiled for AVX-512 where the SIMD kernels are built (it serves only them). */
@@ -79,6 +82,36 @@ static inline int eppf_f4_bin(const int32_t *thr, int n4, int64_t T, int64_t occ
     for (j = 1; j < n4; j++)
         b += occ >= th[j];
     return b;
+}
+
+/* The rows of ``eppf_f123_batch_avx512``'s and ``eppf_f123q_avx2``'s
+ * ``pn``: point k's x, y, z, nx, ny, nz at pn[8 k], then 16 bytes of its
+ * voxel: at levels 2 and 3 its packed voxel pv[k] (the bits of the int64 in
+ * a double's place) and an unused double; at level 1 (pv NULL) its voxel's
+ * x, y, z (``vox``, (n, 3) int32) and an int32 0; zeros where both are NULL.
+ * So one 64-byte row holds a point, its normal and its voxel. */
+static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns,
+                           const int64_t *pv, const int32_t *vox, double *pn)
+{
+    int64_t k;
+    for (k = 0; k < n; k++) {
+        double *r = pn + 8 * k;
+        int32_t v[4] = {0, 0, 0, 0};
+        r[0] = pts[ps * k];
+        r[1] = pts[ps * k + 1];
+        r[2] = pts[ps * k + 2];
+        r[3] = nrm[ns * k];
+        r[4] = nrm[ns * k + 1];
+        r[5] = nrm[ns * k + 2];
+        if (pv) {
+            memcpy(v, pv + k, sizeof pv[k]);
+        } else if (vox) {
+            v[0] = vox[3 * k];
+            v[1] = vox[3 * k + 1];
+            v[2] = vox[3 * k + 2];
+        }
+        memcpy(r + 6, v, sizeof v);
+    }
 }
 
 /* The skipping walks' lane state (``eppf_f4_walkq_avx512``, the portable

@@ -26,8 +26,9 @@
  *   and the steps of successive lines are independent, so an out-of-order
  *   CPU overlaps their look-ups.
  *
- * Level 0 runs this code as it is; level 1 builds the same grids with it and
- * runs the AVX2 forms of the setup and the walk (``eppf_port_setup_avx2``,
+ * Level 0 runs this code as it is; level 1 builds the same grids with it
+ * (compiled for AVX2: ``eppf_port_code_grid_avx2``) and runs the AVX2 forms
+ * of the setup and the walk (``eppf_f123q_avx2``, which also bins f1-f3, and
  * ``eppf_port_walk_avx2`` in _eppf_walk_avx2.h), which give the same lines,
  * steps and states.
  */
@@ -150,7 +151,7 @@ static void eppf_port_walk(int n, int64_t *QP, int64_t *QI, int64_t *QS, const u
 
 /* ``out[x g + y]`` = ``in`` of rows y - 1, y and y + 1 of the same x (those
    inside the grid) or-ed: the y +- 1 part of a 3^2 box; 2 <= g <= 64. */
-static void eppf_port_rows_pm1(const uint64_t *in, uint64_t *out, int64_t g)
+static inline __attribute__((always_inline)) void eppf_port_rows_pm1(const uint64_t *in, uint64_t *out, int64_t g)
 {
     int64_t x, y;
     for (x = 0; x < g; x++) {
@@ -166,8 +167,9 @@ static void eppf_port_rows_pm1(const uint64_t *in, uint64_t *out, int64_t g)
 /* ``out`` = ``bits`` or the voxels whose next plane along ``axis`` meets
    ``o`` in its 3^2 box (``eppf_code_grid``'s O_{m+1} from O_m = o); a and b:
    g^2 words of scratch each; 2 <= g <= 64. */
-static void eppf_port_cone_step(const uint64_t *bits, const uint64_t *o, uint64_t *out, uint64_t *a,
-                                    uint64_t *b, int64_t g, int axis)
+static inline __attribute__((always_inline)) void eppf_port_cone_step(const uint64_t *bits, const uint64_t *o,
+                                                                      uint64_t *out, uint64_t *a, uint64_t *b,
+                                                                      int64_t g, int axis)
 {
     const uint64_t gm = g == 64 ? ~(uint64_t)0 : (((uint64_t)1 << g) - 1);
     int64_t x, y, r;
@@ -210,13 +212,17 @@ static void eppf_port_cone_step(const uint64_t *bits, const uint64_t *o, uint64_
     }
 }
 
+/* (eppf_port_cone_step and eppf_port_rows_pm1 are inlined wherever they
+   are called, so that each build below vectorizes them for its target.) */
+
 /* The portable walk's cone grids from ``bits`` (g^2 words, one per (x, y)
  * row, z bits, none past z = g - 1): words 2 r and 2 r + 1 of ``code``, r =
  * 4096 a + 64 x + y, hold bit 0 and bit 1 of c = min(C, 3) at bit z, C as in
  * ``eppf_code_grid``; 2 <= g <= 64.
  * ``work``: EPPF_PORT_SCRATCH_WORDS words. Words of rows past g are left as
  * they are (no line reads them before its bin is certain). */
-static void eppf_port_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
+static inline __attribute__((always_inline)) void eppf_port_code_grid_impl(const uint64_t *bits, int64_t g,
+                                                                            uint64_t *work, uint64_t *code)
 {
     uint64_t *o2 = work, *o3 = work + g * g, *a = work + 2 * g * g, *b = work + 3 * g * g;
     int64_t x, y;
@@ -233,6 +239,23 @@ static void eppf_port_code_grid(const uint64_t *bits, int64_t g, uint64_t *work,
             }
     }
 }
+
+/* eppf_port_code_grid_impl's body, compiled for the CPU's baseline (level 0)
+   and, where the SIMD kernels are built, for AVX2 (level 1): the same
+   integer operations on the same words, so the same grids. */
+static void eppf_port_code_grid(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
+{
+    eppf_port_code_grid_impl(bits, g, work, code);
+}
+#if EPPF_WALK_SIMD
+__attribute__((target("avx2")))
+static void eppf_port_code_grid_avx2(const uint64_t *bits, int64_t g, uint64_t *work, uint64_t *code)
+{
+    eppf_port_code_grid_impl(bits, g, work, code);
+}
+#else
+#define eppf_port_code_grid_avx2 eppf_port_code_grid
+#endif
 
 /* The f4 walk setup of the pairs (ii[t], jj[t]), t < m, their voxels in
  * ``vox`` ((n, 3), ``_fill_grid``), their f1-f3 bins times n4 in B: lines

@@ -127,10 +127,12 @@ def _line_counts(*args):
 
 
 # Grids 64 and <= 64 take the SIMD walks (where the CPU has them), 100 the generic
-# walk; odd pair counts leave partial batches of 256 (1,024 for the skipping walk) and
-# partial groups of 4 and 8 lanes.
+# walk, n4 = 1 none (the SIMD f1-f3 then write bins rather than queue lines); odd pair
+# counts leave partial batches of 256 (1,024 for the skipping walk) and partial groups
+# of 4 and 8 lanes.
 @pytest.mark.parametrize("grid, n_bins, n_pairs", [
     (64, (20, 4, 5, 3), 1001), (64, (20, 4, 5, 3), 2100), (64, (3, 2, 2, 2), 67), (64, (2, 1, 1, 7), 1),
+    (64, (20, 4, 5, 1), 1001),
     (8, (7, 5, 2, 6), 130), (17, (15, 3, 4, 3), 999), (100, (20, 4, 5, 3), 515), (2, (3, 1, 1, 3), 66),
 ])
 def test_counts_match_reference_on_every_walk(clouds, grid, n_bins, n_pairs):
@@ -302,7 +304,7 @@ def _first_coinciding_draw(points, seed, n_draws):
 
 @pytest.mark.parametrize("n_pairs", [1, 9, 300, 2001, 6000])
 def test_draws_past_coinciding_points_match_reference_at_every_level(n_pairs):
-    # The AVX-512 draws skip the check for coinciding points and leave the rest
+    # The SIMD draws (AVX2 and AVX-512) skip the check for coinciding points and leave the rest
     # of the object to the scalar draw (with its redraws) from the first such
     # candidate on; the pairs must be the ones eppf_pairs draws one at a time.
     rng = np.random.default_rng(n_pairs)
@@ -449,7 +451,7 @@ def test_levels_agree_on_dense_lattices_for_every_f4_bin_count(n4):
 
 
 def test_levels_agree_on_an_object_too_large_for_the_row_copy():
-    # Past 65,536 points the AVX-512 f1-f3 read the points in place and the
+    # Past 65,536 points the SIMD f1-f3 (levels 1 to 3) read the points in place and the
     # skipping walk, which needs the row copy, hands over to the grouped one.
     rng = np.random.default_rng(7)
     clouds = [_box(70_000, rng), _sphere(500, rng)]
