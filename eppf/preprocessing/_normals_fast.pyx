@@ -1229,7 +1229,9 @@ cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
         _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sxyz, n, shared.sidx,
                     shared.cell_of, shared.cell_start, shared.blk)
         for t in range(num_threads):
-            _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)
+            # carved as _shared_grid_normals carves it (with the clipped k), so that its
+            # first query reads this guess
+            _split_scratch(fs + t * f_stride, its + t * i_stride, n, kk, &sc)
             sc.guess[0] = INFINITY
         if num_threads == 1:
             for c in range(n_chunks):

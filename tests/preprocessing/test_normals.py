@@ -546,3 +546,23 @@ def test_simd_level_is_clipped_to_the_cpu():
         assert top in (0, 1, 2) and top >= old
     finally:
         _set_simd_level(old)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_kernel_with_k_above_n_reads_no_stale_scratch(threads):
+    # callers clip k to the cloud's size; the kernel itself must not depend on what its scratch held before
+    from eppf.preprocessing._normals import resolve_orientation
+    from eppf.preprocessing._normals_fast import normals_single, scratch_sizes
+
+    pts = np.random.default_rng(3).normal(size=(7, 3))
+    mode, _ = resolve_orientation("centroid", "test")
+    results = []
+    for fill in (np.nan, 0.0, 1e300):
+        f_len, i_len = scratch_sizes(7, 20)
+        out = np.empty((7, 3))
+        normals_single(pts, 20, mode, np.zeros(3), out, np.full((threads, f_len), fill),
+                       np.full((threads, i_len), -1, dtype=np.int64), threads)
+        results.append(out)
+    expected = estimate_normals(pts, 20)
+    for out in results:
+        assert out.tobytes() == expected.tobytes()
