@@ -20,6 +20,7 @@ from sklearn.utils import check_random_state
 
 from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_parameter
 from ..utils._sampling import resample
+from ..utils._stats_fast import cloud_means
 from ..utils._validation import check_point_cloud
 
 __all__ = [
@@ -521,25 +522,27 @@ def _scale_clouds(clouds, factors, center):
     sizes = np.array([c.shape[0] for c in clouds])
     block = np.concatenate(clouds)
     out = np.empty_like(block)
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    # each cloud's own mean, as c[:, :3].mean(axis=0) adds it (compiled: NumPy's strided reduction over three
+    # columns is slow)
+    centroids = cloud_means(block, offsets) if center == "centroid" else None
     if (sizes == sizes[0]).all():
         # one size: each cloud's factors and centroid broadcast over its points in a (clouds, points, 3) view
-        # (the stack's mean over axis 1 adds in the order each cloud's own mean does)
         shape = (len(clouds), int(sizes[0]), block.shape[1])
         xyz, new = block.reshape(shape)[:, :, :3], out.reshape(shape)
         each = factors[:, None, :]
-        origin = xyz.mean(axis=1)[:, None, :] if center == "centroid" else np.zeros(3)
+        origin = centroids[:, None, :] if center == "centroid" else np.zeros(3)
     else:
         xyz, new = block[:, :3], out
         each = np.repeat(factors, sizes, axis=0)
-        origin = (np.repeat(np.array([c[:, :3].mean(axis=0) for c in clouds]), sizes, axis=0)
-                  if center == "centroid" else np.zeros(3))
+        origin = np.repeat(centroids, sizes, axis=0) if center == "centroid" else np.zeros(3)
     new[..., :3] = (xyz - origin) * each + origin
     if block.shape[1] == 6:
         normals = new[..., 3:]
         np.divide(block.reshape(new.shape)[..., 3:], each, out=normals)
         flat = out[:, 3:]
         flat /= np.sqrt(np.einsum("ij,ij->i", flat, flat))[:, None]
-    bounds = np.concatenate([[0], np.cumsum(sizes)]).tolist()
+    bounds = offsets.tolist()
     return [out[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 

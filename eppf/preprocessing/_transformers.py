@@ -67,6 +67,23 @@ class _CloudTransformer(TransformerMixin, BaseEstimator):
         seeds = object_seeds(self.random_state, len(clouds))
         return [self._apply(cloud, object_rng(seed)) for cloud, seed in zip(clouds, seeds)]
 
+    def fit_transform(self, X, y=None):
+        """Perturb every cloud (``fit`` learns nothing, so this is :meth:`transform`, validating once).
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds, normals in the last three columns.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        X_new : list of ndarray
+            As :meth:`transform`.
+        """
+        return self.transform(X)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.requires_fit = False

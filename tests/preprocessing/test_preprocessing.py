@@ -55,6 +55,17 @@ def test_list_in_list_out_and_no_mutation(est):
 
 
 @pytest.mark.parametrize("est", ALL, ids=lambda e: type(e).__name__)
+def test_fit_transform_is_fit_then_transform(est):
+    # fit_transform validates the clouds once (fit learns nothing): the same clouds, the same errors
+    X = _clouds()
+    ref = clone(est).fit(X).transform(X)
+    for a, b in zip(clone(est).fit_transform(X), ref):
+        assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="point cloud 1 contains NaN"):
+        clone(est).fit_transform([X[0], np.full((5, 3), np.nan)])
+
+
+@pytest.mark.parametrize("est", ALL, ids=lambda e: type(e).__name__)
 def test_seeding(est):
     X = _clouds()
     a = clone(est).transform(X)
