@@ -149,7 +149,8 @@ def test_random_scaling_of_many_clouds_is_the_cloud_by_cloud_function_bit_for_bi
     sized = [rng.normal(size=(n, 3)) * 50 + 3 for n in (5, 300, 300, 41, 2)]
     with_normals = _clouds(5, n_points=37)
     mixed = [with_normals[0], sized[1], with_normals[2]]
-    for X in (sized, with_normals, mixed):
+    ragged_normals = [with_normals[0][:20], with_normals[1], with_normals[2][:5]]
+    for X in (sized, with_normals, mixed, ragged_normals):
         out = RandomScaling(random_state=3, **params).fit_transform(X)
         seeds = object_seeds(3, len(X))
         for cloud, new, seed in zip(X, out, seeds):

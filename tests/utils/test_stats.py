@@ -58,3 +58,27 @@ def test_extreme_values_errors():
         extreme_values(np.zeros((2, 5)), 0)
     low, high = extreme_values(np.zeros((0, 5)), 2)
     assert low.shape == high.shape == (0, 2)
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+@pytest.mark.parametrize("columns", [3, 6])
+def test_stretch_about_is_numpys_expression_bit_for_bit(columns, n_threads):
+    from eppf.utils._stats_fast import stretch_about
+
+    rng = np.random.RandomState(2)
+    sizes = [3, 1024, 2, 57]
+    block = rng.normal(size=(sum(sizes), columns)) * 1e3
+    block[:3, :3] = -0.0  # (-0.0 - 0.0) * f + 0.0 is +0.0, as in NumPy
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    factors = np.exp(rng.uniform(np.log(0.8), np.log(1.25), size=(4, 3)))
+    for origins in (rng.normal(size=(4, 3)) * 1e3, np.zeros((4, 3))):
+        out = np.full_like(block, 7.0)
+        stretch_about(block, offsets, origins, factors, out, n_threads)
+        each, at = np.repeat(factors, sizes, axis=0), np.repeat(origins, sizes, axis=0)
+        np.testing.assert_array_equal(out[:, :3], (block[:, :3] - at) * each + at)
+        assert (out[:, 3:] == 7.0).all()  # the other columns are left alone
+    assert not np.signbit(out[:3, :3]).any()
+    with pytest.raises(ValueError, match="block's shape"):
+        stretch_about(block, offsets, origins, factors, np.empty((2, columns)))
+    with pytest.raises(ValueError, match="one row of 3 per object"):
+        stretch_about(block, offsets, origins[:2], factors, out)
