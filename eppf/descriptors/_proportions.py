@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ..utils._param_validation import Interval
-from ..utils._stats_fast import cloud_means, extreme_values
+from ..utils._cloud_stats import cloud_means, extreme_values
 from ..utils._validation import check_n_jobs
 from ._base import N_JOBS, PointCloudDescriptor
 
@@ -92,7 +92,7 @@ def _proportions_stacked(P, up_axis, coverage):
 
 
 #: Most order statistics :func:`_quantiles` takes from each end of a row by
-#: :func:`eppf.utils._stats_fast.extreme_values` (a one-pass insertion list);
+#: :func:`eppf.utils._cloud_stats.extreme_values` (a one-pass insertion list);
 #: quantiles farther from 0 and 1 go through :func:`numpy.quantile`.
 _MAX_EXTREMES = 64
 

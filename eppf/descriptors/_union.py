@@ -23,7 +23,7 @@ from sklearn.utils import Bunch
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils import check_n_jobs, check_packed_clouds
-from ..utils._validation import _CheckedClouds
+from ..utils._validation import CheckedClouds
 from ..utils._param_validation import N_JOBS, Interval, StrOptions, validate_parameter, validate_params
 from ._base import PointCloudDescriptor
 from ._eppf import EPPFTransformer
@@ -49,7 +49,7 @@ class _BlockInput:
 
     eppf's own descriptors (without extra per-point columns) get clouds
     without normals marked as validated, which they copy instead of
-    validating again (:class:`eppf.utils._validation._CheckedClouds`: the
+    validating again (:class:`eppf.utils._validation.CheckedClouds`: the
     same bits, a copy instead of a pass that checks every value); any other
     block, and every block when the clouds carry normals, gets the list of
     validated arrays, as before.
@@ -57,7 +57,7 @@ class _BlockInput:
 
     def __init__(self, packed):
         self.packed = packed
-        self._checked = _CheckedClouds.of(packed) if packed.normals is None else None
+        self._checked = CheckedClouds.of(packed) if packed.normals is None else None
         self._list = None
 
     def __len__(self):

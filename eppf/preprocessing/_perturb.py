@@ -20,7 +20,7 @@ from sklearn.utils import check_random_state
 
 from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_parameter
 from ..utils._sampling import resample
-from ..utils._stats_fast import cloud_means, stretch_about
+from ..utils._cloud_stats import cloud_means, stretch_about
 from ..utils._validation import check_point_cloud
 
 __all__ = [

@@ -303,7 +303,7 @@ class PackedClouds:
                 f"normals={'none' if self.normals is None else int(self.has_normals.sum())})")
 
 
-class _CheckedClouds(PackedClouds):
+class CheckedClouds(PackedClouds):
     """Clouds without normals that :func:`check_packed_clouds` has just validated, handed on by an estimator
     to the estimators it is made of (:class:`eppf.descriptors.DescriptorUnion` to its blocks).
 
@@ -320,7 +320,7 @@ class _CheckedClouds(PackedClouds):
     def of(cls, packed):
         """The validated ``packed`` (without normals) marked as such; its arrays are shared."""
         if packed.normals is not None:
-            raise ValueError("_CheckedClouds: only clouds without normals skip their validation")
+            raise ValueError("CheckedClouds: only clouds without normals skip their validation")
         return cls(packed.points, None, packed.offsets, packed.lower, packed.upper, packed.has_normals)
 
 
@@ -367,7 +367,7 @@ or PackedClouds
     array([[0., 0., 0., 0., 0., 1.],
            [1., 0., 0., 0., 0., 1.]])
     """
-    if type(X) is _CheckedClouds and X.normals is None and len(X) and int(X.sizes.min()) >= max(min_points, 2):
+    if type(X) is CheckedClouds and X.normals is None and len(X) and int(X.sizes.min()) >= max(min_points, 2):
         # validated by the estimator that hands them on: a copy is what the scan would give
         return PackedClouds(X.points.copy(), None, X.offsets.copy(), X.lower.copy(), X.upper.copy(),
                             X.has_normals.copy())

@@ -347,12 +347,12 @@ def test_blocks_get_the_bits_they_give_alone_validated_once():
 
 def test_checked_clouds_are_copied_as_validation_would_give_them():
     from eppf.utils import check_packed_clouds
-    from eppf.utils._validation import _CheckedClouds
+    from eppf.utils._validation import CheckedClouds
 
     packed = check_packed_clouds(_clouds(4))
-    checked = _CheckedClouds.of(packed)
+    checked = CheckedClouds.of(packed)
     fast, full = check_packed_clouds(checked, min_points=3), check_packed_clouds(list(packed), min_points=3)
-    assert type(fast) is not _CheckedClouds
+    assert type(fast) is not CheckedClouds
     for field in ("points", "offsets", "lower", "upper", "has_normals"):
         np.testing.assert_array_equal(getattr(fast, field), getattr(full, field))
         assert not np.shares_memory(getattr(fast, field), getattr(packed, field))  # the caller's own arrays
@@ -361,4 +361,4 @@ def test_checked_clouds_are_copied_as_validation_would_give_them():
     with pytest.raises(ValueError, match="point cloud 0 has 150 points; at least 151"):
         check_packed_clouds(checked, owner="Needy", min_points=151)
     with pytest.raises(ValueError, match="only clouds without normals"):
-        _CheckedClouds.of(check_packed_clouds([np.hstack([c, c]) for c in _clouds(2)]))
+        CheckedClouds.of(check_packed_clouds([np.hstack([c, c]) for c in _clouds(2)]))
