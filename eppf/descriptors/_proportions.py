@@ -101,7 +101,7 @@ def _quantiles(rows, quantiles):
     """``np.quantile(rows, quantiles, axis=1)`` (its default "linear" method), bit for bit.
 
     Quantiles near 0 and 1 (the robust extents' 2% and 98%) read their two
-    neighbouring order statistics from :func:`extreme_values` instead of
+    neighboring order statistics from :func:`extreme_values` instead of
     partitioning every row, and interpolate between them as NumPy's
     ``_lerp`` does: the virtual index ``(n - 1) q``, its floor ``i`` and
     fraction ``g``, then ``a + (b - a) g``, or ``b - (b - a) (1 - g)`` for
