@@ -844,10 +844,11 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--verbose", type=int, default=0)
     parser.add_argument("--no-mkldnn", action="store_true", help="profile: disable oneDNN convolutions")
-    parser.add_argument("--conv-impl", nargs="+", default=["direct", "spectral"], choices=("direct", "spectral"),
+    parser.add_argument("--conv-impl", nargs="+", default=["direct", "spectral"], choices=("direct", "spectral", "auto"),
                         help="epoch, profile: the 4D network's convolutions, direct and/or in the frequency domain "
                              "(profile: 'spectral' runs the first, single-channel layer directly and the others in the frequency "
-                             "domain; epoch: the classifier's conv_impl, so every layer)")
+                             "domain; epoch: the classifier's conv_impl, so every layer); 'auto': the library's own choice "
+                             "per layer (eppf.nn.conv4d)")
     parser.add_argument("--objects", nargs="+", type=int, default=[1000, 2000, 4000],
                         help="fit: training-set sizes to profile (stratified subsets of the training split)")
     parser.add_argument("--predict-objects", type=int, default=500,

@@ -30,9 +30,11 @@ How the 4D network's convolutions are computed
 ``EPPFNet4D(conv_impl="auto")`` (the default) runs its second 4D convolution
 and its 5x5 convolution in the frequency domain and the first, single-channel
 layer directly, in float32 and where a layer mixes at least 2,048 channel
-pairs (the paper's filters; the recommended recipe's narrower layers and
-bfloat16 mixed precision stay direct, since there the frequency domain was
-measured no faster) (``conv_impl="direct"`` and ``"spectral"`` force one way for all
+pairs (the paper's filters), or 512 in a training step (where gradients are
+recorded: the recommended recipe's narrower layers train in the frequency
+domain and predict directly, the faster way for each); bfloat16 mixed
+precision stays direct, since there the frequency domain was measured no
+faster (``conv_impl="direct"`` and ``"spectral"`` force one way for all
 three; :class:`Conv4d` and :func:`conv4d` take the same option). The
 frequency-domain form is the same convolution up to floating-point rounding
 (relative differences about 1e-6 in float32, forward and gradients) with 4.9

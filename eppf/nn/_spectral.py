@@ -324,12 +324,21 @@ AUTO_MIN_SAVING = 2.5
 
 
 #: The fewest input x output channel pairs for which "auto" uses the frequency
-#: domain: below it the transforms' passes over the activations cost more than
-#: the channel mixing saves (measured with 2 threads, float32, on Zen 4 natively
-#: and held to AVX2: the paper's layers, 32 x 64 and 64 x 48 pairs, trained an
-#: epoch in 0.73-0.80 of the direct time; the recommended network's 16 x 32
-#: and 32 x 24 in 1.0-1.01 of it, and predicted 1.2-1.25x slower).
+#: domain without gradients (prediction, validation): below it the transforms'
+#: passes over the activations cost more than the channel mixing saves
+#: (measured with 2 threads, float32: the recommended network's 16 x 32 and
+#: 32 x 24 pairs predicted 1.2-1.25x slower on Zen 4, natively and held to
+#: AVX2; the paper's 32 x 64 and 64 x 48 pairs gain).
 AUTO_MIN_CHANNEL_PAIRS = 2048
+
+
+#: The same bound where gradients are recorded (a training step: the backward
+#: pass's two products per layer gain as the forward one does). Measured with
+#: 2 threads in float32, ``benchmarks/bench_cnn.py epoch --recommended``: the
+#: recommended network's 16 x 32 and 32 x 24 pairs trained an epoch in 0.75 of
+#: the direct time on an AVX2-only AMD EPYC (Zen 2; 7.1-7.5 against 9.7 s over
+#: 4,000 descriptors), in 1.0-1.01 of it on Zen 4 (natively and held to AVX2).
+AUTO_MIN_TRAIN_CHANNEL_PAIRS = 512
 
 
 def choose_impl(conv_impl, spatial, kernel, in_channels, out_channels):
@@ -341,10 +350,13 @@ def choose_impl(conv_impl, spatial, kernel, in_channels, out_channels):
         ``"auto"`` takes the frequency domain where it needs at least
         :data:`AUTO_MIN_SAVING` times fewer multiply-adds than the direct
         convolution (forward and backward together) and the layer mixes at
-        least :data:`AUTO_MIN_CHANNEL_PAIRS` channel pairs, and never under
-        bfloat16 or float16 autocast (where the direct convolution runs in the
-        lower precision, natively fast where the hardware has it, and the
-        frequency domain would compute in float32).
+        least :data:`AUTO_MIN_CHANNEL_PAIRS` channel pairs, or
+        :data:`AUTO_MIN_TRAIN_CHANNEL_PAIRS` where gradients are recorded
+        (``torch.is_grad_enabled()``: a training step, whose backward pass
+        gains as much again); never under bfloat16 or float16 autocast (where
+        the direct convolution runs in the lower precision, natively fast
+        where the hardware has it, and the frequency domain would compute in
+        float32).
     spatial, kernel : tuple of ints
         Input sizes and kernel sizes along the spatial axes.
     in_channels, out_channels : int
@@ -358,7 +370,7 @@ def choose_impl(conv_impl, spatial, kernel, in_channels, out_channels):
         return conv_impl
     if _lower_precision_autocast():
         return "direct"
-    key = (tuple(spatial), tuple(kernel), int(in_channels), int(out_channels))
+    key = (tuple(spatial), tuple(kernel), int(in_channels), int(out_channels), torch.is_grad_enabled())
     return _auto(*key)
 
 
@@ -368,8 +380,8 @@ def _lower_precision_autocast():
 
 
 @functools.lru_cache(maxsize=256)
-def _auto(spatial, kernel, in_channels, out_channels):
-    if in_channels * out_channels < AUTO_MIN_CHANNEL_PAIRS:
+def _auto(spatial, kernel, in_channels, out_channels, training):
+    if in_channels * out_channels < (AUTO_MIN_TRAIN_CHANNEL_PAIRS if training else AUTO_MIN_CHANNEL_PAIRS):
         return "direct"
     saving = direct_cost(spatial, kernel, in_channels, out_channels) / spectral_cost(
         spatial, kernel, in_channels, out_channels)

@@ -139,17 +139,42 @@ def test_paper_network_chooses_per_layer_and_keeps_its_parameters():
     assert "conv_impl='auto'" in repr(auto.conv2)
 
 
-def test_auto_keeps_narrow_layers_and_lower_precision_direct():
-    # the recommended network's layers mix too few channel pairs to gain
+def test_auto_keeps_narrow_layers_direct_in_prediction_and_lower_precision():
+    # the recommended network's layers mix too few channel pairs to gain in prediction, enough to gain in training
     net = EPPFNet4D(filters=(16, 32, 24), n_hidden=256)
-    assert [net.conv2.impl_for((20, 4, 5)), net.conv3.impl_for(net.plane)] == ["direct", "direct"]
-    assert choose_impl("auto", (40, 30), (5, 5), 32, 64) == "spectral"  # 2,048 pairs: the bound itself
-    assert choose_impl("auto", (40, 30), (5, 5), 31, 64) == "direct"
+    with torch.no_grad():
+        assert [net.conv2.impl_for((20, 4, 5)), net.conv3.impl_for(net.plane)] == ["direct", "direct"]
+        assert choose_impl("auto", (40, 30), (5, 5), 32, 64) == "spectral"  # 2,048 pairs: the bound itself
+        assert choose_impl("auto", (40, 30), (5, 5), 31, 64) == "direct"
+    with torch.inference_mode():
+        assert choose_impl("auto", (40, 30), (5, 5), 31, 64) == "direct"
+    assert torch.is_grad_enabled()
+    assert [net.conv1.impl_for((20, 4, 5)), net.conv2.impl_for((20, 4, 5)), net.conv3.impl_for(net.plane)] == [
+        "direct", "spectral", "spectral"]
+    assert choose_impl("auto", (40, 30), (5, 5), 16, 32) == "spectral"  # 512 pairs: the training bound itself
+    assert choose_impl("auto", (40, 30), (5, 5), 15, 34) == "direct"
+    assert choose_impl("auto", (40, 30), (1, 1), 64, 48) == "direct"  # pairs enough, but no saving
     # under (bfloat16) autocast "auto" is direct; an explicit choice is kept
     with torch.autocast("cpu", dtype=torch.bfloat16):
         assert choose_impl("auto", (40, 30), (5, 5), 64, 48) == "direct"
+        assert choose_impl("auto", (40, 30), (5, 5), 16, 32) == "direct"
         assert choose_impl("spectral", (40, 30), (5, 5), 64, 48) == "spectral"
     assert choose_impl("auto", (40, 30), (5, 5), 64, 48) == "spectral"
+
+
+def test_recommended_network_trains_in_frequency_domain_and_predicts_directly():
+    # "auto" in a training step and in prediction: the same network up to rounding either way
+    torch.manual_seed(0)
+    auto = EPPFNet4D(filters=(16, 32, 24), n_hidden=256, n_side=3).double()
+    direct = EPPFNet4D(filters=(16, 32, 24), n_hidden=256, n_side=3, conv_impl="direct").double()
+    direct.load_state_dict(auto.state_dict())
+    x = torch.rand(5, auto.n_features + 3, dtype=torch.float64)
+    auto.eval(), direct.eval()
+    out = auto(x)  # grad recorded: conv2 and conv3 in the frequency domain
+    ref = direct(x)
+    assert _rel(out, ref) < 1e-12 and not torch.equal(out, ref)
+    with torch.no_grad():
+        assert torch.equal(auto(x), direct(x))  # both direct: the same operations
 
 
 def test_bfloat16_auto_network_equals_direct_one():
