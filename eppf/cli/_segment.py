@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..io._common import NORMAL_NAME_SETS
 from ..utils._atomic import atomic_write
 from ._common import (SEGMENT_INDEX, SEGMENT_INDEX_HEADER, Command, add_runtime, count, positive_float,
                       positive_int, progress_of, register)
@@ -24,8 +25,8 @@ __all__ = ["run_segment"]
 FIELD_FORMATS = ("las", "laz", "pcd", "ply")
 #: Format of the segment files of a scene in another format (text, E57, NumPy): it keeps every field.
 FALLBACK_FORMAT = "ply"
-#: Field names of a scene's normals, as the readers give them (PCD/NumPy, PLY).
-NORMAL_FIELDS = (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"))
+#: Field names of a scene's normals, as the readers give them (PCD/NumPy/LAS, PLY, E57).
+NORMAL_FIELDS = NORMAL_NAME_SETS
 
 
 def add_segmentation(parser, prefix=""):

@@ -22,8 +22,10 @@ from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.utils import Bunch
 from sklearn.utils.validation import check_is_fitted
 
-from ..utils import check_n_jobs, check_point_clouds
+from ..utils import check_n_jobs, check_packed_clouds
+from ..utils._validation import CheckedClouds
 from ..utils._param_validation import N_JOBS, Interval, StrOptions, validate_parameter, validate_params
+from ._base import PointCloudDescriptor
 from ._eppf import EPPFTransformer
 
 __all__ = ["DescriptorUnion", "EPPFGASDTransformer"]
@@ -40,6 +42,39 @@ def _reraise_named(exc, owner, name):
     except Exception:  # an exception class with another constructor
         named = (ValueError if isinstance(exc, ValueError) else TypeError)(f"{owner}: block {name!r}: {exc}")
     raise named from exc
+
+
+class _BlockInput:
+    """The union's clouds, validated once, in the form each block reads.
+
+    eppf's own descriptors (without extra per-point columns) get clouds
+    without normals marked as validated, which they copy instead of
+    validating again (:class:`eppf.utils._validation.CheckedClouds`: the
+    same bits, a copy instead of a pass that checks every value); any other
+    block, and every block when the clouds carry normals, gets the list of
+    validated arrays, as before.
+    """
+
+    def __init__(self, packed):
+        self.packed = packed
+        self._checked = CheckedClouds.of(packed) if packed.normals is None else None
+        self._list = None
+
+    def __len__(self):
+        return len(self.packed)
+
+    def for_block(self, est):
+        """The clouds for block ``est``."""
+        if self._checked is not None and isinstance(est, PointCloudDescriptor) and not est._extra_columns:
+            return self._checked
+        if self._list is None:
+            packed = self.packed
+            if packed.normals is None:  # (views of the validated points, as check_point_clouds gives)
+                bounds = packed.offsets.tolist()
+                self._list = [packed.points[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+            else:
+                self._list = list(packed)
+        return self._list
 
 
 #: One block's entry in ``weights`` (:mod:`eppf.utils._param_validation`).
@@ -235,8 +270,10 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         return transformer_list, w, normalize, n_jobs, n_threads
 
     def _validate_clouds(self, X, transformers, n_threads):
+        """The clouds validated once, as a :class:`_BlockInput` that gives each block the form it reads."""
         min_points = max([2] + [int(getattr(est, "_min_points", 2)) for _, est in transformers])
-        return check_point_clouds(X, owner=type(self).__name__, min_points=min_points, n_threads=n_threads)
+        return _BlockInput(check_packed_clouds(X, owner=type(self).__name__, min_points=min_points,
+                                               n_threads=n_threads))
 
     def _clones(self, transformer_list, n_jobs):
         out = []
@@ -307,7 +344,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         blocks = []
         for name, est in self.transformers_:
             try:
-                B = np.asarray(est.transform(clouds), dtype=np.float64)
+                B = np.asarray(est.transform(clouds.for_block(est)), dtype=np.float64)
             except (ValueError, TypeError) as exc:
                 _reraise_named(exc, owner, name)
             width = self.feature_slices_[name].stop - self.feature_slices_[name].start
@@ -340,7 +377,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         fitted = self._clones(transformer_list, n_jobs)
         for name, est in fitted:
             try:
-                est.fit(clouds)
+                est.fit(clouds.for_block(est))
             except (ValueError, TypeError) as exc:
                 _reraise_named(exc, owner, name)
         self._record(fitted, w)
@@ -387,7 +424,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
         fitted = self._clones(transformer_list, n_jobs)
         for name, est in fitted:
             try:
-                est.fit(clouds)
+                est.fit(clouds.for_block(est))
             except (ValueError, TypeError) as exc:
                 _reraise_named(exc, owner, name)
         self._record(fitted, w)
@@ -421,7 +458,7 @@ class DescriptorUnion(TransformerMixin, BaseEstimator):
             if not hasattr(est, "partial_fit"):
                 raise TypeError(f"{owner}: block {name!r} ({type(est).__name__}) has no partial_fit")
             try:
-                est.partial_fit(clouds)
+                est.partial_fit(clouds.for_block(est))
             except (ValueError, TypeError) as exc:
                 _reraise_named(exc, owner, name)
         self._record(fitted, w)

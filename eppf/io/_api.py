@@ -152,7 +152,10 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     normals : {"auto", True, False}, default="auto"
         Whether to return normals. ``"auto"`` returns them when the file has
         them: PCD fields ``normal_x normal_y normal_z``, PLY properties
-        ``nx ny nz``, the columns of an ``.xyzn`` file, columns 4 to 6 of an
+        ``nx ny nz``, LAS/LAZ extra bytes ``normal_x normal_y normal_z`` (or
+        ``nx ny nz``), E57's surface-normals extension ``nor:normalX
+        nor:normalY nor:normalZ`` (turned by each scan's pose, as its
+        points are), the columns of an ``.xyzn`` file, columns 4 to 6 of an
         ``.xyz``/``.txt``/``.csv``/``.pts`` file when every row there has
         unit length (so that ``x y z r g b`` files are not mistaken), columns
         4 to 6 of an array, and the face normals of points sampled from a

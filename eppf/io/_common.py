@@ -9,6 +9,11 @@ import numpy as np
 
 from ._errors import FileFormatError
 
+#: Normal field names as the formats write them: PCD, NumPy arrays and LAS extra bytes; PLY (and LAS
+#: extra bytes again); E57's surface-normals extension. Readers return normals found under any of them.
+NORMAL_NAMES = ("normal_x", "normal_y", "normal_z")
+NORMAL_NAME_SETS = (NORMAL_NAMES, ("nx", "ny", "nz"), ("nor:normalX", "nor:normalY", "nor:normalZ"))
+
 Mesh = namedtuple("Mesh", ["vertices", "faces"])
 Mesh.__doc__ = """A triangle mesh.
 

@@ -20,13 +20,14 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud, check_file
+from ._common import NORMAL_NAME_SETS, Cloud, check_file
 from ._errors import FileFormatError
 
 #: Records read from a scan at a time.
 PIECE = 1 << 20
 _HEADER = 48
 _CARTESIAN = ("cartesianX", "cartesianY", "cartesianZ")
+_NORMALS = NORMAL_NAME_SETS[2]  # the E57 surface-normals extension
 _SPHERICAL = ("sphericalRange", "sphericalAzimuth", "sphericalElevation")
 
 
@@ -143,6 +144,11 @@ def _scan(libe57, imf, scan, size, path, owner, k):
             rot = libe57.StructureNode(pose.get("rotation"))
             q = [libe57.FloatNode(rot.get(c)).value() for c in "wxyz"]
             xyz = xyz @ _rotation(q).T
+            if set(_NORMALS) <= have and q != [1.0, 0.0, 0.0, 0.0]:
+                # normals are directions: the pose's rotation turns them too (no translation)
+                turned = np.column_stack([columns[n].astype(np.float64) for n in _NORMALS]) @ _rotation(q).T
+                for k, n in enumerate(_NORMALS):
+                    columns[n] = turned[:, k]
         if pose.isDefined("translation"):
             tr = libe57.StructureNode(pose.get("translation"))
             xyz = xyz + np.array([libe57.FloatNode(tr.get(c)).value() for c in "xyz"])
@@ -182,9 +188,19 @@ def read_e57_fields(path, owner):
 
 
 def read_e57(path, owner, want_normals="auto"):
-    """The Cloud of an E57 file: points whose ``cartesianInvalidState`` is not 0 are dropped."""
+    """The Cloud of an E57 file: points whose ``cartesianInvalidState`` is not 0 are dropped.
+
+    Normals are those of the E57 surface-normals extension (``nor:normalX``,
+    ``nor:normalY``, ``nor:normalZ``), turned by each scan's pose as its
+    points are.
+    """
     points, fields = read_e57_fields(path, owner)
+    normals = None
+    if want_normals is not False and all(n in fields for n in _NORMALS):
+        normals = np.column_stack([np.asarray(fields[n], dtype=np.float64) for n in _NORMALS])
     state = fields.get("cartesianInvalidState")
     if state is not None:
-        points = points[state == 0]
-    return Cloud(points, None)
+        keep = state == 0
+        points = points[keep]
+        normals = None if normals is None else normals[keep]
+    return Cloud(points, normals)

@@ -8,14 +8,14 @@ import numpy as np
 
 from . import _e57, _las, _pcd, _ply, _xyz
 from ._api import guard
-from ._common import read_bytes
+from ._common import NORMAL_NAMES, read_bytes
 from ._errors import FileFormatError
 from ._formats import lookup
 
 __all__ = ["read_point_fields", "write_point_fields"]
 
 _WRITABLE = ("pcd", "ply", "las", "laz")
-_NORMALS = ("normal_x", "normal_y", "normal_z")
+_NORMALS = NORMAL_NAMES
 
 
 def _read(path, fmt, owner):
@@ -92,7 +92,9 @@ def read_point_fields(path, *, format=None):
         - NumPy: ``normal_x normal_y normal_z`` for an (n, 6) array.
 
         Normals keep the file's own names: PCD ``normal_x normal_y
-        normal_z``, PLY ``nx ny nz`` (or ``normal_x ...``).
+        normal_z``, PLY ``nx ny nz`` (or ``normal_x ...``), E57
+        ``nor:normalX nor:normalY nor:normalZ`` (turned by the scan's pose
+        rotation, like the points, and then float64).
 
     Raises
     ------

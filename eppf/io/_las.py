@@ -36,7 +36,7 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud, check_file
+from ._common import NORMAL_NAME_SETS, NORMAL_NAMES, Cloud, check_file
 from ._errors import FileFormatError
 
 #: Decoded LAZ data is allocated in pieces of at most this many times the file's size.
@@ -309,7 +309,7 @@ def read_las(path, owner, want_normals="auto"):
     laspy, header, array = _records(path, owner)
     names = array.dtype.names
     nrm = None
-    for trio in (("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz")):
+    for trio in NORMAL_NAME_SETS[:2]:
         if all(n in names for n in trio):
             points = laspy.ScaleAwarePointRecord(array, header.point_format, header.scales, header.offsets)
             nrm = np.column_stack([np.asarray(points[n], dtype=np.float64) for n in trio])
@@ -446,7 +446,7 @@ def write_las(path, points, fields, owner, compressed, shown=None):
 
 
 def _cloud_fields(cloud):
-    return {} if cloud.shape[1] == 3 else {n: cloud[:, 3 + k] for k, n in enumerate(("normal_x", "normal_y", "normal_z"))}
+    return {} if cloud.shape[1] == 3 else {n: cloud[:, 3 + k] for k, n in enumerate(NORMAL_NAMES)}
 
 
 def write_las_cloud(path, cloud, binary=True):

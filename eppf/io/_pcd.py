@@ -11,7 +11,7 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud, content, parse_float_rows
+from ._common import NORMAL_NAMES, Cloud, content, parse_float_rows
 from ._errors import FileFormatError
 
 try:  # compiled LZF decoder and table parser; pure-Python fallbacks below
@@ -271,13 +271,13 @@ def read_pcd(path, data, owner, want_normals="auto"):
 
     xyz = np.column_stack([first(f) for f in "xyz"])
     nrm = None
-    if all(f in cols for f in ("normal_x", "normal_y", "normal_z")):
-        nrm = np.column_stack([first(f) for f in ("normal_x", "normal_y", "normal_z")])
+    if all(f in cols for f in NORMAL_NAMES):
+        nrm = np.column_stack([first(f) for f in NORMAL_NAMES])
     return Cloud(xyz, nrm)
 
 
 def write_pcd(path, cloud, binary=True):
-    fields = ["x", "y", "z"] + (["normal_x", "normal_y", "normal_z"] if cloud.shape[1] == 6 else [])
+    fields = ["x", "y", "z"] + (list(NORMAL_NAMES) if cloud.shape[1] == 6 else [])
     n = cloud.shape[0]
     k = len(fields)
     head = (

@@ -73,13 +73,48 @@ def _check_input(input, weight, bias):
 
 
 def _pad_first_three(input, kernel):
-    """Zero-pad axes n1, n2, n3 of a (B, C, n1, n2, n3) tensor for "same" output."""
+    """Zero-pad axes n1, n2, n3 of a (B, C, n1, n2, n3) tensor for "same" output (both axes of a 2D kernel)."""
     pads = []
     for k in reversed(kernel[:3]):  # F.pad lists the last axis first
         pads.extend(same_padding(k))
     if any(pads):
         input = F.pad(input, pads)
     return input
+
+
+def same_conv(input, weight, bias=None):
+    """Stride-1 "same" ``conv2d`` or ``conv3d`` (by the weight's rank), padded as :func:`same_padding` says.
+
+    With autograd recording, the input is zero-padded first (one copy) and
+    convolved unpadded, the way the layers have always trained. Without it
+    (prediction: :func:`torch.no_grad` or :func:`torch.inference_mode`) the
+    convolution pads the symmetric part itself and only the extra zero after
+    an even kernel is a copy: for the recipe's 5 x 5 layer no copy at all.
+    The values are the same bits either way (oneDNN adds the same products in
+    the same order; the zeros it skips add nothing), and prediction saves
+    the padded copies and their conversions to oneDNN's blocked layouts.
+
+    Parameters
+    ----------
+    input : torch.Tensor of shape (batch, in_channels, *spatial)
+        Two or three spatial axes.
+    weight : torch.Tensor of shape (out_channels, in_channels, *kernel)
+    bias : torch.Tensor of shape (out_channels,), default=None
+
+    Returns
+    -------
+    output : torch.Tensor of shape (batch, out_channels, *spatial)
+    """
+    kernel = weight.shape[2:]
+    conv = F.conv3d if len(kernel) == 3 else F.conv2d
+    if torch.is_grad_enabled():
+        return conv(_pad_first_three(input, kernel), weight, bias)
+    pads = [same_padding(k) for k in kernel]
+    inner = tuple(before for before, _ in pads)  # (same_padding: before <= after)
+    extra = [p for before, after in reversed(pads) for p in (0, after - before)]
+    if any(extra):
+        input = F.pad(input, extra)
+    return conv(input, weight, bias, padding=inner)
 
 
 def _fold_last_axis(input):
@@ -105,7 +140,7 @@ def _conv3d(input, weight, bias, conv_impl):
         return spectral_conv(input, weight, bias)
     if weight.shape[1:].numel() <= PATCH_MAX_TAPS and is_spatial_major(input):
         return patch_conv(input, weight, bias)
-    return F.conv3d(_pad_first_three(input, weight.shape[2:]), weight, bias)
+    return same_conv(input, weight, bias)
 
 
 def _conv4d_fast(input, weight, bias, conv_impl="direct"):

@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from ..utils._param_validation import Interval, IntTuple, Options, StrOptions, validate_parameter
-from ._conv4d import Conv4d, same_padding
+from ._conv4d import Conv4d, same_conv, same_padding
 from ._precision import check_precision
 from ._spectral import choose_impl, spectral_conv
 
@@ -168,7 +168,9 @@ class _SamePadConv(nn.Module):
     def forward(self, x):
         if self.impl_for(x.shape[2:]) == "spectral":
             return spectral_conv(x, self.conv.weight, self.conv.bias)
-        return self.conv(self.pad(x))
+        if torch.is_grad_enabled():
+            return self.conv(self.pad(x))
+        return same_conv(x, self.conv.weight, self.conv.bias)  # (the padding inside the convolution)
 
 
 def _check_network_args(owner, n_bins, n_classes, dropout, filters, n_hidden):
@@ -226,7 +228,8 @@ class _EPPFNetBase(nn.Module):
         """ReLU after convolution ``i``, batch-normalized first when ``batch_norm``."""
         if getattr(self, "batch_norm", False):
             x = self.norms[i](x)
-        return torch.relu(x)
+        # (in place when no gradient is recorded: x is the layer's own new output)
+        return torch.relu(x) if torch.is_grad_enabled() else torch.relu_(x)
 
     def forward(self, x):
         """Logits, float32, for a (batch, prod(n_bins) + n_side) tensor: descriptors, then side features."""

@@ -15,19 +15,24 @@ points of one object) with OpenMP.
   search over growing shells of cells with a sorted k-list takes over. All
   paths return the same list: the k smallest squared distances, ties broken
   by the point's position in the grid order (cell, then original index).
-- The fast path's distance scan runs eight points at a time with AVX-512,
-  four with AVX2 where the CPU has them (``_normals_simd.h``, chosen at
-  import) and two elsewhere (portable vector code, any CPU), over a copy of
-  the grid-order coordinates as x, y and z arrays; with AVX-512 and AVX2 its
-  k-th selection too (bisection over bucket counts), and each covariance is
-  summed two sums per vector register at every level. The same IEEE
-  operations in the same order as the scalar loops here, so every level
-  gives the same candidates and normals bit for bit (``_set_simd_level``
-  picks a lower one for tests).
+- The fast path scans the 3x3x3 block's points gathered once per cell (the
+  queries go in grid order, so a cell's queries come one after another),
+  the rows beyond the guess skipped. The distance scan runs eight points at
+  a time with AVX-512, four with AVX2 where the CPU has them
+  (``_normals_simd.h``, chosen at import) and two elsewhere (portable vector
+  code, any CPU), over x, y and z arrays; with AVX-512 and AVX2 its k-th
+  selection too (bisection over bucket counts). The same IEEE operations in
+  the same order as the scalar loops here, so every level gives the same
+  candidates and normals bit for bit (``_set_simd_level`` picks a lower one
+  for tests).
 - The normal is the eigenvector of the smallest eigenvalue of the
   neighborhood's covariance: closed-form eigenvalues plus a cross product of
   two rows of ``C - lambda_min I``, with cyclic Jacobi for nearly degenerate
-  spectra.
+  spectra (``_smallest_eigvec``). Eight neighborhoods are solved at once,
+  one per vector lane, covariance included (``_normals_lanes.h``): each
+  lane's operations are those of the one-at-a-time code (``_smallest_eigvec``
+  and ``eppf_nrm_covariance``, the sums in ascending grid position), so the
+  bits are too, at every level.
 
 Every normal depends only on its own object's coordinates and k, never on the
 thread that computed it or on the order in which points were visited, so the
@@ -47,6 +52,9 @@ cdef extern from "_normals_simd.h":
     enum:
         EPPF_NRM_SLACK
         EPPF_NRM_BUCKETS
+        EPPF_NRM_LANES
+        EPPF_NRM_EIG_VEC
+    double EPPF_NRM_GAP_RATIO
     int eppf_nrm_has_avx2() noexcept nogil
     int eppf_nrm_has_avx512() noexcept nogil
     int64_t eppf_nrm_scan_portable(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
@@ -63,6 +71,12 @@ cdef extern from "_normals_simd.h":
     void eppf_nrm_covariance(const double* spts, const int64_t* kpos, int64_t k, double* cov) noexcept nogil
     int64_t eppf_nrm_select_avx2(const double* cand_d2, const int64_t* cand_pos, int64_t m, int64_t k,
                                  double to_bucket, int64_t* sel, int64_t* kpos) noexcept nogil
+    unsigned eppf_nrm_eig8_portable(const double* c, double* out) noexcept nogil
+    unsigned eppf_nrm_eig8_avx2(const double* c, double* out) noexcept nogil
+    unsigned eppf_nrm_eig8_avx512(const double* c, double* out) noexcept nogil
+    void eppf_nrm_cov8_portable(const double* nb, int64_t k, double* c) noexcept nogil
+    void eppf_nrm_cov8_avx2(const double* nb, int64_t k, double* c) noexcept nogil
+    void eppf_nrm_cov8_avx512(const double* nb, int64_t k, double* c) noexcept nogil
 
 # The fast path's distance scan: 0 scalar, 1 AVX2, 2 AVX-512 (the best the
 # CPU has, checked at import; ``_set_simd_level`` picks a lower one for tests).
@@ -90,6 +104,10 @@ def _set_simd_level(int level):
 cdef enum:
     _N_BUCKETS = EPPF_NRM_BUCKETS
 
+# Neighborhoods whose eigenvectors are solved together (one per vector lane).
+cdef enum:
+    _LANES = EPPF_NRM_LANES
+
 # Outcomes of the fast path.
 cdef enum:
     _FAST_OK = 0
@@ -106,7 +124,7 @@ cdef enum:
 
 # Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
 # the closed-form eigenvector is replaced by Jacobi's.
-cdef double _GAP_RATIO = 1e-3
+cdef double _GAP_RATIO = EPPF_NRM_GAP_RATIO
 # Grid cell size over the estimated radius of a k-neighborhood.
 cdef double _CELL_OVER_RADIUS = 1.2
 # The fast path keeps candidates within this factor of the previous query's
@@ -146,6 +164,29 @@ cdef struct Scratch:
     int64_t* kpos         # k + EPPF_NRM_SLACK  the k-list's grid-order positions (+ slack
                           #            for the fast path's branch-free compaction)
     unsigned char* cand_b # max_n      fast-path candidate buckets (in the int64 row's tail)
+    # The 3x3x3 block of cells around the last query's cell, gathered: the
+    # points of its rows (runs of grid order) one after another, so in
+    # ascending grid position.
+    double* blk           # 3 * max_n  their x, y and z arrays (max_n apart)
+    int64_t* blk_pos      # max_n      their grid-order positions
+    int64_t blk_cell      #            the cell it surrounds (-1: none yet)
+    int64_t blk_n         #            its number of points
+    int64_t blk_stride    #            max_n
+    int64_t blk_row[10]   #            where each of its nine rows starts (dz, then dy,
+                          #            from -1 to 1; empty outside the grid), then its end
+    double* nb            # 3 * k * _LANES  the eigenvector batch's neighbors (Batch.nb)
+
+
+cdef struct Batch:
+    # Neighborhoods waiting for the eigenvector solver, one per lane: their
+    # k points staged in ``nb`` (the layout of _normals_lanes.h; NULL where
+    # the covariances are given), the covariances' entries c00, c01, c02,
+    # c11, c12, c22 (``_LANES`` lanes each), and where each lane's normal goes.
+    double c[6 * _LANES]
+    double* dst[_LANES]
+    int count
+    double* nb
+    Py_ssize_t k
 
 
 def max_cells(Py_ssize_t n):
@@ -156,8 +197,8 @@ def max_cells(Py_ssize_t n):
 def scratch_sizes(Py_ssize_t max_n, Py_ssize_t k):
     """Lengths of one thread's float64 and int64 scratch rows for objects of
     at most ``max_n`` points and neighborhoods of ``k`` points."""
-    return (7 * max_n + EPPF_NRM_SLACK + k + 1,
-            4 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
+    return (10 * max_n + EPPF_NRM_SLACK + k + 1 + 3 * k * EPPF_NRM_LANES,
+            5 * max_n + 2 * EPPF_NRM_SLACK + max_cells(max_n) + 1 + k + EPPF_NRM_SLACK + (max_n + 7) // 8)
 
 
 cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_ssize_t k,
@@ -176,6 +217,12 @@ cdef inline void _split_scratch(double* fs, int64_t* its, Py_ssize_t max_n, Py_s
     sc.sel = sc.cand_pos + max_n + EPPF_NRM_SLACK
     sc.kpos = sc.sel + max_n + EPPF_NRM_SLACK
     sc.cand_b = <unsigned char*>(sc.kpos + k + EPPF_NRM_SLACK)
+    sc.blk = sc.guess + 1
+    sc.nb = sc.blk + 3 * max_n
+    sc.blk_pos = sc.kpos + k + EPPF_NRM_SLACK + (max_n + 7) // 8
+    sc.blk_cell = -1
+    sc.blk_n = 0
+    sc.blk_stride = max_n
 
 
 cdef inline double _pow2_below(double m) noexcept nogil:
@@ -241,18 +288,19 @@ cdef int64_t _set_resolution(Grid* g, const double* e, double h, Py_ssize_t cap)
     return prod
 
 
-cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cell_of,
+cdef int64_t _count_cells(const double* tpts, Py_ssize_t n, Grid* g, int64_t* cell_of,
                           int64_t* counts) noexcept nogil:
-    """Cell of every point and points per cell (in ``counts[c + 1]``);
-    return the number of occupied cells."""
+    """Cell of every point (grid coordinates ``tpts``, x, y, z per point) and
+    points per cell (in ``counts[c + 1]``); return the number of occupied
+    cells."""
     cdef Py_ssize_t i
     cdef int64_t c, cx, cy, cz, occupied = 0
     for c in range(g.ncells + 1):
         counts[c] = 0
     for i in range(n):
-        cx = _cell_coord(_tr(g, pts[3 * i], 0), g.lo[0], g.inv_h, g.res[0])
-        cy = _cell_coord(_tr(g, pts[3 * i + 1], 1), g.lo[1], g.inv_h, g.res[1])
-        cz = _cell_coord(_tr(g, pts[3 * i + 2], 2), g.lo[2], g.inv_h, g.res[2])
+        cx = _cell_coord(tpts[3 * i], g.lo[0], g.inv_h, g.res[0])
+        cy = _cell_coord(tpts[3 * i + 1], g.lo[1], g.inv_h, g.res[1])
+        cz = _cell_coord(tpts[3 * i + 2], g.lo[2], g.inv_h, g.res[2])
         c = (cz * g.res[1] + cy) * g.res[0] + cx
         cell_of[i] = c
         occupied += counts[c + 1] == 0
@@ -262,11 +310,12 @@ cdef int64_t _count_cells(const double* pts, Py_ssize_t n, Grid* g, int64_t* cel
 
 cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t cap,
                       Grid* g, double* spts, double* sxyz, Py_ssize_t stride, int64_t* sidx,
-                      int64_t* cell_of, int64_t* cell_start) noexcept nogil:
+                      int64_t* cell_of, int64_t* cell_start, double* tpts) noexcept nogil:
     """Move and rescale the object into the unit cube, choose the cell size,
     bin the points and store them sorted by cell (stable: ascending original
     index within a cell), in ``spts`` (x, y, z per point) and in ``sxyz``
-    (x, y and z arrays, ``stride`` apart)."""
+    (x, y and z arrays, ``stride`` apart). ``tpts`` (3 n doubles) holds the
+    grid coordinates in the input order meanwhile."""
     cdef Py_ssize_t i, a
     cdef double hi[3]
     cdef double e[3]
@@ -306,6 +355,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     for a in range(3):
         g.lo[a] = 0.0
         e[a] = (hi[a] - g.shift[a]) * g.scale2
+    for i in range(n):
+        for a in range(3):
+            tpts[3 * i + a] = _tr(g, pts[3 * i + a], a)
     # First guess: about one cell per point of the bounding box, flat axes
     # ignored.
     t = <double>n
@@ -331,10 +383,10 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     # a k-neighborhood. The local dimension d (1 for curves, 2 for surfaces,
     # 3 for volumes) is read from how occupancy changes with the cell size.
     h0 = g.h
-    pc0 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
+    pc0 = <double>n / <double>_count_cells(tpts, n, g, cell_of, cell_start)
     _set_resolution(g, e, h0 * 1.5, cap)
     h1 = g.h
-    pc1 = <double>n / <double>_count_cells(pts, n, g, cell_of, cell_start)
+    pc1 = <double>n / <double>_count_cells(tpts, n, g, cell_of, cell_start)
     d = 2.0
     if pc1 > pc0 and h1 > h0:
         d = log(pc1 / pc0) / log(h1 / h0)
@@ -352,7 +404,7 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
     if tmp > 8.0:
         tmp = 8.0
     _set_resolution(g, e, h1 * tmp, cap)
-    _count_cells(pts, n, g, cell_of, cell_start)
+    _count_cells(tpts, n, g, cell_of, cell_start)
     for c in range(g.ncells):
         cell_start[c + 1] += cell_start[c]
     for i in range(n):
@@ -360,9 +412,9 @@ cdef void _build_grid(const double* pts, Py_ssize_t n, Py_ssize_t k, Py_ssize_t 
         r = cell_start[c]
         cell_start[c] = r + 1
         sidx[r] = i
-        spts[3 * r] = _tr(g, pts[3 * i], 0)
-        spts[3 * r + 1] = _tr(g, pts[3 * i + 1], 1)
-        spts[3 * r + 2] = _tr(g, pts[3 * i + 2], 2)
+        spts[3 * r] = tpts[3 * i]
+        spts[3 * r + 1] = tpts[3 * i + 1]
+        spts[3 * r + 2] = tpts[3 * i + 2]
         g.sx[r] = spts[3 * r]
         g.sy[r] = spts[3 * r + 1]
         g.sz[r] = spts[3 * r + 2]
@@ -503,12 +555,9 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     undefined) it says why: _FAST_FEW (fewer than k within the guess),
     _FAST_MANY (more than ``_MAX_CAND_PER_K * k``) or _FAST_FAR (the k-th
     lies too far to prove that the block holds the k nearest)."""
-    cdef int64_t jy, jz, row, x0, x1, p, b, e
-    cdef Py_ssize_t m = 0, i, j, rank, max_cand = _MAX_CAND_PER_K * k
-    cdef int counts[_N_BUCKETS]
-    cdef Py_ssize_t bk, b2, below, need, n_in, kth_i
-    cdef double to_bucket, kth
-    cdef double qx = q[0], qy = q[1], qz = q[2], d2, di, gz, gz2, gy, gyz2, gx
+    cdef int64_t jy, jz, row, x0, x1, b, e
+    cdef Py_ssize_t m = 0, max_cand = _MAX_CAND_PER_K * k
+    cdef double qx = q[0], qy = q[1], qz = q[2], gz, gz2, gy, gyz2, gx
     cdef int64_t xlo = c[0] - r if c[0] - r > 0 else 0
     cdef int64_t xhi = c[0] + r if c[0] + r < g.res[0] else g.res[0] - 1
     for jz in range(c[2] - r if c[2] - r > 0 else 0, (c[2] + r if c[2] + r < g.res[2] else g.res[2] - 1) + 1):
@@ -547,6 +596,21 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
                 m = eppf_nrm_scan_avx2(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
             else:
                 m = eppf_nrm_scan_portable(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
+    return _select_k(g, q, c, r, k, guess, m, cand_d2, cand_pos, sel, kd2, kpos, cand_b)
+
+
+cdef int _select_k(const Grid* g, const double* q, const int64_t* c, int64_t r, Py_ssize_t k, double guess,
+                   Py_ssize_t m, const double* cand_d2, const int64_t* cand_pos, int64_t* sel, double* kd2,
+                   int64_t* kpos, unsigned char* cand_b) noexcept nogil:
+    """The fast path's selection among the ``m`` candidates (squared
+    distances at most ``guess``, in ascending position) of the block of
+    cells within Chebyshev distance ``r`` of the query's cell: outputs and
+    return value as :func:`_knn_block`'s (``kpos`` holds the candidates'
+    ``cand_pos`` entries)."""
+    cdef Py_ssize_t i, j, rank, max_cand = _MAX_CAND_PER_K * k
+    cdef int counts[_N_BUCKETS]
+    cdef Py_ssize_t bk, below, need, n_in, kth_i
+    cdef double to_bucket, kth, di
     if m < k:
         return _FAST_FEW
     if m > max_cand:
@@ -602,11 +666,97 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
     return _FAST_OK if _block_done(g, q, c, r, kth) else _FAST_FAR
 
 
+cdef void _gather_block(const Grid* g, const int64_t* cell_start, const int64_t* c, int64_t cell,
+                        Scratch* sc) noexcept nogil:
+    """Copy the points of the 3x3x3 block of cells around cell ``c`` (index
+    ``cell``) to ``sc``'s block arrays, row after row: ascending grid
+    position, at most all the object's points (the rows' runs are disjoint)."""
+    cdef int64_t dy, dz, jy, jz, row, p, b, e, nb = 0
+    cdef int64_t xlo = c[0] - 1 if c[0] > 0 else 0
+    cdef int64_t xhi = c[0] + 1 if c[0] + 1 < g.res[0] else g.res[0] - 1
+    cdef double* bx = sc.blk
+    cdef double* by = sc.blk + sc.blk_stride
+    cdef double* bz = sc.blk + 2 * sc.blk_stride
+    for dz in range(3):
+        jz = c[2] + dz - 1
+        for dy in range(3):
+            jy = c[1] + dy - 1
+            sc.blk_row[3 * dz + dy] = nb
+            if jz < 0 or jz >= g.res[2] or jy < 0 or jy >= g.res[1]:
+                continue
+            row = (jz * g.res[1] + jy) * g.res[0]
+            b = cell_start[row + xlo]
+            e = cell_start[row + xhi + 1]
+            for p in range(b, e):
+                bx[nb] = g.sx[p]
+                by[nb] = g.sy[p]
+                bz[nb] = g.sz[p]
+                sc.blk_pos[nb] = p
+                nb += 1
+    sc.blk_row[9] = nb
+    sc.blk_n = nb
+    sc.blk_cell = cell
+
+
+cdef inline Py_ssize_t _scan_block(const Scratch* sc, int64_t b, int64_t e, const double* q, double guess,
+                                   Py_ssize_t m) noexcept nogil:
+    """Offer the gathered block's points [b, e) to the candidate list (the
+    level's distance scan); return the new count."""
+    cdef const double* bx = sc.blk
+    if _simd == 2:
+        return eppf_nrm_scan_avx512(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
+                                    guess, sc.cand_d2, sc.cand_pos, m)
+    if _simd == 1:
+        return eppf_nrm_scan_avx2(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
+                                  guess, sc.cand_d2, sc.cand_pos, m)
+    return eppf_nrm_scan_portable(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
+                                  guess, sc.cand_d2, sc.cand_pos, m)
+
+
+cdef int _knn_near(const Grid* g, const int64_t* cell_start, const double* q, const int64_t* c,
+                   Py_ssize_t k, double guess, Scratch* sc) noexcept nogil:
+    """:func:`_knn_block` for the 3x3x3 block (``r = 1``), over its points
+    gathered once for all queries of a cell (``_gather_block``): the rows
+    within the guess (by the same bounds), merged into runs where they
+    follow one another, instead of one scan per row trimmed at its ends. The
+    points it adds lie beyond the guess, so the candidates, hence the
+    outputs, are the same."""
+    cdef int64_t cell = (c[2] * g.res[1] + c[1]) * g.res[0] + c[0]
+    cdef double gz2[3]
+    cdef double gy2[3]
+    cdef double gap
+    cdef int64_t rb = 0, re = 0
+    cdef Py_ssize_t m = 0, i
+    cdef int t, res
+    if cell != sc.blk_cell:
+        _gather_block(g, cell_start, c, cell, sc)
+    for t in range(3):
+        gap = _gap(q[2], g.lo[2], g.h, c[2], c[2] + t - 1) - g.margin
+        gz2[t] = gap * gap if gap > 0.0 else 0.0
+        gap = _gap(q[1], g.lo[1], g.h, c[1], c[1] + t - 1) - g.margin
+        gy2[t] = gap * gap if gap > 0.0 else 0.0
+    for t in range(9):
+        if not (gz2[t // 3] + gy2[t % 3] <= guess):
+            continue
+        if sc.blk_row[t] != re:
+            m = _scan_block(sc, rb, re, q, guess, m)
+            rb = sc.blk_row[t]
+        re = sc.blk_row[t + 1]
+    m = _scan_block(sc, rb, re, q, guess, m)
+    res = _select_k(g, q, c, 1, k, guess, m, sc.cand_d2, sc.cand_pos, sc.sel, sc.kd2, sc.kpos, sc.cand_b)
+    if res == _FAST_OK:
+        # block indices to grid positions (ascending, as the block is)
+        for i in range(k):
+            sc.kpos[i] = sc.blk_pos[sc.kpos[i]]
+    return res
+
+
 cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_start,
-                        Py_ssize_t s, Py_ssize_t k, Scratch* sc, double* out) noexcept nogil:
-    """Normal of grid-order point ``s`` written to ``out`` (unoriented). The
-    covariance sums the k nearest in ascending grid position, whichever path
-    found them, so the result does not depend on the search path."""
+                        Py_ssize_t s, Py_ssize_t k, Scratch* sc, Batch* bt, double* out) noexcept nogil:
+    """Normal of grid-order point ``s``, to be written to ``out`` (unoriented)
+    when batch ``bt`` is solved. The covariance sums the k nearest in
+    ascending grid position, whichever path found them, so the result does
+    not depend on the search path."""
     cdef Py_ssize_t i, j, p
     cdef double q[3]
     cdef int64_t c[3]
@@ -618,23 +768,18 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
         q[a] = spts[3 * s + a]
         c[a] = _cell_coord(q[a], g.lo[a], g.inv_h, g.res[a])
     if guess < INFINITY:
-        res = _knn_block(g, spts, cell_start, q, c, k, guess, sc.cand_d2, sc.cand_pos, sc.sel,
-                         sc.kd2, sc.kpos, sc.cand_b, 1)
+        res = _knn_near(g, cell_start, q, c, k, guess, sc)
         # One more try with a guess four times larger or smaller (any
         # positive guess gives the same, exact list) and, when that
         # overshoots, one with the guess in between, before the shells.
         if res == _FAST_FEW:
-            res = _knn_block(g, spts, cell_start, q, c, k, 4.0 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            res = _knn_near(g, cell_start, q, c, k, 4.0 * guess, sc)
             if res == _FAST_MANY:
-                res = _knn_block(g, spts, cell_start, q, c, k, 2.0 * guess, sc.cand_d2, sc.cand_pos,
-                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+                res = _knn_near(g, cell_start, q, c, k, 2.0 * guess, sc)
         elif res == _FAST_MANY:
-            res = _knn_block(g, spts, cell_start, q, c, k, 0.25 * guess, sc.cand_d2, sc.cand_pos,
-                             sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+            res = _knn_near(g, cell_start, q, c, k, 0.25 * guess, sc)
             if res == _FAST_FEW:
-                res = _knn_block(g, spts, cell_start, q, c, k, 0.5 * guess, sc.cand_d2, sc.cand_pos,
-                                 sc.sel, sc.kd2, sc.kpos, sc.cand_b, 1)
+                res = _knn_near(g, cell_start, q, c, k, 0.5 * guess, sc)
         if res == _FAST_FAR:
             # The k found bound the k-th distance from above: the 5x5x5 block
             # within that distance holds at least k, often enough to prove it.
@@ -661,8 +806,103 @@ cdef void _point_normal(const Grid* g, const double* spts, const int64_t* cell_s
     sc.guess[0] = kth * _GUESS_FACTOR
     if not (sc.guess[0] > 1e-200):
         sc.guess[0] = g.h * g.h
-    eppf_nrm_covariance(spts, sc.kpos, k, cov)
-    _smallest_eigvec(cov, out)
+    if EPPF_NRM_EIG_VEC == 0:
+        eppf_nrm_covariance(spts, sc.kpos, k, cov)
+        _smallest_eigvec(cov, out)
+    else:
+        _batch_stage(bt, spts, sc.kpos, out)
+
+
+cdef inline void _lane_cov(const Batch* bt, int j, double* cov) noexcept nogil:
+    """The symmetric 3x3 covariance of lane ``j`` (row-major)."""
+    cov[0] = bt.c[j]
+    cov[1] = cov[3] = bt.c[_LANES + j]
+    cov[2] = cov[6] = bt.c[2 * _LANES + j]
+    cov[4] = bt.c[3 * _LANES + j]
+    cov[5] = cov[7] = bt.c[4 * _LANES + j]
+    cov[8] = bt.c[5 * _LANES + j]
+
+
+cdef void _batch_solve(Batch* bt) noexcept nogil:
+    """Write the unit eigenvector of the smallest eigenvalue of every waiting
+    covariance to its destination and empty the batch: ``_smallest_eigvec``'s
+    arithmetic in vector lanes (``eppf_nrm_eig8_*``, the same bits), Jacobi
+    for the lanes it hands back."""
+    cdef double res[3 * _LANES]
+    cdef double cov[9]
+    cdef unsigned bad
+    cdef int j, i
+    if bt.count == 0:
+        return
+    if bt.nb != NULL:
+        # the covariances of the staged neighborhoods (unused lanes: zeros)
+        for j in range(bt.count, _LANES):
+            for i in range(3 * bt.k):
+                bt.nb[_LANES * i + j] = 0.0
+        if _simd == 2:
+            eppf_nrm_cov8_avx512(bt.nb, bt.k, bt.c)
+        elif _simd == 1:
+            eppf_nrm_cov8_avx2(bt.nb, bt.k, bt.c)
+        else:
+            eppf_nrm_cov8_portable(bt.nb, bt.k, bt.c)
+    elif EPPF_NRM_EIG_VEC == 0:
+        for j in range(bt.count):
+            _lane_cov(bt, j, cov)
+            _smallest_eigvec(cov, bt.dst[j])
+        bt.count = 0
+        return
+    for j in range(bt.count, _LANES):
+        for i in range(6):
+            bt.c[i * _LANES + j] = 0.0
+    if _simd == 2:
+        bad = eppf_nrm_eig8_avx512(bt.c, res)
+    elif _simd == 1:
+        bad = eppf_nrm_eig8_avx2(bt.c, res)
+    else:
+        bad = eppf_nrm_eig8_portable(bt.c, res)
+    for j in range(bt.count):
+        if (bad >> j) & 1u:
+            _lane_cov(bt, j, cov)
+            _jacobi_smallest(cov, bt.dst[j])
+        else:
+            bt.dst[j][0] = res[j]
+            bt.dst[j][1] = res[_LANES + j]
+            bt.dst[j][2] = res[2 * _LANES + j]
+    bt.count = 0
+
+
+cdef inline void _batch_stage(Batch* bt, const double* spts, const int64_t* kpos, double* dst) noexcept nogil:
+    """Queue the neighborhood of the ``bt.k`` points of ``spts`` at grid
+    positions ``kpos`` (in that order) for the solver, its normal to go to
+    ``dst``; solve when every lane is taken."""
+    cdef int j = bt.count
+    cdef Py_ssize_t i, k = bt.k
+    cdef int64_t p
+    for i in range(k):
+        p = 3 * kpos[i]
+        bt.nb[_LANES * i + j] = spts[p]
+        bt.nb[_LANES * (k + i) + j] = spts[p + 1]
+        bt.nb[_LANES * (2 * k + i) + j] = spts[p + 2]
+    bt.dst[j] = dst
+    bt.count = j + 1
+    if bt.count == _LANES:
+        _batch_solve(bt)
+
+
+cdef inline void _batch_add(Batch* bt, const double* cov, double* dst) noexcept nogil:
+    """Queue covariance ``cov`` (symmetric, row-major) for the solver, its
+    normal to go to ``dst``; solve when every lane is taken."""
+    cdef int j = bt.count
+    bt.c[j] = cov[0]
+    bt.c[_LANES + j] = cov[1]
+    bt.c[2 * _LANES + j] = cov[2]
+    bt.c[3 * _LANES + j] = cov[4]
+    bt.c[4 * _LANES + j] = cov[5]
+    bt.c[5 * _LANES + j] = cov[8]
+    bt.dst[j] = dst
+    bt.count = j + 1
+    if bt.count == _LANES:
+        _batch_solve(bt)
 
 
 cdef void _jacobi_smallest(const double* cov, double* out) noexcept nogil:
@@ -895,27 +1135,46 @@ cdef void _object_normals(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     """All normals of one object, serially, in one thread's scratch rows."""
     cdef Grid g
     cdef Scratch sc
+    cdef Batch bt
     cdef Py_ssize_t s, kk = k if k < n else n
     if n == 0:
         return
     _split_scratch(fs, its, max_n, k, &sc)
+    bt.count = 0
+    bt.nb = sc.nb
+    bt.k = kk
     # The cell cap of the object's own size (4 n + 64), not of the largest
     # object's: the grid, hence the neighbors' order and the sums, are those
     # of the object alone (:func:`normals_single`), whatever it is packed with.
-    _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start)
+    _build_grid(pts, n, kk, 4 * n + 64, &g, sc.spts, sc.sxyz, max_n, sc.sidx, sc.cell_of, sc.cell_start, sc.blk)
     sc.guess[0] = INFINITY
     for s in range(n):
-        _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, out + 3 * sc.sidx[s])
+        _point_normal(&g, sc.spts, sc.cell_start, s, kk, &sc, &bt, out + 3 * sc.sidx[s])
+    _batch_solve(&bt)
     _orient(pts, n, mode, viewpoint, out)
 
 
-cdef void _shared_grid_normal(const Grid* g, const Scratch* shared, Py_ssize_t s, Py_ssize_t k,
-                              double* fs, int64_t* its, Py_ssize_t n, double* out) noexcept nogil:
-    """Normal of grid-order point ``s`` of a grid built in ``shared``, with
-    this thread's scratch rows for the query buffers."""
+# Grid-order points per task of :func:`normals_single`'s threads.
+cdef Py_ssize_t _SINGLE_CHUNK = 32
+
+
+cdef void _shared_grid_normals(const Grid* g, const Scratch* shared, Py_ssize_t chunk, Py_ssize_t k,
+                               double* fs, int64_t* its, Py_ssize_t n, double* out) noexcept nogil:
+    """Normals of the grid-order points of chunk ``chunk`` (``_SINGLE_CHUNK``
+    points, fewer in the last) of a grid built in ``shared``, with this
+    thread's scratch rows for the query buffers."""
     cdef Scratch sc
+    cdef Batch bt
+    cdef Py_ssize_t s, end = (chunk + 1) * _SINGLE_CHUNK
+    if end > n:
+        end = n
     _split_scratch(fs, its, n, k, &sc)
-    _point_normal(g, shared.spts, shared.cell_start, s, k, &sc, out + 3 * shared.sidx[s])
+    bt.count = 0
+    bt.nb = sc.nb
+    bt.k = k
+    for s in range(chunk * _SINGLE_CHUNK, end):
+        _point_normal(g, shared.spts, shared.cell_start, s, k, &sc, &bt, out + 3 * shared.sidx[s])
+    _batch_solve(&bt)
 
 
 def _check_scratch(fscratch, iscratch, Py_ssize_t max_n, Py_ssize_t k, int num_threads, name):
@@ -961,24 +1220,26 @@ cdef void _normals_single(const double* pts, Py_ssize_t n, Py_ssize_t k, int mod
     ``i_stride`` int64 per thread."""
     cdef Py_ssize_t cap = 4 * n + 64
     cdef Py_ssize_t kk = k if k < n else n
-    cdef Py_ssize_t s, tid, t
+    cdef Py_ssize_t c, tid, t, n_chunks = (n + _SINGLE_CHUNK - 1) // _SINGLE_CHUNK
     cdef Grid g
     cdef Scratch shared
     cdef Scratch sc
     _split_scratch(fs, its, n, k, &shared)
     with nogil:
         _build_grid(pts, n, kk, cap, &g, shared.spts, shared.sxyz, n, shared.sidx,
-                    shared.cell_of, shared.cell_start)
+                    shared.cell_of, shared.cell_start, shared.blk)
         for t in range(num_threads):
-            _split_scratch(fs + t * f_stride, its + t * i_stride, n, k, &sc)
+            # carved as _shared_grid_normals carves it (with the clipped k), so that its
+            # first query reads this guess
+            _split_scratch(fs + t * f_stride, its + t * i_stride, n, kk, &sc)
             sc.guess[0] = INFINITY
         if num_threads == 1:
-            for s in range(n):
-                _shared_grid_normal(&g, &shared, s, kk, fs, its, n, obase)
+            for c in range(n_chunks):
+                _shared_grid_normals(&g, &shared, c, kk, fs, its, n, obase)
         else:
-            for s in prange(n, num_threads=num_threads, schedule="dynamic", chunksize=32):
+            for c in prange(n_chunks, num_threads=num_threads, schedule="dynamic", chunksize=1):
                 tid = threadid()
-                _shared_grid_normal(&g, &shared, s, kk, fs + tid * f_stride, its + tid * i_stride, n, obase)
+                _shared_grid_normals(&g, &shared, c, kk, fs + tid * f_stride, its + tid * i_stride, n, obase)
         _orient(pts, n, mode, viewpoint, obase)
 
 
@@ -1069,15 +1330,20 @@ def normals_cloud(const double[:, ::1] points, Py_ssize_t k, int mode,
     return out_arr
 
 
-def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
+def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False, bint lanes=False):
     """Unit eigenvector of the smallest eigenvalue of each symmetric 3x3
-    matrix, by the kernel's solver or, with ``jacobi=True``, by its Jacobi
-    fallback alone (exposed for tests)."""
+    matrix, by the kernel's solver one matrix at a time, with
+    ``lanes=True`` by its vector-lane form at the level in use (symmetric
+    matrices only: it reads the upper triangle), or with ``jacobi=True`` by
+    its Jacobi fallback alone (exposed for tests)."""
     cdef Py_ssize_t i, n = covs.shape[0]
     cdef double buf[9]
     cdef int a, b
+    cdef Batch bt
     out_arr = np.empty((n, 3), dtype=np.float64)
     cdef double[:, ::1] out = out_arr
+    bt.count = 0
+    bt.nb = NULL
     with nogil:
         for i in range(n):
             for a in range(3):
@@ -1085,6 +1351,9 @@ def smallest_eigvecs(const double[:, :, ::1] covs, bint jacobi=False):
                     buf[3 * a + b] = covs[i, a, b]
             if jacobi:
                 _jacobi_smallest(buf, &out[i, 0])
+            elif lanes:
+                _batch_add(&bt, buf, &out[i, 0])
             else:
                 _smallest_eigvec(buf, &out[i, 0])
+        _batch_solve(&bt)
     return out_arr

@@ -1,12 +1,17 @@
 /* SIMD distance scan and k-th selection of the normals kernel's fast
- * neighbor search (_normals_fast.pyx's ``_knn_block``), chosen at run time:
+ * neighbor search (_normals_fast.pyx's ``_knn_near`` and ``_knn_block``),
+ * chosen at run time:
  *
  * - AVX-512 (F): eight grid-order points at a time;
  * - AVX2: four at a time, the survivors packed with a permutation table;
  * - portable (any CPU, the "scalar" level): two at a time in GCC/clang
  *   vector registers (SSE2, NEON), plain loops with other compilers.
  *
- * and the covariance of a neighborhood (``eppf_nrm_covariance``, every level).
+ * the covariance of a neighborhood (``eppf_nrm_covariance``: the order of
+ * operations the lanes of _normals_lanes.h follow, and the kernel's own
+ * code where the compiler has no vector extensions), and, included once per
+ * level, the covariances and eigenvectors of eight neighborhoods at a time
+ * (_normals_lanes.h).
  *
  * ``eppf_nrm_scan_*`` offers the points at grid-order positions [b, e) to
  * the candidate list: for each, in ascending position, the squared distance
@@ -77,6 +82,45 @@ static inline void eppf_nrm_covariance(const double *spts, const int64_t *kpos, 
     cov[5] = cov[7] = syz_zz[0];
     cov[8] = syz_zz[1];
 }
+
+/* Normals of eight neighborhoods at once, one per vector lane, in
+ * _normals_lanes.h (included once per SIMD level): the covariances
+ * (``eppf_nrm_cov8_*``) and the eigenvector of the smallest eigenvalue
+ * (``eppf_nrm_eig8_*``), each the scalar code's operations lane for lane. */
+#define EPPF_NRM_LANES 8
+/* Below this ratio of (lambda_mid - lambda_min) to (lambda_max - lambda_min)
+ * the closed-form eigenvector is replaced by Jacobi's. */
+#define EPPF_NRM_GAP_RATIO 1e-3
+
+#if defined(__GNUC__)
+#define EPPF_NRM_EIG_VEC 1
+typedef double eppf_nrm_v4d __attribute__((vector_size(32)));
+typedef double eppf_nrm_v8d __attribute__((vector_size(64)));
+typedef long long eppf_nrm_v2l __attribute__((vector_size(16)));
+typedef long long eppf_nrm_v4l __attribute__((vector_size(32)));
+typedef long long eppf_nrm_v8l __attribute__((vector_size(64)));
+
+/* The portable level's (baseline vector code of the target: SSE2, NEON). */
+#define EPPF_NRM_L_NAME(f) f##_portable
+#define EPPF_NRM_L_ATTR
+#define EPPF_NRM_L_VT eppf_nrm_v2d
+#define EPPF_NRM_L_VL eppf_nrm_v2l
+#define EPPF_NRM_L_W 2
+#include "_normals_lanes.h"
+#else
+#define EPPF_NRM_EIG_VEC 0
+/* never called: the kernel solves lane by lane without EPPF_NRM_EIG_VEC */
+static unsigned eppf_nrm_eig8_portable(const double *c, double *out)
+{
+    (void)c; (void)out;
+    return 0;
+}
+
+static void eppf_nrm_cov8_portable(const double *nb, int64_t k, double *c)
+{
+    (void)nb; (void)k; (void)c;
+}
+#endif
 
 /* The portable distance scan (every CPU; the scalar loop's operations),
  * two points per vector register: eppf_nrm_scan_avx2's contract, writing
@@ -175,6 +219,25 @@ static int eppf_nrm_has_avx2(void)
 
 #if EPPF_NRM_SIMD
 
+/* The SIMD selections' bisection for the k-th's bucket over [lo, hi] (``count_mid``:
+ * the number of candidates in the buckets up to mid); leaves the bucket in ``bk`` and
+ * the count of the buckets below it in ``below`` (0 to begin with), kept from the
+ * pass that moved lo last instead of counted by one more pass. */
+#define EPPF_NRM_BISECT(count_mid)                 \
+    do {                                           \
+        while (lo < hi) {                          \
+            int64_t mid = (lo + hi) / 2, c_;       \
+            c_ = (count_mid);                      \
+            if (c_ >= k) {                         \
+                hi = mid;                          \
+            } else {                               \
+                lo = mid + 1;                      \
+                below = c_;                        \
+            }                                      \
+        }                                          \
+        bk = lo;                                   \
+    } while (0)
+
 /* The candidate of rank ``need - 1`` by (d2, index) among the n_in >= need
  * candidates ``sel`` (in ascending index) of the k-th's bucket: the SIMD
  * selections' last step, as in the scalar code of _normals_fast.pyx. */
@@ -256,18 +319,11 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
 {
     const __m512d vscale = _mm512_set1_pd(to_bucket);
     const __m512i iota = _mm512_set_epi64(7, 6, 5, 4, 3, 2, 1, 0);
-    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i;
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below = 0, need, n_in = 0, i, j, kth_i;
     double kth;
-    /* the smallest bucket bk whose count with those below reaches k (the top bucket holds the rest) */
-    while (lo < hi) {
-        int64_t mid = (lo + hi) / 2;
-        if (eppf_nrm_count_below(cand_d2, m, vscale, (double)(mid + 1)) >= k)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    bk = lo;
-    below = bk == 0 ? 0 : eppf_nrm_count_below(cand_d2, m, vscale, (double)bk);
+    /* the smallest bucket bk whose count with those below reaches k (the top bucket holds the rest),
+     * and that count without bk's (``below``, kept for lo: 0 for lo = 0) */
+    EPPF_NRM_BISECT(eppf_nrm_count_below(cand_d2, m, vscale, (double)(mid + 1)));
     need = k - below;
     {
         const __m512d vlo = _mm512_set1_pd((double)bk), vhi = _mm512_set1_pd((double)(bk + 1));
@@ -308,6 +364,14 @@ static int64_t eppf_nrm_select_avx512(const double *cand_d2, const int64_t *cand
     return kth_i;
 }
 
+/* The lane solvers (_normals_lanes.h) in AVX-512 registers. */
+#define EPPF_NRM_L_NAME(f) f##_avx512
+#define EPPF_NRM_L_ATTR __attribute__((target("avx2,avx512f,popcnt")))
+#define EPPF_NRM_L_VT eppf_nrm_v8d
+#define EPPF_NRM_L_VL eppf_nrm_v8l
+#define EPPF_NRM_L_W 8
+#include "_normals_lanes.h"
+
 /* Lane permutations (as eight 32-bit indices) that move the lanes of a 4-bit mask to the front. */
 static const int32_t eppf_nrm_pack4[16][8] = {
     {0, 1, 2, 3, 4, 5, 6, 7}, {0, 1, 2, 3, 4, 5, 6, 7}, {2, 3, 0, 1, 4, 5, 6, 7}, {0, 1, 2, 3, 4, 5, 6, 7},
@@ -315,6 +379,14 @@ static const int32_t eppf_nrm_pack4[16][8] = {
     {6, 7, 0, 1, 2, 3, 4, 5}, {0, 1, 6, 7, 2, 3, 4, 5}, {2, 3, 6, 7, 0, 1, 4, 5}, {0, 1, 2, 3, 6, 7, 4, 5},
     {4, 5, 6, 7, 0, 1, 2, 3}, {0, 1, 4, 5, 6, 7, 2, 3}, {2, 3, 4, 5, 6, 7, 0, 1}, {0, 1, 2, 3, 4, 5, 6, 7},
 };
+
+/* The lane solvers (_normals_lanes.h) in AVX2 registers. */
+#define EPPF_NRM_L_NAME(f) f##_avx2
+#define EPPF_NRM_L_ATTR __attribute__((target("avx2,popcnt")))
+#define EPPF_NRM_L_VT eppf_nrm_v4d
+#define EPPF_NRM_L_VL eppf_nrm_v4l
+#define EPPF_NRM_L_W 4
+#include "_normals_lanes.h"
 
 __attribute__((target("avx2,popcnt")))
 static int64_t eppf_nrm_scan_avx2(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
@@ -380,17 +452,9 @@ static int64_t eppf_nrm_select_avx2(const double *cand_d2, const int64_t *cand_p
 {
     const __m256d vscale = _mm256_set1_pd(to_bucket);
     const __m256i iota = _mm256_set_epi64x(3, 2, 1, 0), four = _mm256_set1_epi64x(4);
-    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below, need, n_in = 0, i, j, kth_i;
+    int64_t lo = 0, hi = EPPF_NRM_BUCKETS - 1, bk, below = 0, need, n_in = 0, i, j, kth_i;
     double kth;
-    while (lo < hi) {
-        int64_t mid = (lo + hi) / 2;
-        if (eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)(mid + 1)) >= k)
-            hi = mid;
-        else
-            lo = mid + 1;
-    }
-    bk = lo;
-    below = bk == 0 ? 0 : eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)bk);
+    EPPF_NRM_BISECT(eppf_nrm_count_below_avx2(cand_d2, m, to_bucket, (double)(mid + 1)));
     need = k - below;
     {
         const double flo = (double)bk, fhi = (double)(bk + 1);
@@ -447,6 +511,28 @@ static int64_t eppf_nrm_select_avx2(const double *cand_d2, const int64_t *cand_p
 }
 
 #else
+
+static unsigned eppf_nrm_eig8_avx512(const double *c, double *out)
+{
+    (void)c; (void)out;
+    return 0; /* never called: eppf_nrm_has_avx512() is 0 */
+}
+
+static unsigned eppf_nrm_eig8_avx2(const double *c, double *out)
+{
+    (void)c; (void)out;
+    return 0; /* never called: eppf_nrm_has_avx2() is 0 */
+}
+
+static void eppf_nrm_cov8_avx512(const double *nb, int64_t k, double *c)
+{
+    (void)nb; (void)k; (void)c; /* never called: eppf_nrm_has_avx512() is 0 */
+}
+
+static void eppf_nrm_cov8_avx2(const double *nb, int64_t k, double *c)
+{
+    (void)nb; (void)k; (void)c; /* never called: eppf_nrm_has_avx2() is 0 */
+}
 
 static int64_t eppf_nrm_scan_avx512(const double *sx, const double *sy, const double *sz, int64_t b, int64_t e,
                                     double qx, double qy, double qz, double guess, double *cand_d2,

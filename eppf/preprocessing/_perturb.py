@@ -20,6 +20,7 @@ from sklearn.utils import check_random_state
 
 from ..utils._param_validation import Interval, Options, Satisfies, StrOptions, validate_parameter
 from ..utils._sampling import resample
+from ..utils._cloud_stats import cloud_means, stretch_about
 from ..utils._validation import check_point_cloud
 
 __all__ = [
@@ -510,36 +511,30 @@ def _scale_clouds(clouds, factors, center):
     """:func:`_scale` of every validated cloud with its row of ``factors`` (n_clouds, 3), bit for bit.
 
     Clouds of one width (all with normals, or none) are stretched in
-    whole-array operations over all their points at once (each row's
-    arithmetic is :func:`_scale`'s, and the centroids are each cloud's own
-    mean, as there), so a list of many small clouds costs a few array
-    operations instead of a few per cloud; the clouds returned are views
-    of one new array. Mixed widths go cloud by cloud.
+    one compiled pass over all their points (each row's arithmetic is
+    :func:`_scale`'s, and the centroids are each cloud's own mean, as
+    there) and their normals in whole-array operations, so a list of many
+    small clouds costs a few array operations instead of a few per cloud;
+    the clouds returned are views of one new array. Mixed widths go cloud
+    by cloud.
     """
     if len({c.shape[1] for c in clouds}) != 1:
         return [_scale(c, f, center) for c, f in zip(clouds, factors)]
     sizes = np.array([c.shape[0] for c in clouds])
     block = np.concatenate(clouds)
     out = np.empty_like(block)
-    if (sizes == sizes[0]).all():
-        # one size: each cloud's factors and centroid broadcast over its points in a (clouds, points, 3) view
-        # (the stack's mean over axis 1 adds in the order each cloud's own mean does)
-        shape = (len(clouds), int(sizes[0]), block.shape[1])
-        xyz, new = block.reshape(shape)[:, :, :3], out.reshape(shape)
-        each = factors[:, None, :]
-        origin = xyz.mean(axis=1)[:, None, :] if center == "centroid" else np.zeros(3)
-    else:
-        xyz, new = block[:, :3], out
-        each = np.repeat(factors, sizes, axis=0)
-        origin = (np.repeat(np.array([c[:, :3].mean(axis=0) for c in clouds]), sizes, axis=0)
-                  if center == "centroid" else np.zeros(3))
-    new[..., :3] = (xyz - origin) * each + origin
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    factors = np.ascontiguousarray(factors, dtype=np.float64)
+    # each cloud's own mean, as c[:, :3].mean(axis=0) adds it, and (xyz - origin) * factors + origin in one
+    # compiled pass with NumPy's operations in NumPy's order (its strided reduction over three columns and
+    # its three temporaries are slow)
+    origins = cloud_means(block, offsets) if center == "centroid" else np.zeros((len(clouds), 3))
+    stretch_about(block, offsets, origins, factors, out)
     if block.shape[1] == 6:
-        normals = new[..., 3:]
-        np.divide(block.reshape(new.shape)[..., 3:], each, out=normals)
+        np.divide(block[:, 3:], np.repeat(factors, sizes, axis=0), out=out[:, 3:])
         flat = out[:, 3:]
         flat /= np.sqrt(np.einsum("ij,ij->i", flat, flat))[:, None]
-    bounds = np.concatenate([[0], np.cumsum(sizes)]).tolist()
+    bounds = offsets.tolist()
     return [out[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 

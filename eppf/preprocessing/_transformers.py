@@ -67,6 +67,23 @@ class _CloudTransformer(TransformerMixin, BaseEstimator):
         seeds = object_seeds(self.random_state, len(clouds))
         return [self._apply(cloud, object_rng(seed)) for cloud, seed in zip(clouds, seeds)]
 
+    def fit_transform(self, X, y=None):
+        """Perturb every cloud (``fit`` learns nothing, so this is :meth:`transform`, validating once).
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Point clouds, normals in the last three columns.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        X_new : list of ndarray
+            As :meth:`transform`.
+        """
+        return self.transform(X)
+
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.requires_fit = False
@@ -319,8 +336,11 @@ class RandomScaling(_CloudTransformer):
         self._check_params()
         clouds = check_point_clouds(X, owner=type(self).__name__)
         low, high, anisotropic = float(self.low), float(self.high), bool(self.anisotropic)
-        factors = np.array([_perturb._scaling_factors(object_rng(seed), low, high, anisotropic)
-                            for seed in object_seeds(self.random_state, len(clouds))])
+        # each object's factors as _perturb._scaling_factors draws them, written into one array
+        log_low, log_high, size = np.log(low), np.log(high), 3 if anisotropic else 1
+        factors = np.empty((len(clouds), 3))
+        for k, seed in enumerate(object_seeds(self.random_state, len(clouds))):
+            factors[k] = np.exp(object_rng(seed).uniform(log_low, log_high, size=size))
         return _perturb._scale_clouds(clouds, factors, self.center)
 
 

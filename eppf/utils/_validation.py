@@ -303,6 +303,27 @@ class PackedClouds:
                 f"normals={'none' if self.normals is None else int(self.has_normals.sum())})")
 
 
+class CheckedClouds(PackedClouds):
+    """Clouds without normals that :func:`check_packed_clouds` has just validated, handed on by an estimator
+    to the estimators it is made of (:class:`eppf.descriptors.DescriptorUnion` to its blocks).
+
+    :func:`check_packed_clouds` copies such clouds instead of validating
+    them again: the validation pass of a valid cloud without normals is a
+    copy of it, so the result is the same bits. Clouds with normals are
+    validated again, as every block always did (which normalizes the normals
+    once more). Never handed to code outside eppf.
+    """
+
+    __slots__ = ()
+
+    @classmethod
+    def of(cls, packed):
+        """The validated ``packed`` (without normals) marked as such; its arrays are shared."""
+        if packed.normals is not None:
+            raise ValueError("CheckedClouds: only clouds without normals skip their validation")
+        return cls(packed.points, None, packed.offsets, packed.lower, packed.upper, packed.has_normals)
+
+
 def check_packed_clouds(X, *, owner=None, min_points=2, allow_normals=True, n_threads=1):
     """Validate a collection of point clouds into one :class:`PackedClouds`.
 
@@ -346,6 +367,10 @@ or PackedClouds
     array([[0., 0., 0., 0., 0., 1.],
            [1., 0., 0., 0., 0., 1.]])
     """
+    if type(X) is CheckedClouds and X.normals is None and len(X) and int(X.sizes.min()) >= max(min_points, 2):
+        # validated by the estimator that hands them on: a copy is what the scan would give
+        return PackedClouds(X.points.copy(), None, X.offsets.copy(), X.lower.copy(), X.upper.copy(),
+                            X.has_normals.copy())
     items = _items(X, _prefix(owner))
     if isinstance(items, PackedClouds):
         items = _packed_items(items)

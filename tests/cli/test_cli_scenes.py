@@ -258,3 +258,22 @@ def test_a_las_file_without_the_extra_ends_in_one_line_naming_it(tmp_path, capsy
     lines = err.strip().splitlines()
     assert status == 2 and len(lines) == 1 and lines[0].startswith("eppf segment: error: ")
     assert "pip install 'eppf[las]'" in lines[0]
+
+
+@pytest.mark.parametrize("names", [("normal_x", "normal_y", "normal_z"), ("nx", "ny", "nz"),
+                                   ("nor:normalX", "nor:normalY", "nor:normalZ")])
+def test_segment_clouds_carry_the_scene_normals_under_every_format_name(names):
+    # the normals each reader names as its format does (PCD/LAS, PLY, E57) reach the segments' clouds
+    from eppf.cli._segment import Scene
+
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(6, 3))
+    normals = rng.normal(size=(6, 3)).astype(np.float32)
+    fields = {n: normals[:, k] for k, n in enumerate(names)}
+    scene = Scene("scene", points, fields, np.array([0, 0, 1, 1, 1, -1]), np.zeros(6, bool), None,
+                  np.array([0, 1, 2, 3, 4]), np.array([0, 2, 5]))
+    cloud = scene.cloud(1)
+    assert cloud.shape == (3, 6)
+    np.testing.assert_array_equal(cloud[:, :3], points[2:5])
+    np.testing.assert_array_equal(cloud[:, 3:], normals[2:5].astype(np.float64))
+    assert Scene("scene", points, {}, scene.labels, scene.ground, None, scene.order, scene.starts).cloud(1).shape == (3, 3)

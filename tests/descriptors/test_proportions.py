@@ -96,3 +96,21 @@ def test_bad_clouds(X, msg):
 def test_bad_parameters(params):
     with pytest.raises(ValueError, match="ProportionTransformer"):
         ProportionTransformer(**params).fit([np.zeros((3, 3))])
+
+
+def test_quantiles_near_the_ends_are_numpys_bit_for_bit():
+    # the robust extents read two order statistics from each end instead of partitioning the rows;
+    # they must give np.quantile's bits, for ties, sorted rows, the ends themselves and short rows,
+    # and quantiles far from the ends go through np.quantile itself
+    from eppf.descriptors._proportions import _quantiles
+
+    rng = np.random.RandomState(7)
+    for n in (2, 3, 5, 50, 1024, 1031):
+        rows = rng.normal(size=(6, n)) * 10.0 ** rng.randint(-3, 4, size=(6, 1))
+        rows[1] = np.round(rows[1], 1)  # ties
+        rows[2] = np.sort(rows[2])
+        rows[3] = np.sort(rows[3])[::-1]
+        rows[4] = 1.5  # all equal
+        for qs in ([0.02, 0.98], [0.0, 1.0], [0.25, 0.75], [0.5], [0.013, 0.5, 0.999]):
+            np.testing.assert_array_equal(_quantiles(np.ascontiguousarray(rows), qs),
+                                          np.quantile(rows, qs, axis=1))

@@ -315,3 +315,50 @@ def test_script_table_and_missing_file(tmp_path, capsys):
              labels=labels, class_names=np.array(["flat", "tall"]))
     assert script.main(["--data", str(tmp_path / "nosplit.npz")]) == 2
     assert "no train/test split" in capsys.readouterr().err
+
+
+class _ListOnly(HeightHistogram):
+    """A third-party block that insists on the list of (n_i, 3|6) arrays the union hands such blocks."""
+
+    def transform(self, X):
+        assert isinstance(X, list) and all(isinstance(c, np.ndarray) and c.shape[1] in (3, 6) for c in X)
+        return super().transform(X)
+
+
+def test_blocks_get_the_bits_they_give_alone_validated_once():
+    # the union validates the clouds once: eppf's descriptors then copy clouds without normals instead of
+    # validating them again, other blocks get the list of arrays; every block's rows must be its own bits,
+    # for clouds without normals, with normals (validated again by each block) and mixed, and odd dtypes
+    rng = np.random.default_rng(4)
+    plain = [c.astype(np.float32) if k == 2 else c for k, c in enumerate(_clouds(6, seed=4))]
+    with_normals = [np.hstack([c, rng.normal(size=c.shape) * 3.0]) for c in _clouds(6, seed=5)]
+    mixed = [with_normals[0], plain[1], with_normals[2]]
+    blocks = [("eppf", EPPFTransformer(n_pairs=800, random_state=3)), ("gasd", GASDTransformer()),
+              ("height", _ListOnly())]
+    for X in (plain, with_normals, mixed):
+        union = DescriptorUnion(blocks, normalize="none", weights={"eppf": 1, "gasd": 1, "height": 1})
+        U = union.fit_transform(X)
+        np.testing.assert_array_equal(union.transform(X), U)
+        for (name, est), w in zip(blocks, union.weights_):
+            alone = np.asarray(clone(est).fit(X).transform(X), dtype=np.float64)
+            # (normalize="none": the block's rows times its weight, 1/3)
+            np.testing.assert_array_equal(U[:, union.feature_slices_[name]], alone * w)
+
+
+def test_checked_clouds_are_copied_as_validation_would_give_them():
+    from eppf.utils import check_packed_clouds
+    from eppf.utils._validation import CheckedClouds
+
+    packed = check_packed_clouds(_clouds(4))
+    checked = CheckedClouds.of(packed)
+    fast, full = check_packed_clouds(checked, min_points=3), check_packed_clouds(list(packed), min_points=3)
+    assert type(fast) is not CheckedClouds
+    for field in ("points", "offsets", "lower", "upper", "has_normals"):
+        np.testing.assert_array_equal(getattr(fast, field), getattr(full, field))
+        assert not np.shares_memory(getattr(fast, field), getattr(packed, field))  # the caller's own arrays
+    assert fast.normals is None
+    # a block needing more points than some cloud has is still told so by the full validation
+    with pytest.raises(ValueError, match="point cloud 0 has 150 points; at least 151"):
+        check_packed_clouds(checked, owner="Needy", min_points=151)
+    with pytest.raises(ValueError, match="only clouds without normals"):
+        CheckedClouds.of(check_packed_clouds([np.hstack([c, c]) for c in _clouds(2)]))

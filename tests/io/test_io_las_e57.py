@@ -250,6 +250,85 @@ def test_e57_points_and_fields_as_pye57_reads_them(tmp_path):
     np.testing.assert_array_equal(read_point_cloud(path), points[valid])
 
 
+def _e57_with_normals(path, xyz, normals, quaternion, translation, invalid=None):
+    """One scan with the E57 surface-normals extension (``nor:normalX/Y/Z``), written through libE57Format's
+    own node API (pye57's writer knows no extension fields)."""
+    libe57 = pytest.importorskip("pye57.libe57")
+    imf = libe57.ImageFile(str(path), "w")
+    try:
+        imf.extensionsAdd("nor", "http://www.libe57.org/E57_NOR_surface_normals.txt")
+        root = imf.root()
+        root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
+        root.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000001}"))
+        root.set("versionMajor", libe57.IntegerNode(imf, 1))
+        root.set("versionMinor", libe57.IntegerNode(imf, 0))
+        data3d = libe57.VectorNode(imf, True)
+        root.set("data3D", data3d)
+        scan = libe57.StructureNode(imf)
+        data3d.append(scan)
+        scan.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000002}"))
+        pose, rot, tr = libe57.StructureNode(imf), libe57.StructureNode(imf), libe57.StructureNode(imf)
+        scan.set("pose", pose)
+        pose.set("rotation", rot)
+        pose.set("translation", tr)
+        for c, v in zip("wxyz", quaternion):
+            rot.set(c, libe57.FloatNode(imf, float(v)))
+        for c, v in zip("xyz", translation):
+            tr.set(c, libe57.FloatNode(imf, float(v)))
+        names = ["cartesianX", "cartesianY", "cartesianZ", "nor:normalX", "nor:normalY", "nor:normalZ"]
+        cols = [np.ascontiguousarray(xyz[:, k], dtype=np.float64) for k in range(3)] + \
+               [np.ascontiguousarray(normals[:, k], dtype=np.float32) for k in range(3)]
+        proto = libe57.StructureNode(imf)
+        for n in names:
+            proto.set(n, libe57.FloatNode(imf, 0.0, libe57.E57_DOUBLE if n[0] == "c" else libe57.E57_SINGLE))
+        if invalid is not None:
+            names.append("cartesianInvalidState")
+            cols.append(np.ascontiguousarray(invalid, dtype=np.int8))
+            proto.set("cartesianInvalidState", libe57.IntegerNode(imf, 0, 0, 2))
+        points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+        scan.set("points", points)
+        buffers = libe57.VectorSourceDestBuffer()
+        for n, c in zip(names, cols):
+            buffers.append(libe57.SourceDestBuffer(imf, n, c, len(c), True, True))
+        writer = points.writer(buffers)
+        writer.write(len(cols[0]))
+        writer.close()
+    finally:
+        imf.close()
+
+
+def test_e57_normals_extension_read_as_normals_and_turned_by_the_pose(tmp_path):
+    pye57 = pytest.importorskip("pye57")
+    path = tmp_path / "normals.e57"
+    xyz = np.array([[1.0, 2, 3], [4, 5, 6], [-1, 0.5, 2], [7, 7, 7]])
+    normals = np.array([[0, 0, 1.0], [0, 1, 0], [0.6, 0.8, 0], [1, 0, 0]])
+    half = np.sqrt(0.5)
+    _e57_with_normals(path, xyz, normals, [half, 0, 0, half], [10, 20, 30], invalid=[0, 0, 0, 2])
+    cloud = read_point_cloud(path)
+    assert cloud.shape == (3, 6)  # the point marked invalid is dropped with its normal
+    e57 = pye57.E57(str(path))
+    placed = e57.read_scan(0, transform=True, ignore_missing_fields=True)
+    e57.close()
+    valid = slice(0, 3)
+    np.testing.assert_allclose(cloud[:, :3], np.column_stack([placed[f"cartesian{a}"] for a in "XYZ"])[valid],
+                               rtol=0, atol=1e-12)
+    # a quarter turn about z takes (x, y, z) to (-y, x, z): by hand, not through the reader's rotation
+    turned = np.column_stack([-normals[:, 1], normals[:, 0], normals[:, 2]])[valid]
+    np.testing.assert_allclose(cloud[:, 3:], turned, rtol=0, atol=1e-7)
+    assert read_point_cloud(path, normals=False).tobytes() == cloud[:, :3].copy().tobytes()
+    points, fields = read_point_fields(path)  # fields in the points' frame too
+    np.testing.assert_allclose(np.column_stack([fields[f"nor:normal{a}"] for a in "XYZ"])[valid], turned,
+                               rtol=0, atol=1e-7)
+
+
+def test_e57_without_normals_refuses_normals_true(tmp_path):
+    path = tmp_path / "scan.e57"
+    _e57_file(path)
+    assert read_point_cloud(path).shape[1] == 3
+    with pytest.raises(FileFormatError, match="scan.e57.* has no normals"):
+        read_point_cloud(path, normals=True)
+
+
 def test_e57_truncated_or_not_e57(tmp_path):
     path = tmp_path / "scan.e57"
     _e57_file(path)

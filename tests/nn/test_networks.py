@@ -104,3 +104,42 @@ def test_wrong_width_names_the_side_features():
     with pytest.raises(ValueError, match=r"\(batch, 51\).*\+ 3 side features"):
         net(torch.zeros(2, N))
     assert np.isfinite(net(torch.zeros(2, N + 3)).detach().numpy()).all()
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_prediction_without_autograd_gives_the_training_forward_bits(conv, precision):
+    # Without autograd the convolutions pad inside themselves and the ReLUs run in place; with it
+    # every layer pads an explicit copy, as in training: the logits must be the same bits.
+    torch.manual_seed(0)
+    extra = {"conv_impl": "direct"} if conv == "4d" else {}
+    for batch_norm in (False, True):
+        net = NETS[conv](n_bins=(6, 3, 4, 3), n_classes=4, filters=(4, 6, 5), n_hidden=8, n_side=3,
+                         batch_norm=batch_norm, precision=precision, **extra).eval()
+        x = torch.randn(9, 216 + 3)
+        with torch.enable_grad():
+            ref = net(x)
+        assert ref.requires_grad
+        with torch.no_grad():
+            assert torch.equal(net(x), ref)
+        with torch.inference_mode():
+            assert torch.equal(net(x), ref)
+
+
+@pytest.mark.parametrize("kernel", [(5, 5), (2, 3), (4, 1), (5, 2, 2), (1, 4, 3)])
+def test_same_conv_pads_as_tensorflow_with_or_without_autograd(kernel):
+    from eppf.nn._conv4d import same_conv, same_padding
+
+    torch.manual_seed(1)
+    x = torch.randn(3, 2, *(7 - i for i in range(len(kernel))))
+    w = torch.randn(4, 2, *kernel)
+    b = torch.randn(4)
+    # reference: the zeros TensorFlow's "same" adds (the extra one after), written out by hand
+    pads = [p for k in reversed(kernel) for p in same_padding(k)]
+    conv = torch.nn.functional.conv3d if len(kernel) == 3 else torch.nn.functional.conv2d
+    ref = conv(torch.nn.functional.pad(x, pads), w, b)
+    assert ref.shape[2:] == x.shape[2:]
+    with torch.no_grad():
+        out = same_conv(x, w, b)
+    torch.testing.assert_close(out, ref, rtol=1e-6, atol=1e-5)
+    torch.testing.assert_close(same_conv(x, w, b).detach(), ref)

@@ -327,6 +327,33 @@ def test_smallest_eigvecs_special_matrices():
     assert_allclose(got[4, 0], 0.0, atol=1e-15)
 
 
+def test_smallest_eigvecs_in_lanes_give_the_scalar_solvers_bits():
+    # The kernel solves eight covariances at once in vector lanes: each lane
+    # must give the one-at-a-time solver's bits at every SIMD level, for
+    # well-separated spectra, the Jacobi cases (nearly equal eigenvalues, a
+    # zero matrix, a double root at r = +-1) and non-finite entries alike,
+    # in any batch length (a partial last batch included).
+    rng = np.random.default_rng(16)
+    mats = []
+    for scales in ([1, 1, 1], [1, 1, 1e-3], [1, 1e-3, 1e-3], [1, 1, 1 - 1e-9], [1e-300, 1e-300, 1e-300]):
+        a = rng.normal(size=(300, 3, 3)) * scales
+        mats.append(np.einsum("nki,nkj->nij", a, a))
+    special = [np.zeros((3, 3)), np.eye(3), np.diag([3.0, 1.0, 2.0]), np.diag([1.0, 1.0, 5.0]),
+               np.diag([2.0, 0.0, 0.0]), np.full((3, 3), np.nan), np.diag([np.inf, 1.0, 2.0]),
+               np.diag([1.0, 2.0, 2.0]), np.diag([1.0, 1.0, 1.0 + 1e-12])]
+    covs = np.ascontiguousarray(np.concatenate(mats + [np.array(special)]))
+    expected = smallest_eigvecs(covs)
+    old = _simd_level()
+    try:
+        for level in sorted({_set_simd_level(level) for level in (0, 1, 2)}):
+            _set_simd_level(level)
+            for stop in (len(covs), 13, 3):
+                got = smallest_eigvecs(covs[:stop], lanes=True)
+                assert_array_equal(got.view(np.uint64), expected[:stop].view(np.uint64))
+    finally:
+        _set_simd_level(old)
+
+
 @pytest.mark.parametrize(
     "points, kwargs, error, msg",
     [
@@ -519,3 +546,23 @@ def test_simd_level_is_clipped_to_the_cpu():
         assert top in (0, 1, 2) and top >= old
     finally:
         _set_simd_level(old)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_kernel_with_k_above_n_reads_no_stale_scratch(threads):
+    # callers clip k to the cloud's size; the kernel itself must not depend on what its scratch held before
+    from eppf.preprocessing._normals import resolve_orientation
+    from eppf.preprocessing._normals_fast import normals_single, scratch_sizes
+
+    pts = np.random.default_rng(3).normal(size=(7, 3))
+    mode, _ = resolve_orientation("centroid", "test")
+    results = []
+    for fill in (np.nan, 0.0, 1e300):
+        f_len, i_len = scratch_sizes(7, 20)
+        out = np.empty((7, 3))
+        normals_single(pts, 20, mode, np.zeros(3), out, np.full((threads, f_len), fill),
+                       np.full((threads, i_len), -1, dtype=np.int64), threads)
+        results.append(out)
+    expected = estimate_normals(pts, 20)
+    for out in results:
+        assert out.tobytes() == expected.tobytes()

@@ -55,6 +55,17 @@ def test_list_in_list_out_and_no_mutation(est):
 
 
 @pytest.mark.parametrize("est", ALL, ids=lambda e: type(e).__name__)
+def test_fit_transform_is_fit_then_transform(est):
+    # fit_transform validates the clouds once (fit learns nothing): the same clouds, the same errors
+    X = _clouds()
+    ref = clone(est).fit(X).transform(X)
+    for a, b in zip(clone(est).fit_transform(X), ref):
+        assert_array_equal(a, b)
+    with pytest.raises(ValueError, match="point cloud 1 contains NaN"):
+        clone(est).fit_transform([X[0], np.full((5, 3), np.nan)])
+
+
+@pytest.mark.parametrize("est", ALL, ids=lambda e: type(e).__name__)
 def test_seeding(est):
     X = _clouds()
     a = clone(est).transform(X)
@@ -138,7 +149,8 @@ def test_random_scaling_of_many_clouds_is_the_cloud_by_cloud_function_bit_for_bi
     sized = [rng.normal(size=(n, 3)) * 50 + 3 for n in (5, 300, 300, 41, 2)]
     with_normals = _clouds(5, n_points=37)
     mixed = [with_normals[0], sized[1], with_normals[2]]
-    for X in (sized, with_normals, mixed):
+    ragged_normals = [with_normals[0][:20], with_normals[1], with_normals[2][:5]]
+    for X in (sized, with_normals, mixed, ragged_normals):
         out = RandomScaling(random_state=3, **params).fit_transform(X)
         seeds = object_seeds(3, len(X))
         for cloud, new, seed in zip(X, out, seeds):
