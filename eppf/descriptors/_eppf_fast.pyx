@@ -33,9 +33,11 @@ each line walked along its dominant axis, skipping voxels proved empty by
 the empty cone ahead of them, look-ups by scalar loads; level 3 is the
 default on AMD, where gathers are slow). Levels 0 (portable C, every CPU)
 and 1 (AVX2) walk grids up to 64 with the same skipping algorithm in
-``_eppf_walk_port.h`` (level 1: the draws four at a time, then f1-f3 and
-the walk setup in one pass, four pairs at a time, as at level 3, and the
-walk's steps four lines to a vector; no gathers). f1-f3 use the
+``_eppf_walk_port.h``; both draw a batch's pairs before checking them, then
+bin f1-f3 and set up the walks in one pass over a copy of the points,
+normals and voxels in 64-byte rows (level 0 one pair at a time in portable
+C; level 1 draws, bins and sets up four pairs at a time, as level 3 does
+eight, and walks four lines to a vector; no gathers). f1-f3 use the
 same IEEE operations in the same order, the walks visit the same voxels or
 prove them empty. Their bins and draws are bit-identical to the scalar code
 here (``_line_bin``, voxel by voxel, walks grids above 64 at every level, and
@@ -74,13 +76,12 @@ cdef extern from "_eppf_walk.h":
     int eppf_walk_has_avx2() noexcept nogil
     int eppf_walk_has_avx512() noexcept nogil
     int eppf_walk_prefers_skips() noexcept nogil
-    void eppf_draw_batch_avx2(int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
-    int eppf_f123q_avx2(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
+    void eppf_draw_batch_at(int level, int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
+    int eppf_f123q(int level, int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                         const double* nrm, int64_t ns, const int32_t* vox, int64_t g, double scale, int n1, int n2,
                         int n3, int n4, double f1_density, const double* cos2, const double* cos3,
                         const int64_t* states, const int32_t* thr, const double* pn, int32_t* B, int64_t* QP,
                         int64_t* QI, int64_t* QS, int* nq_out, int32_t* counts) noexcept nogil
-    void eppf_draw_batch_avx512(int m, uint64_t state, uint32_t n, int32_t* I, int32_t* J) noexcept nogil
     void eppf_fill_grid_avx512(const double* pts, int64_t ps, int64_t n, int64_t g, uint64_t* bits,
                                int64_t* pv) noexcept nogil
     int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
@@ -112,9 +113,6 @@ cdef extern from "_eppf_walk.h":
         EPPF_PORT_CODE_WORDS
     void eppf_port_code_grid(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
     void eppf_port_code_grid_avx2(const uint64_t* bits, int64_t g, uint64_t* work, uint64_t* code) noexcept nogil
-    int eppf_port_setup(int m, const int32_t* I, const int32_t* J, const int32_t* vox, int64_t g, const int32_t* B,
-                        const double* recip_packed, const int64_t* states, const int32_t* thr, int n4,
-                        int64_t* QP, int64_t* QI, int64_t* QS, int32_t* counts) noexcept nogil
     void eppf_port_walk(int n, int64_t* QP, int64_t* QI, int64_t* QS, const uint64_t* code, const int32_t* thr,
                         int n4, int64_t* done, int32_t* counts) noexcept nogil
     void eppf_port_walk_avx2(int n, int64_t* QP, int64_t* QI, int64_t* QS, const uint64_t* code,
@@ -484,13 +482,14 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     the next pair's instead of stalling behind a voxel walk. At level 3 one
     pass over a batch bins f1-f3 and queues the lines (``eppf_f123q_avx512``),
     the f4 walk counts the pairs itself, and lines still being walked at the
-    end of a batch carry over (in ``lanes``) to the next one; level 1's one
-    pass (``eppf_f123q_avx2``) queues a batch's lines for the portable walk's
-    AVX2 form. Unless ``pn`` is NULL, the SIMD f1-f3 read the points, normals
+    end of a batch carry over (in ``lanes``) to the next one; the one pass of
+    levels 1 and 0 (``eppf_f123q_avx2``, ``eppf_f123q_port``) queues a batch's
+    lines for the portable walk (level 1: its AVX2 form). Unless ``pn`` is NULL,
+    the f1-f3 passes read the points, normals
     and voxels from a copy of them there, one 64-byte row a point
     (``eppf_pack_rows``); level 3 needs it and, where it is NULL (objects too
-    large for the copy), takes the grouped walk of level 2, level 1 reads the
-    arrays in place (the same counts).
+    large for the copy), takes the grouped walk of level 2, levels 0 and 1 read
+    the arrays in place (the same counts).
     """
     cdef uint64_t state = seed
     cdef int64_t base, t, m, i, j
@@ -499,11 +498,11 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int32_t pair_bins[QBATCH + 8]
     cdef int occ, total
     cdef int64_t row_words = _row_words(prm.grid)
-    # AVX2 and AVX-512: draw a batch's candidate pairs four or eight at a time;
-    # the f1-f3 pass then finds the first pair whose points coincide, if any,
+    # Every level draws a batch's candidate pairs at once (AVX2 four, AVX-512
+    # eight at a time); the f1-f3 pass then finds the first pair whose points coincide, if any,
     # and from there on the scalar draw (with its redraws) takes over for the
     # rest of the object.
-    cdef bint vec_draw = prm.f123_level >= 1
+    cdef bint vec_draw = True
     cdef int first_same
     cdef int64_t lanes[EPPF_LANES_WORDS]
     # the level-3 queue of a batch's lines (first position, increment, state)
@@ -514,8 +513,6 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
     cdef int n_queued = 0
     if n < 2:  # no pair of distinct indices (the draw below would read past the object)
         return 1
-    if prm.f123_level == 0:
-        pn = NULL
     cdef bint skipping = prm.walk_level == 3 and prm.n4 > 1 and pn != NULL  # f4 by the skipping walk (level 3)
     cdef bint port = _port_walk(prm)  # f4 by the portable skipping walk (levels 0 and 1)
     cdef int64_t batch = QBATCH if skipping or port else BATCH
@@ -523,7 +520,7 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         _fill_grid(pts, ps, n, prm.grid, bits, vox, pv if prm.walk_level >= 2 else NULL)
     if pn != NULL:
         eppf_pack_rows(n, pts, ps, nrm, ns, pv if prm.walk_level >= 2 and prm.n4 > 1 else NULL,
-                       vox if prm.f123_level == 1 and prm.n4 > 1 else NULL, pn)
+                       vox if prm.f123_level <= 1 and prm.n4 > 1 else NULL, pn)
     if skipping:
         eppf_code_grid(bits, prm.grid, code + CODE_SCRATCH, code)
         memset(lanes, 0, sizeof(lanes))
@@ -537,17 +534,14 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         if m > batch:
             m = batch
         if vec_draw:
-            if prm.f123_level == 2:
-                eppf_draw_batch_avx512(<int>m, state, <uint32_t>n, pair_i, pair_j)
-            else:
-                eppf_draw_batch_avx2(<int>m, state, <uint32_t>n, pair_i, pair_j)
+            eppf_draw_batch_at(prm.f123_level, <int>m, state, <uint32_t>n, pair_i, pair_j)
         else:
             for t in range(m):
                 if _draw_pair(pts, ps, <uint32_t>n, &state, &i, &j) != 0:
                     return 1
                 pair_i[t] = <int32_t>i
                 pair_j[t] = <int32_t>j
-        # f1-f3 (levels 1 and 3: with the f4 walk setup); the SIMD passes also
+        # f1-f3 (levels 0, 1 and 3: with the f4 walk setup); the passes also
         # find the first pair whose points coincide (none among scalar draws)
         first_same = <int>m
         if skipping:
@@ -557,14 +551,11 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         elif prm.f123_level == 2:
             first_same = eppf_f123_batch_avx512(<int>m, pair_i, pair_j, pts, ps, nrm, ns, scale, prm.n1, prm.n2,
                                                 prm.n3, prm.n4, prm.f1_density, prm.cos2, prm.cos3, pair_bins, pn)
-        elif prm.f123_level == 1:
-            first_same = eppf_f123q_avx2(<int>m, pair_i, pair_j, pts, ps, nrm, ns, vox, prm.grid, scale, prm.n1,
-                                         prm.n2, prm.n3, prm.n4, prm.f1_density, prm.cos2, prm.cos3,
-                                         prm.first_states, prm.thr, pn, pair_bins, queue_pos if port else NULL,
-                                         queue_inc, queue_state, &n_queued, counts)
         else:
-            for t in range(m):
-                pair_bins[t] = _bin_f123(pts, ps, nrm, ns, pair_i[t], pair_j[t], scale, prm, NULL) * prm.n4
+            first_same = eppf_f123q(prm.f123_level, <int>m, pair_i, pair_j, pts, ps, nrm, ns, vox, prm.grid, scale,
+                                    prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density, prm.cos2, prm.cos3,
+                                    prm.first_states, prm.thr, pn, pair_bins, queue_pos if port else NULL,
+                                    queue_inc, queue_state, &n_queued, counts)
         if vec_draw:
             if first_same < m:
                 vec_draw = False
@@ -582,8 +573,6 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
             eppf_port_walk_avx2(n_queued, queue_pos, queue_inc, queue_state, code, prm.thr, prm.n4, done, counts)
             continue
         if port:
-            n_queued = eppf_port_setup(<int>m, pair_i, pair_j, vox, prm.grid, pair_bins, prm.recip_packed,
-                                       prm.first_states, prm.thr, prm.n4, queue_pos, queue_inc, queue_state, counts)
             eppf_port_walk(n_queued, queue_pos, queue_inc, queue_state, code, prm.thr, prm.n4, done, counts)
             continue
         if prm.n4 > 1:
@@ -729,9 +718,9 @@ def eppf_counts(points_in, normals_in,
     # the walk reads any of the first CODE_READ_WORDS words) or the portable walk's (levels 0 and 1)
     code_arr = np.zeros((num_threads, CODE_READ_WORDS if prm.walk_level == 3
                          else EPPF_PORT_WORDS if _port_walk(&prm) else 1), dtype=np.uint64)
-    # the SIMD f1-f3's rows of points, normals and voxels (8 doubles a point; objects up to ROWS_MAX_POINTS
+    # the f1-f3 passes' rows of points, normals and voxels (8 doubles a point; objects up to ROWS_MAX_POINTS
     # points, larger ones are read in place)
-    cdef bint use_rows = prm.f123_level >= 1 and max_n <= ROWS_MAX_POINTS
+    cdef bint use_rows = max_n <= ROWS_MAX_POINTS
     # (each thread's rows start on a 64-byte boundary, so that no row straddles two cache lines)
     pn_buf = np.zeros(num_threads * (8 * max_n + 8) + 8 if use_rows else 8, dtype=np.float64)
     cdef Py_ssize_t pn_skip = (-(pn_buf.ctypes.data // 8)) % 8

@@ -6,7 +6,9 @@
  * - _eppf_walk_port.h, levels 0 and 1: level 3's skipping walk in portable C
  *   (the cone codes as two bit planes, built with whole-word operations; the
  *   lines of a batch walked in rounds of a few steps, several side by side,
- *   no branch on the data), which level 0 runs as it is;
+ *   no branch on the data), which level 0 runs as it is, after its pair
+ *   draws (``eppf_draw_batch``) and one pass for the coincidence check,
+ *   f1-f3 and the walk setup (``eppf_f123q_port``), as level 1 does;
  * - _eppf_walk_avx2.h, level 1: AVX2, four pairs at a time: the pair draws
  *   (``eppf_draw_batch_avx2``), the f1-f3 bins with the coincidence check
  *   and the portable walk's setup in one pass (``eppf_f123q_avx2``) and its
@@ -76,5 +78,30 @@
 #if !EPPF_WALK_SIMD
 #define eppf_port_walk_avx2 eppf_port_walk
 #endif
+
+/* The candidate pairs of a batch's draws at kernel level ``level`` (0 portable, 1 AVX2, 2 and 3 AVX-512):
+   the same pairs at every level; out_i, out_j: room for m + 7 entries. */
+static void eppf_draw_batch_at(int level, int m, uint64_t state, uint32_t n, int32_t *out_i, int32_t *out_j)
+{
+    if (level >= 2)
+        eppf_draw_batch_avx512(m, state, n, out_i, out_j);
+    else if (level == 1)
+        eppf_draw_batch_avx2(m, state, n, out_i, out_j);
+    else
+        eppf_draw_batch(m, state, n, out_i, out_j);
+}
+
+/* The f1-f3 pass with the coincidence check and the portable walk's setup at level 1 (``eppf_f123q_avx2``)
+   or 0 (``eppf_f123q_port``): the same arguments and results. */
+static int eppf_f123q(int level, int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                      const double *nrm, int64_t ns, const int32_t *vox, int64_t g, double scale, int n1, int n2,
+                      int n3, int n4, double f1_density, const double *cos2, const double *cos3,
+                      const int64_t *states, const int32_t *thr, const double *pn, int32_t *B, int64_t *QP,
+                      int64_t *QI, int64_t *QS, int *nq_out, int32_t *counts)
+{
+    return (level == 1 ? eppf_f123q_avx2 : eppf_f123q_port)(m, ii, jj, pts, ps, nrm, ns, vox, g, scale, n1, n2, n3,
+                                                            n4, f1_density, cos2, cos3, states, thr, pn, B, QP, QI,
+                                                            QS, nq_out, counts);
+}
 
 #endif /* EPPF_WALK_H */

@@ -187,7 +187,7 @@ static const int32_t eppf_compress4[16][8] __attribute__((aligned(32))) = {
  * two points coincide (returned; m when none does) and bins f1-f3
  * (``eppf_bins123_4``). Where QP is NULL it writes B[t] (the f1-f3 bin
  * times n4) for every t (B: room for m + 3); otherwise it sets up the f4
- * walks of the pairs before the first coinciding one as ``eppf_port_setup``
+ * walks of the pairs before the first coinciding one as ``eppf_f123q_port``
  * does (the same lines, in the same order, *nq_out of them, into QP, QI,
  * QS: room for m + 4) and counts those without inner voxels; B is unused.
  * The setup reads each point's voxel as 16 bytes (its x, y, z and one int32

@@ -84,10 +84,10 @@ static inline int eppf_f4_bin(const int32_t *thr, int n4, int64_t T, int64_t occ
     return b;
 }
 
-/* The rows of ``eppf_f123_batch_avx512``'s and ``eppf_f123q_avx2``'s
- * ``pn``: point k's x, y, z, nx, ny, nz at pn[8 k], then 16 bytes of its
+/* The rows of ``eppf_f123_batch_avx512``'s, ``eppf_f123q_avx2``'s and
+ * ``eppf_f123q_port``'s ``pn``: point k's x, y, z, nx, ny, nz at pn[8 k], then 16 bytes of its
  * voxel: at levels 2 and 3 its packed voxel pv[k] (the bits of the int64 in
- * a double's place) and an unused double; at level 1 (pv NULL) its voxel's
+ * a double's place) and an unused double; at levels 0 and 1 (pv NULL) its voxel's
  * x, y, z (``vox``, (n, 3) int32) and an int32 0; zeros where both are NULL.
  * So one 64-byte row holds a point, its normal and its voxel. */
 static void eppf_pack_rows(int64_t n, const double *pts, int64_t ps, const double *nrm, int64_t ns,

@@ -26,11 +26,14 @@
  *   and the steps of successive lines are independent, so an out-of-order
  *   CPU overlaps their look-ups.
  *
- * Level 0 runs this code as it is; level 1 builds the same grids with it
- * (compiled for AVX2: ``eppf_port_code_grid_avx2``) and runs the AVX2 forms
- * of the setup and the walk (``eppf_f123q_avx2``, which also bins f1-f3, and
- * ``eppf_port_walk_avx2`` in _eppf_walk_avx2.h), which give the same lines,
- * steps and states.
+ * Level 0 runs this code as it is, in level 1's order: a batch's pair draws
+ * (``eppf_draw_batch``), one pass for the coincidence check, the f1-f3 bins
+ * and the walks' setup over ``eppf_pack_rows``' rows (``eppf_f123q_port``),
+ * then the walk. Level 1 builds the same grids with it (compiled for AVX2:
+ * ``eppf_port_code_grid_avx2``) and runs the AVX2 forms of the draws, the
+ * pass and the walk (``eppf_draw_batch_avx2``, ``eppf_f123q_avx2`` and
+ * ``eppf_port_walk_avx2`` in _eppf_walk_avx2.h), which give the same pairs,
+ * lines, steps and states.
  */
 #ifndef EPPF_WALK_PORT_H
 #define EPPF_WALK_PORT_H
@@ -257,47 +260,148 @@ static void eppf_port_code_grid_avx2(const uint64_t *bits, int64_t g, uint64_t *
 #define eppf_port_code_grid_avx2 eppf_port_code_grid
 #endif
 
-/* The f4 walk setup of the pairs (ii[t], jj[t]), t < m, their voxels in
- * ``vox`` ((n, 3), ``_fill_grid``), their f1-f3 bins times n4 in B: lines
- * with inner voxels (L > 1) join the list (QP, QI, QS; their number is
- * returned) in the form of ``eppf_f123q_avx512``'s queue; the others are
- * counted at once (occ = T = L + 1, every voxel occupied). The packed start
- * and increment are _eppf_fast.pyx's ``_line_bin``'s (the same correctly
- * rounded 2**14 / L and llrint); ``states``: ``eppf_walk_states``. */
-static int eppf_port_setup(int m, const int32_t *ii, const int32_t *jj, const int32_t *vox, int64_t g,
-                               const int32_t *B, const double *recip_packed, const int64_t *states,
-                               const int32_t *thr, int n4, int64_t *QP, int64_t *QI, int64_t *QS, int32_t *counts)
+/* The candidate pairs of the next m draws of splitmix64 from ``state``,
+ * exactly as _eppf_fast.pyx's ``_draw_pair`` draws them but without its
+ * check for coinciding points (``eppf_f123q_port`` does that check): draw k
+ * is that of state + (k + 1) gamma, independent of the others, so compilers
+ * overlap or vectorize them (``eppf_draw_batch_avx2`` is this four draws to
+ * a vector). out_i, out_j: room for m entries. */
+static void eppf_draw_batch(int m, uint64_t state, uint32_t n, int32_t *out_i, int32_t *out_j)
+{
+    int t;
+    for (t = 0; t < m; t++) {
+        uint64_t z = state + (uint64_t)(t + 1) * EPPF_SM_GAMMA;
+        uint32_t i, j;
+        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+        z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+        z ^= z >> 31;
+        i = (uint32_t)(((z >> 32) * (uint64_t)n) >> 32);
+        j = (uint32_t)(((z & 0xFFFFFFFFULL) * (uint64_t)(n - 1)) >> 32);
+        out_i[t] = (int32_t)i;
+        out_j[t] = (int32_t)(j + (j >= i));
+    }
+}
+
+/* Point r's x, y, z, nx, ny, nz into x[0..5] and, unless ``vox`` and ``pn``
+   are both NULL, its voxel's x, y, z into v[0..2]: from ``pn``'s row
+   (``eppf_pack_rows``, level 1's form) or, where it is NULL, from the arrays
+   in place. */
+static inline void eppf_port_load(const double *pn, const double *pts, int64_t ps, const double *nrm, int64_t ns,
+                                  const int32_t *vox, int64_t r, double *x, int32_t *v)
+{
+    int k;
+    if (pn) {
+        const double *row = pn + 8 * r;
+        int32_t w[4];
+        for (k = 0; k < 6; k++)
+            x[k] = row[k];
+        memcpy(w, row + 6, sizeof w);
+        for (k = 0; k < 3; k++)
+            v[k] = w[k];
+        return;
+    }
+    for (k = 0; k < 3; k++) {
+        x[k] = pts[ps * r + k];
+        x[k + 3] = nrm[ns * r + k];
+    }
+    if (vox)
+        for (k = 0; k < 3; k++)
+            v[k] = vox[3 * r + k];
+}
+
+/* Level 0's pass over a batch of pairs (ii[t], jj[t]), t < m, in the form of
+ * level 1's ``eppf_f123q_avx2`` (the same arguments, results and order of
+ * lines), one pair at a time (measured: faster in scalar code than groups of
+ * pairs laid out for a compiler's vectorizer, and than separate passes for
+ * f1-f3 and the setup): finds the first t whose two points coincide
+ * (returned; m when none does), bins f1-f3 with _eppf_fast.pyx's
+ * ``_bin_f123``'s IEEE operations in the same order, and where QP is not NULL
+ * sets up the f4 walks of the pairs before the first coinciding one (lines
+ * with inner voxels, L > 1, into QP, QI, QS, *nq_out of them; the others
+ * are counted at once: occ = T = L + 1, every voxel occupied), otherwise
+ * writes B[t], the f1-f3 bin times n4. The start and increment are
+ * _eppf_fast.pyx's ``_line_bin``'s (2**14 / L correctly rounded, as
+ * ``recip_packed[L]``, and llrint); each line goes along its dominant axis
+ * (the first on a tie) in the direction in which that coordinate grows, the
+ * axis in bits 62-63. Rows come from ``pn`` (``eppf_pack_rows``) or, where it
+ * is NULL, from the arrays in place (then ``vox``, (n, 3) int32, gives the
+ * voxels). ``states``: ``eppf_walk_states``. */
+static int eppf_f123q_port(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
+                           const double *nrm, int64_t ns, const int32_t *vox, int64_t g, double scale, int n1, int n2,
+                           int n3, int n4, double f1_density, const double *cos2, const double *cos3,
+                           const int64_t *states, const int32_t *thr, const double *pn, int32_t *B, int64_t *QP,
+                           int64_t *QI, int64_t *QS, int *nq_out, int32_t *counts)
 {
     const int64_t half = EPPF_PK_S / 2 + g;
-    int t, nq = 0;
+    const double top1 = (double)(n1 - 1);
+    double recip[EPPF_WALK_MAX_GRID];  /* 2**14 / L, correctly rounded, as recip_packed[L] */
+    int t, k, nq = 0;
+    recip[0] = 0.0;
+    for (k = 1; k < EPPF_WALK_MAX_GRID; k++)
+        recip[k] = (double)EPPF_PK_S / k;
     for (t = 0; t < m; t++) {
-        const int32_t *va = vox + 3 * (int64_t)ii[t], *vb = vox + 3 * (int64_t)jj[t];
-        const int64_t dx = vb[0] - va[0], dy = vb[1] - va[1], dz = vb[2] - va[2];
-        const int64_t ax = dx < 0 ? -dx : dx, ay = dy < 0 ? -dy : dy, az = dz < 0 ? -dz : dz;
-        int64_t L = ax > ay ? ax : ay, p, inc, da, axis, back;
-        double q;
-        L = az > L ? az : L;
-        if (L <= 1) {
-            counts[B[t] + eppf_f4_bin(thr, n4, L + 1, L + 1)]++;
+        double a[6], b[6], dx, dy, dz, dist, v;
+        int32_t va[3] = {0, 0, 0}, vb[3] = {0, 0, 0}, bins, b1, b2 = 0, b3 = 0;
+        eppf_port_load(pn, pts, ps, nrm, ns, QP ? vox : NULL, ii[t], a, va);
+        eppf_port_load(pn, pts, ps, nrm, ns, QP ? vox : NULL, jj[t], b, vb);
+        if (a[0] == b[0] && a[1] == b[1] && a[2] == b[2])
+            break;  /* the first pair whose points coincide ends the batch */
+        /* f1-f3 as _bin_f123 (no branch on the data: the compiler's minimum and maximum) */
+        dx = b[0] - a[0];
+        dy = b[1] - a[1];
+        dz = b[2] - a[2];
+        dist = sqrt(dx * dx + dy * dy + dz * dz);
+        v = dist * scale;
+        v = v * f1_density;
+        v = v < top1 ? v : top1;
+        b1 = (int32_t)(v > 0.0 ? v : 0.0);
+        if (n2 > 1) {
+            const double inv = 1.0 / dist;
+            const double u1 = (a[3] * dx + a[4] * dy + a[5] * dz) * inv;
+            const double u2 = (b[3] * dx + b[4] * dy + b[5] * dz) * inv;
+            const double m1 = u2 < u1 ? u2 : u1;
+            for (k = 0; k < n2 - 1; k++)
+                b2 += m1 <= cos2[k];
+        }
+        if (n3 > 1) {
+            /* (fabs turns -0.0 into +0.0, which compares the same) */
+            const double v3 = fabs(a[3] * b[3] + a[4] * b[4] + a[5] * b[5]);
+            for (k = 0; k < n3 - 1; k++)
+                b3 += v3 <= cos3[k];
+        }
+        bins = ((b1 * n2 + b2) * n3 + b3) * n4;
+        if (!QP) {
+            B[t] = bins;
             continue;
         }
-        q = recip_packed[L];
-        inc = llrint((double)dx * q) * EPPF_PK_X + llrint((double)dy * q) * EPPF_PK_Y + llrint((double)dz * q);
-        p = (va[0] * EPPF_PK_S + half) * EPPF_PK_X + (va[1] * EPPF_PK_S + half) * EPPF_PK_Y + va[2] * EPPF_PK_S
-            + half + inc;
-        /* along the dominant axis (the first on a tie), in the direction in which it grows: from the
-           last inner voxel, by -inc, where it falls (no branch: the direction is random) */
-        axis = ax == L ? 0 : ay == L ? 1 : 2;
-        da = axis == 0 ? dx : axis == 1 ? dy : dz;
-        back = -(int64_t)(da < 0);
-        p += ((L - 2) * inc) & back;
-        inc = (inc ^ back) - back;
-        QP[nq] = (int64_t)((uint64_t)p + ((uint64_t)axis << 62));
-        QI[nq] = inc;
-        QS[nq] = (states[L + 1] ^ EPPF_PORT_BIAS) + (((int64_t)B[t] + (n4 > 3 ? L << 24 : 0)) << 32);
-        nq++;
+        {
+            const int64_t ex = vb[0] - va[0], ey = vb[1] - va[1], ez = vb[2] - va[2];
+            const int64_t ax = ex < 0 ? -ex : ex, ay = ey < 0 ? -ey : ey, az = ez < 0 ? -ez : ez;
+            const int64_t axy = ax > ay ? ax : ay, L = axy > az ? axy : az;
+            const double q = recip[L & 63];
+            int64_t inc = (int64_t)llrint((double)ex * q) * EPPF_PK_X + (int64_t)llrint((double)ey * q) * EPPF_PK_Y
+                          + (int64_t)llrint((double)ez * q);
+            int64_t p = (va[0] * EPPF_PK_S + half) * EPPF_PK_X + (va[1] * EPPF_PK_S + half) * EPPF_PK_Y
+                        + va[2] * EPPF_PK_S + half + inc;
+            /* from the last inner voxel, by -inc, where the dominant axis falls (no branch: the direction is random) */
+            const int64_t axis = ax == L ? 0 : ay == L ? 1 : 2;
+            const int64_t da = axis == 0 ? ex : axis == 1 ? ey : ez;
+            const int64_t back = -(int64_t)(da < 0);
+            if (L <= 1) {
+                counts[bins + eppf_f4_bin(thr, n4, L + 1, L + 1)]++;
+                continue;
+            }
+            p += ((L - 2) * inc) & back;
+            inc = (inc ^ back) - back;
+            QP[nq] = (int64_t)((uint64_t)p + ((uint64_t)axis << 62));
+            QI[nq] = inc;
+            QS[nq] = (states[(L & 63) + 1] ^ EPPF_PORT_BIAS) + (((int64_t)bins + (n4 > 3 ? L << 24 : 0)) << 32);
+            nq++;
+        }
     }
-    return nq;
+    if (nq_out)
+        *nq_out = nq;
+    return t;
 }
 
 #endif /* EPPF_WALK_PORT_H */
