@@ -490,7 +490,23 @@ static inline void esf_sides(const double *pts, const uint32_t *i1, const uint32
 }
 
 #if ESF_SIMD
-/* esf_sides four candidates at a time (gathers of the coordinates; the same
+/* The x, y and z of the points i[0..3] as three vectors: each point's three
+ * doubles by one masked load (nothing read past them), then a 4x4
+ * transpose; AVX2-only AMD CPUs run gathers as slow microcode. */
+__attribute__((target("avx2")))
+static inline void esf_load_xyz4(const double *pts, const uint32_t *i, __m256d *x, __m256d *y, __m256d *z)
+{
+    const __m256i m = _mm256_set_epi64x(0, -1, -1, -1);
+    __m256d r0 = _mm256_maskload_pd(pts + 3 * (size_t)i[0], m), r1 = _mm256_maskload_pd(pts + 3 * (size_t)i[1], m);
+    __m256d r2 = _mm256_maskload_pd(pts + 3 * (size_t)i[2], m), r3 = _mm256_maskload_pd(pts + 3 * (size_t)i[3], m);
+    __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1); /* x0 x1 z0 z1, y0 y1 0 0 */
+    __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3); /* x2 x3 z2 z3, y2 y3 0 0 */
+    *x = _mm256_permute2f128_pd(t0, t2, 0x20);
+    *y = _mm256_permute2f128_pd(t1, t3, 0x20);
+    *z = _mm256_permute2f128_pd(t0, t2, 0x31);
+}
+
+/* esf_sides four candidates at a time (loads of the coordinates; the same
  * subtractions, products and sums in the same order, so the same values;
  * |x| by clearing the sign bit, as fabs). */
 __attribute__((target("avx2")))
@@ -498,32 +514,12 @@ static void esf_sides_avx2(const double *pts, const uint32_t *i1, const uint32_t
                            int n, double *A, double *B, double *C, double *c1, double *c2, double *c3)
 {
     const __m256d sign = _mm256_set1_pd(-0.0);
-    const __m256i one = _mm256_set1_epi64x(1);
     int j;
     for (j = 0; j + 4 <= n; j += 4) {
-        /* offsets 3 i in 64-bit lanes (no overflow for any uint32 index) */
-        __m256i o1 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i1 + j)));
-        __m256i o2 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i2 + j)));
-        __m256i o3 = _mm256_cvtepu32_epi64(_mm_loadu_si128((const __m128i *)(i3 + j)));
         __m256d x1, x2, x3, y1, y2, y3, z1, z2, z3;
-        o1 = _mm256_add_epi64(_mm256_slli_epi64(o1, 1), o1);
-        o2 = _mm256_add_epi64(_mm256_slli_epi64(o2, 1), o2);
-        o3 = _mm256_add_epi64(_mm256_slli_epi64(o3, 1), o3);
-        x1 = _mm256_i64gather_pd(pts, o1, 8);
-        x2 = _mm256_i64gather_pd(pts, o2, 8);
-        x3 = _mm256_i64gather_pd(pts, o3, 8);
-        o1 = _mm256_add_epi64(o1, one);
-        o2 = _mm256_add_epi64(o2, one);
-        o3 = _mm256_add_epi64(o3, one);
-        y1 = _mm256_i64gather_pd(pts, o1, 8);
-        y2 = _mm256_i64gather_pd(pts, o2, 8);
-        y3 = _mm256_i64gather_pd(pts, o3, 8);
-        o1 = _mm256_add_epi64(o1, one);
-        o2 = _mm256_add_epi64(o2, one);
-        o3 = _mm256_add_epi64(o3, one);
-        z1 = _mm256_i64gather_pd(pts, o1, 8);
-        z2 = _mm256_i64gather_pd(pts, o2, 8);
-        z3 = _mm256_i64gather_pd(pts, o3, 8);
+        esf_load_xyz4(pts, i1 + j, &x1, &y1, &z1);
+        esf_load_xyz4(pts, i2 + j, &x2, &y2, &z2);
+        esf_load_xyz4(pts, i3 + j, &x3, &y3, &z3);
         {
             __m256d v21x = _mm256_sub_pd(x2, x1), v21y = _mm256_sub_pd(y2, y1), v21z = _mm256_sub_pd(z2, z1);
             __m256d v31x = _mm256_sub_pd(x3, x1), v31y = _mm256_sub_pd(y3, y1), v31z = _mm256_sub_pd(z3, z1);
