@@ -95,8 +95,10 @@ class EPPF4DClassifier(SkorchClassifierBase):
         How the 4D network (``conv="4d"``) computes its convolutions:
         directly or the same convolutions in the frequency domain (equal up
         to rounding; see :class:`eppf.nn.EPPFNet4D`). ``"auto"`` chooses per
-        layer: the frequency domain for the paper's wide layers in float32,
-        direct otherwise. Ignored by the 3D and 2D networks.
+        layer: in float32 the frequency domain for the paper's wide layers,
+        and in training for the recommended recipe's narrower ones too
+        (which predict directly); direct under bfloat16 and for the
+        single-channel first layer. Ignored by the 3D and 2D networks.
     n_estimators : int, default=1
         Networks trained (beyond the paper): with more than one, ``fit``
         trains a small ensemble, every member on the same validation

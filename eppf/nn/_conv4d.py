@@ -202,8 +202,9 @@ def conv4d(input, weight, bias=None, *, path="auto", conv_impl="auto"):
         fewer multiply-adds for layers with many channels, computed in
         float32 under bfloat16 autocast); ``"auto"`` takes the frequency
         domain where it saves at least 2.5 times the multiply-adds and the
-        layer mixes at least 2,048 input x output channel pairs, and never
-        under autocast (see :func:`eppf.nn._spectral.choose_impl`).
+        layer mixes at least 2,048 input x output channel pairs (512 where
+        gradients are recorded, as in a training step), and never under
+        autocast (see :func:`eppf.nn._spectral.choose_impl`).
 
     Returns
     -------
