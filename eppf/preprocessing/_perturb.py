@@ -539,10 +539,9 @@ def _scale_clouds(clouds, factors, center):
 
 
 def _scaling_factors(rng, low, high, anisotropic):
-    """The factors :func:`random_scaling` draws from ``rng``: log-uniform in [low, high], one per axis or one for
-    all three."""
-    log_factors = rng.uniform(np.log(low), np.log(high), size=3 if anisotropic else 1)
-    return np.broadcast_to(np.exp(log_factors), (3,))
+    """The factors :func:`random_scaling` draws from ``rng``: log-uniform in [low, high], three (one per axis)
+    or one for all three axes (shape (1,): arithmetic and assignment broadcast it, with the same bits)."""
+    return np.exp(rng.uniform(np.log(low), np.log(high), size=3 if anisotropic else 1))
 
 
 def scale(cloud, factors, *, center="centroid"):

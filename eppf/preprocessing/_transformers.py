@@ -336,11 +336,9 @@ class RandomScaling(_CloudTransformer):
         self._check_params()
         clouds = check_point_clouds(X, owner=type(self).__name__)
         low, high, anisotropic = float(self.low), float(self.high), bool(self.anisotropic)
-        # each object's factors as _perturb._scaling_factors draws them, written into one array
-        log_low, log_high, size = np.log(low), np.log(high), 3 if anisotropic else 1
         factors = np.empty((len(clouds), 3))
         for k, seed in enumerate(object_seeds(self.random_state, len(clouds))):
-            factors[k] = np.exp(object_rng(seed).uniform(log_low, log_high, size=size))
+            factors[k] = _perturb._scaling_factors(object_rng(seed), low, high, anisotropic)
         return _perturb._scale_clouds(clouds, factors, self.center)
 
 
