@@ -25,8 +25,6 @@ __all__ = ["run_segment"]
 FIELD_FORMATS = ("las", "laz", "pcd", "ply")
 #: Format of the segment files of a scene in another format (text, E57, NumPy): it keeps every field.
 FALLBACK_FORMAT = "ply"
-#: Field names of a scene's normals, as the readers give them (PCD/NumPy/LAS, PLY, E57).
-NORMAL_FIELDS = NORMAL_NAME_SETS
 
 
 def add_segmentation(parser, prefix=""):
@@ -110,7 +108,7 @@ class Scene:
         """The points of segment ``k``, with the scene's normals when it has them (as
         :func:`eppf.io.read_point_cloud` reads a file's normals)."""
         idx = self.indices(k)
-        for names in NORMAL_FIELDS:
+        for names in NORMAL_NAME_SETS:  # (the readers' names: PCD/NumPy/LAS, PLY, E57)
             if all(n in self.fields and self.fields[n].ndim == 1 for n in names):
                 normals = np.column_stack([self.fields[n][idx] for n in names]).astype(np.float64)
                 return np.hstack([self.points[idx], normals])

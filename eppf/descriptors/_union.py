@@ -67,13 +67,8 @@ class _BlockInput:
         """The clouds for block ``est``."""
         if self._checked is not None and isinstance(est, PointCloudDescriptor) and not est._extra_columns:
             return self._checked
-        if self._list is None:
-            packed = self.packed
-            if packed.normals is None:  # (views of the validated points, as check_point_clouds gives)
-                bounds = packed.offsets.tolist()
-                self._list = [packed.points[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-            else:
-                self._list = list(packed)
+        if self._list is None:  # (views of the validated points, or points and normals stacked)
+            self._list = list(self.packed)
         return self._list
 
 

@@ -143,10 +143,11 @@ def _scan(libe57, imf, scan, size, path, owner, k):
         if pose.isDefined("rotation"):
             rot = libe57.StructureNode(pose.get("rotation"))
             q = [libe57.FloatNode(rot.get(c)).value() for c in "wxyz"]
-            xyz = xyz @ _rotation(q).T
+            turn = _rotation(q).T
+            xyz = xyz @ turn
             if set(_NORMALS) <= have and q != [1.0, 0.0, 0.0, 0.0]:
                 # normals are directions: the pose's rotation turns them too (no translation)
-                turned = np.column_stack([columns[n].astype(np.float64) for n in _NORMALS]) @ _rotation(q).T
+                turned = np.column_stack([columns[n].astype(np.float64) for n in _NORMALS]) @ turn
                 for k, n in enumerate(_NORMALS):
                     columns[n] = turned[:, k]
         if pose.isDefined("translation"):

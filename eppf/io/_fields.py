@@ -15,7 +15,6 @@ from ._formats import lookup
 __all__ = ["read_point_fields", "write_point_fields"]
 
 _WRITABLE = ("pcd", "ply", "las", "laz")
-_NORMALS = NORMAL_NAMES
 
 
 def _read(path, fmt, owner):
@@ -27,7 +26,7 @@ def _read(path, fmt, owner):
     if fmt.raw:  # NumPy arrays: columns 4 to 6 are normals
         cloud = fmt.reader(path, owner, "auto")
         fields = {} if cloud.normals is None else {n: np.ascontiguousarray(cloud.normals[:, k])
-                                                   for k, n in enumerate(_NORMALS)}
+                                                   for k, n in enumerate(NORMAL_NAMES)}
         return np.ascontiguousarray(cloud.xyz, dtype=np.float64), fields
     data = read_bytes(path, owner)
     if name == "pcd":
