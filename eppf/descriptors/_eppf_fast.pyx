@@ -80,8 +80,8 @@ cdef extern from "_eppf_walk.h":
     int eppf_f123q(int level, int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
                         const double* nrm, int64_t ns, const int32_t* vox, int64_t g, double scale, int n1, int n2,
                         int n3, int n4, double f1_density, const double* cos2, const double* cos3,
-                        const int64_t* states, const int32_t* thr, const double* pn, int32_t* B, int64_t* QP,
-                        int64_t* QI, int64_t* QS, int* nq_out, int32_t* counts) noexcept nogil
+                        const int64_t* states, const int32_t* thr, const double* recip_packed, const double* pn,
+                        int32_t* B, int64_t* QP, int64_t* QI, int64_t* QS, int* nq_out, int32_t* counts) noexcept nogil
     void eppf_fill_grid_avx512(const double* pts, int64_t ps, int64_t n, int64_t g, uint64_t* bits,
                                int64_t* pv) noexcept nogil
     int eppf_f123_batch_avx512(int m, const int32_t* I, const int32_t* J, const double* pts, int64_t ps,
@@ -554,7 +554,8 @@ cdef int _object_counts(const double* pts, int64_t ps, const double* nrm, int64_
         else:
             first_same = eppf_f123q(prm.f123_level, <int>m, pair_i, pair_j, pts, ps, nrm, ns, vox, prm.grid, scale,
                                     prm.n1, prm.n2, prm.n3, prm.n4, prm.f1_density, prm.cos2, prm.cos3,
-                                    prm.first_states, prm.thr, pn, pair_bins, queue_pos if port else NULL,
+                                    prm.first_states, prm.thr, prm.recip_packed, pn, pair_bins,
+                                    queue_pos if port else NULL,
                                     queue_inc, queue_state, &n_queued, counts)
         if vec_draw:
             if first_same < m:

@@ -92,16 +92,19 @@ static void eppf_draw_batch_at(int level, int m, uint64_t state, uint32_t n, int
 }
 
 /* The f1-f3 pass with the coincidence check and the portable walk's setup at level 1 (``eppf_f123q_avx2``)
-   or 0 (``eppf_f123q_port``): the same arguments and results. */
+   or 0 (``eppf_f123q_port``, which reads 2**14 / L from ``recip_packed``; level 1 divides in its lanes): the
+   same results. */
 static int eppf_f123q(int level, int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
                       const double *nrm, int64_t ns, const int32_t *vox, int64_t g, double scale, int n1, int n2,
                       int n3, int n4, double f1_density, const double *cos2, const double *cos3,
-                      const int64_t *states, const int32_t *thr, const double *pn, int32_t *B, int64_t *QP,
-                      int64_t *QI, int64_t *QS, int *nq_out, int32_t *counts)
+                      const int64_t *states, const int32_t *thr, const double *recip_packed, const double *pn,
+                      int32_t *B, int64_t *QP, int64_t *QI, int64_t *QS, int *nq_out, int32_t *counts)
 {
-    return (level == 1 ? eppf_f123q_avx2 : eppf_f123q_port)(m, ii, jj, pts, ps, nrm, ns, vox, g, scale, n1, n2, n3,
-                                                            n4, f1_density, cos2, cos3, states, thr, pn, B, QP, QI,
-                                                            QS, nq_out, counts);
+    if (level == 1)
+        return eppf_f123q_avx2(m, ii, jj, pts, ps, nrm, ns, vox, g, scale, n1, n2, n3, n4, f1_density, cos2, cos3,
+                               states, thr, pn, B, QP, QI, QS, nq_out, counts);
+    return eppf_f123q_port(m, ii, jj, pts, ps, nrm, ns, vox, g, scale, n1, n2, n3, n4, f1_density, cos2, cos3,
+                           states, thr, recip_packed, pn, B, QP, QI, QS, nq_out, counts);
 }
 
 #endif /* EPPF_WALK_H */

@@ -320,8 +320,8 @@ static inline void eppf_port_load(const double *pn, const double *pts, int64_t p
  * with inner voxels, L > 1, into QP, QI, QS, *nq_out of them; the others
  * are counted at once: occ = T = L + 1, every voxel occupied), otherwise
  * writes B[t], the f1-f3 bin times n4. The start and increment are
- * _eppf_fast.pyx's ``_line_bin``'s (2**14 / L correctly rounded, as
- * ``recip_packed[L]``, and llrint); each line goes along its dominant axis
+ * _eppf_fast.pyx's ``_line_bin``'s (its ``recip_packed``, 2**14 / L correctly
+ * rounded for L < 64, and llrint); each line goes along its dominant axis
  * (the first on a tie) in the direction in which that coordinate grows, the
  * axis in bits 62-63. Rows come from ``pn`` (``eppf_pack_rows``) or, where it
  * is NULL, from the arrays in place (then ``vox``, (n, 3) int32, gives the
@@ -329,16 +329,12 @@ static inline void eppf_port_load(const double *pn, const double *pts, int64_t p
 static int eppf_f123q_port(int m, const int32_t *ii, const int32_t *jj, const double *pts, int64_t ps,
                            const double *nrm, int64_t ns, const int32_t *vox, int64_t g, double scale, int n1, int n2,
                            int n3, int n4, double f1_density, const double *cos2, const double *cos3,
-                           const int64_t *states, const int32_t *thr, const double *pn, int32_t *B, int64_t *QP,
-                           int64_t *QI, int64_t *QS, int *nq_out, int32_t *counts)
+                           const int64_t *states, const int32_t *thr, const double *recip_packed, const double *pn,
+                           int32_t *B, int64_t *QP, int64_t *QI, int64_t *QS, int *nq_out, int32_t *counts)
 {
     const int64_t half = EPPF_PK_S / 2 + g;
     const double top1 = (double)(n1 - 1);
-    double recip[EPPF_WALK_MAX_GRID];  /* 2**14 / L, correctly rounded, as recip_packed[L] */
     int t, k, nq = 0;
-    recip[0] = 0.0;
-    for (k = 1; k < EPPF_WALK_MAX_GRID; k++)
-        recip[k] = (double)EPPF_PK_S / k;
     for (t = 0; t < m; t++) {
         double a[6], b[6], dx, dy, dz, dist, v;
         int32_t va[3] = {0, 0, 0}, vb[3] = {0, 0, 0}, bins, b1, b2 = 0, b3 = 0;
@@ -378,7 +374,7 @@ static int eppf_f123q_port(int m, const int32_t *ii, const int32_t *jj, const do
             const int64_t ex = vb[0] - va[0], ey = vb[1] - va[1], ez = vb[2] - va[2];
             const int64_t ax = ex < 0 ? -ex : ex, ay = ey < 0 ? -ey : ey, az = ez < 0 ? -ez : ez;
             const int64_t axy = ax > ay ? ax : ay, L = axy > az ? axy : az;
-            const double q = recip[L & 63];
+            const double q = recip_packed[L & 63];
             int64_t inc = (int64_t)llrint((double)ex * q) * EPPF_PK_X + (int64_t)llrint((double)ey * q) * EPPF_PK_Y
                           + (int64_t)llrint((double)ez * q);
             int64_t p = (va[0] * EPPF_PK_S + half) * EPPF_PK_X + (va[1] * EPPF_PK_S + half) * EPPF_PK_Y
