@@ -543,6 +543,18 @@ cdef inline Py_ssize_t _bucket(double x) noexcept nogil:
     return <Py_ssize_t>x
 
 
+cdef inline Py_ssize_t _scan(const double* sx, const double* sy, const double* sz, int64_t b, int64_t e,
+                             const double* q, double guess, double* cand_d2, int64_t* cand_pos,
+                             Py_ssize_t m) noexcept nogil:
+    """Offer points [b, e) of the x, y, z arrays to the candidate list with the
+    level's distance scan (``_simd``); return the new count."""
+    if _simd == 2:
+        return eppf_nrm_scan_avx512(sx, sy, sz, b, e, q[0], q[1], q[2], guess, cand_d2, cand_pos, m)
+    if _simd == 1:
+        return eppf_nrm_scan_avx2(sx, sy, sz, b, e, q[0], q[1], q[2], guess, cand_d2, cand_pos, m)
+    return eppf_nrm_scan_portable(sx, sy, sz, b, e, q[0], q[1], q[2], guess, cand_d2, cand_pos, m)
+
+
 cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start,
                      const double* q, const int64_t* c, Py_ssize_t k, double guess,
                      double* cand_d2, int64_t* cand_pos, int64_t* sel, double* kd2,
@@ -590,12 +602,7 @@ cdef int _knn_block(const Grid* g, const double* spts, const int64_t* cell_start
             e = cell_start[row + x1 + 1]
             if m > max_cand:
                 return _FAST_MANY
-            if _simd == 2:
-                m = eppf_nrm_scan_avx512(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
-            elif _simd == 1:
-                m = eppf_nrm_scan_avx2(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
-            else:
-                m = eppf_nrm_scan_portable(g.sx, g.sy, g.sz, b, e, qx, qy, qz, guess, cand_d2, cand_pos, m)
+            m = _scan(g.sx, g.sy, g.sz, b, e, q, guess, cand_d2, cand_pos, m)
     return _select_k(g, q, c, r, k, guess, m, cand_d2, cand_pos, sel, kd2, kpos, cand_b)
 
 
@@ -700,17 +707,9 @@ cdef void _gather_block(const Grid* g, const int64_t* cell_start, const int64_t*
 
 cdef inline Py_ssize_t _scan_block(const Scratch* sc, int64_t b, int64_t e, const double* q, double guess,
                                    Py_ssize_t m) noexcept nogil:
-    """Offer the gathered block's points [b, e) to the candidate list (the
-    level's distance scan); return the new count."""
+    """Offer the gathered block's points [b, e) to the candidate list; return the new count."""
     cdef const double* bx = sc.blk
-    if _simd == 2:
-        return eppf_nrm_scan_avx512(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
-                                    guess, sc.cand_d2, sc.cand_pos, m)
-    if _simd == 1:
-        return eppf_nrm_scan_avx2(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
-                                  guess, sc.cand_d2, sc.cand_pos, m)
-    return eppf_nrm_scan_portable(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q[0], q[1], q[2],
-                                  guess, sc.cand_d2, sc.cand_pos, m)
+    return _scan(bx, bx + sc.blk_stride, bx + 2 * sc.blk_stride, b, e, q, guess, sc.cand_d2, sc.cand_pos, m)
 
 
 cdef int _knn_near(const Grid* g, const int64_t* cell_start, const double* q, const int64_t* c,
