@@ -45,6 +45,19 @@ Examples
 Cloud = namedtuple("Cloud", ["xyz", "normals"])
 
 
+def widened(values):
+    """A float64 copy of a numeric array, without NumPy's cast warning for signalling NaNs.
+
+    Widening float32 (or float16) to float64 is exact; a signalling NaN in a
+    file (a corrupt or hostile one) becomes a quiet NaN and raises the CPU's
+    "invalid" flag, which NumPy turns into a RuntimeWarning (an exception
+    under ``-W error``) that says nothing about the file. The readers drop or
+    keep NaN points as they always do.
+    """
+    with np.errstate(invalid="ignore"):
+        return np.asarray(values).astype(np.float64)
+
+
 def check_file(path, owner):
     """Stat ``path``: OSError (naming it) unless it is a regular, readable file; returns its size."""
     try:

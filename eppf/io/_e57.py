@@ -20,7 +20,7 @@ import struct
 
 import numpy as np
 
-from ._common import NORMAL_NAME_SETS, Cloud, check_file
+from ._common import NORMAL_NAME_SETS, Cloud, check_file, widened
 from ._errors import FileFormatError
 
 #: Records read from a scan at a time.
@@ -134,9 +134,9 @@ def _scan(libe57, imf, scan, size, path, owner, k):
     columns = {n: (np.concatenate(parts[n]) if parts[n] else np.empty(0, dtype=np.dtype(spec[j][0])))
                .astype(spec[j][1], copy=False) for j, n in enumerate(names)}
     if set(_CARTESIAN) <= have:
-        xyz = np.column_stack([columns[n].astype(np.float64) for n in _CARTESIAN])
+        xyz = np.column_stack([widened(columns[n]) for n in _CARTESIAN])
     else:
-        r, az, el = (columns[n].astype(np.float64) for n in _SPHERICAL)
+        r, az, el = (widened(columns[n]) for n in _SPHERICAL)
         xyz = np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
     if scan.isDefined("pose"):
         pose = libe57.StructureNode(scan.get("pose"))
@@ -147,7 +147,7 @@ def _scan(libe57, imf, scan, size, path, owner, k):
             xyz = xyz @ turn
             if set(_NORMALS) <= have and q != [1.0, 0.0, 0.0, 0.0]:
                 # normals are directions: the pose's rotation turns them too (no translation)
-                turned = np.column_stack([columns[n].astype(np.float64) for n in _NORMALS]) @ turn
+                turned = np.column_stack([widened(columns[n]) for n in _NORMALS]) @ turn
                 for k, n in enumerate(_NORMALS):
                     columns[n] = turned[:, k]
         if pose.isDefined("translation"):
@@ -198,7 +198,7 @@ def read_e57(path, owner, want_normals="auto"):
     points, fields = read_e57_fields(path, owner)
     normals = None
     if want_normals is not False and all(n in fields for n in _NORMALS):
-        normals = np.column_stack([np.asarray(fields[n], dtype=np.float64) for n in _NORMALS])
+        normals = np.column_stack([widened(fields[n]) for n in _NORMALS])
     state = fields.get("cartesianInvalidState")
     if state is not None:
         keep = state == 0

@@ -31,12 +31,13 @@ Coordinates are returned as float64 ``X * scale + offset``, the values
 laspy's ``las.x`` gives, in the file's own units.
 """
 
+import math
 import os
 import struct
 
 import numpy as np
 
-from ._common import NORMAL_NAME_SETS, NORMAL_NAMES, Cloud, check_file
+from ._common import NORMAL_NAME_SETS, NORMAL_NAMES, Cloud, check_file, widened
 from ._errors import FileFormatError
 
 #: Decoded LAZ data is allocated in pieces of at most this many times the file's size.
@@ -108,6 +109,16 @@ def check_header(fh, size, path, owner):
     count = struct.unpack_from("<Q", head, 247)[0] if minor >= 4 else legacy_count
     if minor >= 4 and count == 0:
         count = legacy_count
+    # coordinates are X * scale + offset: a zero or non-finite scale (or offset) gives no coordinates, and a
+    # scale so large that an int32 times it overflows gives infinities
+    scales, offsets = struct.unpack_from("<3d", head, 131), struct.unpack_from("<3d", head, 155)
+    for k, axis in enumerate("xyz"):
+        scale, off = scales[k], offsets[k]
+        if not (math.isfinite(scale) and scale != 0.0):
+            _fail(owner, path, f"byte {131 + 8 * k}", f"{axis} scale factor {scale!r} (a LAS header's must be finite and non-zero)")
+        if not math.isfinite(off) or not math.isfinite(abs(scale) * 2.0 ** 31 + abs(off)):
+            _fail(owner, path, f"byte {155 + 8 * k}", f"{axis} offset {off!r} with scale factor {scale!r} gives no finite "
+                  "coordinates")
     # the VLRs, each inside the header region before the points
     pos = header_size
     extra = 0
@@ -312,7 +323,7 @@ def read_las(path, owner, want_normals="auto"):
     for trio in NORMAL_NAME_SETS[:2]:
         if all(n in names for n in trio):
             points = laspy.ScaleAwarePointRecord(array, header.point_format, header.scales, header.offsets)
-            nrm = np.column_stack([np.asarray(points[n], dtype=np.float64) for n in trio])
+            nrm = np.column_stack([widened(points[n]) for n in trio])
             break
     return Cloud(_coordinates(header, array), nrm)
 

@@ -12,7 +12,7 @@ import zipfile
 
 import numpy as np
 
-from ._common import Cloud, check_file
+from ._common import Cloud, check_file, widened
 from ._errors import FileFormatError
 
 _DEFLATE_MAX_RATIO = 1032  # deflate's longest match (258 bytes) from 2 bits, rounded up
@@ -94,7 +94,7 @@ def _to_cloud(arr, path, owner):
         raise FileFormatError(
             f"{owner}: {path!r} must hold a numeric array of shape (n_points, 3+), got {arr.dtype} {arr.shape}"
         )
-    arr = arr.astype(np.float64)
+    arr = widened(arr)
     return Cloud(arr[:, :3], arr[:, 3:6] if arr.shape[1] >= 6 else None)
 
 

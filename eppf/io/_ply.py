@@ -18,7 +18,7 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud
+from ._common import Cloud, widened
 from ._errors import FileFormatError
 
 try:  # compiled token parser for ASCII bodies; NumPy's string conversion otherwise
@@ -319,7 +319,7 @@ def _column(values, code, copy=True):
     if arr.dtype == np.float64 and code == "f8":
         return arr
     if arr.dtype == np.float32 and code == "f4":  # binary float columns: the exact widening, nothing to round
-        return arr if not copy else arr.astype(np.float64)
+        return widened(arr) if copy else arr
     with np.errstate(over="ignore", invalid="ignore"):  # out-of-range values become inf, as in C
         if code in ("f4",) and arr.dtype != np.float32:
             arr = arr.astype(np.float32)
@@ -349,7 +349,7 @@ def _plain_vertices(data, fmt, elements, pos):
     if count * width * int(code[1]) > len(data) - pos:
         return None
     values = np.frombuffer(data, dtype=_FORMATS[fmt] + code, count=count * width, offset=pos)
-    full = values.reshape(count, width).astype(np.float64)  # (a new C-ordered block: what _finish_cloud keeps)
+    full = widened(values.reshape(count, width))  # (a new C-ordered block: what _finish_cloud keeps)
     return Cloud(full[:, :3], full[:, 3:] if width == 6 else None)
 
 
@@ -381,7 +381,8 @@ def read_ply(path, data, owner, want_faces=True):
     full = np.empty((n_v, 3 + len(normal_names)))
     for j, f in enumerate(("x", "y", "z") + normal_names):
         if n_v:
-            full[:, j] = _column(v[f], vprops[f].code, copy=False)
+            with np.errstate(invalid="ignore"):  # float32 widened in place (a signalling NaN: see widened)
+                full[:, j] = _column(v[f], vprops[f].code, copy=False)
     cloud = Cloud(full[:, :3], full[:, 3:] if normal_names else None)
     if not want_faces or "face" not in spec:
         return cloud, None

@@ -157,6 +157,11 @@ def _chunk_table(data):
     ("las", [("<I", 100, 4 * 10 ** 9)], "VLR 0 of 4000000000 does not fit before the point data"),
     ("las", [("<H", 94, 60000)], "header size 60000 outside"),
     ("laz", [("<q", _offset_to_points, 10 ** 12)], "LAZ chunk table offset 1000000000000 outside"),
+    ("las", [("<d", 131, 0.0)], "byte 131: x scale factor 0.0 .a LAS header's must be finite and non-zero"),
+    ("laz", [("<d", 147, float("nan"))], "byte 147: z scale factor nan"),
+    ("las", [("<d", 139, float("-inf"))], "byte 139: y scale factor -inf"),
+    ("las", [("<d", 131, 1e300)], "byte 155: x offset .* with scale factor 1e.300 gives no finite coordinates"),
+    ("las", [("<d", 163, float("inf"))], "byte 163: y offset inf"),
     ("laz", [("<I", lambda d: _chunk_table(d) + 4, 2 ** 31)], "declares 2147483648 chunks"),
 ])
 def test_hostile_las_headers_are_refused_before_allocating(tmp_path, ext, edits, msg):

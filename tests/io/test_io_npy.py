@@ -111,3 +111,21 @@ def test_npz_corrupt_archives(tmp_path):
     (tmp_path / "bomb.npz").write_bytes(bytes(data))
     with pytest.raises(FileFormatError, match="more than its compression can give"):
         read_point_cloud(tmp_path / "bomb.npz")
+
+
+@pytest.mark.parametrize("ext", ["npy", "npz"])
+def test_float32_signalling_nan_is_read_without_a_warning(tmp_path, ext):
+    import warnings
+
+    from eppf.io import read_point_fields
+
+    rows = np.arange(12, dtype=np.float32).reshape(4, 3)
+    rows.view(np.uint32)[2, 1] = 0x7FA00000  # a signalling NaN: widening it raises the CPU's "invalid" flag
+    path = tmp_path / f"s.{ext}"
+    np.save(path, rows) if ext == "npy" else np.savez(path, points=rows)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # NumPy's cast warning would fail here (the reader called it a malformed file)
+        cloud = read_point_cloud(path)
+        points, _ = read_point_fields(path)
+    assert_array_equal(cloud, rows[[0, 1, 3]].astype(np.float64))  # the NaN point dropped
+    assert points.shape == (4, 3) and np.isnan(points[2, 1])

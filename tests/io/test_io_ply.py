@@ -322,3 +322,28 @@ def test_ply_plain_layout_truncated_or_with_faces_is_left_to_the_general_path(ma
     data = mesh.read_bytes()
     assert _ply._plain_vertices(data, *_ply._header(data, str(mesh), "t")) is None
     assert read_mesh(mesh).faces.tolist() == [[0, 1, 2]]
+
+
+@pytest.mark.parametrize("extra", [False, True])  # the one-call vertex block, or the general path
+def test_ply_signalling_nan_is_dropped_without_a_warning(tmp_path, extra):
+    import warnings
+
+    from eppf.io import read_point_fields
+
+    rows = np.arange(12, dtype=np.float32).reshape(4, 3)
+    bits = rows.view(np.uint32)
+    bits[2, 1] = 0x7FA00000  # a signalling NaN: widening it to float64 raises the CPU's "invalid" flag
+    props = [("float", n) for n in _XYZ] + ([("uchar", "red")] if extra else [])
+    head = "ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + "".join(f"property {t} {n}\n" for t, n in props)
+    rec = np.zeros(4, dtype=[(n, "<f4" if t == "float" else "u1") for t, n in props])
+    for j, n in enumerate(_XYZ):
+        rec[n] = rows[:, j]  # (float32 into float32: the bits are copied)
+    assert rec["y"].view(np.uint32)[2] == 0x7FA00000
+    path = tmp_path / "s.ply"
+    path.write_bytes(head.encode() + b"end_header\n" + rec.tobytes())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # NumPy's "invalid value encountered in cast" would fail here
+        cloud = read_point_cloud(path)
+        points, _ = read_point_fields(path)
+    assert_array_equal(cloud, rows[[0, 1, 3]].astype(np.float64))
+    assert points.shape == (4, 3) and np.isnan(points[2, 1]) and points[3, 1] == 10.0  # every point kept there
