@@ -7,11 +7,15 @@ import numpy as np
 from ..utils._param_validation import Interval, validate_parameter
 from ..utils._validation import check_point_cloud
 
-__all__ = ["MAX_EXTENT", "TOLERANCE", "check_field", "check_scene", "check_tolerance"]
+__all__ = ["MAX_EXTENT", "MIN_EXTENT", "TOLERANCE", "check_field", "check_scene", "check_tolerance"]
 
 #: The largest scene extent per axis: squared distances and the plane fit's sums of squares
 #: (up to 1e9 points) stay finite below it, with a wide margin over any real scan (1e7 m).
 MAX_EXTENT = 1e100
+
+#: The smallest largest extent of a scene: below it, cell sides derived from the extent or a tolerance
+#: consistent with it reach subnormal numbers, whose reciprocals overflow (a real scan spans 1e-3 m at least).
+MIN_EXTENT = 1e-100
 
 #: ``tolerance``: None (derived from the point spacing) or a positive distance.
 TOLERANCE = [None, Interval(numbers.Real, 0, None, closed="neither")]
@@ -23,8 +27,9 @@ def check_scene(points, owner):
     Six-column input (points and normals) is accepted; the normals are dropped.
     Raises TypeError/ValueError naming ``owner`` for a wrong type or shape, an
     empty scene, a single point, NaN or infinite coordinates, a scene whose
-    points are all identical, or one whose extent is beyond :data:`MAX_EXTENT`
-    (its squared distances would overflow float64).
+    points are all identical, one whose extent is beyond :data:`MAX_EXTENT`
+    (its squared distances would overflow float64) or one whose largest extent
+    is below :data:`MIN_EXTENT`.
     """
     arr = check_point_cloud(points, owner=owner, min_points=2, allow_normals=True)
     xyz = np.ascontiguousarray(arr[:, :3])
@@ -36,6 +41,9 @@ def check_scene(points, owner):
     if extent.max() > MAX_EXTENT:
         raise ValueError(f"{owner}: the scene spans {extent.max():.6g} along one axis; at most {MAX_EXTENT:g} can be "
                          "segmented (squared distances would overflow float64): rescale the coordinates")
+    if extent.max() < MIN_EXTENT:
+        raise ValueError(f"{owner}: the scene spans only {extent.max():.6g} along its longest axis; at least "
+                         f"{MIN_EXTENT:g} is needed (smaller cells underflow float64): rescale the coordinates")
     return xyz
 
 

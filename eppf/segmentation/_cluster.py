@@ -149,7 +149,8 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
     ------
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
-        values, are fewer than two or all identical, or a parameter is out of
+        values, are fewer than two or all identical, span more than 1e100 or
+        (along their longest axis) less than 1e-100, or a parameter is out of
         range.
     TypeError
         If the points are not numbers or a parameter has a wrong type.

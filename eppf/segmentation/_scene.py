@@ -99,7 +99,8 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
     ------
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
-        values, are fewer than two or all identical, ``by`` names no field,
+        values, are fewer than two or all identical, span more than 1e100 or
+        (along their longest axis) less than 1e-100, ``by`` names no field,
         the field has the wrong length, or a parameter is out of range.
     TypeError
         If the points are not numbers, the field is not an integer field, or

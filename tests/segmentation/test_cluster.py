@@ -148,6 +148,28 @@ def test_scenes_whose_squared_distances_overflow_are_refused_by_every_function()
                 function(scene)
 
 
+@pytest.mark.parametrize("scale, tolerance", [(5e-320, None), (5e-320, 1e-321), (1e-150, None), (1e-150, 1e-151)])
+def test_scenes_too_small_for_float64_cells_are_refused_by_every_function(scale, tolerance):
+    """Subnormal (or nearly) coordinates: a cell's side would underflow and its reciprocal overflow."""
+    from eppf.segmentation import remove_ground, segment_scene
+
+    scene = np.random.default_rng(0).uniform(size=(300, 3)) * scale
+    for function, kwargs in ((euclidean_clusters, dict(tolerance=tolerance)), (remove_ground, {}),
+                             (segment_scene, dict(tolerance=tolerance))):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # refused before any division by zero or overflow
+            with pytest.raises(ValueError, match=rf"^{function.__name__}: the scene spans only .* at least 1e-100 "
+                                                 r"is needed .* rescale"):
+                function(scene, **kwargs)
+
+
+def test_a_scene_just_above_the_smallest_extent_is_segmented_as_its_scaled_copy():
+    scene = np.random.default_rng(1).uniform(size=(400, 3))
+    labels = euclidean_clusters(scene, 0.08)
+    assert labels.max() >= 1  # more than one cluster: the comparison below means something
+    np.testing.assert_array_equal(euclidean_clusters(scene * 1e-99, 0.08e-99), labels)
+
+
 @pytest.mark.parametrize("kwargs, pattern", [
     (dict(min_points=0), r"min_points must be an int >= 1, got 0"),
     (dict(min_points=2.0), r"min_points must be an int"),
