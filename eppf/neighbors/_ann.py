@@ -45,6 +45,8 @@ _EF_CONSTRUCTION = 64
 _MIN_PER_LIST = 39
 
 _HOW_TO_INSTALL = "pip install faiss-cpu  (or: pip install eppf[ann])"
+# Largest float32 row sum the float32 embedding takes; rows above it are normalised in float64 first.
+_F32_SUM_MAX = float(np.finfo(np.float32).max) / 2
 
 
 def _import_faiss(owner):
@@ -284,9 +286,22 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
     # ------------------------------------------------------------ embedding
 
     def _embed(self, rows):
-        """float32 index vectors of raw histogram rows (float32 or float64), computed in float32."""
-        h = np.maximum(rows, np.float32(self.floor_), dtype=np.float32)
-        h /= h.sum(axis=1, keepdims=True, dtype=np.float64).astype(np.float32)
+        """float32 index vectors of raw histogram rows (float32 or float64), computed in float32.
+
+        Rows whose values or sum lie beyond float32's range (checked
+        histograms: their sums are finite in float64) are divided by their
+        sum in float64 before the cast, so they embed as their scaled-down
+        copies do instead of as infinities and NaN.
+        """
+        with np.errstate(over="ignore"):  # values beyond float32 become inf here; their rows are redone below
+            h = np.maximum(rows, np.float32(self.floor_), dtype=np.float32)
+        sums = h.sum(axis=1, keepdims=True, dtype=np.float64)
+        big = ~(sums[:, 0] <= _F32_SUM_MAX)
+        if big.any():
+            wide = np.maximum(rows[big], self.floor_, dtype=np.float64)
+            h[big] = wide / wide.sum(axis=1, keepdims=True)
+            sums[big] = 1.0
+        h /= sums.astype(np.float32)
         np.sqrt(h, out=h)
         if self.components_ is not None:
             h -= self.mean_.astype(np.float32)
@@ -446,6 +461,7 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
         """
         name = type(self).__name__
         faiss.omp_set_num_threads(1)  # this thread's OpenMP setting only
+        P = prepare_histograms(rows, self.floor_, self._renormalize, name)  # (checks the rows before they embed)
         Z = self._embed(rows)
         extra = 1 if loo_start is not None else 0
         m_search = min(m + extra, self.n_samples_fit_)
@@ -464,7 +480,6 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
                 cand[short] = self.index_.search(Z[short], m_search, params=full)[1]
         if loo_start is not None:
             cand = _drop_own(cand, loo_start)
-        P = prepare_histograms(rows, self.floor_, self._renormalize, name)
         if self._X is not None:
             return rerank_candidates(P, self._X, cand, k, self.floor_, self._renormalize, name)
         return rerank_sparse_candidates(P, self._support, self._row_terms, cand, k, self.floor_)

@@ -268,3 +268,31 @@ def test_row_terms_from_supports_match_the_dense_ones(data, fitted):
     assert_allclose(s, (h * L).sum(axis=1), rtol=1e-12)
     assert_allclose(mass, h.sum(axis=1), rtol=1e-12)
     assert_allclose(lam, np.abs(L).max(axis=1), rtol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [1e39, 1e300])
+def test_histograms_beyond_float32_embed_as_their_scaled_down_copies(data, scale):
+    # float32 index vectors: rows whose values or sums overflow float32 are normalised in float64 first
+    # (they embedded as inf and NaN: wrong candidates, or faiss failing inside k-means)
+    import warnings
+
+    X, y, Q = data
+    X, Q = X[:200], Q[:30]
+    y = y[:200]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        small = ApproximateKLNearestNeighbors(random_state=0).fit(X, y)
+        big = ApproximateKLNearestNeighbors(random_state=0).fit(X * scale, y)
+        assert_allclose(big._embed(X * scale), small._embed(X), rtol=1e-5, atol=1e-6)
+        exhaustive = dict(n_neighbors=3, n_candidates=len(X), n_probe=10**6, random_state=0)
+        a_dist, a_ind = ApproximateKLNearestNeighbors(**exhaustive).fit(X * scale, y).kneighbors(Q * scale)
+    e_dist, e_ind = KLNearestNeighbors(n_neighbors=3).fit(X * scale, y).kneighbors(Q * scale)
+    assert_array_equal(a_ind, e_ind)
+    assert np.isfinite(a_dist).all()
+    assert_allclose(a_dist, e_dist, rtol=1e-12)
+
+
+def test_queries_too_large_for_the_divergence_are_refused_before_they_embed(data, fitted):
+    _, _, Q = data
+    with pytest.raises(ValueError, match=r"^ApproximateKLNearestNeighbors: histogram values are too large"):
+        fitted.kneighbors(Q[:3] * 1e306)
