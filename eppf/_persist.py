@@ -21,6 +21,7 @@ Models written by eppf 0.1 are pickles (joblib files); :func:`load_model`
 opens them only with ``trust=True``.
 """
 
+import errno
 import json
 import math
 import numbers
@@ -508,6 +509,8 @@ def load_model(path, *, trust=False):
         False), is truncated or corrupt, was written in a newer format
         version, names a class that is not on the allow-list, or holds
         arrays of Python objects. The message names the file.
+    OSError
+        If reading the file fails (the message names it).
 
     Warns
     -----
@@ -560,6 +563,10 @@ def load_model(path, *, trust=False):
             arrays = _read_arrays(zf, path)
     except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError, KeyError) as exc:
         raise ValueError(f"cannot load model {path}: corrupt or truncated model file ({type(exc).__name__}: {exc})") from None
+    except OSError as exc:
+        if exc.errno == errno.EINVAL:  # a seek to an offset the archive's directory gives, outside any file
+            raise ValueError(f"cannot load model {path}: corrupt model file (an entry's offset is invalid)") from None
+        raise OSError(exc.errno, f"cannot read model file {path} ({exc.strerror or exc})", path) from None
     try:
         return _Decoder(arrays, path).decode(manifest["root"], "model")
     except RecursionError:

@@ -5,6 +5,7 @@ import json
 import os
 import pickle
 import re
+import struct
 import warnings
 import zipfile
 
@@ -366,6 +367,18 @@ def test_corrupted_bytes_inside_the_container_are_detected(model_file):
     data[mid] ^= 0xFF
     model_file.write_bytes(bytes(data))
     with pytest.raises(ValueError, match=re.escape(str(model_file))):
+        load_model(model_file)
+
+
+def test_central_directory_offset_past_the_entries_gives_value_error_naming_the_file(model_file):
+    # the end record's central-directory offset moved on: zipfile places every entry before byte 0 and its
+    # seek fails with EINVAL (an OSError that named nothing)
+    data = bytearray(model_file.read_bytes())
+    end = data.rindex(b"PK\x05\x06")
+    offset = struct.unpack_from("<I", data, end + 16)[0]
+    struct.pack_into("<I", data, end + 16, offset + 2**24)
+    model_file.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=re.escape(f"cannot load model {model_file}: corrupt model file")):
         load_model(model_file)
 
 
