@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io._npy import read_npy_array, read_npz_arrays
 from ..registry import DESCRIPTORS, make_descriptor
 from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_output, emit, fewest_points,
                       positive_int, progress_of, read_inputs, register, warn_tiny)
@@ -29,12 +30,11 @@ def _load_descriptors(path, owner):
     path = str(path)
     if not Path(path).is_file():
         raise FileNotFoundError(f"no such file: {path}")
-    try:
+    try:  # (eppf.io's readers: every header checked against the stored bytes before anything is allocated)
         if path.lower().endswith(".npy"):
-            return dict(descriptors=np.load(path, allow_pickle=False))
-        with np.load(path, allow_pickle=False) as f:
-            data = {k: f[k] for k in f.files}
-    except Exception as exc:
+            return dict(descriptors=read_npy_array(path, owner))
+        data = read_npz_arrays(path, owner)
+    except ValueError as exc:
         raise ValueError(f"cannot read descriptors from {path}: {exc}") from None
     if "descriptors" not in data:
         raise ValueError(f"{path} has no 'descriptors' array; write it with 'eppf describe -o {owner}.npz'")

@@ -6,6 +6,7 @@ import os
 import numpy as np
 from sklearn.utils import Bunch
 
+from ..io._npy import read_npz_arrays
 from ..utils._atomic import atomic_write
 
 __all__ = ["load_npz", "save_npz"]
@@ -68,20 +69,16 @@ def load_npz(path, *, return_X_y=False):
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"load_npz: no such file: {path!r}")
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except Exception as exc:
-        raise ValueError(f"load_npz: {path!r} is not a readable .npz file ({exc})") from None
-    with archive:
-        missing = [k for k in _REQUIRED if k not in archive.files]
-        if missing:
-            raise ValueError(f"load_npz: {path!r} lacks the arrays {missing}; it has {sorted(archive.files)}")
-        points = np.asarray(archive["points"], dtype=np.float64)
-        offsets = np.asarray(archive["offsets"], dtype=np.int64)
-        labels = np.asarray(archive["labels"], dtype=np.int64)
-        class_names = np.asarray(archive["class_names"]).astype(str)
-        split = np.asarray(archive["split"]).astype(str) if "split" in archive.files else None
-        ids = np.asarray(archive["ids"]).astype(str) if "ids" in archive.files else None
+    archive = read_npz_arrays(path, "load_npz")  # (headers checked against the stored bytes before allocating)
+    missing = [k for k in _REQUIRED if k not in archive]
+    if missing:
+        raise ValueError(f"load_npz: {path!r} lacks the arrays {missing}; it has {sorted(archive)}")
+    points = np.asarray(archive["points"], dtype=np.float64)
+    offsets = np.asarray(archive["offsets"], dtype=np.int64)
+    labels = np.asarray(archive["labels"], dtype=np.int64)
+    class_names = np.asarray(archive["class_names"]).astype(str)
+    split = np.asarray(archive["split"]).astype(str) if "split" in archive else None
+    ids = np.asarray(archive["ids"]).astype(str) if "ids" in archive else None
     n_objects = offsets.size - 1
     if points.ndim != 2 or points.shape[1] not in (3, 6):
         raise ValueError(f"load_npz: {path!r}: 'points' must have shape (n, 3) or (n, 6), got {points.shape}")

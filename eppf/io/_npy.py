@@ -43,9 +43,10 @@ def _read_array(fh, size, path, owner, what):
             f"{owner}: {path!r}{what}: the header declares an array of shape {shape} ({need} bytes), "
             f"but only {left} bytes follow it (truncated, or a wrong shape)"
         )
-    raw = fh.read(need)
-    if len(raw) != need:
-        raise FileFormatError(f"{owner}: {path!r}{what}: array data ends after {len(raw)} of {need} bytes (truncated)")
+    raw = bytearray(need)  # (a writable array, as np.load gives, without a second copy)
+    got = fh.readinto(raw) if need else 0
+    if got != need:
+        raise FileFormatError(f"{owner}: {path!r}{what}: array data ends after {got} of {need} bytes (truncated)")
     return np.frombuffer(raw, dtype=dtype, count=count).reshape(shape, order="F" if fortran else "C")
 
 
@@ -107,20 +108,50 @@ def read_npy(path, owner, want_normals="auto"):
     return _to_cloud(arr, path, owner)
 
 
-def read_npz(path, owner, want_normals="auto"):
+def _in_archive(path, owner, read):
+    """``read(open file)`` on the .npz file ``path``; anything but a FileFormatError from a malformed archive
+    (BadZipFile, zlib.error, NotImplementedError, EOFError, OSError from seeks, ...) becomes one naming it."""
     size = check_file(path, owner)
     if size == 0:
         raise FileFormatError(f"{owner}: {path!r} is empty")
     with open(path, "rb") as fh:  # an OSError here names the file
         try:
-            arr = _read_npz(fh, path, owner)
+            return read(fh)
         except FileFormatError:
             raise
-        except Exception as exc:  # BadZipFile, zlib.error, NotImplementedError, EOFError, OSError from seeks, ...
+        except Exception as exc:  # noqa: BLE001 - the archive's content, not the file system
             raise FileFormatError(
                 f"{owner}: {path!r} is not a readable .npz archive ({type(exc).__name__}: {exc})"
             ) from None
-    return _to_cloud(arr, path, owner)
+
+
+def read_npz(path, owner, want_normals="auto"):
+    return _to_cloud(_in_archive(path, owner, lambda fh: _read_npz(fh, path, owner)), path, owner)
+
+
+def read_npy_array(path, owner):
+    """The array of an ``.npy`` file, its header checked against the file's size before anything is allocated."""
+    size = check_file(path, owner)
+    if size == 0:
+        raise FileFormatError(f"{owner}: {path!r} is empty")
+    with open(path, "rb") as fh:
+        return _read_array(fh, size, path, owner, "")
+
+
+def read_npz_arrays(path, owner):
+    """Every array of an ``.npz`` archive by name (``.npy`` dropped), each checked as a cloud's is.
+
+    Pickled (object) arrays are refused, every header is checked against the
+    bytes its member holds before anything is allocated, and a malformed
+    archive or member raises :class:`FileFormatError` naming ``owner`` and
+    the file (``np.load`` would allocate what a hostile header declares).
+    """
+    def read(fh):
+        with zipfile.ZipFile(fh) as zf:
+            names = zf.namelist()
+            return {n[:-4] if n.endswith(".npy") else n: _member(zf, n, path, owner) for n in names}
+
+    return _in_archive(path, owner, read)
 
 
 def write_npy(path, cloud, binary=True):

@@ -129,7 +129,7 @@ class DescriptorCache:
         try:
             with np.load(path, allow_pickle=False) as f:
                 out = {k: f[k] for k in names}
-        except (OSError, KeyError, ValueError, EOFError):
+        except Exception:  # noqa: BLE001 - a cut or corrupt file of any kind (BadZipFile, zlib.error...): recomputed
             self.log(f"{label}: unreadable cache file {path}, recomputing")
             return None
         self.n_loaded += 1

@@ -161,3 +161,20 @@ def test_experiment_takes_no_progress_and_keeps_quiet_as_deprecated(monkeypatch,
     assert seen == [(False, "eppf experiment retrieval --quick --no-progress"),
                     (False, "eppf experiment retrieval --quiet"), (True, "eppf experiment retrieval")]
     assert "--quiet is deprecated" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("which", ["database", "queries"])
+def test_retrieve_refuses_a_descriptor_file_whose_header_declares_more_than_it_holds(tmp_path, capsys, which):
+    # np.load allocated what the header declared before reading; eppf.io's reader checks it first
+    import io
+
+    head = io.BytesIO()
+    np.lib.format.write_array_header_1_0(head, {"descr": "<f8", "fortran_order": False, "shape": (10**11, 128)})
+    bad = tmp_path / "bad.npy"
+    bad.write_bytes(head.getvalue() + bytes(800))
+    good = tmp_path / "db.npz"
+    np.savez(good, descriptors=np.full((3, 4), 0.25))
+    argv = ["retrieve", "--database", bad if which == "database" else good, "--query-descriptors",
+            good if which == "database" else bad]
+    line = _one_line_error(*_run(argv, capsys)[::2], "retrieve")
+    assert str(bad) in line and "the header declares an array of shape (100000000000, 128)" in line

@@ -216,3 +216,66 @@ def test_reproduce_retrieval_needs_its_data_and_says_how_to_get_it(tmp_path, cap
     assert main(["--sets", "modelnet10_1024", "--repeats", "1", "--n-jobs", "1"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 2 and lines[1].split()[:2] == ["modelnet10_1024", "object"]
+
+
+def _hostile_archives(tmp_path):
+    """A valid flat-layout archive, then copies of it with a huge 'points' header, a corrupt compressed member
+    and an end record whose directory offset places every entry before the file's start."""
+    import io
+    import struct
+
+    clouds = _clouds(np.random.default_rng(0), [5, 5])
+    good = tmp_path / "good.npz"
+    save_npz(good, clouds, [0, 1], ["a", "b"])
+    out = {}
+    with zipfile.ZipFile(good) as zin:
+        members = {n: zin.read(n) for n in zin.namelist()}
+    head = io.BytesIO()
+    np.lib.format.write_array_header_1_0(head, {"descr": "<f8", "fortran_order": False, "shape": (10**11, 3)})
+    for name, build in (("huge", lambda n, b: head.getvalue() + b[-240:] if n == "points.npy" else b),):
+        path = tmp_path / f"{name}.npz"
+        with zipfile.ZipFile(path, "w") as zout:
+            for n, b in members.items():
+                zout.writestr(n, build(n, b))
+        out[name] = (path, r"member 'points.npy': the header declares an array of shape \(100000000000, 3\)")
+    path = tmp_path / "deflated.npz"
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zout:
+        for n, b in members.items():
+            zout.writestr(n, b)
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo("points.npy")
+    data[info.header_offset + 30 + len(info.filename) + 2] ^= 0xFF
+    (tmp_path / "corrupt.npz").write_bytes(bytes(data))
+    out["corrupt"] = (tmp_path / "corrupt.npz", r"member 'points.npy'|not a readable \.npz archive")
+    data = bytearray(good.read_bytes())
+    end = data.rindex(b"PK\x05\x06")
+    struct.pack_into("<I", data, end + 16, struct.unpack_from("<I", data, end + 16)[0] + 2**24)
+    (tmp_path / "offset.npz").write_bytes(bytes(data))
+    out["offset"] = (tmp_path / "offset.npz", r"not a readable \.npz archive \(OSError")
+    return out
+
+
+def test_hostile_archives_give_value_errors_naming_the_file_before_allocating(tmp_path):
+    # np.load allocated what a header declared (2.4 TB here), and a corrupt member or directory raised
+    # zlib.error or a bare OSError
+    import resource
+
+    limit = resource.getrlimit(resource.RLIMIT_AS)
+    for name, (path, pattern) in _hostile_archives(tmp_path).items():
+        resource.setrlimit(resource.RLIMIT_AS, (4 << 30, limit[1]) if limit[1] == resource.RLIM_INFINITY
+                           or limit[1] > 4 << 30 else limit)
+        try:
+            with pytest.raises(ValueError, match=rf"^load_npz: '{path}'.*({pattern})"):
+                load_npz(path)
+        finally:
+            resource.setrlimit(resource.RLIMIT_AS, limit)
+
+
+def test_loaded_clouds_are_writable_arrays(tmp_path):
+    path = tmp_path / "w.npz"
+    save_npz(path, _clouds(np.random.default_rng(1), [4, 6]), [0, 0], ["a"])
+    data = load_npz(path)
+    assert all(c.flags.writeable for c in data.data)
+    data.data[0][0, 0] = 7.0
+    assert data.data[0][0, 0] == 7.0
