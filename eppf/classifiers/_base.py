@@ -184,8 +184,14 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")
         if y.shape[0] != n_objects:
             raise ValueError(f"{owner}: X has {n_objects} objects but y has {y.shape[0]} labels")
-        check_classification_targets(y)
-        classes, y_enc = np.unique(y, return_inverse=True)
+        try:
+            with np.errstate(invalid="ignore"):  # (scikit-learn's cast of NaN labels warns before it raises)
+                check_classification_targets(y)
+            classes, y_enc = np.unique(y, return_inverse=True)
+        except (ValueError, TypeError) as exc:  # NaN labels; labels of types that do not sort together (str and float)
+            kinds = sorted({type(v).__name__ for v in y.tolist()}) if y.dtype == object else [str(y.dtype)]
+            raise type(exc)(f"{owner}: y must hold class labels of one kind (numbers or strings, no NaN); got "
+                            f"{', '.join(kinds)} labels ({exc})") from None
         if classes.shape[0] < 2:
             raise ValueError(f"{owner}: y has a single class {classes[0].tolist()!r}; at least 2 are needed")
         self.classes_ = classes

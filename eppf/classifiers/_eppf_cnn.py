@@ -370,10 +370,14 @@ class EPPF4DClassifier(SkorchClassifierBase):
                 f"{n_features + n_side}; pass the n_bins the descriptors were computed with"
                 + (" (or n_side_features for extra columns)" if not n_side else "")
             )
-        arr = arr.astype(np.float32)
-        if not np.isfinite(arr).all():
+        with np.errstate(over="ignore"):  # (values beyond float32 become inf: named below)
+            out = arr.astype(np.float32)
+        if not np.isfinite(out).all():
+            if np.isfinite(arr).all():
+                raise ValueError(f"{owner}: X holds values beyond float32's range (largest magnitude "
+                                 f"{np.abs(arr).max():.6g}; the networks compute in float32): rescale the descriptors")
             raise ValueError(f"{owner}: X contains NaN or infinite values")
-        return arr
+        return out
 
     def _fit_inputs(self, X, seeds):
         from ..nn import resolve_precision

@@ -18,8 +18,12 @@ def _softmax(logits):
 
 
 # ------------------------------------------------------------------ preprocess
-def _normalise_and_sample(clouds, n_points, seeds):
+def _normalise_and_sample(clouds, n_points, seeds, owner):
     """Center on the bbox center, scale by the largest bbox side, resample.
+
+    A cloud whose bounding box overflows float64 (coordinates near +-1.8e308)
+    has no finite side to scale by: ValueError naming ``owner`` and the
+    object (clouds of one position are refused before, by their check).
 
     Clouds with more than ``n_points`` points are subsampled without
     replacement, smaller ones are topped up with replacement (all points kept
@@ -29,7 +33,12 @@ def _normalise_and_sample(clouds, n_points, seeds):
     for k, cloud in enumerate(clouds):
         xyz = cloud[:, :3]
         lo, hi = xyz.min(axis=0), xyz.max(axis=0)
-        xyz = (xyz - (lo + hi) / 2) / (hi - lo).max()
+        with np.errstate(over="ignore"):
+            side = (hi - lo).max()
+        if not np.isfinite(side):
+            raise ValueError(f"{owner}: object {k}'s bounding box overflows float64 (coordinates from "
+                             f"{lo.min():.6g} to {hi.max():.6g}): rescale it")
+        xyz = (xyz - (lo / 2 + hi / 2)) / side
         n = xyz.shape[0]
         if n != n_points:
             rng = np.random.default_rng(int(seeds[k]))
@@ -234,7 +243,7 @@ class PointNetClassifier(SkorchClassifierBase):
     # ------------------------------------------------------------------ hooks
     def _prepare(self, X, seed):
         clouds = check_point_clouds(X, owner=self._owner, min_points=2)
-        return _normalise_and_sample(clouds, int(self.n_points), object_seeds(seed, len(clouds)))
+        return _normalise_and_sample(clouds, int(self.n_points), object_seeds(seed, len(clouds)), self._owner)
 
     def _fit_inputs(self, X, seeds):
         pts = self._prepare(X, seeds["fit_sample"])

@@ -484,6 +484,11 @@ def test_bad_parameters(params, err, msg):
         (np.zeros(48), ["a"], ValueError, "EPPF4DClassifier: X must have shape (n_objects, n_features) or (n_objects, n_draws, n_features), got shape (48,)"),
         (np.zeros((0, 48)), [], ValueError, "EPPF4DClassifier: X is empty (shape (0, 1, 48))"),
         (np.full((4, 48), np.nan), ["a", "b"] * 2, ValueError, "EPPF4DClassifier: X contains NaN or infinite values"),
+        (np.full((4, 48), 1e300), ["a", "b"] * 2, ValueError,
+         "EPPF4DClassifier: X holds values beyond float32's range (largest magnitude 1e+300; the networks compute in "
+         "float32): rescale the descriptors"),
+        (np.full((4, 48), 1 / 48), np.array(["a", 1, 2.5, "b"], dtype=object), TypeError,
+         "EPPF4DClassifier: y must hold class labels of one kind (numbers or strings, no NaN); got float, int, str labels"),
         (np.full((4, 48), "x"), ["a", "b"] * 2, TypeError, "EPPF4DClassifier: X must hold numbers, got dtype <U1"),
         (None, ["a"], TypeError, "EPPF4DClassifier: X must be an array of descriptors, got NoneType"),
         (np.full((4, 48), 1 / 48), ["a", "b", "a"], ValueError, "EPPF4DClassifier: X has 4 objects but y has 3 labels"),

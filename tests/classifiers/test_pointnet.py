@@ -88,7 +88,7 @@ def test_normalise_and_sample():
     rng = np.random.default_rng(0)
     big = rng.normal(size=(100, 3)) * [1, 2, 3] + 5
     small = rng.normal(size=(10, 3))
-    out = _normalise_and_sample([big, small], 50, np.array([1, 2], dtype=np.uint64))
+    out = _normalise_and_sample([big, small], 50, np.array([1, 2], dtype=np.uint64), "t")
     assert out.shape == (2, 50, 3)
     for pts in out:
         side = pts.max(axis=0) - pts.min(axis=0)
@@ -213,6 +213,33 @@ def test_bad_input():
         clf.fit(None, y)
     with pytest.raises(ValueError, match=re.escape("PointNetClassifier: at least 2 training objects")):
         PointNetClassifier(**{**FAST, "early_stopping": True, "validation_fraction": 0.5}).fit(X[:3], y[:3])
+
+
+def test_labels_of_mixed_kinds_or_nan_are_named():
+    X, _ = _toy(2)
+    clf = PointNetClassifier(**FAST)
+    with pytest.raises(TypeError, match=r"^PointNetClassifier: y must hold class labels of one kind .* float, int, str"):
+        clf.fit(X, np.array(["ball", 1, 2.5, "stick"], dtype=object))
+    with pytest.raises(ValueError, match=r"^PointNetClassifier: y must hold class labels of one kind .*NaN"):
+        clf.fit(X, np.array([0.0, 1.0, np.nan, 1.0]))
+
+
+def test_clouds_near_the_float64_limits():
+    import warnings
+
+    X, y = _toy(2)
+    clf = PointNetClassifier(**FAST)
+    overflowing = [np.vstack([c, [[1e308, 0, 0], [-1e308, 0, 0]]]) for c in X]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # refused before the overflow (it trained on NaN and zeros)
+        with pytest.raises(ValueError, match=r"^PointNetClassifier: object 0's bounding box overflows float64"):
+            clf.fit(overflowing, y)
+        # far from the origin but with a finite box: its center (lo + hi) / 2 overflowed to inf
+        far = [c * 1e306 + 1.5e308 for c in X]
+        got = _normalise_and_sample(far, 32, np.arange(4), "t")
+        near = _normalise_and_sample([c * 1e306 for c in X], 32, np.arange(4), "t")
+    assert np.isfinite(got).all() and np.abs(got).max() <= 0.5 + 1e-6
+    np.testing.assert_allclose(got, near, atol=1e-2)  # the same shapes, up to the rounding of 1.5e308 + x
 
 
 def test_not_fitted():
