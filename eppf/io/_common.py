@@ -46,9 +46,9 @@ Cloud = namedtuple("Cloud", ["xyz", "normals"])
 
 
 def widened(values):
-    """A float64 copy of a numeric array, without NumPy's cast warning for signalling NaNs.
+    """A float64 copy of a numeric array, without NumPy's cast warning for signaling NaNs.
 
-    Widening float32 (or float16) to float64 is exact; a signalling NaN in a
+    Widening float32 (or float16) to float64 is exact; a signaling NaN in a
     file (a corrupt or hostile one) becomes a quiet NaN and raises the CPU's
     "invalid" flag, which NumPy turns into a RuntimeWarning (an exception
     under ``-W error``) that says nothing about the file. The readers drop or

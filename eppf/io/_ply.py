@@ -381,7 +381,7 @@ def read_ply(path, data, owner, want_faces=True):
     full = np.empty((n_v, 3 + len(normal_names)))
     for j, f in enumerate(("x", "y", "z") + normal_names):
         if n_v:
-            with np.errstate(invalid="ignore"):  # float32 widened in place (a signalling NaN: see widened)
+            with np.errstate(invalid="ignore"):  # float32 widened in place (a signaling NaN: see widened)
                 full[:, j] = _column(v[f], vprops[f].code, copy=False)
     cloud = Cloud(full[:, :3], full[:, 3:] if normal_names else None)
     if not want_faces or "face" not in spec:

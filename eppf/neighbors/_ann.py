@@ -45,7 +45,7 @@ _EF_CONSTRUCTION = 64
 _MIN_PER_LIST = 39
 
 _HOW_TO_INSTALL = "pip install faiss-cpu  (or: pip install eppf[ann])"
-# Largest float32 row sum the float32 embedding takes; rows above it are normalised in float64 first.
+# Largest float32 row sum the float32 embedding takes; rows above it are normalized in float64 first.
 _F32_SUM_MAX = float(np.finfo(np.float32).max) / 2
 
 
