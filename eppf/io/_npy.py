@@ -16,6 +16,7 @@ from ._common import Cloud, check_file, widened
 from ._errors import FileFormatError
 
 _DEFLATE_MAX_RATIO = 1032  # deflate's longest match (258 bytes) from 2 bits, rounded up
+_READ_PIECE = 1 << 18  # bytes an array is read in at a time (numpy's own piece: larger ones were slower)
 
 
 def _read_array(fh, size, path, owner, what):
@@ -43,8 +44,13 @@ def _read_array(fh, size, path, owner, what):
             f"{owner}: {path!r}{what}: the header declares an array of shape {shape} ({need} bytes), "
             f"but only {left} bytes follow it (truncated, or a wrong shape)"
         )
-    raw = bytearray(need)  # (a writable array, as np.load gives, without a second copy)
-    got = fh.readinto(raw) if need else 0
+    raw = bytearray(need)  # (a writable array, as np.load gives, read in pieces without a second whole copy)
+    view, got = memoryview(raw), 0
+    while got < need:
+        n = fh.readinto(view[got : got + _READ_PIECE])
+        if not n:
+            break
+        got += n
     if got != need:
         raise FileFormatError(f"{owner}: {path!r}{what}: array data ends after {got} of {need} bytes (truncated)")
     return np.frombuffer(raw, dtype=dtype, count=count).reshape(shape, order="F" if fortran else "C")
@@ -100,12 +106,7 @@ def _to_cloud(arr, path, owner):
 
 
 def read_npy(path, owner, want_normals="auto"):
-    size = check_file(path, owner)
-    if size == 0:
-        raise FileFormatError(f"{owner}: {path!r} is empty")
-    with open(path, "rb") as fh:
-        arr = _read_array(fh, size, path, owner, "")
-    return _to_cloud(arr, path, owner)
+    return _to_cloud(read_npy_array(path, owner), path, owner)
 
 
 def _in_archive(path, owner, read):
