@@ -25,7 +25,9 @@ hostile header makes laspy or lazrs allocate beyond the file:
   compressed size: the points are decoded in pieces of at most
   :data:`LAZ_PIECE_RATIO` times the file's size, and a file whose data ends
   before its count stops with a :class:`FileFormatError`;
-- LAS 1.4 extended VLRs after the points must lie inside the file.
+- LAS 1.4 extended VLRs after the points must lie inside the file;
+- every scale factor must be finite and non-zero and every offset finite,
+  with ``|scale| * 2**31 + |offset|`` finite (no int32 coordinate overflows).
 
 Coordinates are returned as float64 ``X * scale + offset``, the values
 laspy's ``las.x`` gives, in the file's own units.
