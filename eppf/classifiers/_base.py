@@ -190,8 +190,9 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             classes, y_enc = np.unique(y, return_inverse=True)
         except (ValueError, TypeError) as exc:  # NaN labels; labels of types that do not sort together (str and float)
             kinds = sorted({type(v).__name__ for v in y.tolist()}) if y.dtype == object else [str(y.dtype)]
-            raise type(exc)(f"{owner}: y must hold class labels of one kind (numbers or strings, no NaN); got "
-                            f"{', '.join(kinds)} labels ({exc})") from None
+            kind = TypeError if isinstance(exc, TypeError) else ValueError  # (not a subclass: theirs may take other arguments)
+            raise kind(f"{owner}: y must hold class labels of one kind (numbers or strings, no NaN); got "
+                       f"{', '.join(kinds)} labels ({exc})") from None
         if classes.shape[0] < 2:
             raise ValueError(f"{owner}: y has a single class {classes[0].tolist()!r}; at least 2 are needed")
         self.classes_ = classes
