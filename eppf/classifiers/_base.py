@@ -190,7 +190,8 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             classes, y_enc = np.unique(y, return_inverse=True)
         except (ValueError, TypeError) as exc:  # NaN labels; labels of types that do not sort together (str and float)
             kinds = sorted({type(v).__name__ for v in y.tolist()}) if y.dtype == object else [str(y.dtype)]
-            kind = TypeError if isinstance(exc, TypeError) else ValueError  # (not a subclass: theirs may take other arguments)
+            # (the plain class, not the caught one's: a subclass's constructor may take other arguments)
+            kind = TypeError if isinstance(exc, TypeError) else ValueError
             raise kind(f"{owner}: y must hold class labels of one kind (numbers or strings, no NaN); got "
                        f"{', '.join(kinds)} labels ({exc})") from None
         if classes.shape[0] < 2:
