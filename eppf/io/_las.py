@@ -117,10 +117,11 @@ def check_header(fh, size, path, owner):
     for k, axis in enumerate("xyz"):
         scale, off = scales[k], offsets[k]
         if not (math.isfinite(scale) and scale != 0.0):
-            _fail(owner, path, f"byte {131 + 8 * k}", f"{axis} scale factor {scale!r} (a LAS header's must be finite and non-zero)")
+            _fail(owner, path, f"byte {131 + 8 * k}",
+                  f"{axis} scale factor {scale!r} (a LAS header's must be finite and non-zero)")
         if not math.isfinite(off) or not math.isfinite(abs(scale) * 2.0 ** 31 + abs(off)):
-            _fail(owner, path, f"byte {155 + 8 * k}", f"{axis} offset {off!r} with scale factor {scale!r} gives no finite "
-                  "coordinates")
+            _fail(owner, path, f"byte {155 + 8 * k}",
+                  f"{axis} offset {off!r} with scale factor {scale!r} gives no finite coordinates")
     # the VLRs, each inside the header region before the points
     pos = header_size
     extra = 0
