@@ -514,12 +514,7 @@ API_CHECKS = [
 
 # Known departures from the contract, each with its reason. ``strict``: the
 # test fails once the estimator is fixed, so the entry cannot outlive the bug.
-KNOWN_FAILURES = {
-    ("PointNetClassifier", "check_input_tags"): "takes a list of clouds (or a 3D array) but does not declare "
-                                          "three_d_array=True in __sklearn_tags__",
-    ("CachedTransformer", "check_get_feature_names_out"): "wraps a descriptor but does not pass on its "
-                                                          "get_feature_names_out",
-}
+KNOWN_FAILURES = {}
 
 
 # Checks that only apply to some estimators (the others are not generated, rather than skipped).

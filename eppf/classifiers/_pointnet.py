@@ -335,6 +335,7 @@ class PointNetClassifier(SkorchClassifierBase):
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()
         tags.input_tags.two_d_array = False
+        tags.input_tags.three_d_array = True  # a list of clouds, or an (n_objects, n_points, 3) array
         return tags
 
 

@@ -5,6 +5,7 @@ import warnings
 
 from sklearn.base import BaseEstimator, TransformerMixin, clone
 from sklearn.utils import get_tags
+from sklearn.utils.metaestimators import available_if
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils._cache import DescriptorCache, data_digest, estimator_key
@@ -146,6 +147,25 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
         """
         check_is_fitted(self, "transformer_")
         return self._cached_transform(self._cache(), self.transformer_, X)
+
+    @available_if(lambda self: hasattr(self.transformer, "get_feature_names_out"))
+    def get_feature_names_out(self, input_features=None):
+        """Get the names of the output columns: the wrapped transformer's.
+
+        Available when the wrapped transformer has ``get_feature_names_out``.
+
+        Parameters
+        ----------
+        input_features : array-like of str or None, default=None
+            Passed on to the fitted transformer.
+
+        Returns
+        -------
+        feature_names_out : ndarray of str
+            One name per output column.
+        """
+        check_is_fitted(self, "transformer_")
+        return self.transformer_.get_feature_names_out(input_features)
 
     def __sklearn_tags__(self):
         tags = super().__sklearn_tags__()

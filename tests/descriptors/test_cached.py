@@ -124,3 +124,15 @@ def test_the_old_import_path_still_works():
     import eppf.datasets
 
     assert eppf.datasets.CachedTransformer is CachedTransformer
+
+
+def test_feature_names_are_the_wrapped_descriptors_and_only_where_it_has_them(tmp_path):
+    from eppf import GASDTransformer
+
+    clouds = [np.random.default_rng(k).normal(size=(80, 3)) for k in range(3)]
+    cached = CachedTransformer(GASDTransformer(), memory=tmp_path).fit(clouds)
+    names = cached.get_feature_names_out()
+    assert_array_equal(names, GASDTransformer().fit(clouds).get_feature_names_out())
+    assert len(names) == cached.transform(clouds).shape[1]
+    # a wrapped transformer without names: the wrapper has none either (as a Pipeline step would expect)
+    assert not hasattr(CachedTransformer(_Histogram(), memory=tmp_path), "get_feature_names_out")
