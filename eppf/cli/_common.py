@@ -220,7 +220,8 @@ def emit(rows, header, output, out):
     """Rows as a printed table, or as a CSV file written atomically."""
     out = out or sys.stdout
     if output:
-        with atomic_write(output, "w", newline="") as fh:
+        # UTF-8 on every system; a file name that is not UTF-8 goes back as its own bytes (surrogateescape)
+        with atomic_write(output, "w", newline="", encoding="utf-8", errors="surrogateescape") as fh:
             writer = csv.writer(fh)
             writer.writerow(header)
             for row in rows:
@@ -271,7 +272,7 @@ def is_segment_index(path):
     if os.path.basename(path) != SEGMENT_INDEX:
         return False
     try:
-        with open(path, newline="") as fh:
+        with open(path, newline="", encoding="utf-8", errors="replace") as fh:
             return fh.readline().startswith(SEGMENT_INDEX_HEADER)
     except (OSError, UnicodeDecodeError):
         return False

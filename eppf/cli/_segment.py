@@ -243,7 +243,7 @@ def run_segment(args, out=None):
             row.append(scene.fields[by][idx[0]].item())
         rows.append(row)
     index = os.path.join(folder, SEGMENT_INDEX)
-    with atomic_write(index, "w", newline="") as fh:
+    with atomic_write(index, "w", newline="", encoding="utf-8", errors="surrogateescape") as fh:
         writer = csv.writer(fh)
         writer.writerow(header)
         writer.writerows(rows)

@@ -76,7 +76,8 @@ def file_seeds(random_state, folder, files):
     base = int(check_random_state(random_state).randint(0, np.iinfo(np.int64).max, dtype=np.int64))
     seeds = []
     for f in files:
-        key = f"{base}/{os.path.relpath(f, folder).replace(os.sep, '/')}".encode()
+        # (surrogateescape: a name that is not UTF-8 hashes as its own bytes; UTF-8 names as before)
+        key = f"{base}/{os.path.relpath(f, folder).replace(os.sep, '/')}".encode("utf-8", "surrogateescape")
         seeds.append(int.from_bytes(hashlib.blake2b(key, digest_size=8).digest(), "little"))
     return seeds
 

@@ -489,7 +489,7 @@ def write_report(out, name, *, title, command, data, protocol, table, csv_rows, 
     writer = csv.DictWriter(buf, fieldnames=list(csv_rows[0]), lineterminator="\n")
     writer.writeheader()
     writer.writerows(csv_rows)
-    with open(paths["csv"], "w", newline="") as f:
+    with open(paths["csv"], "w", newline="", encoding="utf-8") as f:
         f.write(buf.getvalue())
     png = None
     if plot is not None:
@@ -510,7 +510,7 @@ def write_report(out, name, *, title, command, data, protocol, table, csv_rows, 
     md += ["## Machine", ""]
     md += machine_info()
     md.append("")
-    with open(paths["md"], "w") as f:
+    with open(paths["md"], "w", encoding="utf-8") as f:
         f.write("\n".join(md))
     log(f"wrote {', '.join(paths.values())}")
     return paths

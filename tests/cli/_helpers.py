@@ -15,5 +15,5 @@ def run(argv, capsys):
 
 def read_csv(path):
     """The rows of a CSV file written by ``eppf``, as dicts keyed by its header."""
-    with open(path, newline="") as fh:
+    with open(path, newline="", encoding="utf-8", errors="surrogateescape") as fh:  # (as eppf writes them)
         return list(csv.DictReader(fh))

@@ -267,3 +267,28 @@ def test_cnn_training_prints_one_line_per_epoch_and_predict_gives_probabilities(
     status, out, _ = _run(["train", "--data", folder, "-o", model, "--classifier", "4d", "--max-epochs", "1", *SMALL,
                            "--test-size", "0", *COMMON], capsys)
     assert status == 0 and not any(line.startswith("epoch") for line in out.splitlines())
+
+
+def test_predict_csv_keeps_a_file_name_that_is_not_utf8(tmp_path, capsys):
+    # the CSV is UTF-8 on every system, and a name that is not UTF-8 goes back as its own bytes
+    rng = np.random.default_rng(0)
+    data = tmp_path / "objects"
+    for name in ("mug", "box"):
+        os.makedirs(data / name)
+        for k in range(3):
+            write_point_cloud(data / name / f"{k}.xyz", rng.normal(size=(60, 3)) * (1 + len(name)))
+    odd = os.path.join(os.fsencode(data / "box"), b"caf\xe9.xyz")
+    try:
+        with open(odd, "wb") as fh:
+            fh.write(open(data / "box" / "0.xyz", "rb").read())
+    except (OSError, ValueError):
+        pytest.skip("this file system does not store names that are not UTF-8")
+    assert _run(["train", "--data", data, "-o", tmp_path / "m.model", "--test-size", "0", "--n-pairs", "500",
+                 "--no-progress"], capsys)[0] == 0
+    status, _, err = _run(["predict", "--model", tmp_path / "m.model", data, "-o", tmp_path / "p.csv", "--no-progress"],
+                          capsys)
+    assert status == 0, err  # (it stopped: 'utf-8' codec can't encode ... surrogates not allowed)
+    raw = (tmp_path / "p.csv").read_bytes()
+    assert odd in raw
+    rows = _csv(tmp_path / "p.csv")
+    assert len(rows) == 7 and os.fsdecode(odd) in {row["file"] for row in rows}

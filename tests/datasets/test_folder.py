@@ -178,3 +178,34 @@ def test_load_folder_and_the_command_line_read_a_folder_by_one_rule(tmp_path, fo
     cli = sorted((os.path.relpath(f, root).replace(os.sep, "/").rsplit(".", 1)[0], *cls) for f, _, cls in plan.entries)
     assert cli == sorted(zip(data.ids.tolist(), data.target_names[data.target].tolist(),
                              [""] * len(data.ids) if data.split is None else data.split.tolist()))
+
+
+def _undecodable_name(folder):
+    """A file name that is not UTF-8 (Latin-1 bytes, as some tools and archives write), or skip where the
+    file system refuses one (macOS, Windows)."""
+    path = os.path.join(os.fsencode(folder), b"caf\xe9.xyz")
+    try:
+        with open(path, "wb") as fh:
+            fh.write(b"".join(b"%r %r %r\n" % tuple(row) for row in RNG.normal(size=(60, 3)).tolist()))
+    except (OSError, ValueError):
+        pytest.skip("this file system does not store names that are not UTF-8")
+    return os.fsdecode(path)
+
+
+def test_a_file_name_that_is_not_utf8_is_loaded_with_its_own_seed(tmp_path):
+    import hashlib
+
+    from eppf.datasets._loaders import file_seeds
+
+    _write_flat(tmp_path)
+    name = _undecodable_name(tmp_path / "mug")
+    data = load_folder(tmp_path, n_points=20, random_state=3)  # (it raised UnicodeEncodeError hashing the name)
+    assert name in list(data.filenames)
+    seed = file_seeds(3, str(tmp_path), [name])[0]
+    k = list(data.filenames).index(name)
+    assert_array_equal(data.data[k], read_point_cloud(name, n_points=20, random_state=seed))
+    # the seed hashes the name's own bytes, and a UTF-8 name's as before (its str encoded as UTF-8)
+    base = int(np.random.RandomState(3).randint(0, np.iinfo(np.int64).max, dtype=np.int64))
+    for path, raw in ((name, b"mug/caf\xe9.xyz"), (str(tmp_path / "box" / "0.xyz"), b"box/0.xyz")):
+        want = int.from_bytes(hashlib.blake2b(b"%d/%s" % (base, raw), digest_size=8).digest(), "little")
+        assert file_seeds(3, str(tmp_path), [path]) == [want]
