@@ -45,6 +45,12 @@ def _check_labels(y, owner, name):
         raise ValueError(f"{owner}: {name} is empty")
     if y.dtype.kind == "f" and not np.all(np.isfinite(y)):
         raise ValueError(f"{owner}: {name} contains NaN or infinite values")
+    if y.dtype == object:
+        try:
+            np.unique(y)  # (what scikit-learn's type_of_target and the scores do with the labels)
+        except TypeError:
+            kinds = sorted({type(v).__name__ for v in y.tolist()})
+            raise TypeError(f"{owner}: {name} mixes labels that do not sort together ({', '.join(kinds)})") from None
     kind = type_of_target(y)
     if kind not in ("binary", "multiclass"):
         raise ValueError(f"{owner}: {name} must hold class labels, got a {kind!r} target")

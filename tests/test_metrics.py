@@ -103,6 +103,18 @@ def test_scores_errors(y_true, y_pred, msg):
         retrieval_scores(y_true, y_pred)
 
 
+def test_labels_that_do_not_sort_together_are_named():
+    from eppf.metrics import leave_one_out_retrieval
+
+    mixed = np.array(["a", 1, 2.5, "b"], dtype=object)
+    with pytest.raises(TypeError, match=re.escape("retrieval_scores: y_true mixes labels that do not sort together "
+                                                  "(float, int, str)")):
+        retrieval_scores(mixed, mixed)
+    X = np.random.default_rng(0).random((4, 6))
+    with pytest.raises(TypeError, match=re.escape("leave_one_out_retrieval: y mixes labels")):
+        leave_one_out_retrieval(X, mixed)  # (NumPy's bare "'<' not supported" before)
+
+
 # ------------------------------------------------------------ leave-one-out
 
 
