@@ -71,13 +71,22 @@ def _check_mesh(vertices, faces, owner):
     return v, f.astype(np.intp, copy=False)
 
 
-def _voxel_average(cloud, leaf):
-    """Average the points (and normals) falling in each cube of side ``leaf``."""
+def _voxel_average(cloud, leaf, owner):
+    """Average the points (and normals) falling in each cube of side ``leaf``, cubes in lexicographic order."""
     xyz = cloud[:, :3]
-    cell = np.floor((xyz - xyz.min(axis=0)) / leaf).astype(np.int64)
+    with np.errstate(over="ignore"):
+        scaled = (xyz - xyz.min(axis=0)) / leaf
+    if not scaled.max() < 2.0**62:  # (a cell index must fit an int64; inf for a subnormal leaf)
+        raise ValueError(f"{owner}: resolution {leaf:g} is too small for the mesh's extent "
+                         f"{np.ptp(xyz, axis=0).max():.6g} (more than 2**62 cells along an axis)")
+    cell = np.floor(scaled).astype(np.int64)
     dims = cell.max(axis=0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    if int(dims[0]) * int(dims[1]) * int(dims[2]) < 2**63:  # one int64 key per cell, in the same order
+        key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    else:  # (the packed key would overflow: the rows themselves, sorted the same way)
+        _, inverse, counts = np.unique(cell, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
     out = np.empty((counts.size, cloud.shape[1]))
     for c in range(cloud.shape[1]):
         out[:, c] = np.bincount(inverse, weights=cloud[:, c], minlength=counts.size)
@@ -173,13 +182,27 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
         count = int(validate_parameter(n_samples, CONSTRAINTS["n_samples"], name="n_samples", owner=owner))
     rng = check_random_state(random_state)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    ab, ac = b - a, c - a
-    cross = np.cross(ab, ac)
-    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        ab, ac = b - a, c - a
+        cross = np.cross(ab, ac)
+        double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
     cum = np.cumsum(double_area)
     total = cum[-1]
-    if not total > 0:
-        raise ValueError(f"{owner}: the mesh has zero surface area (all {f.shape[0]} faces are degenerate)")
+    if not (np.isfinite(total) and total > 0):
+        # areas beyond float64 (coordinates near 1e154 and above) or below it (subnormal ones): the same
+        # weights and normals from the mesh scaled to a unit extent, the points from the mesh as it is
+        with np.errstate(over="ignore"):
+            span = float(np.ptp(v, axis=0).max())
+        if not np.isfinite(span):
+            raise ValueError(f"{owner}: the mesh's extent overflows float64 (coordinates from {v.min():.6g} to "
+                             f"{v.max():.6g}): rescale it")
+        if span > 0:
+            cross = np.cross(ab / span, ac / span)
+            double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+            cum = np.cumsum(double_area)
+            total = cum[-1]
+        if not total > 0:
+            raise ValueError(f"{owner}: the mesh has zero surface area (all {f.shape[0]} faces are degenerate)")
     draws = rng.random_sample((3, count))
     pick = np.searchsorted(cum, draws[0] * total, side="right")
     np.minimum(pick, f.shape[0] - 1, out=pick)
@@ -200,7 +223,7 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
         out[3:] = rows[9:12]
     cloud = out.T.copy()
     if resolution is not None:
-        cloud = _voxel_average(cloud, float(resolution))
+        cloud = _voxel_average(cloud, float(resolution), owner)
         if not return_normals:
             cloud = np.ascontiguousarray(cloud[:, :3])
     return cloud

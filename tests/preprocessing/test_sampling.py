@@ -127,3 +127,32 @@ def test_resolution_density_follows_area():
 def test_errors(vertices, faces, kwargs, exc, msg):
     with pytest.raises(exc, match=re.escape(msg)):
         sample_mesh(vertices, faces, **kwargs)
+
+
+@pytest.mark.parametrize("scale", [1e300, 1e-310])
+def test_meshes_whose_areas_leave_float64_sample_as_their_unit_copies(scale):
+    # the cross products overflowed (1e300) or underflowed (subnormal coordinates): inf or zero areas
+    import warnings
+
+    v, f = _tetrahedron()
+    ref = sample_mesh(v, f, n_points=300, random_state=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = sample_mesh(v * scale, f, n_points=300, random_state=0)
+    assert np.isfinite(got).all()
+    assert_allclose(got[:, 3:], ref[:, 3:], atol=1e-9)  # the same faces chosen, the same normals
+    if scale > 1:
+        assert_allclose(got[:, :3] / scale, ref[:, :3], rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match=r"^sample_mesh: the mesh's extent overflows float64"):
+        sample_mesh(np.array([[-1e308, 0, 0], [1e308, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]), n_points=10)
+
+
+def test_a_resolution_finer_than_every_spacing_keeps_every_sample_in_order():
+    # 1e-7 on a unit mesh: 1e21 cells, more than an int64 key packs (it wrapped around silently); every
+    # sample alone in its cube, the cubes in lexicographic order
+    v, f = _tetrahedron()
+    samples = sample_mesh(v, f, n_points=3000, random_state=0)
+    got = sample_mesh(v, f, resolution=1e-7, n_samples=3000, random_state=0)
+    assert_array_equal(got, samples[np.lexsort(samples[:, 2::-1].T)])
+    with pytest.raises(ValueError, match=r"^sample_mesh: resolution 4.94066e-324 is too small for the mesh's extent"):
+        sample_mesh(v, f, resolution=5e-324, n_samples=100)
