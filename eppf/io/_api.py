@@ -347,8 +347,10 @@ def write_point_cloud(path, cloud, *, format=None, binary=True):
 
     Notes
     -----
-    PCD and PLY files store float32, as PCL and most scanners do; text files
-    keep full float64 precision (17 significant digits), NPY/NPZ are exact.
+    PCD and PLY files store float32, as PCL and most scanners do (float64
+    when a finite value lies beyond float32's range, which would store it as
+    an infinity); text files keep full float64 precision (17 significant
+    digits), NPY/NPZ are exact.
     Normals are written as PCD ``normal_x normal_y normal_z`` fields, PLY
     ``nx ny nz`` properties, or columns 4 to 6.
 

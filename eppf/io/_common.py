@@ -45,6 +45,13 @@ Examples
 Cloud = namedtuple("Cloud", ["xyz", "normals"])
 
 
+def float_code(values):
+    """``"f4"``, the float32 that PCD and PLY files of clouds hold, unless a finite value lies beyond float32's
+    range (it would be stored as an infinity): then ``"f8"``."""
+    finite = np.abs(values[np.isfinite(values)])
+    return "f8" if finite.size and finite.max() > np.finfo(np.float32).max else "f4"
+
+
 def widened(values):
     """A float64 copy of a numeric array, without NumPy's cast warning for signaling NaNs.
 

@@ -11,7 +11,7 @@ import struct
 
 import numpy as np
 
-from ._common import NORMAL_NAMES, Cloud, content, parse_float_rows
+from ._common import NORMAL_NAMES, Cloud, content, float_code, parse_float_rows
 from ._errors import FileFormatError
 
 try:  # compiled LZF decoder and table parser; pure-Python fallbacks below
@@ -280,19 +280,20 @@ def write_pcd(path, cloud, binary=True):
     fields = ["x", "y", "z"] + (list(NORMAL_NAMES) if cloud.shape[1] == 6 else [])
     n = cloud.shape[0]
     k = len(fields)
+    code = float_code(cloud)
     head = (
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
-        f"FIELDS {' '.join(fields)}\nSIZE {' '.join(['4'] * k)}\nTYPE {' '.join(['F'] * k)}\n"
+        f"FIELDS {' '.join(fields)}\nSIZE {' '.join([code[1]] * k)}\nTYPE {' '.join(['F'] * k)}\n"
         f"COUNT {' '.join(['1'] * k)}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\n"
         f"DATA {'binary' if binary else 'ascii'}\n"
     )
-    data32 = np.ascontiguousarray(cloud, dtype="<f4")
+    data = np.ascontiguousarray(cloud, dtype="<" + code)
     with open(path, "wb") as fh:
         fh.write(head.encode("ascii"))
         if binary:
-            fh.write(data32.tobytes())
+            fh.write(data.tobytes())
         else:
-            np.savetxt(fh, data32, fmt="%.9g")
+            np.savetxt(fh, data, fmt="%.9g" if code == "f4" else "%.17g")
 
 
 # --------------------------------------------------------------------------- every field

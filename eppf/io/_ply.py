@@ -18,7 +18,7 @@ import struct
 
 import numpy as np
 
-from ._common import Cloud, widened
+from ._common import Cloud, float_code, widened
 from ._errors import FileFormatError
 
 try:  # compiled token parser for ASCII bodies; NumPy's string conversion otherwise
@@ -423,8 +423,9 @@ def _header_text(binary, elements):
 
 def write_ply(path, cloud, faces=None, binary=True):
     names = ["x", "y", "z"] + (["nx", "ny", "nz"] if cloud.shape[1] == 6 else [])
-    elements = [("vertex", cloud.shape[0], [f"float {n}" for n in names])]
-    vert = np.ascontiguousarray(cloud, dtype="<f4")
+    code = float_code(cloud)
+    elements = [("vertex", cloud.shape[0], [f"{'float' if code == 'f4' else 'double'} {n}" for n in names])]
+    vert = np.ascontiguousarray(cloud, dtype="<" + code)
     if faces is not None:
         k = faces.shape[1]
         count_type = "uchar" if k <= 255 else "int"
@@ -439,7 +440,7 @@ def write_ply(path, cloud, faces=None, binary=True):
             if faces is not None:
                 fh.write(frec.tobytes())
         else:
-            np.savetxt(fh, vert, fmt="%.9g")
+            np.savetxt(fh, vert, fmt="%.9g" if code == "f4" else "%.17g")
             if faces is not None:
                 np.savetxt(fh, np.column_stack([np.full(faces.shape[0], k), faces]), fmt="%d")
 

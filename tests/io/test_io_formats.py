@@ -263,3 +263,26 @@ def test_every_reader_error_is_documented(tmp_path):
                     assert path.name in str(exc)
                 except ValueError as exc:  # read_mesh of a cloud format: an argument error
                     assert reader is read_mesh and "not meshes" in str(exc)
+
+
+@pytest.mark.parametrize("ext", [".pcd", ".ply"])
+@pytest.mark.parametrize("binary", [True, False])
+def test_pcd_and_ply_store_float64_only_for_values_beyond_float32(tmp_path, ext, binary):
+    # float32 as PCL writes it; a finite value beyond float32's range was written as an infinity (and the
+    # point dropped on reading)
+    import warnings
+
+    rng = np.random.default_rng(0)
+    unit = rng.normal(size=(30, 3))
+    for cloud, wide in ((unit, False), (unit * 1e300, True), (np.hstack([unit * 1e200, unit / 2]), True)):
+        path = tmp_path / f"c{ext}"
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)  # (NumPy's overflow warning of the float32 cast)
+            write_point_cloud(path, cloud, binary=binary)
+        head = path.read_bytes()[:400]
+        assert (b"double x" in head or b"SIZE 8 8 8" in head) == wide
+        back = read_point_cloud(path, normals=cloud.shape[1] == 6)
+        if wide:
+            assert_array_equal(back, cloud)  # (text: 17 significant digits)
+        else:
+            assert_allclose(back, cloud, rtol=1e-7)  # float32's precision
