@@ -27,6 +27,7 @@ the clouds, through hooks the descriptors expose:
 """
 
 import collections
+import io
 import numbers
 import os
 import re
@@ -201,6 +202,7 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
                                     chunk_size=chunk_size, progress=progress)
         X = np.concatenate(rows) if rows else None
     elif hasattr(output, "write"):
+        _check_binary_seekable(output, owner)  # (before the work: the .npy header is written last, in bytes)
         X, result = None, write_descriptors(output, names, read, descriptor, n_jobs=n_jobs, unreadable=unreadable,
                                             chunk_size=chunk_size, progress=progress)
     else:
@@ -216,6 +218,19 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
                       UserWarning, stacklevel=2)
     return Bunch(descriptors=X, n_features=result.n_features, files=[names[k] for k in result.kept],
                  skipped=result.skipped, n_points=result.shapes[:, 0].copy(), descriptor=result.descriptor)
+
+
+def _check_binary_seekable(fh, owner):
+    """A file object ``describe_files`` can write a ``.npy`` array to: binary, writable and seekable."""
+    if isinstance(fh, io.TextIOBase) or "b" not in getattr(fh, "mode", "b"):
+        raise TypeError(f"{owner}: output must be a file opened in binary mode ('wb'), got {fh!r}")
+    try:
+        seekable = fh.seekable() if hasattr(fh, "seekable") else False
+    except (OSError, ValueError):  # (a closed file)
+        seekable = False
+    if not seekable:
+        raise ValueError(f"{owner}: output must be seekable (the .npy header is completed after the rows), got "
+                         f"{fh!r}; write to a .npy path or a regular file")
 
 
 def _first_messages(skipped):

@@ -130,6 +130,22 @@ def test_bad_arguments_are_refused(tmp_path):
         describe_files([tmp_path / "nothing"], EPPFTransformer())
 
 
+def test_an_output_file_that_is_text_or_cannot_seek_is_refused_before_the_work(tmp_path, monkeypatch):
+    # (a pipe failed with "[Errno 29] Illegal seek", a text file with "write() argument must be str", both after
+    # every file was described)
+    import os
+
+    folder = _folder(tmp_path)
+    monkeypatch.setattr(streaming, "write_descriptors", lambda *a, **k: pytest.fail("described before the check"))
+    with open(tmp_path / "d.txt", "w") as text:
+        with pytest.raises(TypeError, match=r"describe_files: output must be a file opened in binary mode"):
+            describe_files([folder], GASDTransformer(), output=text)
+    read_end, write_end = os.pipe()
+    with os.fdopen(read_end, "rb"), os.fdopen(write_end, "wb") as pipe:
+        with pytest.raises(ValueError, match=r"describe_files: output must be seekable .* write to a .npy path"):
+            describe_files([folder], GASDTransformer(), output=pipe)
+
+
 # ---------------------------------------------------------------------------
 # The hooks
 # ---------------------------------------------------------------------------
