@@ -221,8 +221,8 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
 
 
 def _check_binary_seekable(fh, owner):
-    """A file object ``describe_files`` can write a ``.npy`` array to: binary, writable and seekable."""
-    if isinstance(fh, io.TextIOBase) or "b" not in getattr(fh, "mode", "b"):
+    """A file object ``describe_files`` can write a ``.npy`` array to: binary and seekable."""
+    if isinstance(fh, io.TextIOBase):
         raise TypeError(f"{owner}: output must be a file opened in binary mode ('wb'), got {fh!r}")
     try:
         seekable = fh.seekable() if hasattr(fh, "seekable") else False

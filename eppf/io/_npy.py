@@ -109,12 +109,18 @@ def read_npy(path, owner, want_normals="auto"):
     return _to_cloud(read_npy_array(path, owner), path, owner)
 
 
-def _in_archive(path, owner, read):
-    """``read(open file)`` on the .npz file ``path``; anything but a FileFormatError from a malformed archive
-    (BadZipFile, zlib.error, NotImplementedError, EOFError, OSError from seeks, ...) becomes one naming it."""
+def _size(path, owner):
+    """The size of the readable, non-empty file ``path`` (OSError or FileFormatError naming it)."""
     size = check_file(path, owner)
     if size == 0:
         raise FileFormatError(f"{owner}: {path!r} is empty")
+    return size
+
+
+def _in_archive(path, owner, read):
+    """``read(open file)`` on the .npz file ``path``; anything but a FileFormatError from a malformed archive
+    (BadZipFile, zlib.error, NotImplementedError, EOFError, OSError from seeks, ...) becomes one naming it."""
+    _size(path, owner)
     with open(path, "rb") as fh:  # an OSError here names the file
         try:
             return read(fh)
@@ -132,9 +138,7 @@ def read_npz(path, owner, want_normals="auto"):
 
 def read_npy_array(path, owner):
     """The array of an ``.npy`` file, its header checked against the file's size before anything is allocated."""
-    size = check_file(path, owner)
-    if size == 0:
-        raise FileFormatError(f"{owner}: {path!r} is empty")
+    size = _size(path, owner)
     with open(path, "rb") as fh:
         return _read_array(fh, size, path, owner, "")
 

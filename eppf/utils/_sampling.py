@@ -105,6 +105,13 @@ def _voxel_average(cloud, leaf, owner):
     return out
 
 
+def _face_areas(ab, ac):
+    """The faces' cross products ``ab x ac``, their lengths (twice the areas) and the lengths' running sum."""
+    cross = np.cross(ab, ac)
+    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    return cross, double_area, np.cumsum(double_area)
+
+
 def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=100_000,
                 return_normals=True, random_state=None):
     """Sample a point cloud uniformly over the surface of a triangle mesh.
@@ -184,9 +191,7 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
         ab, ac = b - a, c - a
-        cross = np.cross(ab, ac)
-        double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-    cum = np.cumsum(double_area)
+        cross, double_area, cum = _face_areas(ab, ac)
     total = cum[-1]
     if not (np.isfinite(total) and total > 0):
         # areas beyond float64 (coordinates near 1e154 and above) or below it (subnormal ones): the same
@@ -197,9 +202,7 @@ def sample_mesh(vertices, faces, *, n_points=None, resolution=None, n_samples=10
             raise ValueError(f"{owner}: the mesh's extent overflows float64 (coordinates from {v.min():.6g} to "
                              f"{v.max():.6g}): rescale it")
         if span > 0:
-            cross = np.cross(ab / span, ac / span)
-            double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-            cum = np.cumsum(double_area)
+            cross, double_area, cum = _face_areas(ab / span, ac / span)
             total = cum[-1]
         if not total > 0:
             raise ValueError(f"{owner}: the mesh has zero surface area (all {f.shape[0]} faces are degenerate)")
