@@ -12,12 +12,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.base import clone
 from sklearn.utils import check_random_state
-from sklearn.utils.multiclass import type_of_target
 
 from .neighbors._base import check_distance_params, learn_floor, prepare_histograms, validate_histogram_array
 from .neighbors._kl import loo_nearest
 from .utils._blas import blas_limits
 from .utils._param_validation import Interval, validate_parameter
+from .utils._validation import check_class_labels
 
 __all__ = [
     "RepeatedRetrievalResult",
@@ -32,30 +32,6 @@ METRICS = ("total_accuracy", "mean_class_accuracy", "macro_precision", "macro_re
 
 #: ``n_repeats`` of :func:`repeated_retrieval` (:mod:`eppf.utils._param_validation`).
 _N_REPEATS = [Interval(numbers.Integral, 1, None, closed="left", description="a positive int")]
-
-def _check_labels(y, owner, name):
-    if y is None:
-        raise ValueError(f"{owner}: {name} is None; class labels are needed")
-    y = np.asarray(y)
-    if y.ndim == 2 and y.shape[1] == 1:
-        y = y.ravel()
-    if y.ndim != 1:
-        raise ValueError(f"{owner}: {name} must be a 1D array of class labels, got shape {y.shape}")
-    if y.shape[0] == 0:
-        raise ValueError(f"{owner}: {name} is empty")
-    if y.dtype.kind == "f" and not np.all(np.isfinite(y)):
-        raise ValueError(f"{owner}: {name} contains NaN or infinite values")
-    if y.dtype == object:
-        try:
-            np.unique(y)  # (what scikit-learn's type_of_target and the scores do with the labels)
-        except TypeError:
-            kinds = sorted({type(v).__name__ for v in y.tolist()})
-            raise TypeError(f"{owner}: {name} mixes labels that do not sort together ({', '.join(kinds)})") from None
-    kind = type_of_target(y)
-    if kind not in ("binary", "multiclass"):
-        raise ValueError(f"{owner}: {name} must hold class labels, got a {kind!r} target")
-    return y
-
 
 def retrieval_scores(y_true, y_pred):
     """Total accuracy and class-averaged scores of a retrieval or classification.
@@ -113,8 +89,8 @@ def retrieval_scores(y_true, y_pred):
     (0.75, 0.8333, 0.75)
     """
     owner = "retrieval_scores"
-    y_true = _check_labels(y_true, owner, "y_true")
-    y_pred = _check_labels(y_pred, owner, "y_pred")
+    y_true = check_class_labels(y_true, owner, "y_true")
+    y_pred = check_class_labels(y_pred, owner, "y_pred")
     if y_true.shape[0] != y_pred.shape[0]:
         raise ValueError(
             f"{owner}: y_true and y_pred have different lengths ({y_true.shape[0]} and {y_pred.shape[0]})"
@@ -206,7 +182,7 @@ def leave_one_out_retrieval(
         owner, floor=floor, renormalize=renormalize, chunk_size=chunk_size, n_jobs=n_jobs
     )
     X = validate_histogram_array(X, owner, "X")
-    y = _check_labels(y, owner, "y")
+    y = check_class_labels(y, owner, "y")
     if y.shape[0] != X.shape[0]:
         raise ValueError(f"{owner}: X has {X.shape[0]} samples but y has {y.shape[0]} labels")
     if X.shape[0] < 2:
@@ -362,7 +338,7 @@ def repeated_retrieval(
         raise ValueError(
             f"{owner}: {type(transformer).__name__} has no random_state parameter, so repeated draws would be identical"
         )
-    y = _check_labels(y, owner, "y")
+    y = check_class_labels(y, owner, "y")
     n_clouds = len(clouds)
     if n_clouds != y.shape[0]:
         raise ValueError(f"{owner}: {n_clouds} point clouds but {y.shape[0]} labels")

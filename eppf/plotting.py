@@ -13,6 +13,7 @@ import numbers
 import numpy as np
 
 from .utils._param_validation import Interval, IntTuple, StrOptions, validate_parameter
+from .utils._validation import check_class_labels
 
 try:
     import matplotlib  # noqa: F401
@@ -63,6 +64,13 @@ def _new_axes(ax):
 N_BINS = [IntTuple(4, 1, None, description="a tuple of 4 positive ints")]
 
 
+#: The magnitudes the plots draw: matplotlib overflows near float64's largest values (a scale's padding),
+#: the noise band's standard deviation squares them, and matplotlib's log color bar fails below about
+#: 2e-287 (it widens such a range to +-0.1).
+_DRAWABLE_MAX = 1e150
+_DRAWABLE_MIN = 1e-280
+
+
 def _check_bins(n_bins, owner):
     """Validate four positive bin counts without importing torch."""
     return tuple(int(v) for v in validate_parameter(n_bins, N_BINS, name="n_bins", owner=owner))
@@ -92,6 +100,11 @@ def _as_histogram(descriptor, n_bins, owner):
         )
     if not np.isfinite(arr).all():
         raise ValueError(f"{owner}: descriptor contains NaN or infinite values")
+    if np.abs(arr).max() > _DRAWABLE_MAX:
+        raise ValueError(
+            f"{owner}: descriptor holds values beyond {_DRAWABLE_MAX:g} in magnitude (largest "
+            f"{np.abs(arr).max():.3g}), which matplotlib's color bar cannot draw; rescale the descriptor first"
+        )
     return arr
 
 
@@ -107,12 +120,20 @@ def _slice_grid(fig, hist, *, log, cmap, title, colorbar_label):
         if positive.size == 0:
             raise ValueError("plot_descriptor: log=True needs at least one positive bin")
         values = np.where(hist > 0, hist, np.nan)
-        norm = LogNorm(vmin=positive.min(), vmax=positive.max())
+        if positive.min() < _DRAWABLE_MIN:
+            raise ValueError(
+                f"plot_descriptor: log=True cannot draw the positive value {positive.min():.3g} (matplotlib's log "
+                f"color bar needs values from {_DRAWABLE_MIN:g}); rescale the descriptor first"
+            )
+        low, high = float(positive.min()), float(positive.max())
+        if low == high:  # (a decade either side: matplotlib's own widening fails on small values)
+            low, high = low / 10.0, high * 10.0
+        norm = LogNorm(vmin=low, vmax=high)
         vmin = vmax = None
     else:
         vmin, vmax = float(hist.min()), float(hist.max())
         if vmin == vmax:
-            vmax = vmin + 1.0
+            vmax = vmin + max(1.0, abs(vmin) / 2.0)  # (a step that moves vmax whatever vmin's size)
     axes = fig.subplots(n4, n3, sharex=True, sharey=True, squeeze=False)
     image = None
     for i4 in range(n4):
@@ -177,8 +198,10 @@ def plot_descriptor(descriptor, n_bins=(20, 4, 5, 3), *, fig=None, log=False, cm
     Raises
     ------
     ValueError
-        If the descriptor's length or shape does not match ``n_bins``, or it
-        holds NaN or infinite values.
+        If the descriptor's length or shape does not match ``n_bins``, it
+        holds NaN or infinite values or values beyond 1e150 in magnitude, or
+        (``log=True``) it has no positive bin or one below 1e-280 (beyond
+        what matplotlib's scales draw).
 
     See Also
     --------
@@ -456,8 +479,10 @@ def plot_confusion_matrix(
     Raises
     ------
     ValueError
-        If the lengths differ, ``normalize`` is unknown or the display names
-        do not match the labels.
+        If the lengths differ, a label is NaN or continuous, ``normalize`` is
+        unknown or the display names do not match the labels.
+    TypeError
+        If the labels do not sort together (numbers mixed with strings).
 
     See Also
     --------
@@ -488,6 +513,8 @@ def plot_confusion_matrix(
         raise ValueError(f"{owner}: y_true is empty")
     if normalize not in _NORMALIZE:
         raise ValueError(f"{owner}: normalize must be 'true', 'pred', 'all' or None, got {normalize!r}")
+    y_true = check_class_labels(y_true, owner, "y_true")
+    y_pred = check_class_labels(y_pred, owner, "y_pred")
     if labels is None:
         labels = np.unique(np.concatenate([y_true, y_pred]))
     labels = np.asarray(labels)
@@ -525,6 +552,9 @@ def _finite_float_array(values, owner, name):
         raise ValueError(f"{owner}: {name} must be numbers") from None
     if not np.isfinite(arr).all():
         raise ValueError(f"{owner}: {name} contains NaN or infinite values")
+    if arr.size and np.abs(arr).max() > _DRAWABLE_MAX:
+        raise ValueError(f"{owner}: {name} holds values beyond {_DRAWABLE_MAX:g} in magnitude, which matplotlib "
+                         "cannot draw")
     return arr
 
 
@@ -554,8 +584,8 @@ def plot_noise_curve(sigmas, scores, *, ax=None, ylabel="total accuracy", xlabel
     Raises
     ------
     ValueError
-        If a method's scores do not have one row per noise level, or hold
-        NaN.
+        If a method's scores do not have one row per noise level, or a
+        value is NaN, infinite or beyond 1e150 in magnitude.
 
     See Also
     --------
@@ -630,8 +660,9 @@ def plot_scores_bar(scores, *, ax=None, ylabel="F1", errors=None, sort=False):
     Raises
     ------
     ValueError
-        If ``scores`` is empty, a value is not a number or a pair, or
-        ``errors`` names a key that is not in ``scores``.
+        If ``scores`` is empty, a value is not a number or a pair or lies
+        beyond 1e150 in magnitude, or ``errors`` names a key that is not in
+        ``scores``.
 
     See Also
     --------
@@ -735,7 +766,9 @@ def plot_learning_curve(history_or_classifier, *, ax=None, keys=("train_loss", "
     sklearn.exceptions.NotFittedError
         If the classifier is not fitted.
     ValueError
-        If the history is empty or none of ``keys`` is in it.
+        If the history is empty, none of ``keys`` is in it, or a value is
+        not a number or a finite one beyond 1e150 in magnitude (infinite and
+        NaN losses are drawn as spikes and gaps).
 
     See Also
     --------
@@ -760,12 +793,19 @@ def plot_learning_curve(history_or_classifier, *, ax=None, keys=("train_loss", "
     present = [k for k in keys if any(k in r for r in rows)]
     if not present:
         raise ValueError(f"{owner}: none of the keys {tuple(keys)} is in the history; it has {sorted(rows[0])}")
-    epochs = np.array([r.get("epoch", i + 1) for i, r in enumerate(rows)], dtype=np.float64)
+    epochs = _finite_float_array([r.get("epoch", i + 1) for i, r in enumerate(rows)], owner, "the history's epochs")
     ax = _new_axes(ax)
     twin = None
     handles = []
     for i, key in enumerate(present):
-        y = np.array([r.get(key, np.nan) for r in rows], dtype=np.float64)
+        try:
+            y = np.array([r.get(key, np.nan) for r in rows], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{owner}: the history's {key!r} values must be numbers") from None
+        finite = y[np.isfinite(y)]  # (NaN and infinities, e.g. a diverged loss, leave gaps or spikes)
+        if finite.size and np.abs(finite).max() > _DRAWABLE_MAX:
+            raise ValueError(f"{owner}: the history's {key!r} values reach beyond {_DRAWABLE_MAX:g} in magnitude, "
+                             "which matplotlib cannot draw")
         target = ax
         if "acc" in key:
             if twin is None:

@@ -3,6 +3,7 @@ import math
 import re
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -85,6 +86,26 @@ def test_plot_descriptor_log_blanks_empty_bins():
     assert fig._suptitle.get_text() == "t"
 
 
+@pytest.mark.parametrize(
+    "value, log",
+    [(v, False) for v in (0.0, 7.0, -3.0, 1e150, -1e150, 1e-280)] + [(v, True) for v in (7.0, 1e150, 1e-280)],
+)
+def test_plot_descriptor_draws_extreme_and_constant_values(value, log):
+    # Every bin equal, or one bin apart (of opposite sign, or 1e150 on a log scale): the figure draws
+    # without matplotlib's warnings or errors, and the color range holds every value.
+    for x in (np.full(48, value), np.r_[np.full(47, value), (1e150 if log else -value)]):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            fig = plot_descriptor(x, N_BINS, log=log)
+            fig.canvas.draw()
+        image = fig.axes[0].images[0]
+        low, high = image.norm.vmin, image.norm.vmax
+        assert low < high
+        assert low <= x[x > 0].min() if log else low <= x.min()
+        assert high >= x.max()
+        plt.close(fig)
+
+
 def test_plot_descriptor_into_given_figure():
     fig = plt.figure()
     assert plot_descriptor(np.ones(48), N_BINS, fig=fig) is fig
@@ -100,6 +121,9 @@ def test_plot_descriptor_into_given_figure():
         (np.ones(48), (6, 2, 4), "plot_descriptor: n_bins must be a tuple of 4 positive ints"),
         (np.ones(48), (6, 2, 4, 0), "plot_descriptor: n_bins must be a tuple of 4 positive ints"),
         (np.zeros(48), N_BINS, "plot_descriptor: log=True needs at least one positive bin"),
+        (np.full(48, 1e308), N_BINS, "plot_descriptor: descriptor holds values beyond 1e+150 in magnitude"),
+        (np.r_[np.ones(47), -1e200], N_BINS, "plot_descriptor: descriptor holds values beyond 1e+150 in magnitude"),
+        (np.full(48, 5e-324), N_BINS, "plot_descriptor: log=True cannot draw the positive value 4.94e-324"),
     ],
 )
 def test_plot_descriptor_errors(descriptor, n_bins, msg):
@@ -248,11 +272,28 @@ def test_plot_confusion_matrix_display_labels_and_no_values():
         (([[0]], [[0]]), {}, "plot_confusion_matrix: y_true and y_pred must be 1D"),
         (([0, 1], [0, 1]), dict(normalize="rows"), "plot_confusion_matrix: normalize must be 'true', 'pred', 'all'"),
         (([0, 1], [0, 1]), dict(display_labels=["a"]), "plot_confusion_matrix: display_labels has 1 names"),
+        (([0.0, np.nan], [0.0, 0.0]), {}, "plot_confusion_matrix: y_true contains NaN or infinite values"),
+        (([0, 1], [0.5, 1.5]), {}, "plot_confusion_matrix: y_pred must hold class labels, got a 'continuous' target"),
     ],
 )
 def test_plot_confusion_matrix_errors(args, kwargs, msg):
     with pytest.raises(ValueError, match=re.escape(msg)):
         plot_confusion_matrix(*args, **kwargs)
+
+
+def test_plot_confusion_matrix_refuses_labels_that_do_not_sort():
+    y = np.array([1, "a", 2.5], dtype=object)
+    with pytest.raises(TypeError, match=re.escape("plot_confusion_matrix: y_true mixes labels that do not sort")):
+        plot_confusion_matrix(y, y)
+
+
+def test_plot_learning_curve_draws_a_diverged_loss():
+    # Infinite and NaN losses (a diverged epoch) stay drawable: gaps in the line, no error.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ax = plot_learning_curve([{"train_loss": 1.0}, {"train_loss": np.inf}, {"train_loss": np.nan}])
+        ax.figure.canvas.draw()
+    assert_array_equal(ax.lines[0].get_ydata(), [1.0, np.inf, np.nan])
 
 
 # --------------------------------------------------------------- noise curve
@@ -283,6 +324,8 @@ def test_plot_noise_curve_mean_and_band():
         ([], {"a": []}, "plot_noise_curve: sigmas must be a non-empty 1D array"),
         ([0, np.nan], {"a": [1, 2]}, "plot_noise_curve: sigmas contains NaN or infinite values"),
         ([0, 1], {"a": [1, np.nan]}, "plot_noise_curve: scores['a'] contains NaN or infinite values"),
+        ([0, 1e200], {"a": [1, 2]}, "plot_noise_curve: sigmas holds values beyond 1e+150 in magnitude"),
+        ([0, 1], {"a": [[1e300, -1e300], [0, 1]]}, "plot_noise_curve: scores['a'] holds values beyond 1e+150"),
     ],
 )
 def test_plot_noise_curve_errors(sigmas, scores, msg):
@@ -331,6 +374,8 @@ def test_plot_scores_bar_errors_dict_overrides():
         ({"a": "high"}, None, "plot_scores_bar: scores['a'] must be numbers"),
         ({"a": 1.0}, {"b": 0.1}, "plot_scores_bar: errors has 'b', which is not in scores"),
         ({"a": np.inf}, None, "plot_scores_bar: scores['a'] contains NaN or infinite values"),
+        ({"a": 1e308, "b": -1e308}, None, "plot_scores_bar: scores['a'] holds values beyond 1e+150 in magnitude"),
+        ({"a": 0.5}, {"a": 1e200}, "plot_scores_bar: errors['a'] holds values beyond 1e+150 in magnitude"),
     ],
 )
 def test_plot_scores_bar_errors(scores, errors, msg):
@@ -372,6 +417,11 @@ def test_plot_learning_curve_unfitted():
         ([{"epoch": 1, "loss": 1.0}], ValueError, "plot_learning_curve: none of the keys"),
         ([1, 2], TypeError, "plot_learning_curve: the history must be a list of per-epoch dicts"),
         (3.0, TypeError, "plot_learning_curve: expected a fitted EPPF4DClassifier or PointNetClassifier"),
+        ([{"train_loss": "high"}], ValueError, "plot_learning_curve: the history's 'train_loss' values must be numbers"),
+        ([{"train_loss": 1e308}], ValueError, "plot_learning_curve: the history's 'train_loss' values reach beyond"),
+        ([{"epoch": "one", "train_loss": 1.0}], ValueError, "plot_learning_curve: the history's epochs must be numbers"),
+        ([{"epoch": np.nan, "train_loss": 1.0}], ValueError,
+         "plot_learning_curve: the history's epochs contains NaN or infinite values"),
     ],
 )
 def test_plot_learning_curve_errors(history, err, msg):

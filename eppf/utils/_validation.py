@@ -15,11 +15,12 @@ import numbers
 import operator
 
 import numpy as np
+from sklearn.utils.multiclass import type_of_target
 
 from ._param_validation import N_JOBS, Interval, validate_parameter
 
 __all__ = [
-    "PackedClouds", "as_vector3", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
+    "PackedClouds", "as_vector3", "check_class_labels", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
     "condition_point_clouds", "object_seeds", "pack_point_clouds",
 ]
 
@@ -738,3 +739,32 @@ def as_vector3(value):
         return None
     v = np.ascontiguousarray(v, dtype=np.float64)
     return v if np.isfinite(v).all() else None
+
+
+def check_class_labels(y, owner, name):
+    """``y`` as a 1D array of class labels (a column vector is flattened), or an error naming ``owner``.
+
+    Refused: None, other shapes, no labels, NaN or infinite float labels, labels that do not sort together
+    (TypeError), and targets scikit-learn does not call "binary" or "multiclass" (continuous values).
+    """
+    if y is None:
+        raise ValueError(f"{owner}: {name} is None; class labels are needed")
+    y = np.asarray(y)
+    if y.ndim == 2 and y.shape[1] == 1:
+        y = y.ravel()
+    if y.ndim != 1:
+        raise ValueError(f"{owner}: {name} must be a 1D array of class labels, got shape {y.shape}")
+    if y.shape[0] == 0:
+        raise ValueError(f"{owner}: {name} is empty")
+    if y.dtype.kind == "f" and not np.all(np.isfinite(y)):
+        raise ValueError(f"{owner}: {name} contains NaN or infinite values")
+    if y.dtype == object:
+        try:
+            np.unique(y)  # (what scikit-learn's type_of_target and the scores do with the labels)
+        except TypeError:
+            kinds = sorted({type(v).__name__ for v in y.tolist()})
+            raise TypeError(f"{owner}: {name} mixes labels that do not sort together ({', '.join(kinds)})") from None
+    kind = type_of_target(y)
+    if kind not in ("binary", "multiclass"):
+        raise ValueError(f"{owner}: {name} must hold class labels, got a {kind!r} target")
+    return y
