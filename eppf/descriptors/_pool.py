@@ -35,7 +35,10 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
     ----------
     transformer : estimator
         A descriptor transformer such as :class:`eppf.descriptors.EPPFTransformer`, with
-        a ``random_state`` parameter. Each draw fits a clone on ``X`` as
+        a ``random_state`` parameter (nested ones included, e.g. in a
+        :class:`~eppf.descriptors.DescriptorUnion`); one without (GASD,
+        VFH, ...) needs ``augment``, whose perturbed copies make its draws
+        differ. Each draw fits a clone on ``X`` as
         given (so ``scaling="fit"`` learns its scale from the unperturbed
         clouds) and transforms the draw's clouds.
     X : list of array-like of shape (n_i, 3) or (n_i, 6)
@@ -75,32 +78,51 @@ def descriptor_pool(transformer, X, n_draws=4, *, augment=None, random_state=Non
     (3, 3, 1200)
     """
     validate_parameter(n_draws, _N_DRAWS, name="n_draws", owner=_OWNER)
-    for role, est, methods in (("transformer", transformer, ("fit", "transform")),
-                               ("augment", augment, ("fit_transform",))):
-        if est is None and role == "augment":
-            continue
-        missing = [m for m in methods if not callable(getattr(est, m, None))]
-        if missing or "random_state" not in getattr(est, "get_params", lambda: {})():
-            raise TypeError(
-                f"{_OWNER}: {role} must be a scikit-learn style estimator with "
-                f"{' and '.join(methods)} and a random_state parameter, got {type(est).__name__}"
-            )
+    _check_parts(_OWNER, transformer, augment)
     if hasattr(X, "__next__"):
         X = list(X)  # an iterator (a generator) would be used up by the first draw
     rng = check_random_state(random_state)
     seeds = rng.randint(np.iinfo(np.int32).max, size=(int(n_draws), 2))
     draws = []
     for r, (seed, aug_seed) in enumerate(seeds):
-        est = clone(transformer).set_params(random_state=int(seed)).fit(X)
-        clouds = X if augment is None or r == 0 else clone(augment).set_params(random_state=int(aug_seed)).fit_transform(X)
+        est = _seed_params(clone(transformer), seed).fit(X)
+        clouds = X if augment is None or r == 0 else _seed_params(clone(augment), aug_seed).fit_transform(X)
         draws.append(np.asarray(est.transform(clouds)))
     return np.stack(draws, axis=1)
 
 
+def _random_state_keys(est):
+    """The names of ``est``'s ``random_state`` parameters, nested ones included."""
+    params = getattr(est, "get_params", lambda deep=True: {})(deep=True)
+    return [k for k in params if k == "random_state" or k.endswith("__random_state")]
+
+
 def _seed_params(est, seed):
     """``est`` with every ``random_state`` it has, nested ones included, set to ``seed``."""
-    keys = [k for k in est.get_params(deep=True) if k == "random_state" or k.endswith("__random_state")]
-    return est.set_params(**{k: int(seed) for k in keys})
+    return est.set_params(**{k: int(seed) for k in _random_state_keys(est)})
+
+
+def _check_parts(owner, transformer, augment):
+    """The pool's transformer and augmentation as the pools use them, or a TypeError naming ``owner``.
+
+    The transformer needs ``fit`` and ``transform`` and a (nested) ``random_state``, which each draw
+    sets, unless ``augment`` is given: then a deterministic transformer (GASD, VFH, ...) still gives
+    draws that differ, by their perturbed copies. ``augment`` needs ``fit_transform`` and a
+    ``random_state``.
+    """
+    for role, est, methods in (("transformer", transformer, ("fit", "transform")),
+                               ("augment", augment, ("fit_transform",))):
+        if est is None and role == "augment":
+            continue
+        missing = [m for m in methods if not callable(getattr(est, m, None))]
+        seeded = bool(_random_state_keys(est)) or (role == "transformer" and augment is not None)
+        if missing or not seeded:
+            need = "a random_state parameter" if role == "augment" else \
+                "a random_state parameter (or an augment, whose perturbed copies make the draws differ)"
+            raise TypeError(
+                f"{owner}: {role} must be a scikit-learn style estimator with {' and '.join(methods)} and {need}, "
+                f"got {type(est).__name__}"
+            )
 
 
 class DescriptorPool(TransformerMixin, BaseEstimator):
@@ -123,7 +145,10 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
         A descriptor transformer (:class:`EPPFTransformer`,
         :class:`DescriptorUnion`, ...). Every ``random_state`` parameter it
         has, nested ones included, is set per draw; draw ``r`` is described
-        by a clone fitted on the clouds given to ``fit``.
+        by a clone fitted on the clouds given to ``fit``. A transformer
+        without one (GASD, VFH, ...) needs ``augment``: its draws then differ
+        only by their perturbed copies (draw 0, and every test draw where
+        ``test_augment=False``, describe the same clouds the same way).
     n_draws : int, default=8
         Draws per object in the training pool.
     augment : transformer or None, default=None
@@ -208,17 +233,7 @@ class DescriptorPool(TransformerMixin, BaseEstimator):
     def _check_params(self):
         owner = type(self).__name__
         validate_params(self)
-        for role, est, methods in (("transformer", self.transformer, ("fit", "transform")),
-                                   ("augment", self.augment, ("fit_transform",))):
-            if est is None and role == "augment":
-                continue
-            missing = [m for m in methods if not callable(getattr(est, m, None))]
-            params = getattr(est, "get_params", lambda deep=True: {})(deep=True)
-            if missing or not any(k == "random_state" or k.endswith("__random_state") for k in params):
-                raise TypeError(
-                    f"{owner}: {role} must be a scikit-learn style estimator with {' and '.join(methods)} and a "
-                    f"random_state parameter, got {type(est).__name__}"
-                )
+        _check_parts(owner, self.transformer, self.augment)
         if self.share_normals:
             self._normal_settings()
 

@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
-from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.base import BaseEstimator, TransformerMixin, clone
 
 from eppf import EPPF4DClassifier, EPPFTransformer, descriptor_pool
 from eppf.preprocessing import RandomScaling
@@ -68,7 +68,7 @@ def test_pool_feeds_the_classifier():
         ({"n_draws": 0}, ValueError, "descriptor_pool: n_draws must be an int >= 1, got 0"),
         ({"n_draws": 2.0}, TypeError, "descriptor_pool: n_draws must be an int >= 1, got 2.0"),
         ({"n_draws": True}, TypeError, "descriptor_pool: n_draws must be an int >= 1, got True"),
-        ({"transformer": "eppf"}, TypeError, "descriptor_pool: transformer must be a scikit-learn style estimator with fit and transform and a random_state parameter, got str"),
+        ({"transformer": "eppf"}, TypeError, "descriptor_pool: transformer must be a scikit-learn style estimator with fit and transform and a random_state parameter (or an augment, whose perturbed copies make the draws differ), got str"),
         ({"augment": np.sqrt}, TypeError, "descriptor_pool: augment must be a scikit-learn style estimator with fit_transform and a random_state parameter, got ufunc"),
     ],
 )
@@ -76,6 +76,42 @@ def test_errors(kwargs, exc, msg):
     args = {"transformer": TR, "n_draws": 2, **kwargs}
     with pytest.raises(exc, match=re.escape(msg)):
         descriptor_pool(args.pop("transformer"), _clouds(2), args.pop("n_draws"), **args)
+
+
+def test_deterministic_transformer_draws_differ_by_augmentation():
+    # GASD has no random_state: without augment its draws would be identical (refused); with it, draw r
+    # describes the copy stretched with draw r's augmentation seed, in the function and the step alike.
+    from eppf.descriptors import DescriptorPool, GASDTransformer
+
+    X = _clouds()
+    msg = ("transformer must be a scikit-learn style estimator with fit and transform and a random_state parameter "
+           "(or an augment, whose perturbed copies make the draws differ), got GASDTransformer")
+    with pytest.raises(TypeError, match=re.escape(f"descriptor_pool: {msg}")):
+        descriptor_pool(GASDTransformer(), X, 2)
+    with pytest.raises(TypeError, match=re.escape(f"DescriptorPool: {msg}")):
+        DescriptorPool(GASDTransformer(), 2).fit(X)
+    pool = descriptor_pool(GASDTransformer(), X, 3, augment=RandomScaling(0.5, 2.0), random_state=4)
+    seeds = np.random.RandomState(4).randint(np.iinfo(np.int32).max, size=(3, 2))
+    for r in range(3):
+        clouds = X if r == 0 else RandomScaling(0.5, 2.0, random_state=int(seeds[r, 1])).fit_transform(X)
+        assert_array_equal(pool[:, r], GASDTransformer().fit(X).transform(clouds))
+    assert not np.array_equal(pool[:, 1], pool[:, 2])
+    step = DescriptorPool(GASDTransformer(), 3, augment=RandomScaling(0.5, 2.0), random_state=4)
+    assert_array_equal(step.fit_transform(X), pool)
+    assert not np.array_equal(step.transform(X)[:, 1], step.transform(X)[:, 0])
+
+
+def test_nested_random_states_are_seeded_by_the_function():
+    # A union has no random_state of its own: each draw seeds its blocks' (as DescriptorPool does).
+    from eppf.descriptors import DescriptorPool, DescriptorUnion, ProportionTransformer
+
+    X = _clouds()
+    union = DescriptorUnion([("eppf", TR), ("prop", ProportionTransformer())], normalize="none")
+    pool = descriptor_pool(union, X, 2, random_state=3)
+    assert_array_equal(pool, DescriptorPool(union, 2, random_state=3).fit_transform(X))
+    seeds = np.random.RandomState(3).randint(np.iinfo(np.int32).max, size=(2, 2))
+    assert_array_equal(pool[:, 1], clone(union).set_params(eppf__random_state=int(seeds[1, 0])).fit(X).transform(X))
+    assert not np.array_equal(pool[:, 0], pool[:, 1])
 
 
 def test_bad_clouds_are_reported_by_the_transformer():
