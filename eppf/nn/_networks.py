@@ -234,6 +234,8 @@ class _EPPFNetBase(nn.Module):
     def forward(self, x):
         """Logits, float32, for a (batch, prod(n_bins) + n_side) tensor: descriptors, then side features."""
         self._check_features(x)
+        if x.shape[0] == 0:  # (the 4D network's folded layouts cannot reshape an empty batch)
+            return x.new_zeros((0, self.fc2.out_features))
         n = self.n_features
         side = x[:, n:] if getattr(self, "n_side", 0) else None
         x = x[:, :n] if side is not None else x
@@ -272,6 +274,13 @@ class _EPPFNetBase(nn.Module):
             raise ValueError(
                 f"{type(self).__name__}: expected input of shape (batch, {self.n_features + n_side}) for n_bins="
                 f"{self.n_bins}{extra}, got {tuple(x.shape)}"
+            )
+        weights = self.fc1.weight.dtype
+        if x.dtype != weights:
+            raise TypeError(
+                f"{type(self).__name__}: expected a {str(weights).replace('torch.', '')} input, the dtype of the "
+                f"network's parameters, got {str(x.dtype).replace('torch.', '')}; convert it with "
+                f"x.to({weights})"
             )
 
 

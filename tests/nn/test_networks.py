@@ -1,6 +1,7 @@
 """Tests of the EPPF networks' options beyond the paper: side features and batch normalisation."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -104,6 +105,28 @@ def test_wrong_width_names_the_side_features():
     with pytest.raises(ValueError, match=r"\(batch, 51\).*\+ 3 side features"):
         net(torch.zeros(2, N))
     assert np.isfinite(net(torch.zeros(2, N + 3)).detach().numpy()).all()
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+@pytest.mark.parametrize("conv", ["2d", "3d", "4d"])
+def test_empty_batch_and_input_dtype(conv, precision):
+    # An empty batch gives empty logits (the 4D network's folded layouts failed to reshape it); an input
+    # of another dtype than the parameters' is a TypeError naming the network (torch's own errors named
+    # neither), and a network converted to float64 takes float64 input.
+    for impl in (("direct", "spectral") if conv == "4d" else (None,)):
+        extra = {"conv_impl": impl} if impl else {}
+        net = NETS[conv](n_bins=(6, 3, 4, 3), n_classes=4, filters=(4, 6, 5), n_hidden=8, precision=precision,
+                         **extra).eval()
+        out = net(torch.zeros(0, 216))
+        assert out.shape == (0, 4) and out.dtype == torch.float32
+        for dtype in (torch.float64, torch.int64, torch.bfloat16):
+            msg = f"{type(net).__name__}: expected a float32 input, the dtype of the network's parameters, got "
+            with pytest.raises(TypeError, match=re.escape(msg + str(dtype).replace("torch.", ""))):
+                net(torch.zeros(2, 216, dtype=dtype))
+    if precision == "float32":
+        net = net.double()
+        assert net(torch.zeros(3, 216, dtype=torch.float64)).dtype == torch.float64
+        assert net(torch.zeros(0, 216, dtype=torch.float64)).dtype == torch.float64
 
 
 @pytest.mark.parametrize("precision", ["float32", "bfloat16"])
