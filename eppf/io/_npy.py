@@ -77,8 +77,11 @@ def _read_npz(fh, path, owner):
             raise FileFormatError(
                 f"{owner}: {path!r} holds a data set (points and offsets); read it with eppf.datasets.load_npz"
             )
-        if "points" in keys:
-            arr = _member(zf, keys["points"], path, owner)
+        # eppf writes 'points' (and 'normals'); Open3D's tensor point clouds write 'positions' (and 'normals',
+        # 'colors', ...)
+        name = "points" if "points" in keys else "positions" if "positions" in keys else None
+        if name is not None:
+            arr = _member(zf, keys[name], path, owner)
             if "normals" in keys and arr.ndim == 2:
                 nrm = _member(zf, keys["normals"], path, owner)
                 if nrm.ndim != 2 or nrm.shape[0] != arr.shape[0] or nrm.shape[1] != 3:
@@ -90,7 +93,8 @@ def _read_npz(fh, path, owner):
             arr = _member(zf, names[0], path, owner)
         else:
             raise FileFormatError(
-                f"{owner}: {path!r} holds the arrays {sorted(files)}; expected one array or one named 'points'"
+                f"{owner}: {path!r} holds the arrays {sorted(files)}; expected one array or one named 'points' "
+                "(or Open3D's 'positions')"
             )
     return arr
 

@@ -264,10 +264,15 @@ def _columns(path, data, owner):
 
 
 def read_pcd(path, data, owner, want_normals="auto"):
-    fields, _, n_points, _, cols, _ = _columns(path, data, owner)
+    fields, types, n_points, _, cols, _ = _columns(path, data, owner)
+    declared = {name: base for name, (base, _) in zip(fields, types)}
+
     def first(name):
-        with np.errstate(invalid="ignore"):  # NaN to float64 is exact; its cast warning is noise
-            return np.asarray(cols[name], dtype=np.float64).reshape(n_points, -1)[:, 0]
+        # an ASCII column is parsed as float64: rounded to its declared type (as PCL reads it, and as the
+        # binary kinds hold it); NaN to float64 is exact, its cast warning noise
+        with np.errstate(invalid="ignore", over="ignore"):
+            values = np.asarray(cols[name], dtype=declared[name].newbyteorder("="))
+            return values.astype(np.float64).reshape(n_points, -1)[:, 0]
 
     xyz = np.column_stack([first(f) for f in "xyz"])
     nrm = None

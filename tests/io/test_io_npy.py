@@ -42,6 +42,22 @@ def test_npy_npz_match_numpy(tmp_path):
         assert_array_equal(read_point_cloud(tmp_path / name, normals=True), arr.astype(np.float64))
 
 
+
+def test_npz_of_open3d_positions_and_normals(tmp_path):
+    """Open3D's o3d.t.io.write_point_cloud(.npz) stores 'positions', 'normals', 'colors', 'intensity' (float32,
+    intensity (n, 1)); it was refused as holding several arrays none named 'points'."""
+    rng = np.random.RandomState(1)
+    xyz, nrm = rng.normal(size=(20, 3)).astype(np.float32), rng.normal(size=(20, 3)).astype(np.float32)
+    np.savez(tmp_path / "o3d.npz", positions=xyz, normals=nrm, colors=rng.uniform(size=(20, 3)).astype(np.float32),
+             intensity=rng.uniform(size=(20, 1)).astype(np.float32))
+    assert read_point_cloud(tmp_path / "o3d.npz").tobytes() == np.hstack([xyz, nrm]).astype(np.float64).tobytes()
+    np.savez(tmp_path / "o3d_xyz.npz", positions=xyz, colors=rng.uniform(size=(20, 3)).astype(np.float32))
+    assert read_point_cloud(tmp_path / "o3d_xyz.npz").tobytes() == xyz.astype(np.float64).tobytes()
+    np.savez(tmp_path / "other.npz", a=xyz, b=nrm)
+    with pytest.raises(FileFormatError, match=re.escape("holds the arrays ['a', 'b']; expected one array or one named")):
+        read_point_cloud(tmp_path / "other.npz")
+
+
 @pytest.mark.parametrize(
     "shape, msg",
     [

@@ -282,3 +282,17 @@ def test_pcd_ascii_fast_path_matches_general_reader(make_cloud, tmp_path):
         _pcd._parse_float_table = saved
     assert_array_equal(fast, ref)
     assert_allclose(fast, cloud, rtol=1e-6, atol=1e-6)
+
+
+def test_pcd_ascii_values_are_rounded_to_their_declared_type(write_file, tmp_path):
+    """An ASCII body is text, but a SIZE 4 field is float32: read as PCL (and Open3D) read it, and as the same
+    cloud in binary reads, not as the float64 nearest to the text (PCL writes 8 significant digits)."""
+    rows = [[0.1, 0.29552022, -1.5, 4278190080, 0, 0.9800666, 0.19866933], [1e-3, 2.5, 3, 0, 1, 0, 0]]
+    body = "".join(" ".join(repr(v) for v in row) + "\n" for row in rows)
+    ascii_path = write_file(tmp_path / "a.pcd", PCD_HEAD.format(n=2, kind="ascii") + body)
+    rec = b"".join(struct.pack("<fffIfff", *row) for row in rows)
+    binary_path = write_file(tmp_path / "b.pcd", PCD_HEAD.format(n=2, kind="binary").encode() + rec, "wb")
+    cloud = read_point_cloud(ascii_path)
+    expected = np.array(rows, dtype=np.float32)[:, [0, 1, 2, 4, 5, 6]].astype(np.float64)
+    assert cloud.tobytes() == expected.tobytes()
+    assert cloud.tobytes() == read_point_cloud(binary_path).tobytes()
