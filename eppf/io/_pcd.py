@@ -263,21 +263,50 @@ def _columns(path, data, owner):
     return fields, [(dtype.fields[name][0].base, c) for name, c in zip(dtype.names, counts)], n_points, kind, cols, pos
 
 
-def read_pcd(path, data, owner, want_normals="auto"):
-    fields, types, n_points, _, cols, _ = _columns(path, data, owner)
+def _as_declared(values, dtype, name, path, owner):
+    """An ASCII column, parsed as float64, in its declared type (as PCL reads it and the binary kinds hold it).
+
+    A value that type cannot hold is a FileFormatError naming the field, not a wrapped or infinite number:
+    for integer types a NaN, infinite, fractional or out-of-range value; for float types a finite value
+    beyond their range. NaN and infinities stay what they are in float types (NaN marks PCL's invalid points).
+    """
+    dtype = dtype.newbyteorder("=")
+    values = np.asarray(values, dtype=np.float64)
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        bad = ~(np.isfinite(values) & (values == np.floor(values)) & (values >= info.min) & (values <= info.max))
+    else:
+        with np.errstate(over="ignore"):
+            narrow = values.astype(dtype)
+        bad = np.isfinite(values) & ~np.isfinite(narrow)
+    if bad.any():
+        code = f"TYPE {_CODES[dtype.kind]} SIZE {dtype.itemsize}"
+        raise FileFormatError(
+            f"{owner}: {path!r}: field {name!r} ({code}) holds {values[bad].flat[0]:.17g}, which that type cannot hold"
+        )
+    with np.errstate(invalid="ignore"):  # (NaN to a float type is exact; its cast warning is noise)
+        return values.astype(dtype)
+
+
+def _coordinates(fields, types, n_points, kind, cols, path, owner, names="xyz"):
+    """The first values of the fields ``names`` as an (n_points, 3) float64 array, ASCII ones in their
+    declared type first (``_as_declared``)."""
     declared = {name: base for name, (base, _) in zip(fields, types)}
 
     def first(name):
-        # an ASCII column is parsed as float64: rounded to its declared type (as PCL reads it, and as the
-        # binary kinds hold it); NaN to float64 is exact, its cast warning noise
-        with np.errstate(invalid="ignore", over="ignore"):
-            values = np.asarray(cols[name], dtype=declared[name].newbyteorder("="))
-            return values.astype(np.float64).reshape(n_points, -1)[:, 0]
+        values = _as_declared(cols[name], declared[name], name, path, owner) if kind == "ascii" else cols[name]
+        with np.errstate(invalid="ignore"):  # (NaN to float64 is exact; its cast warning is noise)
+            return np.asarray(values, dtype=np.float64).reshape(n_points, -1)[:, 0]
 
-    xyz = np.column_stack([first(f) for f in "xyz"])
+    return np.column_stack([first(f) for f in names])
+
+
+def read_pcd(path, data, owner, want_normals="auto"):
+    fields, types, n_points, kind, cols, _ = _columns(path, data, owner)
+    xyz = _coordinates(fields, types, n_points, kind, cols, path, owner)
     nrm = None
     if all(f in cols for f in NORMAL_NAMES):
-        nrm = np.column_stack([first(f) for f in NORMAL_NAMES])
+        nrm = _coordinates(fields, types, n_points, kind, cols, path, owner, NORMAL_NAMES)
     return Cloud(xyz, nrm)
 
 
@@ -317,8 +346,7 @@ def _ascii_field(values, dtype, name, path, owner):
         if whole:
             return values.astype(np.uint32)
         return values.astype(np.float32).view(np.uint32)
-    with np.errstate(invalid="ignore", over="ignore"):
-        return values.astype(dtype.newbyteorder("="))
+    return _as_declared(values, dtype, name, path, owner)
 
 
 def _ascii_wide_ints(data, pos, n_points, n_cols, path, owner):
@@ -356,11 +384,7 @@ def read_pcd_fields(path, data, owner):
             values = np.ascontiguousarray(_ascii_field(values, base, name, path, owner))
         out[name] = values
         col += width
-    declared = {name: base for name, (base, _) in zip(fields, types)}
-    with np.errstate(invalid="ignore", over="ignore"):  # ASCII coordinates rounded to their declared type
-        points = np.column_stack([np.asarray(cols[f], dtype=declared[f]).reshape(n_points, -1)[:, 0]
-                                  .astype(np.float64) for f in "xyz"])
-    return points, out
+    return _coordinates(fields, types, n_points, kind, cols, path, owner), out
 
 
 def write_pcd_fields(path, points, fields):

@@ -296,3 +296,36 @@ def test_pcd_ascii_values_are_rounded_to_their_declared_type(write_file, tmp_pat
     expected = np.array(rows, dtype=np.float32)[:, [0, 1, 2, 4, 5, 6]].astype(np.float64)
     assert cloud.tobytes() == expected.tobytes()
     assert cloud.tobytes() == read_point_cloud(binary_path).tobytes()
+
+
+@pytest.mark.parametrize("typ, size, value, shown", [
+    ("I", 4, "nan", "nan"), ("I", 4, "1.5", "1.5"), ("I", 4, "7e10", "70000000000"), ("U", 1, "300", "300"),
+    ("U", 1, "-1", "-1"), ("I", 2, "inf", "inf"), ("F", 4, "1e40", "1e+40"), ("F", 4, "-3.5e38", "-3.5e+38"),
+])
+def test_pcd_ascii_value_its_declared_type_cannot_hold_is_refused(write_file, tmp_path, typ, size, value, shown):
+    # Rounding an ASCII column to its declared type must not wrap or overflow silently: NaN in an integer
+    # field became -2147483648, 300 in a one-byte field 44, 1e40 in a float32 field an infinity (a dropped
+    # point). Both readers name the field and the value.
+    from eppf.io import read_point_fields
+
+    head = (f"VERSION .7\nFIELDS x y z\nSIZE {size} {size} {size}\nTYPE {typ} {typ} {typ}\nCOUNT 1 1 1\n"
+            "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n")
+    path = write_file(tmp_path / "v.pcd", head + f"1 2 3\n4 {value} 6\n")
+    msg = f"field 'y' (TYPE {typ} SIZE {size}) holds {shown}, which that type cannot hold"
+    for reader in (read_point_cloud, read_point_fields):
+        with pytest.raises(FileFormatError, match=re.escape(msg)):
+            reader(path)
+
+
+def test_pcd_ascii_values_at_their_types_limits_are_read(write_file, tmp_path):
+    # The bounds themselves, NaN and infinities in a float field (PCL's invalid points), and a decimal
+    # just above float32's largest value that rounds to it, all read.
+    from eppf.io import read_point_fields
+
+    head = ("VERSION .7\nFIELDS x y z i\nSIZE 4 4 4 1\nTYPE F F F U\nCOUNT 1 1 1 1\n"
+            "WIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n")
+    path = write_file(tmp_path / "l.pcd", head + "3.4028235e38 -1 0 255\nnan inf 0 0\n1 2 3 7\n")
+    points, fields = read_point_fields(path)
+    assert points[0, 0] == float(np.finfo(np.float32).max) and np.isnan(points[1, 0]) and np.isinf(points[1, 1])
+    assert_array_equal(fields["i"], np.array([255, 0, 7], dtype=np.uint8))
+    assert_array_equal(read_point_cloud(path), [[np.finfo(np.float32).max, -1, 0], [1, 2, 3]])  # (NaN point dropped)
