@@ -116,6 +116,16 @@ def guard(owner, path, fmt, func, *args, **kwargs):
         raise FileFormatError(f"{owner}: {path!r}: malformed {fmt.name} file ({type(exc).__name__}: {exc})") from None
 
 
+def _sampled(owner, path, fmt, what, func, *args, **kwargs):
+    """Run ``resample`` or ``sample_mesh`` on a file's content: their refusals (a cloud of one point, a
+    degenerate mesh) are FileFormatErrors saying that the content, read as it is, cannot be sampled, not
+    that the file is malformed."""
+    try:
+        return func(*args, **kwargs)
+    except (TypeError, ValueError) as exc:
+        raise FileFormatError(f"{owner}: {path!r}: the {fmt.name} file's {what} ({exc})") from None
+
+
 def _read_any(path, fmt, owner, normals, want_faces):
     """(Cloud or None, Mesh or None) from any format."""
     if fmt.raw:
@@ -193,9 +203,11 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         If the file cannot be opened; the message names it.
     FileFormatError
         A :class:`ValueError`: the file is empty, truncated or malformed, a
-        header count does not fit the file, or a mesh cannot be sampled (no
-        faces, non-finite vertices, zero area); the message names the file
-        and the line (text) or byte (binary) where reading failed.
+        header count does not fit the file, a mesh cannot be sampled (no
+        faces, non-finite vertices, zero area) or a cloud cannot be
+        resampled to ``n_points`` (fewer than two distinct points); the
+        message names the file and the line (text) or byte (binary) where
+        reading failed.
     ValueError
         If the extension is unknown or an argument is invalid.
 
@@ -245,9 +257,9 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
             raise FileFormatError(f"{owner}: {path!r} has no faces, so it cannot be sampled; pass mesh='vertices'")
         count = n_points if n_points is not None or resolution is not None else MESH_POINTS
         with np.errstate(over="ignore", invalid="ignore"):
-            out = guard(owner, path, fmt, sample_mesh, shape.vertices, shape.faces, n_points=count,
-                         resolution=resolution, return_normals=normals is not False,
-                         random_state=_rng(random_state, owner))
+            out = _sampled(owner, path, fmt, "mesh cannot be sampled", sample_mesh, shape.vertices, shape.faces,
+                           n_points=count, resolution=resolution, return_normals=normals is not False,
+                           random_state=_rng(random_state, owner))
         if not np.isfinite(out).all():
             raise FileFormatError(
                 f"{owner}: {path!r}: the mesh's coordinates are too large to sample (its areas overflow float64)"
@@ -255,7 +267,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         return out
     out = _finish_cloud(cloud, path, normals, owner, remove_nan)
     if n_points is not None:
-        out = guard(owner, path, fmt, resample, out, n_points, random_state=_rng(random_state, owner))
+        out = _sampled(owner, path, fmt, f"cloud cannot be resampled to {n_points} points", resample, out, n_points,
+                       random_state=_rng(random_state, owner))
     return out
 
 

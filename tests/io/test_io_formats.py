@@ -227,8 +227,19 @@ def test_mesh_without_faces(write_file, tmp_path):
 
 def test_degenerate_mesh_error_names_the_file(write_file, tmp_path):
     path = write_file(tmp_path / "flat.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n")
-    with pytest.raises(FileFormatError, match=r"flat\.off'.*zero total area|flat\.off'.*area"):
+    with pytest.raises(FileFormatError, match=r"flat\.off': the off file's mesh cannot be sampled \(sample_mesh: .*area"):
         read_point_cloud(path)
+
+
+@pytest.mark.parametrize("rows", ["1 2 3\n", "1 2 3\n1 2 3\n1 2 3\n"])
+def test_cloud_that_cannot_be_resampled_is_not_called_malformed(write_file, tmp_path, rows):
+    # A well-formed file whose cloud resample refuses (one point; all points identical) says so, with
+    # resample's reason, instead of "malformed xyz file".
+    path = write_file(tmp_path / "few.xyz", rows)
+    assert read_point_cloud(path).shape[1] == 3
+    with pytest.raises(FileFormatError, match=r"few\.xyz': the xyz file's cloud cannot be resampled to 100 points "
+                                              r"\(resample: "):
+        read_point_cloud(path, n_points=100)
 
 
 def test_point_files_resampled_like_resample(make_cloud, tmp_path):
