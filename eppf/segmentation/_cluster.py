@@ -33,11 +33,15 @@ def default_tolerance(points, owner="segment_scene"):
     """
     n = len(points)
     sample = np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.int64))
+    # coincident sample points have the same distance: each is searched once (a pile of 10^6 identical
+    # points, as scanners write for missing returns, was scanned in full for each of its sample points)
+    _, first, copy = np.unique(points[sample], axis=0, return_index=True, return_inverse=True)
+    distinct, copy = sample[first], copy.reshape(-1)
     extent = np.sort(points.max(axis=0) - points.min(axis=0))
     side = 2.0 * float(np.sqrt(extent[2]) * np.sqrt(max(extent[1], extent[2] * 1e-6)) / np.sqrt(n))
     middle = len(sample) // 2
     while True:
-        dist = _cluster_fast.nearest_distances(points, *grid_cells(points, side, owner), sample)
+        dist = _cluster_fast.nearest_distances(points, *grid_cells(points, side, owner), distinct)[copy]
         spacing = float(np.partition(dist, middle)[middle])
         if spacing <= side:
             return TOLERANCE_FACTOR * spacing

@@ -53,7 +53,10 @@ def _plane_ransac(points, threshold, n_trials, rng):
     local = sample - center
     picks = rng.randint(0, len(sample), size=(n_trials, 3))
     a, b, c = local[picks[:, 0]], local[picks[:, 1]], local[picks[:, 2]]
-    normals = np.cross(b - a, c - a)
+    # the normals' directions from coordinates of unit scale: the squares of the cross products' components
+    # underflow (a scene 1e-90 wide) or overflow (1e90 wide) on the scene's own scale
+    scale = float(np.abs(local).max())
+    normals = np.cross((b - a) / scale, (c - a) / scale)
     length = np.linalg.norm(normals, axis=1)
     ok = length > 0
     best, best_count = None, -1

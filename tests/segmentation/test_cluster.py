@@ -199,3 +199,21 @@ def test_derived_tolerance_is_five_median_nearest_neighbor_distances(seed):
     dist, _ = cKDTree(points).query(points, k=3)
     nearest = np.where(dist[:, 1] > 0, dist[:, 1], dist[:, 2])
     assert np.isclose(default_tolerance(points), TOLERANCE_FACTOR * np.partition(nearest, 1500)[1500], rtol=1e-12)
+
+
+def test_derived_tolerance_searches_coincident_points_once(monkeypatch):
+    # 200,000 points at the origin (a scanner's missing returns) and one more: the pile's 19,999 sample points
+    # were each compared with the whole pile, for minutes; one of them stands for all
+    from eppf.segmentation import _cluster, _cluster_fast
+    from eppf.segmentation._cluster import TOLERANCE_FACTOR, default_tolerance
+
+    searched, search = [], _cluster_fast.nearest_distances
+
+    def nearest_distances(*args):
+        searched.append(len(args[-1]))
+        return search(*args)
+
+    monkeypatch.setattr(_cluster._cluster_fast, "nearest_distances", nearest_distances)
+    points = np.vstack([np.zeros((200000, 3)), [[1.0, 2.0, 2.0]]])
+    assert default_tolerance(points) == TOLERANCE_FACTOR * 3.0
+    assert searched and max(searched) == 2

@@ -1,5 +1,7 @@
 """remove_ground on analytic scenes: floors, tilted planes, hills, nothing but ground."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -143,6 +145,19 @@ def test_wide_scene_with_a_tiny_threshold_keeps_the_grid_bounded():
     points = np.column_stack([rng.uniform(0, 1e6, (2000, 2)), rng.normal(0, 1e-3, 2000)])
     mask = remove_ground(points, method="grid", threshold=1e-3)  # 1e18 cells asked: the grid widens its cells
     assert mask.mean() > 0.99
+
+
+@pytest.mark.parametrize("scale", [1e-90, 1e90])
+def test_the_plane_does_not_depend_on_the_scale(scale):
+    # within the extents check_scene accepts (1e-100 to 1e100): the hypotheses' normals once came from cross
+    # products whose squared components underflowed to 0 (every triple taken for collinear) or overflowed
+    rng = np.random.default_rng(6)
+    ground = floor(10.0, 400, rng)
+    box = rng.uniform([4, 4, 1.0], [5, 5, 2.0], size=(100, 3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mask = remove_ground(np.vstack([ground, box]) * scale, method="plane", threshold=0.1 * scale)
+    assert mask[:400].all() and not mask[400:].any()
 
 
 @pytest.mark.parametrize("kwargs, kind, pattern", [
