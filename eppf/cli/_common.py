@@ -114,7 +114,8 @@ def add_runtime(parser, n_jobs=True):
     if n_jobs:
         parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (-1: all cores)")
     parser.add_argument("--random-state", type=int, default=0,
-                        help="seed of everything random: descriptor draws, mesh sampling, splits (default: 0)")
+                        help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's RANSAC ground plane "
+                             "(default: 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
 
 

@@ -67,7 +67,7 @@ def add_arguments(p):
 def segmentation_settings(args):
     """Keyword arguments of :func:`eppf.segmentation.segment_scene` from the options."""
     given = dict(by=args.by, ground=args.ground, tolerance=args.tolerance, min_points=args.min_points,
-                 max_points=args.max_points)
+                 max_points=args.max_points, random_state=getattr(args, "random_state", None))
     return {name: value for name, value in given.items() if value is not None}  # segment_scene's defaults
 
 

@@ -2,24 +2,25 @@
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClusterMixin
+from sklearn.utils import check_random_state
 
 from ._checks import TOLERANCE, check_field, check_scene
 from ._cluster import (
     MAX_POINTS, MIN_POINTS, check_sizes, cluster_roots, default_tolerance, number_segments, split_field,
 )
 from ._ground import ground_mask
-from ..utils._param_validation import Options, StrOptions, validate_parameter
+from ..utils._param_validation import RANDOM_STATE, Options, StrOptions, validate_parameter
 
 __all__ = ["SceneSegmenter", "segment_scene"]
 
 GROUND = ("auto", "plane", "grid", "none")
 #: Smallest segment kept by default: smaller clusters are noise or bits of ground.
 DEFAULT_MIN_POINTS = 30
-#: RANSAC's settings for the ground plane of a scene (fixed: the same segments on every call).
-_N_TRIALS, _SEED, _MAX_SLOPE = 100, 0, 0.3
+#: RANSAC's settings for the ground plane of a scene (its seed is ``random_state``).
+_N_TRIALS, _MAX_SLOPE = 100, 0.3
 
 
-def _segment(points, fields, by, ground, tolerance, min_points, max_points, owner):
+def _segment(points, fields, by, ground, tolerance, min_points, max_points, random_state, owner):
     """(labels, ground mask, tolerance, ground method used) of a scene; parameters already validated."""
     pts = check_scene(points, owner)
     min_points, max_points = check_sizes(min_points, max_points, owner)
@@ -39,7 +40,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
     if method == "none":
         mask = np.zeros(len(pts), dtype=bool)
     else:
-        mask, method = ground_mask(pts, method, None, tol, _MAX_SLOPE, _N_TRIALS, np.random.RandomState(_SEED))
+        mask, method = ground_mask(pts, method, None, tol, _MAX_SLOPE, _N_TRIALS, check_random_state(random_state))
     keep = np.flatnonzero(~mask)
     labels = np.full(len(pts), -1, dtype=np.int64)
     if keep.size:
@@ -51,7 +52,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, owne
 
 
 def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None, min_points=DEFAULT_MIN_POINTS,
-                  max_points=None):
+                  max_points=None, random_state=0):
     """Split a scene into objects: remove the ground, then cluster (or split by a field).
 
     PCL's recipe for a scene of objects standing on a floor or on terrain
@@ -86,6 +87,10 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
         Smallest kept segment; smaller ones (noise, bits of ground) get -1.
     max_points : int, default=None
         Largest kept segment; None keeps segments of any size.
+    random_state : int, RandomState instance or None, default=0
+        Seed of RANSAC's trials for a ground plane (``ground`` "plane", or
+        "auto" where it tries the plane); the default gives the same labels
+        on every call.
 
     Returns
     -------
@@ -93,7 +98,8 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
         The segment of each point, -1 for ground and for points in no kept
         segment. Segments are numbered 0, 1, ...: clusters by size, largest
         first, ties by smallest point index; a field's segments in increasing
-        order of its value. The same scene gives the same labels on every call.
+        order of its value. The same scene and ``random_state`` (an int) give
+        the same labels on every call.
 
     Raises
     ------
@@ -126,7 +132,7 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
     """
     owner = "segment_scene"
     return SceneSegmenter(by=by, ground=ground, tolerance=tolerance, min_points=min_points,
-                          max_points=max_points)._fit(points, fields, owner).labels_
+                          max_points=max_points, random_state=random_state)._fit(points, fields, owner).labels_
 
 
 class SceneSegmenter(ClusterMixin, BaseEstimator):
@@ -150,6 +156,9 @@ class SceneSegmenter(ClusterMixin, BaseEstimator):
         Smallest kept segment (>= 1).
     max_points : int, default=None
         Largest kept segment; None keeps segments of any size.
+    random_state : int, RandomState instance or None, default=0
+        Seed of RANSAC's trials for a ground plane; the default gives the
+        same segments on every fit.
 
     Attributes
     ----------
@@ -189,20 +198,23 @@ class SceneSegmenter(ClusterMixin, BaseEstimator):
         "tolerance": TOLERANCE,
         "min_points": MIN_POINTS,
         "max_points": MAX_POINTS,
+        "random_state": RANDOM_STATE,
     }
 
-    def __init__(self, *, by=None, ground="auto", tolerance=None, min_points=DEFAULT_MIN_POINTS, max_points=None):
+    def __init__(self, *, by=None, ground="auto", tolerance=None, min_points=DEFAULT_MIN_POINTS, max_points=None,
+                 random_state=0):
         self.by = by
         self.ground = ground
         self.tolerance = tolerance
         self.min_points = min_points
         self.max_points = max_points
+        self.random_state = random_state
 
     def _fit(self, points, fields, owner):
         for name, value in self.get_params(deep=False).items():
             validate_parameter(value, self._parameter_constraints[name], name=name, owner=owner)
         labels, mask, tol, method = _segment(points, fields, self.by, self.ground, self.tolerance, self.min_points,
-                                             self.max_points, owner)
+                                             self.max_points, self.random_state, owner)
         self.labels_ = labels
         self.ground_mask_ = mask
         self.ground_method_ = method

@@ -176,6 +176,21 @@ def test_tolerance_and_sizes_reach_the_segmentation(tmp_path, capsys):
     assert "4 segments of" in out
 
 
+def test_random_state_reaches_the_ground_plane(tmp_path, capsys, monkeypatch):
+    # --random-state seeds RANSAC's ground plane (the help says it seeds everything random; it was ignored)
+    from eppf.segmentation import _scene
+
+    scene, *_ = _pcd_scene(tmp_path)
+    starts = []
+    real = _scene.ground_mask
+    monkeypatch.setattr(_scene, "ground_mask", lambda *a: starts.append(a[-1].get_state()[1][0]) or real(*a))
+    for k, seed in enumerate(("0", "11")):
+        status, _, err = _run(["segment", scene, "-o", tmp_path / f"s{k}", "--random-state", seed, "--no-progress"],
+                              capsys)
+        assert status == 0, err
+    assert starts == [np.random.RandomState(0).get_state()[1][0], np.random.RandomState(11).get_state()[1][0]]
+
+
 def test_scene_errors_name_the_option_and_come_before_the_work(tmp_path, capsys):
     scene, *_ = _pcd_scene(tmp_path)
     model = tmp_path / "missing.eppf"
