@@ -178,3 +178,51 @@ def test_check_build(tmp_path):
     (tmp_path / "eppf" / "__init__.py").write_text("")
     with pytest.raises(ValueError, match="no built extensions"):
         sbs.check_build(str(tmp_path))
+
+
+def test_walk_model_codes_and_lookups():
+    # The model's "cone, cap 3" grid is the portable kernel's code grid; its quadrant grids follow their
+    # definition (brute force over the voxels a run of steps can reach); a hand-walked line's look-ups.
+    import itertools
+
+    import bench_walk_model as wm
+
+    from eppf.descriptors._eppf_fast import _cone_codes
+
+    rng = np.random.default_rng(3)
+    for g, density in ((7, 0.05), (9, 0.02), (5, 0.3)):
+        occ = rng.random((g, g, g)) < density
+        cone = wm.code_grids(occ, "cone")
+        assert np.array_equal(np.stack([np.minimum(cone[(a, 0, 0)], 3) for a in range(3)]),
+                              _cone_codes(occ, portable=True))
+        grids = wm.code_grids(occ, "quadrant")
+        for (a, sy, sz), e in grids.items():
+            for x, y, z in itertools.product(range(g), repeat=3):
+                v = np.array([x, y, z])
+                others = [m for m in range(3) if m != a]
+                run = 0  # voxels from v on, along +a, every path of steps by (0 or sy, 0 or sz) empty
+                while True:
+                    free = True
+                    for j in range(run + 1):  # the voxels run steps ahead: offsets 0..run times the signs
+                        for k in range(run + 1):
+                            w = v.copy()
+                            w[a] += run
+                            w[others[0]] += sy * j
+                            w[others[1]] += sz * k
+                            if w[a] >= g:
+                                free = free and True
+                            elif 0 <= w[others[0]] < g and 0 <= w[others[1]] < g and occ[tuple(w)]:
+                                free = False
+                    if not free or v[a] + run >= g:
+                        break
+                    run += 1
+                expected = run if v[a] + run < g else wm.ANY
+                assert e[x, y, z] == expected, (a, sy, sz, x, y, z)
+    # hand-walked lines: 8 inner voxels, lo = 4, hi = 7 (T = 10), empty but the last
+    inner_occ = np.array([0, 0, 0, 0, 0, 0, 0, 1], dtype=bool)
+    inner_e = np.array([5, 4, 3, 3, 2, 1, 1, 0])
+    assert wm.lookups(inner_occ, inner_e, 4, 7, 3) == 3  # skips 3, 3, 1: occ 2 + 1 left < 4, bottom bin
+    assert wm.lookups(inner_occ, inner_e, 4, 7, 1) == 7  # one voxel a look-up until occ + rem < lo
+    assert wm.lookups(inner_occ, inner_e, 4, 7, wm.ANY) == 3  # skips 5, 1, 1 (the codes of voxels 5 and 6)
+    assert wm.lookups(np.array([True]), np.array([0]), 1, 3, 3) == 1  # T = 3: one look-up, occupied: top
+    assert wm.lookups(np.array([False]), np.array([1]), 1, 2, 3) == 0  # both ends reach hi = 2 at once
