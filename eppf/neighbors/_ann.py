@@ -25,7 +25,7 @@ from ..utils._blas import single_blas_thread
 from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions
 from ..utils._stream import ordered_map
 from ..utils._validation import check_n_jobs
-from ._base import KL_CONSTRAINTS, KLNeighborsBase, learn_floor, prepare_histograms, validate_histograms
+from ._base import KL_CONSTRAINTS, KLNeighborsBase, check_mass, learn_floor, prepare_histograms, validate_histograms
 from ._rerank import rerank_candidates, rerank_sparse_candidates
 
 __all__ = ["ApproximateKLNearestNeighbors"]
@@ -409,11 +409,10 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
             values.append(vals)
             # the floored rows' sum h ln h, mass and largest |ln h|, from their support alone
             v = vals.astype(np.float64)
-            with np.errstate(over="ignore", invalid="ignore"):
-                s_rows = np.bincount(row_id, weights=v * np.log(v), minlength=m) + (n_bins - cnt) * f_ln_f
-            if not np.all(np.isfinite(s_rows)):
-                raise ValueError(f"{name}: histogram values are too large for the KL divergence (overflow in x ln x)")
-            mass = np.bincount(row_id, weights=v, minlength=m) + (n_bins - cnt) * f
+            with np.errstate(over="ignore"):
+                mass = np.bincount(row_id, weights=v, minlength=m) + (n_bins - cnt) * f
+            check_mass(mass, name)
+            s_rows = np.bincount(row_id, weights=v * np.log(v), minlength=m) + (n_bins - cnt) * f_ln_f
             lo = np.maximum(rows.min(axis=1), f).astype(np.float64)
             hi = np.maximum(rows.max(axis=1), f).astype(np.float64)
             lam = np.maximum(np.abs(np.log(lo)), np.abs(np.log(hi)))

@@ -296,3 +296,16 @@ def test_queries_too_large_for_the_divergence_are_refused_before_they_embed(data
     _, _, Q = data
     with pytest.raises(ValueError, match=r"^ApproximateKLNearestNeighbors: histogram values are too large"):
         fitted.kneighbors(Q[:3] * 1e306)
+
+
+@pytest.mark.parametrize("renormalize", [False, True])
+def test_training_rows_whose_cross_terms_would_overflow_are_refused(renormalize):
+    # the compressed supports' row terms were finite, but re-ranking two such rows overflowed to wrong distances
+    X = np.array([[1.2e305, 1.2e305], [1.2e305, 1.19e305], [1.2e305, 1.0]] * 20)
+    est = ApproximateKLNearestNeighbors(floor=0.5, renormalize=renormalize, n_components=None, random_state=0)
+    if renormalize:  # (the divergence sees each row divided by its sum)
+        dist, ind = est.fit(X, np.arange(60) % 3).kneighbors(X[:3], n_neighbors=2)
+        assert np.isfinite(dist).all()
+        return
+    with pytest.raises(ValueError, match=r"^ApproximateKLNearestNeighbors: histogram values are too large"):
+        est.fit(X, np.arange(60) % 3)

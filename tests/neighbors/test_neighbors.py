@@ -153,7 +153,7 @@ def test_distances_n_jobs_and_dtypes():
         ({"X": [[1.0]], "chunk_size": 2.5}, TypeError, "symmetric_kl_distances: chunk_size must be a positive int or None, got 2.5"),
         ({"X": [[1.0]], "renormalize": "yes"}, TypeError, "symmetric_kl_distances: renormalize must be a bool, got 'yes'"),
         ({"X": [[1.0]], "n_jobs": 0}, ValueError, "symmetric_kl_distances: n_jobs must be None or a non-zero int (-1: all cores), got 0"),
-        ({"X": [[1e308, 1.0]]}, ValueError, "symmetric_kl_distances: histogram values are too large for the KL divergence (overflow in x ln x)"),
+        ({"X": [[1e308, 1.0]]}, ValueError, "symmetric_kl_distances: histogram values are too large for the KL divergence (a row sums to 1e+308"),
     ],
 )
 def test_distances_errors(kwargs, err, msg):
@@ -161,6 +161,35 @@ def test_distances_errors(kwargs, err, msg):
     X = kwargs.pop("X")
     with pytest.raises(err, match=re.escape(msg)):
         symmetric_kl_distances(X, **kwargs)
+
+
+def test_rows_whose_cross_terms_would_overflow_are_refused():
+    # Each row's sum h ln h is finite (about 1.7e308), but the two cross terms of a pair of them overflowed:
+    # d(0, 1) came out 0 instead of about 8.4e300, the rounding bound infinite (every candidate tied, the query
+    # itself returned as its own leave-one-out neighbor), with RuntimeWarnings only.
+    X = np.array([[1.2e305, 1.2e305], [1.2e305, 1.19e305], [1.2e305, 1.0]])
+    msg = "histogram values are too large for the KL divergence (a row sums to 2.4e+305"
+    with pytest.raises(ValueError, match="^symmetric_kl_distances: " + re.escape(msg)):
+        symmetric_kl_distances(X, floor=0.5)
+    with pytest.raises(ValueError, match="^KLNearestNeighbors: " + re.escape(msg)):
+        KLNearestNeighbors(floor=0.5).fit(X, [0, 1, 2])
+    fitted = KLNearestNeighbors(floor=0.5).fit(X * 1e-5, [0, 1, 2])
+    with pytest.raises(ValueError, match="^KLNearestNeighbors: " + re.escape(msg)):
+        fitted.kneighbors(X)
+
+
+def test_rows_near_the_largest_mass_give_finite_exact_distances():
+    import warnings
+
+    from eppf.neighbors._base import MASS_MAX
+
+    X = np.array([[0.5, 0.5], [0.5, 0.49], [0.5, 1e-300]]) * MASS_MAX
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        D = symmetric_kl_distances(X, floor=0.5)
+        ind = KLNearestNeighbors(n_neighbors=2, floor=0.5).fit(X, [0, 1, 2]).kneighbors(return_distance=False)
+    assert_allclose(D, _slow_kl(X, X, 0.5), rtol=1e-6)
+    assert_array_equal(ind, [[1, 2], [0, 2], [1, 0]])
 
 
 # ------------------------------------------------------------- the estimator
