@@ -236,6 +236,11 @@ def learn_floor(arrays, owner):
             f"{owner}: cannot learn floor='auto' because X has no positive value; "
             "pass floor as a positive float"
         )
+    if smallest / 2.0 == 0.0:  # (the smallest subnormal: a floor of 0 has no logarithm)
+        raise ValueError(
+            f"{owner}: cannot learn floor='auto' because half the smallest positive value of the histograms "
+            f"({smallest!r}) is 0 in float64; pass floor as a positive float"
+        )
     return smallest / 2.0
 
 
