@@ -47,6 +47,8 @@ _MIN_PER_LIST = 39
 _HOW_TO_INSTALL = "pip install faiss-cpu  (or: pip install eppf[ann])"
 # Largest float32 row sum the float32 embedding takes; rows above it are normalized in float64 first.
 _F32_SUM_MAX = float(np.finfo(np.float32).max) / 2
+# Smallest float32 row sum it takes (float32's smallest normal number); rows below it are normalized in float64 first.
+_F32_SUM_MIN = float(np.finfo(np.float32).tiny)
 
 
 def _import_faiss(owner):
@@ -289,18 +291,20 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
         """float32 index vectors of raw histogram rows (float32 or float64), computed in float32.
 
         Rows whose values or sum lie beyond float32's range (checked
-        histograms: their sums are finite in float64) are divided by their
-        sum in float64 before the cast, so they embed as their scaled-down
-        copies do instead of as infinities and NaN.
+        histograms: their sums are finite in float64), or whose sum is below
+        its smallest normal number (their bins round to 0 or lose their
+        digits), are divided by their sum in float64 before the cast, so
+        they embed as their rescaled copies do instead of as infinities and
+        NaN.
         """
         with np.errstate(over="ignore"):  # values beyond float32 become inf here; their rows are redone below
             h = np.maximum(rows, np.float32(self.floor_), dtype=np.float32)
         sums = h.sum(axis=1, keepdims=True, dtype=np.float64)
-        big = ~(sums[:, 0] <= _F32_SUM_MAX)
-        if big.any():
-            wide = np.maximum(rows[big], self.floor_, dtype=np.float64)
-            h[big] = wide / wide.sum(axis=1, keepdims=True)
-            sums[big] = 1.0
+        odd = ~((sums[:, 0] >= _F32_SUM_MIN) & (sums[:, 0] <= _F32_SUM_MAX))
+        if odd.any():
+            wide = np.maximum(rows[odd], self.floor_, dtype=np.float64)
+            h[odd] = wide / wide.sum(axis=1, keepdims=True)
+            sums[odd] = 1.0
         h /= sums.astype(np.float32)
         np.sqrt(h, out=h)
         if self.components_ is not None:
