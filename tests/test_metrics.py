@@ -96,6 +96,8 @@ def test_scores_perfect_and_column_vectors():
         ([0, np.nan], [0, 1], "retrieval_scores: y_true contains NaN or infinite values"),
         (["a", "b"], [0, 1], "retrieval_scores: y_true and y_pred mix string and numeric labels"),
         (None, [0, 1], "retrieval_scores: y_true is None; class labels are needed"),
+        ([1j, 2], [1j, 2], "retrieval_scores: y_true must hold class labels, got complex values"),
+        ([0, 1], np.array([0, 1], dtype=complex), "retrieval_scores: y_pred must hold class labels, got complex values"),
     ],
 )
 def test_scores_errors(y_true, y_pred, msg):
