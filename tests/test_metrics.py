@@ -268,6 +268,16 @@ def test_repeated_retrieval_matches_manual_loop():
     assert not hasattr(transformer, "n_fits_")
 
 
+def test_repeated_retrieval_reads_an_iterator_of_clouds_once():
+    # every draw describes all the clouds: a generator gave a bare "object of type 'generator' has no len()"
+    clouds, y = _clouds()
+    a = repeated_retrieval(_NoisyHistogram(), (c for c in clouds), y, n_repeats=3, random_state=0)
+    b = repeated_retrieval(_NoisyHistogram(), clouds, y, n_repeats=3, random_state=0)
+    assert_array_equal(a.seeds, b.seeds)
+    for k in b.per_repeat:
+        assert_array_equal(a.per_repeat[k], b.per_repeat[k])
+
+
 def test_repeated_retrieval_deterministic_and_table():
     clouds, y = _clouds(seed=1)
     a = repeated_retrieval(_NoisyHistogram(), clouds, y, n_repeats=3, random_state=7)
