@@ -294,7 +294,8 @@ def repeated_retrieval(
         ``random_state`` parameter (e.g. :class:`eppf.descriptors.EPPFTransformer`).
         It is cloned for every draw and never modified.
     clouds : list of array-like
-        The point clouds, passed unchanged to ``fit_transform``.
+        The point clouds, passed unchanged to ``fit_transform`` (an
+        iterator, e.g. a generator, is read into a list first).
     y : array-like of shape (n_objects,)
         Class labels.
     n_repeats : int, default=10
@@ -339,6 +340,8 @@ def repeated_retrieval(
             f"{owner}: {type(transformer).__name__} has no random_state parameter, so repeated draws would be identical"
         )
     y = check_class_labels(y, owner, "y")
+    if hasattr(clouds, "__next__"):  # an iterator (a generator) is read once: every draw describes the clouds
+        clouds = list(clouds)
     n_clouds = len(clouds)
     if n_clouds != y.shape[0]:
         raise ValueError(f"{owner}: {n_clouds} point clouds but {y.shape[0]} labels")

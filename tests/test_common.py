@@ -395,6 +395,13 @@ def check_fit_transform_equals_fit_then_transform(est):
     _assert_same(clone(est).fit_transform(X), clone(est).fit(X).transform(X))
 
 
+def check_fit_transform_reads_an_iterator_once(est):
+    # fit and transform take an iterator of clouds, so fit_transform does too (the descriptors' and
+    # CachedTransformer's fit used it up: "X is empty", or a TypeError, from the transform after it)
+    X, _ = _data(est)
+    _assert_same(clone(est).fit_transform(c for c in X), clone(est).fit_transform(X))
+
+
 def check_deterministic_under_int_random_state(est):
     X, y = _data(est)
     fitted = _fit(clone(est), X, y)
@@ -506,6 +513,7 @@ API_CHECKS = [
     check_tags,
     check_three_d_array_as_declared,
     check_fit_transform_equals_fit_then_transform,
+    check_fit_transform_reads_an_iterator_once,
     check_deterministic_under_int_random_state,
     check_random_state_none_draws_afresh,
     check_output_dtype_and_shape,
@@ -523,6 +531,7 @@ _APPLIES = {
     # point-cloud estimators should all take 3D arrays (check_input_tags), so all are tried
     check_three_d_array_as_declared: lambda est: get_tags(est).input_tags.three_d_array or _input_kind(est) == "points",
     check_fit_transform_equals_fit_then_transform: lambda est: hasattr(est, "transform"),
+    check_fit_transform_reads_an_iterator_once: lambda est: hasattr(est, "transform") and _input_kind(est) == "points",
     check_random_state_none_draws_afresh: lambda est: bool(_seed_params(est)),
 }
 

@@ -96,6 +96,8 @@ def test_scores_perfect_and_column_vectors():
         ([0, np.nan], [0, 1], "retrieval_scores: y_true contains NaN or infinite values"),
         (["a", "b"], [0, 1], "retrieval_scores: y_true and y_pred mix string and numeric labels"),
         (None, [0, 1], "retrieval_scores: y_true is None; class labels are needed"),
+        ([1j, 2], [1j, 2], "retrieval_scores: y_true must hold class labels, got complex values"),
+        ([0, 1], np.array([0, 1], dtype=complex), "retrieval_scores: y_pred must hold class labels, got complex values"),
     ],
 )
 def test_scores_errors(y_true, y_pred, msg):
@@ -264,6 +266,16 @@ def test_repeated_retrieval_matches_manual_loop():
     # the transformer passed in is untouched
     assert transformer.random_state is None
     assert not hasattr(transformer, "n_fits_")
+
+
+def test_repeated_retrieval_reads_an_iterator_of_clouds_once():
+    # every draw describes all the clouds: a generator gave a bare "object of type 'generator' has no len()"
+    clouds, y = _clouds()
+    a = repeated_retrieval(_NoisyHistogram(), (c for c in clouds), y, n_repeats=3, random_state=0)
+    b = repeated_retrieval(_NoisyHistogram(), clouds, y, n_repeats=3, random_state=0)
+    assert_array_equal(a.seeds, b.seeds)
+    for k in b.per_repeat:
+        assert_array_equal(a.per_repeat[k], b.per_repeat[k])
 
 
 def test_repeated_retrieval_deterministic_and_table():

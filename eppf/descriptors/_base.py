@@ -311,6 +311,26 @@ class PointCloudDescriptor(TransformerMixin, BaseEstimator):
         self.n_features_out_ = int(self._n_features(params))
         return self
 
+    def fit_transform(self, X, y=None):
+        """Fit to the clouds, then compute their descriptors.
+
+        Parameters
+        ----------
+        X : list of array-like of shape (n_i, 3) or (n_i, 6)
+            Training point clouds, with normals in columns 3-5 when
+            available; an iterator (a generator) is read once.
+        y : None
+            Ignored.
+
+        Returns
+        -------
+        X_new : ndarray of shape (n_objects, `n_features_out_`)
+            The descriptors, one row per cloud, those of ``fit(X).transform(X)``.
+        """
+        if hasattr(X, "__next__"):  # fit would use an iterator up, leaving transform nothing
+            X = list(X)
+        return self.fit(X, y).transform(X)
+
     def partial_fit(self, X, y=None):
         """Fit on one more batch of the training clouds.
 

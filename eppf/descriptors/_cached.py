@@ -123,6 +123,8 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
         X_new : ndarray
             The wrapped transformer's output.
         """
+        if hasattr(X, "__next__"):  # an iterator (a generator) is read once: fit would use it up
+            X = list(X)
         cache = self._cache()
         est = clone(self.transformer)
         if y is None:
@@ -146,6 +148,8 @@ class CachedTransformer(TransformerMixin, BaseEstimator):
             The wrapped transformer's output.
         """
         check_is_fitted(self, "transformer_")
+        if hasattr(X, "__next__"):  # (read twice: hashed for the cache key, then transformed)
+            X = list(X)
         return self._cached_transform(self._cache(), self.transformer_, X)
 
     @available_if(lambda self: hasattr(self.transformer, "get_feature_names_out"))

@@ -25,7 +25,7 @@ from ..utils._blas import single_blas_thread
 from ..utils._param_validation import RANDOM_STATE, Interval, StrOptions
 from ..utils._stream import ordered_map
 from ..utils._validation import check_n_jobs
-from ._base import KL_CONSTRAINTS, KLNeighborsBase, learn_floor, prepare_histograms, validate_histograms
+from ._base import KL_CONSTRAINTS, KLNeighborsBase, check_mass, learn_floor, prepare_histograms, validate_histograms
 from ._rerank import rerank_candidates, rerank_sparse_candidates
 
 __all__ = ["ApproximateKLNearestNeighbors"]
@@ -47,6 +47,8 @@ _MIN_PER_LIST = 39
 _HOW_TO_INSTALL = "pip install faiss-cpu  (or: pip install eppf[ann])"
 # Largest float32 row sum the float32 embedding takes; rows above it are normalized in float64 first.
 _F32_SUM_MAX = float(np.finfo(np.float32).max) / 2
+# Smallest float32 row sum it takes (float32's smallest normal number); rows below it are normalized in float64 first.
+_F32_SUM_MIN = float(np.finfo(np.float32).tiny)
 
 
 def _import_faiss(owner):
@@ -289,18 +291,20 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
         """float32 index vectors of raw histogram rows (float32 or float64), computed in float32.
 
         Rows whose values or sum lie beyond float32's range (checked
-        histograms: their sums are finite in float64) are divided by their
-        sum in float64 before the cast, so they embed as their scaled-down
-        copies do instead of as infinities and NaN.
+        histograms: their sums are finite in float64), or whose sum is below
+        its smallest normal number (their bins round to 0 or lose their
+        digits), are divided by their sum in float64 before the cast, so
+        they embed as their rescaled copies do instead of as infinities and
+        NaN.
         """
         with np.errstate(over="ignore"):  # values beyond float32 become inf here; their rows are redone below
             h = np.maximum(rows, np.float32(self.floor_), dtype=np.float32)
         sums = h.sum(axis=1, keepdims=True, dtype=np.float64)
-        big = ~(sums[:, 0] <= _F32_SUM_MAX)
-        if big.any():
-            wide = np.maximum(rows[big], self.floor_, dtype=np.float64)
-            h[big] = wide / wide.sum(axis=1, keepdims=True)
-            sums[big] = 1.0
+        odd = ~((sums[:, 0] >= _F32_SUM_MIN) & (sums[:, 0] <= _F32_SUM_MAX))
+        if odd.any():
+            wide = np.maximum(rows[odd], self.floor_, dtype=np.float64)
+            h[odd] = wide / wide.sum(axis=1, keepdims=True)
+            sums[odd] = 1.0
         h /= sums.astype(np.float32)
         np.sqrt(h, out=h)
         if self.components_ is not None:
@@ -409,11 +413,10 @@ class ApproximateKLNearestNeighbors(KLNeighborsBase):
             values.append(vals)
             # the floored rows' sum h ln h, mass and largest |ln h|, from their support alone
             v = vals.astype(np.float64)
-            with np.errstate(over="ignore", invalid="ignore"):
-                s_rows = np.bincount(row_id, weights=v * np.log(v), minlength=m) + (n_bins - cnt) * f_ln_f
-            if not np.all(np.isfinite(s_rows)):
-                raise ValueError(f"{name}: histogram values are too large for the KL divergence (overflow in x ln x)")
-            mass = np.bincount(row_id, weights=v, minlength=m) + (n_bins - cnt) * f
+            with np.errstate(over="ignore"):
+                mass = np.bincount(row_id, weights=v, minlength=m) + (n_bins - cnt) * f
+            check_mass(mass, name)
+            s_rows = np.bincount(row_id, weights=v * np.log(v), minlength=m) + (n_bins - cnt) * f_ln_f
             lo = np.maximum(rows.min(axis=1), f).astype(np.float64)
             hi = np.maximum(rows.max(axis=1), f).astype(np.float64)
             lam = np.maximum(np.abs(np.log(lo)), np.abs(np.log(hi)))

@@ -27,7 +27,9 @@ __all__ = [
     "BLOCK_ENTRIES",
     "KL_CONSTRAINTS",
     "KLNeighborsBase",
+    "MASS_MAX",
     "Prepared",
+    "check_mass",
     "check_distance_params",
     "check_n_neighbors",
     "first_near_min",
@@ -44,6 +46,14 @@ __all__ = [
 #: Target size of one block of a distance matrix, or of rows read at a time,
 #: in float64 entries (64 MiB).
 BLOCK_ENTRIES = 1 << 23
+
+
+#: Largest row mass (sum of the floored bins) the divergence takes. A distance
+#: and its rounding bound sum a few terms, each at most a row's mass times the
+#: largest ``|ln h|`` of a row (below 745 for any positive float64): below
+#: this they stay finite, above it two large rows' cross terms can overflow
+#: (to a distance of 0 or NaN, or a rounding bound that ties everything).
+MASS_MAX = float(np.finfo(np.float64).max) / (16 * 745)
 
 
 #: The parameters of the symmetric-KL estimators and functions, and what they accept.
@@ -226,7 +236,29 @@ def learn_floor(arrays, owner):
             f"{owner}: cannot learn floor='auto' because X has no positive value; "
             "pass floor as a positive float"
         )
+    if smallest / 2.0 == 0.0:  # (the smallest subnormal: a floor of 0 has no logarithm)
+        raise ValueError(
+            f"{owner}: cannot learn floor='auto' because half the smallest positive value of the histograms "
+            f"({smallest!r}) is 0 in float64; pass floor as a positive float"
+        )
     return smallest / 2.0
+
+
+def check_mass(mass, owner):
+    """Raise if a row mass is above :data:`MASS_MAX` (or infinite).
+
+    Parameters
+    ----------
+    mass : ndarray of shape (n_samples,)
+        Row sums of floored histograms.
+    owner : str
+        Name used in the error message.
+    """
+    if not np.all(mass <= MASS_MAX):
+        raise ValueError(
+            f"{owner}: histogram values are too large for the KL divergence (a row sums to "
+            f"{float(np.max(mass)):.4g}; its terms stay finite for sums up to {MASS_MAX:.4g})"
+        )
 
 
 class Prepared(namedtuple("Prepared", "H L s mass lam")):
@@ -260,15 +292,19 @@ def prepare_histograms(X, floor, renormalize, owner):
         Fields ``H, L, s, mass, lam``.
     """
     H = np.maximum(X, floor, dtype=np.float64)
-    if renormalize:
-        H /= H.sum(axis=1, keepdims=True)
+    with np.errstate(over="ignore"):
+        mass = H.sum(axis=1)
+    if renormalize and np.all(np.isfinite(mass)):
+        H /= mass[:, None]
+        mass = H.sum(axis=1)
+    check_mass(mass, owner)
     with np.errstate(over="ignore", invalid="ignore"):
         L = np.log(H)
         s = np.einsum("ij,ij->i", H, L)
     if not np.all(np.isfinite(s)):
         raise ValueError(f"{owner}: histogram values are too large for the KL divergence (overflow in x ln x)")
     lam = np.abs(L).max(axis=1) if L.shape[1] else np.zeros(L.shape[0])
-    return Prepared(H, L, s, H.sum(axis=1), lam)
+    return Prepared(H, L, s, mass, lam)
 
 
 def relative_rounding(n_bins):

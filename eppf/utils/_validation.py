@@ -744,8 +744,8 @@ def as_vector3(value):
 def check_class_labels(y, owner, name):
     """``y`` as a 1D array of class labels (a column vector is flattened), or an error naming ``owner``.
 
-    Refused: None, other shapes, no labels, NaN or infinite float labels, labels that do not sort together
-    (TypeError), and targets scikit-learn does not call "binary" or "multiclass" (continuous values).
+    Refused: None, other shapes, no labels, NaN or infinite float labels, complex labels, labels that do not
+    sort together (TypeError), and targets scikit-learn does not call "binary" or "multiclass" (continuous values).
     """
     if y is None:
         raise ValueError(f"{owner}: {name} is None; class labels are needed")
@@ -758,6 +758,8 @@ def check_class_labels(y, owner, name):
         raise ValueError(f"{owner}: {name} is empty")
     if y.dtype.kind == "f" and not np.all(np.isfinite(y)):
         raise ValueError(f"{owner}: {name} contains NaN or infinite values")
+    if y.dtype.kind == "c":  # (type_of_target's bare "Complex data not supported")
+        raise ValueError(f"{owner}: {name} must hold class labels, got complex values")
     if y.dtype == object:
         try:
             np.unique(y)  # (what scikit-learn's type_of_target and the scores do with the labels)

@@ -270,10 +270,12 @@ def test_row_terms_from_supports_match_the_dense_ones(data, fitted):
     assert_allclose(lam, np.abs(L).max(axis=1), rtol=1e-12)
 
 
-@pytest.mark.parametrize("scale", [1e39, 1e300])
+@pytest.mark.parametrize("scale", [1e39, 1e300, 1e-40, 1e-50, 1e-300])
 def test_histograms_beyond_float32_embed_as_their_scaled_down_copies(data, scale):
     # float32 index vectors: rows whose values or sums overflow float32 are normalised in float64 first
-    # (they embedded as inf and NaN: wrong candidates, or faiss failing inside k-means)
+    # (they embedded as inf and NaN: wrong candidates, or faiss failing inside k-means), and so are rows
+    # whose sums are below float32's normal range (their bins rounded to 0: NaN vectors, faiss's k-means
+    # raising RuntimeError at fit)
     import warnings
 
     X, y, Q = data
@@ -296,3 +298,16 @@ def test_queries_too_large_for_the_divergence_are_refused_before_they_embed(data
     _, _, Q = data
     with pytest.raises(ValueError, match=r"^ApproximateKLNearestNeighbors: histogram values are too large"):
         fitted.kneighbors(Q[:3] * 1e306)
+
+
+@pytest.mark.parametrize("renormalize", [False, True])
+def test_training_rows_whose_cross_terms_would_overflow_are_refused(renormalize):
+    # the compressed supports' row terms were finite, but re-ranking two such rows overflowed to wrong distances
+    X = np.array([[1.2e305, 1.2e305], [1.2e305, 1.19e305], [1.2e305, 1.0]] * 20)
+    est = ApproximateKLNearestNeighbors(floor=0.5, renormalize=renormalize, n_components=None, random_state=0)
+    if renormalize:  # (the divergence sees each row divided by its sum)
+        dist, ind = est.fit(X, np.arange(60) % 3).kneighbors(X[:3], n_neighbors=2)
+        assert np.isfinite(dist).all()
+        return
+    with pytest.raises(ValueError, match=r"^ApproximateKLNearestNeighbors: histogram values are too large"):
+        est.fit(X, np.arange(60) % 3)

@@ -145,6 +145,7 @@ def test_distances_n_jobs_and_dtypes():
         ({"X": [0.5, 0.5]}, ValueError, "symmetric_kl_distances: Expected 2D array, got 1D array instead"),
         ({"X": [[0.5, 0.5]], "Y": [[0.2, 0.3, 0.5]]}, ValueError, "symmetric_kl_distances: X and Y must have the same number of bins, got 2 and 3"),
         ({"X": [[0.0, 0.0]]}, ValueError, "symmetric_kl_distances: cannot learn floor='auto' because X has no positive value; pass floor as a positive float"),
+        ({"X": [[5e-324, 1.0]]}, ValueError, "symmetric_kl_distances: cannot learn floor='auto' because half the smallest positive value of the histograms (5e-324) is 0 in float64; pass floor as a positive float"),
         ({"X": [[1.0]], "floor": 0.0}, ValueError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got 0.0"),
         ({"X": [[1.0]], "floor": "min"}, ValueError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got 'min'"),
         ({"X": [[1.0]], "floor": np.nan}, ValueError, "symmetric_kl_distances: floor must be 'auto' or a positive float, got nan"),
@@ -153,7 +154,7 @@ def test_distances_n_jobs_and_dtypes():
         ({"X": [[1.0]], "chunk_size": 2.5}, TypeError, "symmetric_kl_distances: chunk_size must be a positive int or None, got 2.5"),
         ({"X": [[1.0]], "renormalize": "yes"}, TypeError, "symmetric_kl_distances: renormalize must be a bool, got 'yes'"),
         ({"X": [[1.0]], "n_jobs": 0}, ValueError, "symmetric_kl_distances: n_jobs must be None or a non-zero int (-1: all cores), got 0"),
-        ({"X": [[1e308, 1.0]]}, ValueError, "symmetric_kl_distances: histogram values are too large for the KL divergence (overflow in x ln x)"),
+        ({"X": [[1e308, 1.0]]}, ValueError, "symmetric_kl_distances: histogram values are too large for the KL divergence (a row sums to 1e+308"),
     ],
 )
 def test_distances_errors(kwargs, err, msg):
@@ -161,6 +162,35 @@ def test_distances_errors(kwargs, err, msg):
     X = kwargs.pop("X")
     with pytest.raises(err, match=re.escape(msg)):
         symmetric_kl_distances(X, **kwargs)
+
+
+def test_rows_whose_cross_terms_would_overflow_are_refused():
+    # Each row's sum h ln h is finite (about 1.7e308), but the two cross terms of a pair of them overflowed:
+    # d(0, 1) came out 0 instead of about 8.4e300, the rounding bound infinite (every candidate tied, the query
+    # itself returned as its own leave-one-out neighbor), with RuntimeWarnings only.
+    X = np.array([[1.2e305, 1.2e305], [1.2e305, 1.19e305], [1.2e305, 1.0]])
+    msg = "histogram values are too large for the KL divergence (a row sums to 2.4e+305"
+    with pytest.raises(ValueError, match="^symmetric_kl_distances: " + re.escape(msg)):
+        symmetric_kl_distances(X, floor=0.5)
+    with pytest.raises(ValueError, match="^KLNearestNeighbors: " + re.escape(msg)):
+        KLNearestNeighbors(floor=0.5).fit(X, [0, 1, 2])
+    fitted = KLNearestNeighbors(floor=0.5).fit(X * 1e-5, [0, 1, 2])
+    with pytest.raises(ValueError, match="^KLNearestNeighbors: " + re.escape(msg)):
+        fitted.kneighbors(X)
+
+
+def test_rows_near_the_largest_mass_give_finite_exact_distances():
+    import warnings
+
+    from eppf.neighbors._base import MASS_MAX
+
+    X = np.array([[0.5, 0.5], [0.5, 0.49], [0.5, 1e-300]]) * MASS_MAX
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        D = symmetric_kl_distances(X, floor=0.5)
+        ind = KLNearestNeighbors(n_neighbors=2, floor=0.5).fit(X, [0, 1, 2]).kneighbors(return_distance=False)
+    assert_allclose(D, _slow_kl(X, X, 0.5), rtol=1e-6)
+    assert_array_equal(ind, [[1, 2], [0, 2], [1, 0]])
 
 
 # ------------------------------------------------------------- the estimator
@@ -363,6 +393,7 @@ def _fitted():
         (lambda: KLNearestNeighbors(n_jobs="all"), lambda c: c.fit([[1.0, 0.0]], [0]), TypeError, "KLNearestNeighbors: n_jobs must be None or a non-zero int (-1: all cores), got 'all'"),
         (KLNearestNeighbors, lambda c: c.fit([[1.0, -0.5]], [0]), ValueError, "Negative values in data passed to KLNearestNeighbors (X): histograms must be non-negative, found minimum -0.5"),
         (KLNearestNeighbors, lambda c: c.fit([[0.0, 0.0]], [0]), ValueError, "KLNearestNeighbors: cannot learn floor='auto' because X has no positive value; pass floor as a positive float"),
+        (KLNearestNeighbors, lambda c: c.fit([[5e-324, 0.0]], [0]), ValueError, "KLNearestNeighbors: cannot learn floor='auto' because half the smallest positive value of the histograms (5e-324) is 0 in float64"),
         (KLNearestNeighbors, lambda c: c.fit([[1.0, np.nan]], [0]), ValueError, "KLNearestNeighbors: Input X contains NaN"),
         (KLNearestNeighbors, lambda c: c.fit([[1.0, 0.0], [0.0, 1.0]], [0]), ValueError, "KLNearestNeighbors: Found input variables with inconsistent numbers of samples: [2, 1]"),
         (KLNearestNeighbors, lambda c: c.fit([[1.0, 0.0], [0.0, 1.0]], [0.5, 1.5]), ValueError, "KLNearestNeighbors: Unknown label type: continuous"),
