@@ -162,9 +162,12 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     from .datasets._folder import object_files
     from .datasets._loaders import file_seeds
 
+    from .io._api import check_sampling_args
+
     owner = "describe_files"
     if on_error not in ("raise", "skip"):
         raise ValueError(f"{owner}: on_error must be 'raise' or 'skip', got {on_error!r}")
+    check_sampling_args(owner, normals, n_points, resolution)  # (once: not per file, where "skip" hid them)
     if isinstance(files, (str, bytes, os.PathLike)):
         files = [files]
     names, seeds = [], []

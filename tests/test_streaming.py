@@ -1,6 +1,7 @@
 """eppf.describe_files and the descriptors' streaming hooks (partial_fit, _stream_part)."""
 
 import io
+import re
 import threading
 
 import numpy as np
@@ -128,6 +129,22 @@ def test_bad_arguments_are_refused(tmp_path):
         describe_files([folder], EPPFTransformer(), on_error="ignore")
     with pytest.raises(FileNotFoundError, match="no such file or folder"):
         describe_files([tmp_path / "nothing"], EPPFTransformer())
+
+
+@pytest.mark.parametrize("options, msg", [
+    (dict(n_points=0), "describe_files: n_points must be None or an int >= 2, got 0"),
+    (dict(resolution=-1.0), "describe_files: resolution must be None or a positive finite float, got -1.0"),
+    (dict(normals="yes"), "describe_files: normals must be 'auto', True or False, got 'yes'"),
+    (dict(n_points=64, resolution=0.1), "describe_files: give n_points or resolution, not both"),
+])
+def test_bad_reading_options_fail_once_before_any_file_is_read(tmp_path, monkeypatch, options, msg):
+    # (each file's read refused them, so with on_error="skip" every file was skipped first, one message each)
+    import eppf.io
+
+    folder = _folder(tmp_path)
+    monkeypatch.setattr(eppf.io, "read_point_cloud", lambda *a, **k: pytest.fail("a file was read"))
+    with pytest.raises(ValueError, match=re.escape(msg)):
+        describe_files([folder], GASDTransformer(), on_error="skip", **options)
 
 
 def test_an_output_file_that_is_text_or_cannot_seek_is_refused_before_the_work(tmp_path, monkeypatch):

@@ -26,6 +26,17 @@ def _check_normals_arg(normals, owner):
         raise ValueError(f"{owner}: normals must be 'auto', True or False, got {normals!r}")
 
 
+def check_sampling_args(owner, normals, n_points, resolution):
+    """``(n_points, resolution)`` checked as :func:`read_point_cloud` takes them, with ``normals``: for
+    callers that read many files, so that a bad option fails once, before any file is read."""
+    _check_normals_arg(normals, owner)
+    n_points = check_n_points(n_points, owner)
+    resolution = check_resolution(resolution, owner)
+    if n_points is not None and resolution is not None:
+        raise ValueError(f"{owner}: give n_points or resolution, not both")
+    return n_points, resolution
+
+
 def _check_random_state_arg(random_state, owner):
     """Refuse a ``random_state`` that :func:`_rng` cannot use (before any file is read)."""
     if isinstance(random_state, numbers.Integral) and not isinstance(random_state, bool):
@@ -237,13 +248,9 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     (500, 6)
     """
     owner = "read_point_cloud"
-    _check_normals_arg(normals, owner)
     if mesh not in ("sample", "vertices"):
         raise ValueError(f"{owner}: mesh must be 'sample' or 'vertices', got {mesh!r}")
-    n_points = check_n_points(n_points, owner)
-    resolution = check_resolution(resolution, owner)
-    if n_points is not None and resolution is not None:
-        raise ValueError(f"{owner}: give n_points or resolution, not both")
+    n_points, resolution = check_sampling_args(owner, normals, n_points, resolution)
     # the generator is made only for a file that is sampled (a mesh, or resampling to n_points)
     _check_random_state_arg(random_state, owner)
     path = os.fspath(path)
