@@ -301,8 +301,11 @@ def stream_descriptors(names, read, descriptor, sink, *, n_jobs=None, unreadable
         clouds' shapes), ``n_features`` and ``descriptor`` (the fitted clone).
     """
     if not (hasattr(descriptor, "partial_fit") and hasattr(descriptor, "_stream_part")):
+        pool = hasattr(descriptor, "n_draws") and hasattr(descriptor, "transformer")
+        hint = (" (a pool gives several draws a cloud, which are not one row a file: stream its transformer)"
+                if pool else "")
         raise TypeError(f"{owner}: descriptor must be an eppf descriptor transformer (with partial_fit), "
-                        f"got {type(descriptor).__name__}")
+                        f"got {type(descriptor).__name__}{hint}")
     chunk_size = CHUNK_FILES if chunk_size is None else chunk_size
     validate_parameter(chunk_size, _CHUNK_SIZE, name="chunk_size", owner=owner)
     est = clone(descriptor)

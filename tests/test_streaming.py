@@ -123,6 +123,10 @@ def test_bad_arguments_are_refused(tmp_path):
     folder = _folder(tmp_path)
     with pytest.raises(TypeError, match="describe_files: descriptor must be an eppf descriptor"):
         describe_files([folder], object())
+    from eppf.descriptors import DescriptorPool
+
+    with pytest.raises(TypeError, match=r"got DescriptorPool \(a pool gives several draws a cloud, .* stream its "):
+        describe_files([folder], DescriptorPool(GASDTransformer(), 2, random_state=0))
     with pytest.raises(ValueError, match="chunk_size must be a positive int"):
         describe_files([folder], EPPFTransformer(), chunk_size=0)
     with pytest.raises(ValueError, match="on_error must be"):
