@@ -484,7 +484,10 @@ def _descriptor_problem(est, name):
         if "scale_" in vars(est) or name in ("eppf.EPPFTransformer", "eppf.CVFHTransformer",
                                                "eppf.OURCVFHTransformer", "eppf.GRSDTransformer"):
             checks.append(("scale_", lambda v: v is None or _positive_real(v), "None or a positive finite float"))
-        if name == "eppf.EPPFTransformer":
+        if name == "eppf.EPPFTransformer":  # fit learns a scale only with scaling="fit"
+            fit_scale = est.scaling == "fit"
+            checks[-1] = ("scale_", lambda v: _positive_real(v) if fit_scale else v is None,
+                          "a positive finite float (scaling='fit')" if fit_scale else "None (scaling is not 'fit')")
             n_bins, functions, _ = est._resolve_params()
             shape = tuple(b for b, f in zip(n_bins, _eppf_functions()) if f in functions)
             checks += [("n_bins_", lambda v: v == n_bins, f"{n_bins} (from n_bins)"),
@@ -585,6 +588,10 @@ def _sklearn_problem(est, name):
     feature = lambda v: v is None or _array(v, 1, "f", n_in)  # noqa: E731
     if name == "sklearn.preprocessing.StandardScaler":
         checks += [(a, feature, "None or a float array of n_features_in_ values") for a in ("mean_", "var_", "scale_")]
+        # None exactly where fit leaves it None: without centering or without scaling
+        checks += [(a, lambda v, used=used: (v is not None) == bool(used), f"{'a float array' if used else 'None'} "
+                    f"({kind}={bool(used)})") for a, used, kind in (("mean_", est.with_mean, "with_mean"),
+                                                                   ("scale_", est.with_std, "with_std"))]
     elif name in ("sklearn.preprocessing.MinMaxScaler", "sklearn.preprocessing.MaxAbsScaler"):
         attrs = ("min_", "scale_") if name.endswith("MinMaxScaler") else ("scale_",)
         checks += [(a, lambda v: _array(v, 1, "f", n_in), "a float array of n_features_in_ values") for a in attrs]

@@ -588,7 +588,9 @@ _EDITED = {"__type__": "ndarray", "ref": "edited"}
     ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].pop("n_bins_"), None, "n_bins_ is missing"),
     ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(n_features_out_=7), None,
      "n_features_out_ is 7 but its parameters give 32"),
-    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(scale_="x"), None, "scale_ must be None or"),
+    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(scale_="x"), None, "scale_ must be a positive"),
+    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(scale_=None), None,
+     "scale_ must be a positive finite float (scaling='fit')"),
     ("eppf", "eppf.EPPFTransformer",  # an EPPF node relabelled as another descriptor of the allow-list
      lambda n: n.update({"class": "eppf.GASDTransformer", "params": {}}), None, "n_features_out_ is 32 but"),
     ("union", "eppf.DescriptorUnion", lambda n: n["attributes"].update(weights_=_EDITED), _array_of(np.array([1.0, np.nan])),
@@ -609,6 +611,8 @@ _EDITED = {"__type__": "ndarray", "ref": "edited"}
      "coef_ is missing"),
     ("sklearn", "sklearn.preprocessing.StandardScaler", lambda n: n["attributes"].update(scale_=_EDITED),
      _array_of(np.ones(5)), "scale_ must be None or a float array of n_features_in_ values"),
+    ("sklearn", "sklearn.preprocessing.StandardScaler", lambda n: n["attributes"].update(mean_=None), None,
+     "mean_ must be a float array (with_mean=True)"),
 ])
 def test_broken_parameters_or_fitted_state_are_refused_at_load(fitted_models, tmp_path, model, cls, change, arrays,
                                                                message):
