@@ -382,6 +382,11 @@ class _Decoder:
             else:
                 state[key] = self.decode(value, f"{where}.{key}")
         vars(est).update(state)
+        _check_params(est, name, self.fail, where)
+        if state or net is not None or members is not None:  # saved fitted: its fitted state must be whole
+            problem = _fitted_problem(est, name)
+            if problem:
+                raise self.fail(where, f"{name} has a broken fitted state: {problem}")
         if net is not None:
             est.net_ = self._net(est, name, net, f"{where}.net_")
         if members is not None:
@@ -413,6 +418,210 @@ class _Decoder:
 
             net.history_ = History(history)
         return net
+
+
+# ------------------------------------------------------ rebuilt estimators
+# A hand-edited file can hold an estimator whose parameters its own code would refuse, or whose
+# fitted attributes are missing or of another kind than fit sets: it would load and then fail in
+# predict or transform with an error that names neither the file nor the problem. Loading checks
+# the parameters with the estimator's own validation and the fitted attributes against what fit
+# sets, as written below from each class's fit (attributes are read, never called).
+
+
+def _check_params(est, name, fail, where):
+    """Refuse parameters the estimator's own validation refuses (as fit and predict would)."""
+    from .utils._param_validation import validate_params
+
+    try:
+        if getattr(type(est), "_parameter_constraints", None) is not None and name.startswith("eppf."):
+            validate_params(est)
+        elif hasattr(est, "_validate_params"):  # scikit-learn's own
+            est._validate_params()
+    except (ValueError, TypeError) as exc:
+        raise fail(where, f"{name} has parameters it does not accept: {exc}") from None
+
+
+def _int(value, low=0):
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value >= low
+
+
+def _positive_real(value):
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)) \
+        and math.isfinite(value) and value > 0
+
+
+def _array(value, ndim, kinds, length=None):
+    """Whether ``value`` is an ndarray of ``ndim`` dimensions and a dtype kind in ``kinds``
+    (finite when floating), with ``length`` rows when given."""
+    return isinstance(value, np.ndarray) and value.ndim == ndim and value.dtype.kind in kinds \
+        and (length is None or value.shape[0] == length) \
+        and (value.dtype.kind != "f" or bool(np.all(np.isfinite(value))))
+
+
+def _int_tuple(value):
+    return type(value) is tuple and all(_int(v, 1) for v in value)
+
+
+def _attrs_problem(est, checks):
+    """The first of ``checks`` (attribute, test, what it must be) that ``est`` fails, described."""
+    for attr, test, what in checks:
+        if attr not in vars(est):
+            return f"its fitted attribute {attr} is missing"
+        value = vars(est)[attr]
+        if not test(value):
+            shown = f"an array of shape {value.shape} and dtype {value.dtype}" if isinstance(value, np.ndarray) \
+                else repr(value)[:80]
+            return f"{attr} must be {what}, got {shown}"
+    return None
+
+
+def _descriptor_problem(est, name):
+    from .descriptors import DescriptorPool, DescriptorUnion
+    from .descriptors._base import PointCloudDescriptor
+
+    if isinstance(est, PointCloudDescriptor):
+        checks = [("n_features_out_", lambda v: _int(v, 1), "a positive int")]
+        if "scale_" in vars(est) or name in ("eppf.EPPFTransformer", "eppf.CVFHTransformer",
+                                               "eppf.OURCVFHTransformer", "eppf.GRSDTransformer"):
+            checks.append(("scale_", lambda v: v is None or _positive_real(v), "None or a positive finite float"))
+        if name == "eppf.EPPFTransformer":  # fit learns a scale only with scaling="fit"
+            fit_scale = est.scaling == "fit"
+            checks[-1] = ("scale_", lambda v: _positive_real(v) if fit_scale else v is None,
+                          "a positive finite float (scaling='fit')" if fit_scale else "None (scaling is not 'fit')")
+            n_bins, functions, _ = est._resolve_params()
+            shape = tuple(b for b, f in zip(n_bins, _eppf_functions()) if f in functions)
+            checks += [("n_bins_", lambda v: v == n_bins, f"{n_bins} (from n_bins)"),
+                       ("functions_", lambda v: v == functions, f"{functions} (from functions)"),
+                       ("histogram_shape_", lambda v: v == shape, f"{shape} (from n_bins and functions)")]
+        if name == "eppf.WahlTransformer":
+            n_bins = est._check_params()[0]
+            checks.append(("n_bins_", lambda v: v == n_bins, f"{n_bins} (from n_bins)"))
+        problem = _attrs_problem(est, checks)
+        if problem is None:
+            width = int(est._n_features(est._check_params()))
+            if est.n_features_out_ != width:
+                problem = f"n_features_out_ is {est.n_features_out_} but its parameters give {width} features"
+        return problem
+    if isinstance(est, DescriptorUnion):
+        problem = _attrs_problem(est, [
+            ("transformers_", lambda v: type(v) is list and len(v) > 0 and all(
+                type(t) is tuple and len(t) == 2 and isinstance(t[0], str) and _is_descriptor(t[1]) for t in v),
+             "a non-empty list of (name, fitted descriptor) pairs"),
+            ("weights_", lambda v: _array(v, 1, "f", len(est.transformers_)), "a float array of one weight per block"),
+            ("feature_slices_", lambda v: type(v) is dict, "a dict of slices"),
+            ("n_features_out_", lambda v: _int(v, 1), "a positive int")])
+        if problem is None:
+            col = 0
+            for block, t in est.transformers_:
+                width = getattr(t, "n_features_out_", None)
+                if est.feature_slices_.get(block) != slice(col, col + width):
+                    return f"feature_slices_[{block!r}] must be slice({col}, {col + width}) (block widths in order)"
+                col += width
+            if len(est.feature_slices_) != len(est.transformers_) or est.n_features_out_ != col:
+                return f"feature_slices_ and n_features_out_ must cover the blocks' {col} features"
+        return problem
+    if isinstance(est, DescriptorPool):
+        problem = _attrs_problem(est, [
+            ("transformers_", lambda v: type(v) is list and len(v) > 0 and all(_is_descriptor(t) for t in v),
+             "a non-empty list of fitted descriptors"),
+            ("n_features_out_", lambda v: _int(v, 1), "a positive int")])
+        if problem is None and any(getattr(t, "n_features_out_", None) != est.n_features_out_
+                                   for t in est.transformers_):
+            return f"its fitted descriptors must each give n_features_out_={est.n_features_out_} features"
+        return problem
+    return None
+
+
+def _eppf_functions():
+    from .descriptors._eppf import FUNCTIONS
+
+    return FUNCTIONS
+
+
+def _is_descriptor(est):
+    """A fitted eppf descriptor (what a union or a pool computes with)."""
+    from .descriptors import DescriptorPool, DescriptorUnion
+    from .descriptors._base import PointCloudDescriptor
+
+    return isinstance(est, (PointCloudDescriptor, DescriptorUnion, DescriptorPool)) and "n_features_out_" in vars(est)
+
+
+def _classifier_problem(est, name):
+    classes = ("classes_", lambda v: _array(v, 1, "iubfUO") and len(v) > 0, "a non-empty 1D array")
+    if name == "eppf.KLNearestNeighbors":
+        from .neighbors._base import Prepared
+
+        problem = _attrs_problem(est, [
+            ("n_features_in_", lambda v: _int(v, 1), "a positive int"),
+            ("floor_", _positive_real, "a positive finite float"), classes,
+            ("_renormalize", lambda v: isinstance(v, (bool, np.bool_)), "a bool"),
+            ("_fit_data", lambda v: isinstance(v, Prepared), "the training histograms"),
+            ("n_samples_fit_", lambda v: v == est._fit_data.H.shape[0], "the number of training histograms"),
+            ("_y", lambda v: _array(v, 1, "iu", est.n_samples_fit_) and (not v.size or (
+                v.min() >= 0 and v.max() < len(est.classes_))),
+             "an int array of one index into classes_ per training histogram")])
+        if problem is None and est._fit_data.H.shape[1] != est.n_features_in_:
+            return f"n_features_in_ is {est.n_features_in_} but the training histograms have " \
+                   f"{est._fit_data.H.shape[1]} bins"
+        return problem
+    if name == "eppf.EPPF4DClassifier":
+        n_bins = est._n_bins if _int_tuple(vars(est).get("_n_bins")) else None
+        n_side = vars(est).get("n_side_features_")
+        n_flat = math.prod(n_bins) if n_bins else None
+        return _attrs_problem(est, [
+            ("_n_bins", lambda v: v == tuple(int(b) for b in est.n_bins), "the n_bins parameter as a tuple"),
+            ("n_side_features_", lambda v: _int(v, 0), "an int >= 0"),
+            ("n_features_in_", lambda v: v == n_flat + n_side, f"prod(n_bins) + n_side_features_"),
+            ("n_draws_fit_", lambda v: _int(v, 1), "a positive int"), classes,
+            ("side_mean_", lambda v: _array(v, 1, "f", n_side), "a float array of n_side_features_ values"),
+            ("side_scale_", lambda v: _array(v, 1, "f", n_side), "a float array of n_side_features_ values"),
+            ("input_mean_", lambda v: _array(v, 1, "f") and len(v) in (1, n_flat), "a float array of 1 or prod(n_bins) values"),
+            ("input_scale_", lambda v: _array(v, 1, "f") and len(v) in (1, n_flat), "a float array of 1 or prod(n_bins) values")])
+    if name == "eppf.PointNetClassifier":
+        return _attrs_problem(est, [classes, ("_predict_seed", lambda v: _int(v, 0) and v < 2**32, "an int seed")])
+    return None
+
+
+def _sklearn_problem(est, name):
+    n_in = vars(est).get("n_features_in_")
+    checks = [("n_features_in_", lambda v: _int(v, 1), "a positive int")]
+    feature = lambda v: v is None or _array(v, 1, "f", n_in)  # noqa: E731
+    if name == "sklearn.preprocessing.StandardScaler":
+        checks += [(a, feature, "None or a float array of n_features_in_ values") for a in ("mean_", "var_", "scale_")]
+        # None exactly where fit leaves it None: without centering or without scaling
+        checks += [(a, lambda v, used=used: (v is not None) == bool(used), f"{'a float array' if used else 'None'} "
+                    f"({kind}={bool(used)})") for a, used, kind in (("mean_", est.with_mean, "with_mean"),
+                                                                   ("scale_", est.with_std, "with_std"))]
+    elif name in ("sklearn.preprocessing.MinMaxScaler", "sklearn.preprocessing.MaxAbsScaler"):
+        attrs = ("min_", "scale_") if name.endswith("MinMaxScaler") else ("scale_",)
+        checks += [(a, lambda v: _array(v, 1, "f", n_in), "a float array of n_features_in_ values") for a in attrs]
+    elif name == "sklearn.decomposition.PCA":
+        checks += [("mean_", lambda v: _array(v, 1, "f", n_in), "a float array of n_features_in_ values"),
+                   ("components_", lambda v: _array(v, 2, "f") and v.shape[1] == n_in and len(v) > 0,
+                    "a float array of shape (n_components, n_features_in_)"),
+                   ("explained_variance_", lambda v: _array(v, 1, "f", len(est.components_)),
+                    "a float array of one value per component")]
+    elif name == "sklearn.linear_model.LogisticRegression":
+        checks += [("classes_", lambda v: _array(v, 1, "iubfUO") and len(v) >= 2, "a 1D array of two or more classes"),
+                   ("coef_", lambda v: _array(v, 2, "f") and v.shape[1] == n_in
+                    and len(v) == (1 if len(est.classes_) == 2 else len(est.classes_)),
+                    "a float array of shape (1 or n_classes, n_features_in_)"),
+                   ("intercept_", lambda v: _array(v, 1, "f", len(est.coef_)), "a float array of one value per row of coef_")]
+    return _attrs_problem(est, checks)
+
+
+def _fitted_problem(est, name):
+    """What is wrong with the fitted state of a rebuilt ``est`` (allow-list ``name``), or None.
+
+    Written from each class's ``fit``: the attributes it sets, their kind and how they agree with
+    each other and with the parameters. Classes without fitted state worth checking (the
+    perturbations, Pipeline and Normalizer beyond ``n_features_in_``) pass.
+    """
+    if name.startswith("eppf.") and not name.startswith("eppf.preprocessing."):
+        return _descriptor_problem(est, name) or _classifier_problem(est, name)
+    if name.startswith("sklearn.") and name != "sklearn.pipeline.Pipeline":
+        return _sklearn_problem(est, name)
+    return None
 
 
 def _version_tuple(text):
@@ -507,8 +716,11 @@ def load_model(path, *, trust=False):
     ValueError
         If the file is not a model file in the safe format (and ``trust`` is
         False), is truncated or corrupt, was written in a newer format
-        version, names a class that is not on the allow-list, or holds
-        arrays of Python objects. The message names the file.
+        version, names a class that is not on the allow-list, holds arrays
+        of Python objects, or holds an estimator whose parameters it does
+        not accept or whose fitted attributes are missing, of another kind
+        than ``fit`` sets or disagree with each other or with the
+        parameters. The message names the file.
     OSError
         If reading the file fails (the message names it).
 

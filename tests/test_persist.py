@@ -511,3 +511,124 @@ def test_a_pickle_that_ends_in_a_zip_archive_is_a_pickle(tmp_path):
     assert zipfile.is_zipfile(path)
     with pytest.raises(ValueError, match="is not an eppf model in the safe format but a pickle"):
         load_model(path)
+
+
+# ------------------------------------------- hand-edited fitted state and parameters
+# A hand-edited file whose estimator has parameters its code refuses, or fitted attributes missing or of
+# another kind than fit sets, loaded and then failed in predict or transform with an AttributeError,
+# IndexError or TypeError naming neither the file nor the problem; it is refused at load.
+@pytest.fixture(scope="module")
+def fitted_models(tmp_path_factory):
+    from eppf.descriptors import DescriptorUnion
+
+    X, y = make_shapes(2, n_points=96, classes=["box", "sphere"], return_X_y=True, random_state=0)
+    H, yh = _descriptors(n=12, bins=4 * 2 * 2 * 2)
+    eppf_t = EPPFTransformer(n_bins=(4, 2, 2, 2), n_pairs=300, random_state=0)
+    models = {
+        "kl": Pipeline([("l1", Normalizer(norm="l1")), ("knn", KLNearestNeighbors(n_neighbors=2))]).fit(H, yh),
+        "eppf": eppf_t.fit(X),
+        "union": DescriptorUnion([("e", EPPFTransformer(n_bins=(4, 2, 2, 2), n_pairs=300, random_state=0)),
+                                  ("s", ESFTransformer(n_triplets=300, n_bins=4, random_state=0))]).fit(X),
+        "cnn": EPPF4DClassifier(n_bins=(4, 2, 2, 2), max_epochs=1, n_hidden=4, filters=(2, 2, 2), batch_size=4,
+                                early_stopping=False, random_state=0).fit(H, yh),
+        "sklearn": Pipeline([("scale", StandardScaler()), ("pca", PCA(2, random_state=0)),
+                             ("lr", LogisticRegression())]).fit(H, yh),
+    }
+    folder = tmp_path_factory.mktemp("fitted")
+    for name, model in models.items():
+        save_model(model, folder / f"{name}.eppf")
+    return folder
+
+
+def _estimator_node(manifest, cls):
+    """The first estimator node of class ``cls`` in a manifest's tree."""
+    def walk(node):
+        if isinstance(node, dict):
+            if node.get("__type__") == "estimator" and node["class"] == cls:
+                return node
+            node = list(node.values())
+        if isinstance(node, list):
+            for v in node:
+                found = walk(v)
+                if found is not None:
+                    return found
+        return None
+
+    return walk(manifest["root"])
+
+
+def _array_of(value):
+    return lambda blob: _npz(**dict(np.load(io.BytesIO(blob))), edited=value)
+
+
+_EDITED = {"__type__": "ndarray", "ref": "edited"}
+
+
+@pytest.mark.parametrize("model, cls, change, arrays, message", [
+    # parameters the estimator's own validation refuses
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["params"].update(n_neighbors=-1), None, "n_neighbors must be"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["params"].update(weights=None), None, "weights must be"),
+    ("sklearn", "sklearn.decomposition.PCA", lambda n: n["params"].update(n_components="x"), None, "n_components"),
+    # KLNearestNeighbors: attributes missing, of another kind, disagreeing with each other
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].pop("classes_"), None, "classes_ is missing"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].pop("_fit_data"), None, "_fit_data is missing"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].update(classes_=["chair", "lamp", "table"]), None,
+     "classes_ must be a non-empty 1D array"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].update(floor_=None), None,
+     "floor_ must be a positive finite float"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].update(n_samples_fit_=3), None,
+     "n_samples_fit_ must be the number of training histograms"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].update(n_features_in_=5), None,
+     "n_features_in_ is 5 but the training histograms have 32 bins"),
+    ("kl", "eppf.KLNearestNeighbors", lambda n: n["attributes"].update(_y=_EDITED), _array_of(np.arange(12) % 4),
+     "_y must be an int array of one index into classes_"),
+    ("kl", "sklearn.preprocessing.Normalizer", lambda n: n["attributes"].update(n_features_in_="x"), None,
+     "n_features_in_ must be a positive int"),
+    # descriptors
+    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].pop("n_bins_"), None, "n_bins_ is missing"),
+    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(n_features_out_=7), None,
+     "n_features_out_ is 7 but its parameters give 32"),
+    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(scale_="x"), None, "scale_ must be a positive"),
+    ("eppf", "eppf.EPPFTransformer", lambda n: n["attributes"].update(scale_=None), None,
+     "scale_ must be a positive finite float (scaling='fit')"),
+    ("eppf", "eppf.EPPFTransformer",  # an EPPF node relabelled as another descriptor of the allow-list
+     lambda n: n.update({"class": "eppf.GASDTransformer", "params": {}}), None, "n_features_out_ is 32 but"),
+    ("union", "eppf.DescriptorUnion", lambda n: n["attributes"].update(weights_=_EDITED), _array_of(np.array([1.0, np.nan])),
+     "weights_ must be a float array of one weight per block"),
+    ("union", "eppf.DescriptorUnion", lambda n: n["attributes"]["feature_slices_"]["items"].pop("s"), None,
+     "feature_slices_['s'] must be slice(32, "),
+    ("union", "eppf.DescriptorUnion",  # a classifier where a fitted block was
+     lambda n: n["attributes"]["transformers_"][0]["items"].__setitem__(1, {
+         "__type__": "estimator", "class": "eppf.KLNearestNeighbors", "params": {}, "attributes": {}}), None,
+     "transformers_ must be a non-empty list of (name, fitted descriptor) pairs"),
+    # the 4D network's classifier and the scikit-learn classes
+    ("cnn", "eppf.EPPF4DClassifier", lambda n: n["attributes"].update(input_mean_=[0.0]), None,
+     "input_mean_ must be a float array"),
+    ("cnn", "eppf.EPPF4DClassifier", lambda n: n["attributes"].update(n_features_in_=31), None,
+     "n_features_in_ must be prod(n_bins) + n_side_features_"),
+    ("cnn", "eppf.EPPF4DClassifier", lambda n: n["attributes"].pop("side_mean_"), None, "side_mean_ is missing"),
+    ("sklearn", "sklearn.linear_model.LogisticRegression", lambda n: n["attributes"].pop("coef_"), None,
+     "coef_ is missing"),
+    ("sklearn", "sklearn.preprocessing.StandardScaler", lambda n: n["attributes"].update(scale_=_EDITED),
+     _array_of(np.ones(5)), "scale_ must be None or a float array of n_features_in_ values"),
+    ("sklearn", "sklearn.preprocessing.StandardScaler", lambda n: n["attributes"].update(mean_=None), None,
+     "mean_ must be a float array (with_mean=True)"),
+])
+def test_broken_parameters_or_fitted_state_are_refused_at_load(fitted_models, tmp_path, model, cls, change, arrays,
+                                                               message):
+    path = tmp_path / "edited.eppf"
+    path.write_bytes((fitted_models / f"{model}.eppf").read_bytes())
+
+    def edit(m):
+        change(_estimator_node(m, cls))
+        return m
+
+    _rewrite(path, manifest=edit, arrays=arrays)
+    with pytest.raises(ValueError, match=re.escape(str(path))) as info:
+        load_model(path)
+    assert message in str(info.value)
+
+
+def test_unedited_fitted_models_pass_the_load_checks(fitted_models):
+    for name in ("kl", "eppf", "union", "cnn", "sklearn"):
+        assert load_model(fitted_models / f"{name}.eppf") is not None
