@@ -521,13 +521,15 @@ def _descriptor_problem(est, name):
                 return f"feature_slices_ and n_features_out_ must cover the blocks' {col} features"
         return problem
     if isinstance(est, DescriptorPool):
+        # (n_features_out_ comes with the first pool a fitted pool computes: fit alone leaves it unset)
         problem = _attrs_problem(est, [
             ("transformers_", lambda v: type(v) is list and len(v) > 0 and all(_is_descriptor(t) for t in v),
-             "a non-empty list of fitted descriptors"),
-            ("n_features_out_", lambda v: _int(v, 1), "a positive int")])
-        if problem is None and any(getattr(t, "n_features_out_", None) != est.n_features_out_
-                                   for t in est.transformers_):
-            return f"its fitted descriptors must each give n_features_out_={est.n_features_out_} features"
+             "a non-empty list of fitted descriptors")])
+        widths = {getattr(t, "n_features_out_", None) for t in est.transformers_} if problem is None else set()
+        if problem is None and "n_features_out_" in vars(est):
+            widths.add(est.n_features_out_)
+        if len(widths) > 1:
+            return f"its fitted descriptors and n_features_out_ must all give one number of features, got {widths}"
         return problem
     return None
 
@@ -588,10 +590,9 @@ def _sklearn_problem(est, name):
     feature = lambda v: v is None or _array(v, 1, "f", n_in)  # noqa: E731
     if name == "sklearn.preprocessing.StandardScaler":
         checks += [(a, feature, "None or a float array of n_features_in_ values") for a in ("mean_", "var_", "scale_")]
-        # None exactly where fit leaves it None: without centering or without scaling
-        checks += [(a, lambda v, used=used: (v is not None) == bool(used), f"{'a float array' if used else 'None'} "
-                    f"({kind}={bool(used)})") for a, used, kind in (("mean_", est.with_mean, "with_mean"),
-                                                                   ("scale_", est.with_std, "with_std"))]
+        # an array where transform uses it (fit also keeps the mean without centering, unless with_std=False too)
+        checks += [(a, lambda v: v is not None, f"a float array ({kind}=True)")
+                   for a, kind in (("mean_", "with_mean"), ("scale_", "with_std")) if getattr(est, kind)]
     elif name in ("sklearn.preprocessing.MinMaxScaler", "sklearn.preprocessing.MaxAbsScaler"):
         attrs = ("min_", "scale_") if name.endswith("MinMaxScaler") else ("scale_",)
         checks += [(a, lambda v: _array(v, 1, "f", n_in), "a float array of n_features_in_ values") for a in attrs]

@@ -632,3 +632,39 @@ def test_broken_parameters_or_fitted_state_are_refused_at_load(fitted_models, tm
 def test_unedited_fitted_models_pass_the_load_checks(fitted_models):
     for name in ("kl", "eppf", "union", "cnn", "sklearn"):
         assert load_model(fitted_models / f"{name}.eppf") is not None
+
+
+def test_every_allow_listed_estimator_fitted_the_usual_ways_loads(tmp_path):
+    # The load checks must not refuse what eppf itself saves: every registered descriptor fitted by fit or
+    # partial_fit, a pool fitted only (no pool computed yet: no n_features_out_) or by fit_transform, the
+    # perturbations, and the scikit-learn steps in their variants (no centering, binary and multiclass).
+    from sklearn.base import clone
+    from sklearn.preprocessing import MaxAbsScaler, MinMaxScaler
+
+    from eppf.descriptors import DescriptorPool, GASDColorTransformer, ProportionTransformer
+    from eppf.preprocessing import GaussianNoise, Occlusion, RandomDropout, RandomRotation, RandomScaling, Resampler
+    from eppf.registry import make_descriptor
+
+    X, y = make_shapes(2, n_points=96, classes=["box", "sphere", "cylinder"], return_X_y=True, random_state=0)
+    colored = [np.hstack([c, np.full((len(c), 3), 0.5)]) for c in X]
+    H, yh = _descriptors(n=12, bins=4 * 2 * 2 * 2)
+    small = dict(eppf=dict(n_pairs=300), eppf_short=dict(n_pairs=300), esf=dict(n_triplets=300),
+                 wahl=dict(n_pairs=300))
+    models = []
+    for name in ("ourcvfh", "esf", "wahl", "eppf_short", "eppf", "vfh", "gasd", "cvfh", "grsd", "eppf+gasd"):
+        est = make_descriptor(name, **small.get(name, {}))
+        models += [clone(est).fit(X), clone(est).partial_fit(X[:3]).partial_fit(X[3:])]
+    models += [GASDColorTransformer().fit(colored), ProportionTransformer().fit(X)]
+    pool = DescriptorPool(make_descriptor("gasd"), 2, augment=RandomScaling(), random_state=0)
+    computed = clone(pool)
+    computed.fit_transform(X)
+    models += [clone(pool).fit(X), computed]
+    models += [t.fit(X) for t in (GaussianNoise(), Occlusion(), RandomDropout(), RandomRotation(), RandomScaling(),
+                                  Resampler(64))]
+    models += [StandardScaler(with_mean=False).fit(H), StandardScaler(with_std=False).fit(H), MinMaxScaler().fit(H),
+               MaxAbsScaler().fit(H), PCA(3).fit(H), LogisticRegression().fit(H, yh),
+               LogisticRegression().fit(H, yh == "chair"), KLNearestNeighbors(n_neighbors=3).fit(H, yh)]
+    for k, model in enumerate(models):
+        save_model(model, tmp_path / f"m{k}.eppf")
+        back = load_model(tmp_path / f"m{k}.eppf")
+        assert type(back) is type(model), model
