@@ -16,6 +16,7 @@ from sklearn.utils import Bunch, check_random_state
 from ..preprocessing._perturb import (
     CONSTRAINTS as PERTURB_CONSTRAINTS,
     add_noise_array,
+    check_finite,
     occlude_array,
     random_rotation_matrix,
     random_unit_vector,
@@ -473,7 +474,9 @@ def make_shapes(
                 axis = "z" if rotate == "z" else None
                 cloud = rotate_array(cloud, random_rotation_matrix(axis=axis, random_state=rng), "origin")
             cloud = occlude_array(cloud, removed, random_unit_vector(rng))
-            cloud = add_noise_array(cloud, noise, rng)
+            with np.errstate(over="ignore", invalid="ignore"):
+                cloud = add_noise_array(cloud, noise, rng)
+            check_finite(cloud, _OWNER, "noisy", "use a smaller noise (the objects are about 1 across)")
             data.append(cloud if with_normals else np.ascontiguousarray(cloud[:, :3]))
     target = np.repeat(np.arange(len(classes), dtype=np.int64), n_per_class)
 

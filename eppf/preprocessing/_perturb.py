@@ -6,7 +6,9 @@ Every function takes one cloud, an array of shape (n_points, 3) or
 the same number of columns; the input is never modified. Normals follow the
 points: they are rotated with them and dropped with them. Randomness comes
 from ``random_state`` (anything :func:`sklearn.utils.check_random_state`
-accepts), so a fixed integer gives the same output on every call.
+accepts), so a fixed integer gives the same output on every call. A result
+that overflows float64 (coordinates near its limit, huge noise or factors)
+raises a ValueError instead of returning inf or NaN.
 
 The functions are the building blocks of the synthetic data set
 (:func:`eppf.datasets.make_shapes`) and of the point-cloud transformers in
@@ -136,6 +138,34 @@ def _n_removed(fraction, n_points):
     return min(int(np.floor(fraction * n_points + 0.5)), n_points - 2)
 
 
+class NotFiniteError(ValueError):
+    """A perturbed cloud that is not finite in float64 (its values overflowed).
+
+    Raised with the name of the function or transformer (``owner``) and,
+    from a transformer, the index of the cloud; the transformers of
+    :mod:`eppf.preprocessing` catch the error of the function they call and
+    raise it again under their own name.
+    """
+
+    def __init__(self, owner, what, remedy, index=None):
+        cloud = "point cloud" if index is None else f"point cloud {index}"
+        super().__init__(f"{owner}: the {what} {cloud} overflows float64; {remedy}")
+        self.what, self.remedy = what, remedy
+
+
+def check_finite(out, owner, what, remedy):
+    """Return ``out``, or raise :class:`NotFiniteError` when the ``what`` cloud has a non-finite value."""
+    if not np.isfinite(out).all():
+        raise NotFiniteError(owner, what, remedy)
+    return out
+
+
+#: The remedies :func:`check_finite` suggests, by perturbation.
+NOISE_REMEDY = "use a smaller sigma or rescale the cloud"
+ROTATION_REMEDY = "center or rescale the cloud first"
+SCALING_REMEDY = "use factors nearer 1 or center or rescale the cloud first"
+
+
 def random_unit_vector(rng):
     while True:
         vec = rng.normal(size=3)
@@ -194,13 +224,15 @@ def add_gaussian_noise(cloud, sigma, *, relative_to="unit_cube", random_state=No
     sigma = check_non_negative(sigma, "sigma", owner)
     _check(owner, relative_to=relative_to)
     rng = check_random_state(random_state)
-    if relative_to == "unit_cube":
-        sigma = sigma * float(np.ptp(arr[:, :3], axis=0).max())
-    return add_noise_array(arr, sigma, rng)
+    with np.errstate(over="ignore", invalid="ignore"):
+        if relative_to == "unit_cube":
+            sigma = sigma * float(np.ptp(arr[:, :3], axis=0).max())
+        noisy = add_noise_array(arr, sigma, rng)
+    return check_finite(noisy, owner, "noisy", NOISE_REMEDY)
 
 
 def add_noise_array(arr, sigma, rng):
-    """Kernel of :func:`add_gaussian_noise` on a validated array, in place."""
+    """Kernel of :func:`add_gaussian_noise` on a validated array, in place (unchecked: may overflow)."""
     if sigma > 0:
         arr[:, :3] += rng.normal(scale=sigma, size=(arr.shape[0], 3))
     return arr
@@ -408,12 +440,14 @@ def random_rotation_matrix(*, axis=None, random_state=None):
 
 
 def rotate_array(arr, rotation, center):
+    """Kernel of :func:`rotate` on a validated array (unchecked: coordinates near float64's limit may overflow)."""
     out = arr.copy()
-    if center == "centroid":
-        origin = arr[:, :3].mean(axis=0)
-        out[:, :3] = (arr[:, :3] - origin) @ rotation.T + origin
-    else:
-        out[:, :3] = arr[:, :3] @ rotation.T
+    with np.errstate(over="ignore", invalid="ignore"):
+        if center == "centroid":
+            origin = arr[:, :3].mean(axis=0)
+            out[:, :3] = (arr[:, :3] - origin) @ rotation.T + origin
+        else:
+            out[:, :3] = arr[:, :3] @ rotation.T
     if arr.shape[1] == 6:
         out[:, 3:] = arr[:, 3:] @ rotation.T
     return out
@@ -446,7 +480,7 @@ def rotate(cloud, rotation, *, center="centroid"):
     arr = check_point_cloud(cloud, owner=owner)
     _check(owner, center=center, rotation=rotation)
     rot = np.asarray(rotation, dtype=np.float64)
-    return rotate_array(arr, rot, center)
+    return check_finite(rotate_array(arr, rot, center), owner, "rotated", ROTATION_REMEDY)
 
 
 def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
@@ -490,20 +524,22 @@ def random_rotation(cloud, *, axis=None, center="centroid", random_state=None):
     if axis is not None:
         axis = _check_vector(axis, "axis", owner)
     rot = random_rotation_matrix(axis=axis, random_state=random_state)
-    return rotate_array(arr, rot, center)
+    return check_finite(rotate_array(arr, rot, center), owner, "rotated", ROTATION_REMEDY)
 
 
 # --------------------------------------------------------------------------- #
 # scaling
 # --------------------------------------------------------------------------- #
 def _scale(arr, factors, center):
+    """The stretch of :func:`scale` on a validated array (unchecked: extreme values or factors may overflow)."""
     out = arr.copy()
-    origin = arr[:, :3].mean(axis=0) if center == "centroid" else np.zeros(3)
-    out[:, :3] = (arr[:, :3] - origin) * factors + origin
-    if arr.shape[1] == 6:
-        # Normals transform with the inverse transpose of diag(factors), then get unit length again.
-        normals = arr[:, 3:] / factors
-        out[:, 3:] = normals / np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]
+    with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+        origin = arr[:, :3].mean(axis=0) if center == "centroid" else np.zeros(3)
+        out[:, :3] = (arr[:, :3] - origin) * factors + origin
+        if arr.shape[1] == 6:
+            # Normals transform with the inverse transpose of diag(factors), then get unit length again.
+            normals = arr[:, 3:] / factors
+            out[:, 3:] = normals / np.sqrt(np.einsum("ij,ij->i", normals, normals))[:, None]
     return out
 
 
@@ -516,7 +552,7 @@ def _scale_clouds(clouds, factors, center):
     there) and their normals in whole-array operations, so a list of many
     small clouds costs a few array operations instead of a few per cloud;
     the clouds returned are views of one new array. Mixed widths go cloud
-    by cloud.
+    by cloud. Unchecked: extreme values or factors may overflow.
     """
     if len({c.shape[1] for c in clouds}) != 1:
         return [_scale(c, f, center) for c, f in zip(clouds, factors)]
@@ -531,9 +567,10 @@ def _scale_clouds(clouds, factors, center):
     origins = cloud_means(block, offsets) if center == "centroid" else np.zeros((len(clouds), 3))
     stretch_about(block, offsets, origins, factors, out)
     if block.shape[1] == 6:
-        np.divide(block[:, 3:], np.repeat(factors, sizes, axis=0), out=out[:, 3:])
-        flat = out[:, 3:]
-        flat /= np.sqrt(np.einsum("ij,ij->i", flat, flat))[:, None]
+        with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
+            np.divide(block[:, 3:], np.repeat(factors, sizes, axis=0), out=out[:, 3:])
+            flat = out[:, 3:]
+            flat /= np.sqrt(np.einsum("ij,ij->i", flat, flat))[:, None]
     bounds = offsets.tolist()
     return [out[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
@@ -583,7 +620,7 @@ def scale(cloud, factors, *, center="centroid"):
     arr = check_point_cloud(cloud, owner=owner)
     _check(owner, center=center, factors=factors)
     fac = np.asarray(factors, dtype=np.float64)
-    return _scale(arr, np.broadcast_to(fac, (3,)), center)
+    return check_finite(_scale(arr, np.broadcast_to(fac, (3,)), center), owner, "stretched", SCALING_REMEDY)
 
 
 def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centroid", random_state=None):
@@ -624,4 +661,5 @@ def random_scaling(cloud, low=0.8, high=1.25, *, anisotropic=True, center="centr
     arr = check_point_cloud(cloud, owner=owner)
     low, high = _check_scale_range(low, high, owner)
     _check(owner, anisotropic=anisotropic, center=center)
-    return _scale(arr, _scaling_factors(check_random_state(random_state), low, high, bool(anisotropic)), center)
+    factors = _scaling_factors(check_random_state(random_state), low, high, bool(anisotropic))
+    return check_finite(_scale(arr, factors, center), owner, "stretched", SCALING_REMEDY)

@@ -65,7 +65,13 @@ class _CloudTransformer(TransformerMixin, BaseEstimator):
         self._check_params()
         clouds = check_point_clouds(X, owner=type(self).__name__)
         seeds = object_seeds(self.random_state, len(clouds))
-        return [self._apply(cloud, object_rng(seed)) for cloud, seed in zip(clouds, seeds)]
+        out = []
+        for k, (cloud, seed) in enumerate(zip(clouds, seeds)):
+            try:
+                out.append(self._apply(cloud, object_rng(seed)))
+            except _perturb.NotFiniteError as exc:  # named after this transformer and the cloud
+                raise _perturb.NotFiniteError(type(self).__name__, exc.what, exc.remedy, index=k) from None
+        return out
 
     def fit_transform(self, X, y=None):
         """Perturb every cloud (``fit`` learns nothing, so this is :meth:`transform`, validating once).
@@ -339,7 +345,11 @@ class RandomScaling(_CloudTransformer):
         factors = np.empty((len(clouds), 3))
         for k, seed in enumerate(object_seeds(self.random_state, len(clouds))):
             factors[k] = _perturb._scaling_factors(object_rng(seed), low, high, anisotropic)
-        return _perturb._scale_clouds(clouds, factors, self.center)
+        out = _perturb._scale_clouds(clouds, factors, self.center)
+        for k, cloud in enumerate(out):
+            if not np.isfinite(cloud).all():
+                raise _perturb.NotFiniteError(type(self).__name__, "stretched", _perturb.SCALING_REMEDY, index=k)
+        return out
 
 
 class Resampler(_CloudTransformer):

@@ -373,3 +373,9 @@ def test_size_alone_does_not_separate_classes():
 def test_parameter_errors(kwargs, err, msg):
     with pytest.raises(err, match=re.escape(msg)):
         make_shapes(**kwargs)
+
+
+def test_noise_beyond_float64_is_an_error():
+    # noise=1e308 passed the parameter check and gave inf coordinates
+    with pytest.raises(ValueError, match=re.escape("make_shapes: the noisy point cloud overflows float64")):
+        make_shapes(1, n_points=20, classes=["box"], noise=1e308)

@@ -434,3 +434,36 @@ def test_keeps_at_least_two_points():
     cloud = _cloud(3)
     assert occlude(cloud, 0.99, direction="x").shape[0] == 2
     assert random_dropout(cloud, 0.99, random_state=0).shape[0] == 2
+
+
+_HUGE = np.array([[1e308, 1e308, 0.0], [-1e308, 1e308, 0.0], [0.0, -1e308, 1e308], [1e308, 0.0, -1e308]])
+
+
+@pytest.mark.parametrize(
+    "call, msg",
+    [
+        # the centroid's sum overflowed (NaN coordinates and NumPy warnings)
+        (lambda: random_rotation(_HUGE, random_state=0), "random_rotation: the rotated point cloud overflows float64"),
+        (lambda: rotate(_HUGE, rotation_matrix("z", 0.5)), "rotate: the rotated point cloud overflows float64"),
+        # stretched beyond float64's range: inf coordinates came back
+        (lambda: scale(_HUGE, 2.0, center="origin"), "scale: the stretched point cloud overflows float64"),
+        (lambda: random_scaling(_HUGE, 2.0, 2.5, random_state=0), "random_scaling: the stretched point cloud overflows"),
+        # normals divided by a factor near float64's smallest: inf / inf = NaN normals
+        (lambda: scale(_cloud(10), [1e-310, 1.0, 1.0]), "scale: the stretched point cloud overflows float64"),
+        # noise larger than float64 holds
+        (lambda: add_gaussian_noise(_cloud(10), 1e308, relative_to="none", random_state=0), "add_gaussian_noise: the noisy"),
+        (lambda: add_gaussian_noise(_HUGE, 1.0, random_state=0), "add_gaussian_noise: the noisy point cloud overflows"),
+    ],
+)
+def test_overflow_is_an_error_not_inf_or_nan(call, msg):
+    with np.errstate(all="raise"):  # and no NumPy warning on the way
+        with pytest.raises(ValueError, match=re.escape(msg)):
+            call()
+
+
+def test_near_float64_limit_still_perturbed():
+    # what does fit in float64 is perturbed as before, rigidly
+    cloud = _HUGE * 0.25
+    rotated = random_rotation(cloud, center="origin", random_state=0)
+    assert_allclose(pdist(rotated), pdist(cloud), rtol=1e-12)
+    assert np.isfinite(random_scaling(cloud, 1.1, 1.2, random_state=0)).all()

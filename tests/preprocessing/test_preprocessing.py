@@ -215,3 +215,20 @@ def test_parameter_errors(est, exc, msg):
 def test_input_errors(X, exc, msg):
     with pytest.raises(exc, match=re.escape(msg)):
         RandomDropout(0.1).fit_transform(X)
+
+
+@pytest.mark.parametrize(
+    "est, msg",
+    [
+        (RandomRotation(random_state=0), "RandomRotation: the rotated point cloud 1 overflows float64"),
+        (RandomScaling(2.0, 2.5, random_state=0), "RandomScaling: the stretched point cloud 1 overflows float64"),
+        (RandomScaling(2.0, 2.5, center="origin", random_state=0), "RandomScaling: the stretched point cloud 1 overflows"),
+        (GaussianNoise(1.0, random_state=0), "GaussianNoise: the noisy point cloud 1 overflows float64"),
+    ],
+)
+def test_overflow_names_the_transformer_and_the_cloud(est, msg):
+    # the second cloud reaches float64's limit: NaN or inf coordinates (and NumPy warnings) came back
+    huge = np.array([[1e308, 1e308, 0.0], [-1e308, 1e308, 0.0], [0.0, -1e308, 1e308], [1e308, 0.0, -1e308]])
+    with np.errstate(all="raise"):
+        with pytest.raises(ValueError, match=re.escape(msg)):
+            est.fit_transform([_clouds(1)[0], huge])
