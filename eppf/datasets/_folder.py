@@ -7,7 +7,7 @@ import numpy as np
 from sklearn.utils import Bunch
 
 from ..io import read_point_cloud, supported_extensions
-from ._loaders import check_choice, check_dir, check_n_points, file_seeds, load_all
+from ._loaders import check_choice, check_class_names, check_dir, check_n_points, file_seeds, load_all
 
 __all__ = ["folder_layout", "load_folder", "object_files"]
 
@@ -167,8 +167,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
     n_points = check_n_points(n_points, owner)
-    if classes is not None and (isinstance(classes, str) or len(classes) == 0):
-        raise ValueError(f"{owner}: classes must be None or a non-empty sequence of class names, got {classes!r}")
+    classes = check_class_names(classes, owner, allow_none=True)
 
     files = object_files(root)
     layout, kind = folder_layout(root, files)
@@ -188,7 +187,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     if classes is None:
         names = found
     else:
-        names = [str(c) for c in classes]
+        names = classes
         absent = [c for c in names if c not in found]
         if absent:
             raise ValueError(f"{owner}: no object files for the classes {absent} under {root!r}; "

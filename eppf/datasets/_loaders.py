@@ -60,6 +60,27 @@ MODELNET_VERSION = [Options(numbers.Integral, values=[40, 10])]
 TRAIN_SIZE = [Interval(numbers.Real, 0, 1, closed="neither", description="a number in (0, 1)")]
 
 
+def check_class_names(classes, owner, *, allow_none=False, lower=False):
+    """``classes`` as a list of distinct names (``str``, lower case when ``lower``), or None when allowed and given.
+
+    A string, an empty collection or a repeated name is a ValueError and a
+    value that is not a collection a TypeError, each naming ``owner``.
+    """
+    if classes is None and allow_none:
+        return None
+    what = "None or a non-empty sequence" if allow_none else "a non-empty sequence"
+    if isinstance(classes, (str, bytes)) or not hasattr(classes, "__iter__"):
+        exc = ValueError if isinstance(classes, (str, bytes)) else TypeError
+        raise exc(f"{owner}: classes must be {what} of class names, got {classes!r}")
+    names = [str(c).lower() if lower else str(c) for c in classes]
+    if not names:
+        raise ValueError(f"{owner}: classes must be {what} of class names, got {classes!r}")
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ValueError(f"{owner}: classes repeats {repeated}; each class must be named once")
+    return names
+
+
 def check_choice(value, name, choices, owner):
     """Check that ``value`` is one of ``choices`` (compared with ``==``); return it."""
     choices = tuple(choices)
@@ -504,9 +525,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     resolution = check_resolution(resolution, owner)
     if n_points is None and resolution is None:
         raise ValueError(f"{owner}: give n_points or resolution (meshes must be sampled)")
-    if isinstance(classes, str) or len(classes) == 0:
-        raise ValueError(f"{owner}: classes must be a non-empty sequence of class names, got {classes!r}")
-    names = [str(c).lower() for c in classes]
+    names = check_class_names(classes, owner, lower=True)
     index = {n: k for k, n in enumerate(names)}
     exts = supported_extensions()
 
@@ -624,9 +643,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     n_points = check_n_points(n_points, owner)
     validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)
-    if isinstance(classes, str) or len(classes) == 0:
-        raise ValueError(f"{owner}: classes must be a non-empty sequence of class names, got {classes!r}")
-    names = [str(c) for c in classes]
+    names = check_class_names(classes, owner)
     index = {n: k for k, n in enumerate(names)}
     pattern = os.path.join("Area_*", "*", "Annotations", "*.txt")
     files = sorted(glob.glob(os.path.join(root, pattern))) or sorted(glob.glob(os.path.join(root, "*", pattern)))

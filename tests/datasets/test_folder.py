@@ -98,6 +98,8 @@ def test_bad_file_raise_and_skip(tmp_path):
 @pytest.mark.parametrize("kwargs, msg", [
     (dict(classes=["cat"]), "load_folder: no object files for the classes ['cat']"),
     (dict(classes="mug"), "load_folder: classes must be None or a non-empty sequence"),
+    # a repeated class gave two target names and every object the second label
+    (dict(classes=["mug", "box", "mug"]), "load_folder: classes repeats ['mug']; each class must be named once"),
     (dict(subset="train"), "load_folder: "),
     (dict(subset="val"), "subset"),
     (dict(n_points=0), "n_points"),
@@ -209,3 +211,13 @@ def test_a_file_name_that_is_not_utf8_is_loaded_with_its_own_seed(tmp_path):
     for path, raw in ((name, b"mug/caf\xe9.xyz"), (str(tmp_path / "box" / "0.xyz"), b"box/0.xyz")):
         want = int.from_bytes(hashlib.blake2b(b"%d/%s" % (base, raw), digest_size=8).digest(), "little")
         assert file_seeds(3, str(tmp_path), [path]) == [want]
+
+
+def test_classes_that_are_not_a_collection(tmp_path):
+    # len(5) raised a bare "object of type 'int' has no len()"
+    _write_flat(tmp_path)
+    with pytest.raises(TypeError, match=re.escape("load_folder: classes must be None or a non-empty sequence of class names, got 5")):
+        load_folder(tmp_path, classes=5)
+    # any iterable of names is read once, in its order
+    data = load_folder(tmp_path, classes=(name for name in ["mug", "box"]))
+    assert data.target_names.tolist() == ["mug", "box"]

@@ -278,6 +278,9 @@ def test_scannet_corrupt_and_errors(tmp_path):
         load_scannet_objects(tmp_path, resolution=None)
     with pytest.raises(ValueError, match="classes must be a non-empty sequence"):
         load_scannet_objects(tmp_path, classes="chair")
+    # names are compared in lower case: the same class twice gave two target names, one never used
+    with pytest.raises(ValueError, match=re.escape("load_scannet_objects: classes repeats ['chair']")):
+        load_scannet_objects(tmp_path, classes=["Chair", "chair"])
     with pytest.raises(ValueError, match="holds no object files of the classes"):
         load_scannet_objects(tmp_path, classes=["sofa"])
 
@@ -348,6 +351,7 @@ def test_s3dis_corrupt_file(tmp_path):
     [
         ({"train_size": 1.0}, ValueError, "load_s3dis_objects: train_size must be a number in (0, 1), got 1.0"),
         ({"classes": []}, ValueError, "classes must be a non-empty sequence"),
+        ({"classes": ["chair", "chair"]}, ValueError, "load_s3dis_objects: classes repeats ['chair']"),
         ({"classes": ["wall2"]}, ValueError, "no annotation files of the classes ['wall2']"),
         ({"subset": "val"}, ValueError, "subset must be one of"),
     ],
