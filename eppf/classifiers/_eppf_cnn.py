@@ -500,6 +500,12 @@ class EPPF4DClassifier(SkorchClassifierBase):
         -------
         self : EPPF4DClassifier
             Fitted estimator.
+
+        Raises
+        ------
+        KeyboardInterrupt
+            On Ctrl-C during training (skorch alone would swallow it and
+            return a half-trained network).
         """
         return super().fit(X, y)
 
