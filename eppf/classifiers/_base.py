@@ -199,6 +199,8 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
     def _encode_labels(self, y, n_objects):
         """Check y against the objects; set ``classes_``; return int64 codes."""
         owner = self._owner
+        if y is None:  # (np.asarray makes it a 0-d array, which the shape check would name as shape ())
+            raise ValueError(f"{owner}: y is None; class labels are needed")
         y = np.asarray(y)
         if y.ndim != 1:
             raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")

@@ -270,6 +270,13 @@ def test_labels_map_back(labels):
     np.testing.assert_array_equal(pred, clf.classes_[np.argmax(clf.predict_proba(X), axis=1)])
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_missing_labels_are_named(kind):
+    clf, X, _ = _make(kind, max_epochs=1, verbose=0)
+    with pytest.raises(ValueError, match=re.escape(f"{type(clf).__name__}: y is None; class labels are needed")):
+        clf.fit(X, None)
+
+
 def test_pointnet_order_preserving_relabelling_changes_nothing_but_the_names():
     X, y = _clouds(12, ["b", "a"])
     kw = dict(PN_FAST, max_epochs=1, early_stopping=False, random_state=0)
