@@ -450,6 +450,11 @@ def _positive_real(value):
         and math.isfinite(value) and value > 0
 
 
+#: dtype kinds of class labels a classifier's fit accepts (scikit-learn's checks): ints, unsigned ints,
+#: bools, floats, strings, objects (strings of a mixed length), datetimes and time spans.
+_LABEL_KINDS = "iubfUOMm"
+
+
 def _array(value, ndim, kinds, length=None):
     """Whether ``value`` is an ndarray of ``ndim`` dimensions and a dtype kind in ``kinds``
     (finite when floating), with ``length`` rows when given."""
@@ -549,7 +554,7 @@ def _is_descriptor(est):
 
 
 def _classifier_problem(est, name):
-    classes = ("classes_", lambda v: _array(v, 1, "iubfUO") and len(v) > 0, "a non-empty 1D array")
+    classes = ("classes_", lambda v: _array(v, 1, _LABEL_KINDS) and len(v) > 0, "a non-empty 1D array")
     if name == "eppf.KLNearestNeighbors":
         from .neighbors._base import Prepared
 
@@ -603,7 +608,7 @@ def _sklearn_problem(est, name):
                    ("explained_variance_", lambda v: _array(v, 1, "f", len(est.components_)),
                     "a float array of one value per component")]
     elif name == "sklearn.linear_model.LogisticRegression":
-        checks += [("classes_", lambda v: _array(v, 1, "iubfUO") and len(v) >= 2, "a 1D array of two or more classes"),
+        checks += [("classes_", lambda v: _array(v, 1, _LABEL_KINDS) and len(v) >= 2, "a 1D array of two or more classes"),
                    ("coef_", lambda v: _array(v, 2, "f") and v.shape[1] == n_in
                     and len(v) == (1 if len(est.classes_) == 2 else len(est.classes_)),
                     "a float array of shape (1 or n_classes, n_features_in_)"),

@@ -73,6 +73,25 @@ def test_kl_nearest_neighbors_round_trip_is_exact(tmp_path, params):
     assert_array_equal(back.kneighbors(return_distance=False), clf.kneighbors(return_distance=False))
 
 
+@pytest.mark.parametrize("labels", [np.array(["2020-01-01", "2021-06-30", "2022-12-31"], dtype="datetime64[D]"),
+                                    np.array([1, 5, 60], dtype="timedelta64[s]")])
+@pytest.mark.parametrize("kind", ["kl", "eppf"])
+def test_time_labels_round_trip(tmp_path, labels, kind):
+    # fit accepts dates and time spans as labels (scikit-learn's check does); load_model
+    # refused the classes_ of the very file save_model wrote from them
+    X, names = _descriptors()
+    y = labels[np.searchsorted(np.unique(names), names)]
+    if kind == "kl":
+        clf = KLNearestNeighbors().fit(X, y)
+    else:
+        clf = EPPF4DClassifier(n_bins=(2, 2, 3, 2), filters=(2, 2, 2), n_hidden=4, max_epochs=1,
+                               early_stopping=False, precision="float32", random_state=0, verbose=0).fit(X, y)
+    back = _round_trip(clf, tmp_path)
+    assert back.classes_.dtype == labels.dtype
+    assert_array_equal(back.classes_, labels)
+    assert_array_equal(back.predict(X), clf.predict(X))
+
+
 @pytest.mark.parametrize("make", [
     lambda: EPPFTransformer(n_bins=(6, 2, 3, 2), n_pairs=400, random_state=3),
     lambda: ESFTransformer(n_triplets=400, n_bins=8, random_state=3),

@@ -115,6 +115,26 @@ def _validation_split(y_enc, n_classes, fraction, seed, owner):
     return train_test_split(np.arange(n), test_size=n_valid, random_state=seed, stratify=stratify)
 
 
+def _interrupted(net, max_epochs):
+    """Whether skorch's ``fit`` returned because it caught a ``KeyboardInterrupt`` no callback raised.
+
+    ``NeuralNet.partial_fit`` swallows every ``KeyboardInterrupt``: those of
+    early stopping and the time budget, which end training on purpose, and a
+    user's Ctrl-C, after which the network is half trained. Training ended
+    as planned when one of those callbacks stopped it or when ``max_epochs``
+    epochs finished (the epoch timer wrote the last one's duration).
+    """
+    callbacks = dict(net.callbacks_)
+    early = callbacks.get("early_stopping")
+    if early is not None and early.misses_ >= early.patience:
+        return False
+    budget = callbacks.get("time_budget")
+    if budget is not None and budget.stopped_:
+        return False
+    history = net.history
+    return not (len(history) == max_epochs and "dur" in history[-1])
+
+
 class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
     """Base of the skorch-backed classifiers (see the module docstring for the hooks).
 
@@ -179,6 +199,8 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
     def _encode_labels(self, y, n_objects):
         """Check y against the objects; set ``classes_``; return int64 codes."""
         owner = self._owner
+        if y is None:  # (np.asarray makes it a 0-d array, which the shape check would name as shape ())
+            raise ValueError(f"{owner}: y is None; class labels are needed")
         y = np.asarray(y)
         if y.ndim != 1:
             raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")
@@ -270,6 +292,12 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         -------
         self : object
             Fitted estimator.
+
+        Raises
+        ------
+        KeyboardInterrupt
+            On Ctrl-C during training (skorch alone would swallow it and
+            return a half-trained network).
         """
         self._check_params()
         rng = check_random_state(self.random_state)
@@ -332,6 +360,10 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         with _torch_threads(self._n_threads()), torch.random.fork_rng(devices=[]):
             torch.manual_seed(seeds["torch"])
             net.fit(train_ds, y=None)
+        if _interrupted(net, int(self.max_epochs)):
+            # Ctrl-C: end fit as Python would (skorch alone returns a half-trained network,
+            # which the next ensemble member, the caller and eppf's commands would take as trained).
+            raise KeyboardInterrupt
         averaging = dict(net.callbacks_).get("weight_averaging")
         if averaging is not None:  # after early stopping loaded the best epoch: the average replaces it
             averaging.apply(net)

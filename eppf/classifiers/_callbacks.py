@@ -35,6 +35,7 @@ class TimeBudget(Callback):
 
     def initialize(self):
         self.start_ = None
+        self.stopped_ = False
         return self
 
     def on_train_begin(self, net, X=None, y=None, **kwargs):
@@ -43,6 +44,7 @@ class TimeBudget(Callback):
     def on_epoch_end(self, net, dataset_train=None, dataset_valid=None, **kwargs):
         if time.monotonic() - self.start_ > self.seconds:
             self.sink(f"Stopping: time budget of {self.seconds:g} s used after {len(net.history)} epochs.")
+            self.stopped_ = True  # (a Ctrl-C the net swallows is told apart by this)
             raise KeyboardInterrupt
 
 

@@ -345,8 +345,13 @@ class EPPF4DClassifier(SkorchClassifierBase):
             arr = np.asarray(X)
         except Exception as exc:
             raise ValueError(f"{owner}: X could not be converted to an array: {exc}") from None
+        if arr.dtype == object and arr.ndim == 0:  # a sparse matrix, a generator: not a sequence of rows
+            hint = " (dense descriptors are needed: use X.toarray())" if hasattr(X, "toarray") else ""
+            raise TypeError(f"{owner}: X must be an array of descriptors, got {type(X).__name__}{hint}")
         if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
             raise TypeError(f"{owner}: X must hold numbers, got dtype {arr.dtype}")
+        if np.iscomplexobj(arr):  # (a cast to float32 would drop the imaginary parts with a ComplexWarning)
+            raise TypeError(f"{owner}: X must hold real numbers, got dtype {arr.dtype}")
         if arr.ndim == 2:
             arr = arr[:, None, :]
         elif arr.ndim != 3:
@@ -495,6 +500,12 @@ class EPPF4DClassifier(SkorchClassifierBase):
         -------
         self : EPPF4DClassifier
             Fitted estimator.
+
+        Raises
+        ------
+        KeyboardInterrupt
+            On Ctrl-C during training (skorch alone would swallow it and
+            return a half-trained network).
         """
         return super().fit(X, y)
 

@@ -299,6 +299,12 @@ class PointNetClassifier(SkorchClassifierBase):
         -------
         self : PointNetClassifier
             Fitted estimator.
+
+        Raises
+        ------
+        KeyboardInterrupt
+            On Ctrl-C during training (skorch alone would swallow it and
+            return a half-trained network).
         """
         return super().fit(X, y)
 

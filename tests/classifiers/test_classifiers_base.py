@@ -229,6 +229,34 @@ def test_threads_restored_when_fit_raises(two_threads, monkeypatch):
         assert torch.get_num_threads() == 2
 
 
+@pytest.mark.parametrize(
+    "kind, at, extra",
+    [(kind, at, extra) for kind in KINDS for at, extra in [(1, {}), (3, {}), (3, {"early_stopping": False}), (8, {})]]
+    + [("eppf", 5, {"n_estimators": 2})],
+)
+def test_ctrl_c_during_training_ends_fit(kind, at, extra, monkeypatch):
+    # skorch's partial_fit swallows every KeyboardInterrupt (its early stopping's and the
+    # time budget's too); a user's Ctrl-C must still end fit, not return a half-trained
+    # network (nor crash on a history without valid_loss, nor go on with the next member).
+    from eppf.nn import EPPFNet4D, PointNet
+
+    module = EPPFNet4D if kind == "eppf" else PointNet
+    forward, calls = module.forward, []
+
+    def interrupted_forward(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == at:
+            raise KeyboardInterrupt
+        return forward(self, *args, **kwargs)
+
+    monkeypatch.setattr(module, "forward", interrupted_forward)
+    clf, X, y = _make(kind, **{"max_epochs": 3, "random_state": 0, "verbose": 0, **extra})
+    with pytest.raises(KeyboardInterrupt):
+        clf.fit(X, y)
+    assert len(calls) == at  # nothing trained after the interrupt
+    assert not hasattr(clf, "net_")
+
+
 # ---------------------------------------------------------------- labels
 @pytest.mark.parametrize("labels", [["zebra", "ant", "mole"], [30, -7, 4]])
 def test_labels_map_back(labels):
@@ -240,6 +268,13 @@ def test_labels_map_back(labels):
     # columns of predict_proba follow classes_: a permuted mapping would score near 1/3
     assert np.mean(pred == y) >= 0.9
     np.testing.assert_array_equal(pred, clf.classes_[np.argmax(clf.predict_proba(X), axis=1)])
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_missing_labels_are_named(kind):
+    clf, X, _ = _make(kind, max_epochs=1, verbose=0)
+    with pytest.raises(ValueError, match=re.escape(f"{type(clf).__name__}: y is None; class labels are needed")):
+        clf.fit(X, None)
 
 
 def test_pointnet_order_preserving_relabelling_changes_nothing_but_the_names():

@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+import scipy.sparse
 import torch
 from numpy.testing import assert_allclose, assert_array_equal
 from sklearn.base import BaseEstimator, TransformerMixin, clone
@@ -491,6 +492,11 @@ def test_bad_parameters(params, err, msg):
          "EPPF4DClassifier: y must hold class labels of one kind (numbers or strings, no NaN); got float, int, str labels"),
         (np.full((4, 48), "x"), ["a", "b"] * 2, TypeError, "EPPF4DClassifier: X must hold numbers, got dtype <U1"),
         (None, ["a"], TypeError, "EPPF4DClassifier: X must be an array of descriptors, got NoneType"),
+        (np.full((4, 48), 1 / 48) + 0j, ["a", "b"] * 2, TypeError, "EPPF4DClassifier: X must hold real numbers, got dtype complex128"),
+        (scipy.sparse.csr_matrix(np.full((4, 48), 1 / 48)), ["a", "b"] * 2, TypeError,
+         "EPPF4DClassifier: X must be an array of descriptors, got csr_matrix (dense descriptors are needed: use X.toarray())"),
+        ((row for row in np.full((4, 48), 1 / 48)), ["a", "b"] * 2, TypeError,
+         "EPPF4DClassifier: X must be an array of descriptors, got generator"),
         (np.full((4, 48), 1 / 48), ["a", "b", "a"], ValueError, "EPPF4DClassifier: X has 4 objects but y has 3 labels"),
         (np.full((4, 48), 1 / 48), ["a"] * 4, ValueError, "EPPF4DClassifier: y has a single class 'a'; at least 2 are needed"),
         (np.full((4, 48), 1 / 48), [[0, 1]] * 4, ValueError, "EPPF4DClassifier: y must be 1D, got shape (4, 2)"),
