@@ -178,3 +178,18 @@ def test_retrieve_refuses_a_descriptor_file_whose_header_declares_more_than_it_h
             good if which == "database" else bad]
     line = _one_line_error(*_run(argv, capsys)[::2], "retrieve")
     assert str(bad) in line and "the header declares an array of shape (100000000000, 128)" in line
+
+
+@pytest.mark.parametrize("argv, option", [(["--resolution", "nan"], "--resolution"),
+                                          (["--resolution", "-1"], "--resolution"),
+                                          (["--n-points", "100", "--resolution", "0.5"], "--resolution")])
+def test_bare_eppf_checks_the_sampling_options_as_eppf_run_does(tmp_path, capsys, argv, option):
+    # `eppf --data x` (the README's spelling) took --resolution as any float and both options together, and
+    # failed later on every file ("no file could be read") instead of naming the option
+    data = _class_folder(tmp_path / "objects", {"chair": 2, "lamp": 2})
+    with pytest.raises(SystemExit) as exc:
+        main(["--data", str(data), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "Traceback" not in err
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("eppf: error: argument") and option in line and "no file could be read" not in err
