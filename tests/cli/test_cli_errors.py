@@ -193,3 +193,19 @@ def test_bare_eppf_checks_the_sampling_options_as_eppf_run_does(tmp_path, capsys
     assert exc.value.code == 2 and "Traceback" not in err
     line = err.strip().splitlines()[-1]
     assert line.startswith("eppf: error: argument") and option in line and "no file could be read" not in err
+
+
+@pytest.mark.parametrize("option", [["--n-points", "64"], ["--resolution", "0.5"]])
+def test_evaluate_with_a_model_refuses_the_sampling_options_it_would_ignore(tmp_path, capsys, option):
+    # with --model, files are read with the model's saved sampling settings: --n-points/--resolution were
+    # accepted and silently ignored (retrieval included), so the table looked like that of the asked sampling
+    data = _class_folder(tmp_path / "objects", {"chair": 3, "lamp": 3})
+    model = tmp_path / "m.model"
+    assert _run(["train", "--data", data, "-o", model, "--test-size", "0", "--n-pairs", "500", "--no-progress"],
+                capsys)[0] == 0
+    status, out, err = _run(["evaluate", "--data", data, "--model", model, "--n-pairs", "500", "--no-progress",
+                             *option], capsys)
+    line = _one_line_error(status, err, "evaluate")
+    assert option[0] in line and "--model" in line and out == ""
+    # without --model they apply, as before
+    assert _run(["evaluate", "--data", data, "--n-pairs", "500", "--no-progress", *option], capsys)[0] == 0
