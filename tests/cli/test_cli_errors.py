@@ -209,3 +209,16 @@ def test_evaluate_with_a_model_refuses_the_sampling_options_it_would_ignore(tmp_
     assert option[0] in line and "--model" in line and out == ""
     # without --model they apply, as before
     assert _run(["evaluate", "--data", data, "--n-pairs", "500", "--no-progress", *option], capsys)[0] == 0
+
+
+@pytest.mark.parametrize("option", [["--descriptor", "esf"], ["--n-pairs", "500"], ["--n-bins", "4", "2", "2", "2"],
+                                    ["--scaling", "object"], ["--normal-neighbors", "5"]])
+def test_pointnet_training_refuses_the_descriptor_options_it_would_ignore(tmp_path, capsys, option):
+    # PointNet reads the points: a descriptor option was accepted, ignored and recorded in the model's params
+    data = _class_folder(tmp_path / "objects", {"chair": 3, "lamp": 3})
+    model = tmp_path / "m.model"
+    status, out, err = _run(["train", "--data", data, "-o", model, "--classifier", "pointnet", "--max-epochs", "1",
+                             "--no-progress", *option], capsys)
+    line = _one_line_error(status, err, "train")
+    assert line.startswith(f"eppf train: error: {option[0]}:") and "pointnet" in line
+    assert out == "" and not model.exists()
