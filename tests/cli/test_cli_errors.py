@@ -222,3 +222,14 @@ def test_pointnet_training_refuses_the_descriptor_options_it_would_ignore(tmp_pa
     line = _one_line_error(status, err, "train")
     assert line.startswith(f"eppf train: error: {option[0]}:") and "pointnet" in line
     assert out == "" and not model.exists()
+
+
+def test_experiment_data_help_names_the_folders_it_reads():
+    # eppf experiment --data reads a folder of class subfolders (load_data: load_folder), as the README says;
+    # its help named only 'builtin' and .npz files
+    from eppf.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices["experiment"]
+    for name, parser in next(a for a in sub._actions if a.dest == "experiment").choices.items():
+        text = next(a for a in parser._actions if a.dest == "data").help
+        assert "folder" in text and ".npz" in text, name
