@@ -119,12 +119,16 @@ def add_runtime(parser, n_jobs=True):
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
 
 
+#: ``--n-pairs`` when not given.
+DEFAULT_N_PAIRS = 20000
+
+
 def add_descriptor(parser, choice=True, default="eppf"):
     """``--descriptor``, ``--n-pairs``, ``--scaling`` and ``--normal-neighbors``."""
     if choice:
         parser.add_argument("--descriptor", choices=DESCRIPTOR_NAMES, default=default,
                             help=f"which registered descriptor (default: {default})")
-    parser.add_argument("--n-pairs", type=positive_int, default=20000,
+    parser.add_argument("--n-pairs", type=positive_int, default=DEFAULT_N_PAIRS,
                         help="random samples per object: point pairs (EPPF, Wahl) or triplets (ESF); "
                              "deterministic descriptors ignore it")
     parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,

@@ -56,6 +56,12 @@ def run_evaluate(args, out=None):
     cmd = getattr(args, "prog", "eppf evaluate")
     if args.no_retrieval and args.model is None:
         raise ValueError("nothing to evaluate: --no-retrieval without --model")
+    if args.model is not None:
+        # the model's files are read as its training files were: a sampling option here would be ignored
+        given = [o for o, v in (("--n-points", args.n_points), ("--resolution", args.resolution)) if v is not None]
+        if given:
+            raise ValueError(f"{given[0]}: with --model the files are read as the model's training files were "
+                             "(its saved sampling settings); leave it out")
     check_output(args.output)
     saved = load_model(args.model, trust=args.trust) if args.model is not None else None
     sampling = model_sampling(saved, cmd) if saved is not None else sampling_from_args(args)

@@ -49,7 +49,9 @@ def _levels(text):
 
 def _add_common(p, draws=False):
     p.add_argument("--data", default="builtin",
-                   help="'builtin' (synthetic shapes, the default) or a .npz file in the flat layout (eppf.datasets.load_npz)")
+                   help="'builtin' (synthetic shapes, the default), a folder with one subfolder of files per class "
+                        "(optionally inside train/ and test/; eppf.datasets.load_folder) or a .npz file in the flat "
+                        "layout (eppf.datasets.load_npz)")
     p.add_argument("--out", default=None, help="output folder (default: results/<experiment>/<data name>)")
     p.add_argument("--cache-dir", default=None, help="descriptor cache folder (default: OUT/cache)")
     p.add_argument("--random-state", type=int, default=0, help="seed of everything random (default 0)")

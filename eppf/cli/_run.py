@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from ._common import (Command, add_sampling, load_labelled, n_jobs_type, positive_int, register,
+from ._common import (Command, add_sampling, load_labelled, n_jobs_type, positive_float, positive_int, register,
                       sampling_from_args, warn, warn_tiny)
 
 __all__ = ["run_main_job"]
@@ -42,8 +42,10 @@ def add_arguments(parser, defaults_only=False):
     parser.add_argument("--test-size", type=float, default=0.25,
                         help=h("test fraction when the data has no split"))
     if defaults_only:
-        parser.add_argument("--n-points", type=positive_int, default=None, help=argparse.SUPPRESS)
-        parser.add_argument("--resolution", type=float, default=None, help=argparse.SUPPRESS)
+        # checked as `eppf run` checks them: `eppf --data x` is the README's spelling of `eppf run --data x`
+        group = parser.add_mutually_exclusive_group()
+        group.add_argument("--n-points", type=positive_int, default=None, help=argparse.SUPPRESS)
+        group.add_argument("--resolution", type=positive_float, default=None, help=argparse.SUPPRESS)
         parser.add_argument("--on-error", choices=["skip", "raise"], default="skip", help=argparse.SUPPRESS)
     else:
         add_sampling(parser)

@@ -12,10 +12,10 @@ import time
 import numpy as np
 
 from ..registry import CLASSIFIERS, DESCRIPTORS
-from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, Command, add_data_source, add_descriptor,
-                      add_runtime, add_sampling, check_classes, check_output, descriptor_from_args, load_labelled,
-                      count, fewest_points, positive_int, progress_of, register, sampling_from_args, set_runtime,
-                      warn_tiny)
+from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, DEFAULT_N_PAIRS, Command, add_data_source,
+                      add_descriptor, add_runtime, add_sampling, check_classes, check_output, descriptor_from_args,
+                      load_labelled, count, fewest_points, positive_int, progress_of, register, sampling_from_args,
+                      set_runtime, warn_tiny)
 
 __all__ = ["make_pipeline_from_args", "run_train"]
 
@@ -84,6 +84,13 @@ def make_pipeline_from_args(args):
     cls = spec.estimator_class()
     torch_jobs = None if args.n_jobs < 0 else args.n_jobs
     if spec.input == "points":
+        # it reads the points: a descriptor option would be ignored, and the model would record it as used
+        given = [o for o, v in (("--descriptor", args.descriptor != "eppf"),
+                                ("--n-pairs", args.n_pairs != DEFAULT_N_PAIRS), ("--n-bins", args.n_bins is not None),
+                                ("--scaling", args.scaling is not None),
+                                ("--normal-neighbors", args.normal_neighbors is not None)) if v]
+        if given:
+            raise ValueError(f"{given[0]}: the {name} classifier reads the points, not a descriptor; leave it out")
         clf = cls(max_epochs=args.max_epochs, random_state=args.random_state, n_jobs=torch_jobs,
                   verbose=1 if progress else 0)
         return Pipeline([("classifier", clf)])

@@ -178,3 +178,58 @@ def test_retrieve_refuses_a_descriptor_file_whose_header_declares_more_than_it_h
             good if which == "database" else bad]
     line = _one_line_error(*_run(argv, capsys)[::2], "retrieve")
     assert str(bad) in line and "the header declares an array of shape (100000000000, 128)" in line
+
+
+@pytest.mark.parametrize("argv, option", [(["--resolution", "nan"], "--resolution"),
+                                          (["--resolution", "-1"], "--resolution"),
+                                          (["--n-points", "100", "--resolution", "0.5"], "--resolution")])
+def test_bare_eppf_checks_the_sampling_options_as_eppf_run_does(tmp_path, capsys, argv, option):
+    # `eppf --data x` (the README's spelling) took --resolution as any float and both options together, and
+    # failed later on every file ("no file could be read") instead of naming the option
+    data = _class_folder(tmp_path / "objects", {"chair": 2, "lamp": 2})
+    with pytest.raises(SystemExit) as exc:
+        main(["--data", str(data), "--no-progress", *argv])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "Traceback" not in err
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("eppf: error: argument") and option in line and "no file could be read" not in err
+
+
+@pytest.mark.parametrize("option", [["--n-points", "64"], ["--resolution", "0.5"]])
+def test_evaluate_with_a_model_refuses_the_sampling_options_it_would_ignore(tmp_path, capsys, option):
+    # with --model, files are read with the model's saved sampling settings: --n-points/--resolution were
+    # accepted and silently ignored (retrieval included), so the table looked like that of the asked sampling
+    data = _class_folder(tmp_path / "objects", {"chair": 3, "lamp": 3})
+    model = tmp_path / "m.model"
+    assert _run(["train", "--data", data, "-o", model, "--test-size", "0", "--n-pairs", "500", "--no-progress"],
+                capsys)[0] == 0
+    status, out, err = _run(["evaluate", "--data", data, "--model", model, "--n-pairs", "500", "--no-progress",
+                             *option], capsys)
+    line = _one_line_error(status, err, "evaluate")
+    assert option[0] in line and "--model" in line and out == ""
+    # without --model they apply, as before
+    assert _run(["evaluate", "--data", data, "--n-pairs", "500", "--no-progress", *option], capsys)[0] == 0
+
+
+@pytest.mark.parametrize("option", [["--descriptor", "esf"], ["--n-pairs", "500"], ["--n-bins", "4", "2", "2", "2"],
+                                    ["--scaling", "object"], ["--normal-neighbors", "5"]])
+def test_pointnet_training_refuses_the_descriptor_options_it_would_ignore(tmp_path, capsys, option):
+    # PointNet reads the points: a descriptor option was accepted, ignored and recorded in the model's params
+    data = _class_folder(tmp_path / "objects", {"chair": 3, "lamp": 3})
+    model = tmp_path / "m.model"
+    status, out, err = _run(["train", "--data", data, "-o", model, "--classifier", "pointnet", "--max-epochs", "1",
+                             "--no-progress", *option], capsys)
+    line = _one_line_error(status, err, "train")
+    assert line.startswith(f"eppf train: error: {option[0]}:") and "pointnet" in line
+    assert out == "" and not model.exists()
+
+
+def test_experiment_data_help_names_the_folders_it_reads():
+    # eppf experiment --data reads a folder of class subfolders (load_data: load_folder), as the README says;
+    # its help named only 'builtin' and .npz files
+    from eppf.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices["experiment"]
+    for name, parser in next(a for a in sub._actions if a.dest == "experiment").choices.items():
+        text = next(a for a in parser._actions if a.dest == "data").help
+        assert "folder" in text and ".npz" in text, name
