@@ -283,15 +283,17 @@ def is_segment_index(path):
         return False
 
 
-def find_files(item):
+def find_files(item, exclude=()):
     """Files of one command-line input: ``(root, [files])``, sorted; root is the seed folder. A folder's
-    ``eppf segment`` index is left out."""
+    ``eppf segment`` index is left out, and so are the files of ``exclude`` (the command's own output: a
+    ``-o labels.csv`` inside the input folder is not read as a point file by the next run)."""
     from ..datasets._folder import object_files
     from ..io import supported_extensions
 
     path = Path(item)
     if path.is_dir():
-        found = [f for f in object_files(path) if not is_segment_index(f)]
+        own = {os.path.realpath(e) for e in exclude if e}
+        found = [f for f in object_files(path) if not is_segment_index(f) and os.path.realpath(f) not in own]
         if not found:
             raise ValueError(f"no point cloud or mesh files ({' '.join(supported_extensions())}, any case) in the "
                              f"folder {item}")
@@ -452,14 +454,14 @@ def is_data_set_input(inputs):
         and _is_npz_data_set(inputs[0])
 
 
-def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None, min_points=MIN_POINTS):
+def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None, min_points=MIN_POINTS, exclude=()):
     """The :class:`InputPlan` of files and folders (see :func:`read_inputs`); nothing is read yet."""
     inputs = [str(i) for i in inputs]
     if labelled and (len(inputs) != 1 or not os.path.isdir(inputs[0])):
         if len(inputs) == 1 and not os.path.exists(inputs[0]):
             raise FileNotFoundError(f"--data {inputs[0]}: no such file or folder")
         raise ValueError(f"--data must be a .npz data set or a folder of class subfolders, got {' '.join(inputs)}")
-    groups = [find_files(item) for item in inputs]
+    groups = [find_files(item, exclude) for item in inputs]
     folder_input = len(inputs) == 1 and os.path.isdir(inputs[0])
     root = groups[0][0] if folder_input else None
     entries = [(f, r, None) for r, files in groups for f in files]  # (file, root, class)
@@ -506,7 +508,7 @@ def plan_inputs(inputs, sampling, *, cmd="eppf", labelled=None, min_points=MIN_P
 
 
 def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf", labelled=None,
-                min_points=MIN_POINTS):
+                min_points=MIN_POINTS, exclude=()):
     """Read files, folders or one ``.npz`` data set the one way (see the module docstring).
 
     Parameters
@@ -528,11 +530,13 @@ def read_inputs(inputs, sampling, *, on_error="skip", progress=False, cmd="eppf"
     min_points : int
         A cloud with fewer points (:func:`fewest_points` of the descriptor)
         is skipped, or stops the command, like a file that cannot be read.
+    exclude : sequence of str
+        Files a folder's listing leaves out: the command's own output.
     """
     inputs = [str(i) for i in inputs]
     if is_data_set_input(inputs):
         return _drop_tiny(_read_npz_data_set(inputs[0]), min_points, on_error, cmd)
-    plan = plan_inputs(inputs, sampling, cmd=cmd, labelled=labelled, min_points=min_points)
+    plan = plan_inputs(inputs, sampling, cmd=cmd, labelled=labelled, min_points=min_points, exclude=exclude)
     clouds, kept, skipped = [], [], []
     for k in progress_bar(range(len(plan.entries)), desc="reading", enabled=progress):
         try:

@@ -66,7 +66,7 @@ def run_describe(args, out=None):
         est = descriptor_from_args(args, progress)
         params = _saved_params(est)
         objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd,
-                              min_points=fewest_points(est))
+                              min_points=fewest_points(est), exclude=[output])
         warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
         X = est.fit_transform(objects.clouds)
         meta = _Meta(objects.ids, objects.labels, objects.class_names, objects.split,
@@ -124,7 +124,7 @@ def _save(output, X, meta, args, sampling):
 
 def _stream(args, est, sampling, output, progress, cmd):
     """Files and folders through :func:`eppf.streaming.stream_descriptors`, rows to ``output`` as they come."""
-    plan = plan_inputs(args.inputs, sampling, cmd=cmd, min_points=fewest_points(est))
+    plan = plan_inputs(args.inputs, sampling, cmd=cmd, min_points=fewest_points(est), exclude=[output])
     params = _saved_params(est)
     names = [f for f, _, _ in plan.entries]
 

@@ -88,7 +88,8 @@ def run_predict(args, out=None):
     model = saved["model"]
     set_runtime(model, args.n_jobs, progress_of(args))
     objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=args.on_error,
-                          progress=progress_of(args), cmd=cmd, labelled=False, min_points=fewest_points(model))
+                          progress=progress_of(args), cmd=cmd, labelled=False, min_points=fewest_points(model),
+                          exclude=[args.output])
     unreliable = warn_unreliable(model, objects.clouds, objects.ids, cmd)
     labels, proba, dist, neighbour = _evidence(model, objects.clouds, saved)
     header, columns = evidence_columns(proba, dist, neighbour)

@@ -102,7 +102,7 @@ def run_retrieve(args, out=None):
         settings = dict(params, n_jobs=args.n_jobs, verbose=1 if progress_of(args) else 0)
         est = make_descriptor(descriptor, **settings)
         objects = read_inputs(args.queries, sampling, on_error=args.on_error, progress=progress_of(args), cmd=cmd,
-                              min_points=fewest_points(est))
+                              min_points=fewest_points(est), exclude=[args.output])
         q_ids = objects.ids
         if objects.labels is not None:
             q_labels = objects.class_names[objects.labels]

@@ -96,6 +96,26 @@ def test_predict_csv_marks_the_rows_warned_as_unreliable(tmp_path, kl_model, cap
     assert "unreliable" not in out.splitlines()[0]
 
 
+def test_a_commands_own_output_in_its_input_folder_is_not_read_back(tmp_path, kl_model, capsys):
+    # predict -o scans/labels.csv, run twice: the second run read its own CSV as a point file (a CSV is one)
+    # and skipped it with a warning; retrieve's CSV and describe's .npy likewise
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    rng = np.random.default_rng(2)
+    for name in ("a.xyz", "b.xyz"):
+        write_point_cloud(scans / name, rng.normal(size=(100, 3)))
+    for _ in range(2):
+        status, out, err = _run(["predict", scans, "--model", kl_model, "-o", scans / "labels.csv", "--no-progress"],
+                                capsys)
+        assert status == 0 and err == "", err
+        assert "eppf: 2 rows ->" in out
+    (scans / "labels.csv").unlink()  # (another command's CSV is read as what it is: a point file)
+    status, out, err = _run(["describe", scans, "-o", scans / "d.npy", "--n-pairs", "500", "--no-progress"], capsys)
+    assert status == 0 and err == "", err
+    status, out, err = _run(["describe", scans, "-o", scans / "d.npy", "--n-pairs", "500", "--no-progress"], capsys)
+    assert status == 0 and err == "" and "2 eppf descriptors" in out, (out, err)
+
+
 def test_no_progress_silences_a_cnn_model_trained_with_progress(tmp_path, capsys):
     pytest.importorskip("torch")
     data = _folder(tmp_path / "data", n_per_class=4, n_points=80)
