@@ -98,6 +98,8 @@ def test_scores_perfect_and_column_vectors():
         (None, [0, 1], "retrieval_scores: y_true is None; class labels are needed"),
         ([1j, 2], [1j, 2], "retrieval_scores: y_true must hold class labels, got complex values"),
         ([0, 1], np.array([0, 1], dtype=complex), "retrieval_scores: y_pred must hold class labels, got complex values"),
+        (np.array(["2020-01-01", "NaT"], dtype="datetime64[D]"), np.array(["2020-01-01"] * 2, dtype="datetime64[D]"),
+         "retrieval_scores: y_true contains NaT (not-a-time) labels"),
     ],
 )
 def test_scores_errors(y_true, y_pred, msg):

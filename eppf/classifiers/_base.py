@@ -206,6 +206,8 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
             raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")
         if y.shape[0] != n_objects:
             raise ValueError(f"{owner}: X has {n_objects} objects but y has {y.shape[0]} labels")
+        if y.dtype.kind in "mM" and np.isnat(y).any():  # (NaT, as NaN, is no class; np.unique keeps it as one)
+            raise ValueError(f"{owner}: y contains NaT (not-a-time) labels")
         try:
             with np.errstate(invalid="ignore"):  # (scikit-learn's cast of NaN labels warns before it raises)
                 check_classification_targets(y)

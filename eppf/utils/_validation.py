@@ -617,6 +617,11 @@ def pack_point_clouds(clouds):
     return points, normals, offsets
 
 
+#: The most threads ``n_jobs`` may ask for (positive or, counted from the cores, negative): OpenMP runs the
+#: threads it is asked for, and far more than any machine has cores crashed it (65,536 on a 2-core guest).
+MAX_THREADS = 1024
+
+
 def check_n_jobs(n_jobs, *, owner=None):
     """Resolve ``n_jobs`` to a positive thread count: the one meaning of ``n_jobs`` in eppf.
 
@@ -646,7 +651,7 @@ def check_n_jobs(n_jobs, *, owner=None):
     TypeError
         If ``n_jobs`` is neither an int nor None.
     ValueError
-        If ``n_jobs`` is 0.
+        If ``n_jobs`` is 0, or above :data:`MAX_THREADS` in magnitude.
 
     Examples
     --------
@@ -661,6 +666,9 @@ def check_n_jobs(n_jobs, *, owner=None):
     validate_parameter(n_jobs, N_JOBS, name="n_jobs", owner=owner or "check_n_jobs")
     if n_jobs is None:
         return max(1, int(openmp_max_threads()))
+    if abs(n_jobs) > MAX_THREADS:  # (the kernels' thread counts are C ints: 10**18 overflowed there)
+        raise ValueError(f"{owner or 'check_n_jobs'}: n_jobs={n_jobs} asks for more threads than eppf runs "
+                         f"(at most {MAX_THREADS:,}); -1 uses all cores")
     if n_jobs > 0:
         return int(n_jobs)
     n_cpus = os.cpu_count() or 1
@@ -758,6 +766,8 @@ def check_class_labels(y, owner, name):
         raise ValueError(f"{owner}: {name} is empty")
     if y.dtype.kind == "f" and not np.all(np.isfinite(y)):
         raise ValueError(f"{owner}: {name} contains NaN or infinite values")
+    if y.dtype.kind in "mM" and np.isnat(y).any():
+        raise ValueError(f"{owner}: {name} contains NaT (not-a-time) labels")
     if y.dtype.kind == "c":  # (type_of_target's bare "Complex data not supported")
         raise ValueError(f"{owner}: {name} must hold class labels, got complex values")
     if y.dtype == object:

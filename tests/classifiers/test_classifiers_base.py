@@ -275,6 +275,11 @@ def test_missing_labels_are_named(kind):
     clf, X, _ = _make(kind, max_epochs=1, verbose=0)
     with pytest.raises(ValueError, match=re.escape(f"{type(clf).__name__}: y is None; class labels are needed")):
         clf.fit(X, None)
+    # NaT is no class either (np.unique kept it as one, where a NaN label is refused)
+    y = np.array(["2020-01-01", "2020-01-02"] * (len(X) // 2) + ["2020-01-01"] * (len(X) % 2), dtype="datetime64[D]")
+    y[0] = np.datetime64("NaT")
+    with pytest.raises(ValueError, match=re.escape(f"{type(clf).__name__}: y contains NaT (not-a-time) labels")):
+        clf.fit(X, y)
 
 
 def test_pointnet_order_preserving_relabelling_changes_nothing_but_the_names():

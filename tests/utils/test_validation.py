@@ -206,3 +206,22 @@ def test_block_validation_reports_the_first_bad_cloud(X, match, check):
 def test_wrong_collections_are_refused_the_same_way(X, match, exc, check):
     with pytest.raises(exc, match=re.escape(match)):
         check(X, owner="T")
+
+
+def test_check_n_jobs_resolves_joblibs_meaning_and_bounds_the_threads():
+    # Positive counts as given, negative ones from the cores, None OpenMP's default; a count beyond
+    # MAX_THREADS in either direction is refused naming the owner (10**18 overflowed the kernels' C int, and
+    # 65,536 OpenMP threads crashed the process on a 2-core guest).
+    import os
+
+    from eppf import EPPFTransformer
+    from eppf.utils._validation import MAX_THREADS, check_n_jobs
+
+    cores = os.cpu_count() or 1
+    assert check_n_jobs(3) == 3 and check_n_jobs(MAX_THREADS) == MAX_THREADS
+    assert check_n_jobs(-1) == cores and check_n_jobs(-cores - 5) == 1 and check_n_jobs(None) >= 1
+    for n_jobs in (MAX_THREADS + 1, -MAX_THREADS - 1, 10**18, -(10**18)):
+        with pytest.raises(ValueError, match=rf"^EPPFTransformer: n_jobs={n_jobs} asks for more threads"):
+            EPPFTransformer(n_jobs=n_jobs, n_pairs=50).fit_transform([np.random.default_rng(0).random((20, 3))])
+        with pytest.raises(ValueError, match=rf"^check_n_jobs: n_jobs={n_jobs} asks for more threads"):
+            check_n_jobs(n_jobs)
