@@ -575,15 +575,18 @@ def _classifier_problem(est, name):
         n_bins = est._n_bins if _int_tuple(vars(est).get("_n_bins")) else None
         n_side = vars(est).get("n_side_features_")
         n_flat = math.prod(n_bins) if n_bins else None
+        # (in order: each test reads only what the ones before it checked)
+        side = lambda v: _array(v, 1, "f", n_side)  # noqa: E731
+        flat = lambda v: _array(v, 1, "f") and len(v) in (1, n_flat)  # noqa: E731
         return _attrs_problem(est, [
             ("_n_bins", lambda v: v == tuple(int(b) for b in est.n_bins), "the n_bins parameter as a tuple"),
             ("n_side_features_", lambda v: _int(v, 0), "an int >= 0"),
-            ("n_features_in_", lambda v: v == n_flat + n_side, f"prod(n_bins) + n_side_features_"),
+            ("n_features_in_", lambda v: v == n_flat + n_side, "prod(n_bins) + n_side_features_"),
             ("n_draws_fit_", lambda v: _int(v, 1), "a positive int"), classes,
-            ("side_mean_", lambda v: _array(v, 1, "f", n_side), "a float array of n_side_features_ values"),
-            ("side_scale_", lambda v: _array(v, 1, "f", n_side), "a float array of n_side_features_ values"),
-            ("input_mean_", lambda v: _array(v, 1, "f") and len(v) in (1, n_flat), "a float array of 1 or prod(n_bins) values"),
-            ("input_scale_", lambda v: _array(v, 1, "f") and len(v) in (1, n_flat), "a float array of 1 or prod(n_bins) values")])
+            ("side_mean_", side, "a float array of n_side_features_ values"),
+            ("side_scale_", side, "a float array of n_side_features_ values"),
+            ("input_mean_", flat, "a float array of 1 or prod(n_bins) values"),
+            ("input_scale_", flat, "a float array of 1 or prod(n_bins) values")])
     if name == "eppf.PointNetClassifier":
         return _attrs_problem(est, [classes, ("_predict_seed", lambda v: _int(v, 0) and v < 2**32, "an int seed")])
     return None
@@ -608,11 +611,13 @@ def _sklearn_problem(est, name):
                    ("explained_variance_", lambda v: _array(v, 1, "f", len(est.components_)),
                     "a float array of one value per component")]
     elif name == "sklearn.linear_model.LogisticRegression":
-        checks += [("classes_", lambda v: _array(v, 1, _LABEL_KINDS) and len(v) >= 2, "a 1D array of two or more classes"),
+        checks += [("classes_", lambda v: _array(v, 1, _LABEL_KINDS) and len(v) >= 2,
+                    "a 1D array of two or more classes"),
                    ("coef_", lambda v: _array(v, 2, "f") and v.shape[1] == n_in
                     and len(v) == (1 if len(est.classes_) == 2 else len(est.classes_)),
                     "a float array of shape (1 or n_classes, n_features_in_)"),
-                   ("intercept_", lambda v: _array(v, 1, "f", len(est.coef_)), "a float array of one value per row of coef_")]
+                   ("intercept_", lambda v: _array(v, 1, "f", len(est.coef_)),
+                    "a float array of one value per row of coef_")]
     return _attrs_problem(est, checks)
 
 

@@ -161,7 +161,6 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     """
     from .datasets._folder import object_files
     from .datasets._loaders import file_seeds
-
     from .io._api import check_sampling_args
 
     owner = "describe_files"

@@ -114,8 +114,8 @@ def add_runtime(parser, n_jobs=True):
     if n_jobs:
         parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (-1: all cores)")
     parser.add_argument("--random-state", type=int, default=0,
-                        help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's RANSAC ground plane "
-                             "(default: 0)")
+                        help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's RANSAC "
+                             "ground plane (default: 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
 
 
@@ -293,7 +293,9 @@ def find_files(item, exclude=()):
     path = Path(item)
     if path.is_dir():
         own = {os.path.realpath(e) for e in exclude if e}
-        found = [f for f in object_files(path) if not is_segment_index(f) and os.path.realpath(f) not in own]
+        names = {os.path.basename(e) for e in own}  # (resolved only where the name matches: one syscall chain each)
+        found = [f for f in object_files(path) if not is_segment_index(f)
+                 and not (os.path.basename(f) in names and os.path.realpath(f) in own)]
         if not found:
             raise ValueError(f"no point cloud or mesh files ({' '.join(supported_extensions())}, any case) in the "
                              f"folder {item}")

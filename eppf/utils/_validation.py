@@ -20,8 +20,8 @@ from sklearn.utils.multiclass import type_of_target
 from ._param_validation import N_JOBS, Interval, validate_parameter
 
 __all__ = [
-    "PackedClouds", "as_vector3", "check_class_labels", "check_int", "check_n_jobs", "check_packed_clouds", "check_point_cloud", "check_point_clouds",
-    "condition_point_clouds", "object_seeds", "pack_point_clouds",
+    "PackedClouds", "as_vector3", "check_class_labels", "check_int", "check_n_jobs", "check_packed_clouds",
+    "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds", "pack_point_clouds",
 ]
 
 
