@@ -100,12 +100,7 @@ def _as_histogram(descriptor, n_bins, owner):
         )
     if not np.isfinite(arr).all():
         raise ValueError(f"{owner}: descriptor contains NaN or infinite values")
-    if np.abs(arr).max() > _DRAWABLE_MAX:
-        raise ValueError(
-            f"{owner}: descriptor holds values beyond {_DRAWABLE_MAX:g} in magnitude (largest "
-            f"{np.abs(arr).max():.3g}), which matplotlib's color bar cannot draw; rescale the descriptor first"
-        )
-    return arr
+    return _check_drawable(arr, owner, "descriptor")
 
 
 def _slice_grid(fig, hist, *, log, cmap, title, colorbar_label):
@@ -552,9 +547,15 @@ def _finite_float_array(values, owner, name):
         raise ValueError(f"{owner}: {name} must be numbers") from None
     if not np.isfinite(arr).all():
         raise ValueError(f"{owner}: {name} contains NaN or infinite values")
-    if arr.size and np.abs(arr).max() > _DRAWABLE_MAX:
-        raise ValueError(f"{owner}: {name} holds values beyond {_DRAWABLE_MAX:g} in magnitude, which matplotlib "
-                         "cannot draw")
+    return _check_drawable(arr, owner, name)
+
+
+def _check_drawable(arr, owner, name):
+    """``arr`` (finite), or a ValueError naming ``owner`` and ``name`` when a value is beyond ``_DRAWABLE_MAX``."""
+    largest = float(np.abs(arr).max()) if arr.size else 0.0
+    if largest > _DRAWABLE_MAX:
+        raise ValueError(f"{owner}: {name} holds values beyond {_DRAWABLE_MAX:g} in magnitude (largest {largest:.3g}), "
+                         "which matplotlib cannot draw; rescale them first")
     return arr
 
 
