@@ -84,6 +84,14 @@ def _columns(arr, want_normals):
     return Cloud(arr[:, :3], _guess_normals(arr))
 
 
+def _has_rows(data, pos):
+    """True when a line from byte ``pos`` holds more than blanks and a ``#`` comment (stops at the first)."""
+    line, pos = next_line(data, pos)
+    while line is not None and not line.split(b"#", 1)[0].strip():
+        line, pos = next_line(data, pos)
+    return line is not None
+
+
 def read_pts(path, data, owner, want_normals="auto"):
     """Open3D's ``.pts``: an optional first line with the point count, then rows."""
     first, pos = next_line(data, 0)
@@ -97,6 +105,13 @@ def read_pts(path, data, owner, want_normals="auto"):
             line_no = data[:pos].rstrip(b"\n").count(b"\n")
             if count < 0:
                 raise FileFormatError(f"{owner}: {path!r} line {line_no + 1}: negative point count {count}")
+            if not _has_rows(data, pos):
+                # Open3D writes an empty cloud as the count line "0" alone: a file of no points, as an empty
+                # PLY, NPY, LAS or E57 file is (read_point_cloud then says it holds no points)
+                if count == 0:
+                    return Cloud(np.empty((0, 3)), None)
+                raise FileFormatError(f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
+                                      "but the file holds no points (truncated)")
             arr, idx = _table(path, data, owner, start=pos, start_line=line_no + 1)
             if arr.shape[0] != count:
                 raise FileFormatError(
@@ -177,7 +192,8 @@ def read_text_fields(path, data, owner, fmt):
             except ValueError:
                 pass
     if start:
-        read_pts(path, data, owner)  # checks the count line against the rows
+        if read_pts(path, data, owner).xyz.shape[0] == 0:  # (checks the count line against the rows)
+            return np.empty((0, 3)), {}
         arr = _table(path, data, owner, start=start, start_line=data[:start].count(b"\n"))[0]
     elif fmt in FIXED_NAMES:
         arr = _fixed(path, data, owner, fmt)

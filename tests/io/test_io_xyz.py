@@ -133,6 +133,31 @@ def test_pts_bad_count_line(write_file, tmp_path, text, msg):
     assert "bad.pts" in str(info.value)
 
 
+def test_pts_of_no_points_as_open3d_writes_it_is_refused_as_other_empty_files_are(write_file, tmp_path):
+    # Open3D writes an empty cloud as the count line alone ("0", with Windows line ends); it was refused as
+    # holding "only blank or comment lines". Now it is a file of no points, as an empty PLY file is.
+    from eppf.io import read_point_fields
+
+    path = write_file(tmp_path / "empty.pts", b"0\r\n", mode="wb")
+    ply = write_file(tmp_path / "empty.ply", "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                                             "property float y\nproperty float z\nend_header\n")
+    for name in (path, ply):
+        with pytest.raises(FileFormatError) as info:
+            read_point_cloud(name)
+        assert str(info.value) == f"read_point_cloud: {name!r} holds no points"
+        points, fields = read_point_fields(name)
+        assert points.shape == (0, 3) and fields == {}
+    write_file(path, "0\n# no points\n\n")
+    assert read_point_fields(path)[0].shape == (0, 3)
+
+
+def test_pts_count_line_without_rows_is_truncated(write_file, tmp_path):
+    path = write_file(tmp_path / "cut.pts", "3\n# the rows are missing\n")
+    with pytest.raises(FileFormatError, match=re.escape(
+            "cut.pts' line 1: the count line says 3 points, but the file holds no points (truncated)")):
+        read_point_cloud(path)
+
+
 def test_xyzn_always_normals_and_round_trip(make_cloud, write_file, tmp_path):
     # normals need not be unit length in an .xyzn file: the format says they are normals
     path = write_file(tmp_path / "p.xyzn", "1 2 3 0 0 2\n4 5 6 0 3 0\n")
