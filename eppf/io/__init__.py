@@ -12,7 +12,8 @@ extensions              kind    notes
 ``.pts``                cloud   Open3D; the same rows, after an optional count line
 ``.xyzn``               cloud   Open3D; ``x y z nx ny nz``
 ``.xyzrgb``             cloud   Open3D; ``x y z r g b`` (color ignored)
-``.npy .npz``           cloud   NumPy arrays of shape (n, 3) or (n, 6); an ``.npz`` with several holds
+``.npy .npz``           cloud   NumPy arrays of shape (n, 3) or (n, 6) (wider: normals when columns 4-6 have
+                                unit length); an ``.npz`` with several holds
                                 ``points`` (Open3D: ``positions``) and optionally ``normals``
 ``.off``                mesh    including ModelNet's ``OFF490 518 0`` first line
 ``.obj``                mesh    Wavefront; polygons split into triangles

@@ -179,8 +179,9 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         points are), the columns of an ``.xyzn`` file, columns 4 to 6 of an
         ``.xyz``/``.txt``/``.csv``/``.pts`` file when every row there has
         unit length (so that ``x y z r g b`` files are not mistaken), columns
-        4 to 6 of an array, and the face normals of points sampled from a
-        mesh. True requires them; False drops them.
+        4 to 6 of an array of 6 columns (of a wider array when every row
+        there has unit length), and the face normals of points sampled from
+        a mesh. True requires them; False drops them.
     remove_nan : bool, default=True
         Drop points with a NaN or infinite value (PCL marks invalid points of
         organized clouds with NaN).

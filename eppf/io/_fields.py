@@ -88,7 +88,8 @@ def read_point_fields(path, *, format=None):
           ``.xyzn`` (``nx ny nz``), ``.xyzrgb`` (``red green blue``) and
           ``.pts`` (``intensity`` and/or ``red green blue``), else
           ``column_4``, ``column_5``, ... (counting from 1), all float64.
-        - NumPy: ``normal_x normal_y normal_z`` for an (n, 6) array.
+        - NumPy: ``normal_x normal_y normal_z`` for an (n, 6) array, or a
+          wider one whose columns 4 to 6 have unit length in every row.
 
         Normals keep the file's own names: PCD ``normal_x normal_y
         normal_z``, PLY ``nx ny nz`` (or ``normal_x ...``), E57

@@ -14,6 +14,7 @@ import numpy as np
 
 from ._common import Cloud, check_file, widened
 from ._errors import FileFormatError
+from ._xyz import cloud_of_table
 
 _DEFLATE_MAX_RATIO = 1032  # deflate's longest match (258 bytes) from 2 bits, rounded up
 _READ_PIECE = 1 << 18  # bytes an array is read in at a time (numpy's own piece: larger ones were slower)
@@ -32,8 +33,14 @@ def _read_array(fh, size, path, owner, what):
             raise ValueError(f"unsupported .npy version {version}")
     except Exception as exc:  # noqa: BLE001 - ValueError, SyntaxError, tokenize.TokenError, EOFError, ...
         raise FileFormatError(f"{owner}: {path!r}{what}: not a readable .npy array ({exc})") from None
-    if dtype.hasobject or dtype.fields is not None or dtype.subdtype is not None:
+    if dtype.hasobject:
         raise FileFormatError(f"{owner}: {path!r}{what}: holds a {dtype} array; expected plain numbers (pickled objects are refused)")
+    if dtype.fields is not None:  # (PDAL's numpy writer: one named field per dimension)
+        raise FileFormatError(f"{owner}: {path!r}{what}: holds a structured array with the fields "
+                              f"{list(dtype.names)[:12]}; expected a plain numeric array of shape (n_points, 3+) "
+                              "(columns x y z first)")
+    if dtype.subdtype is not None:
+        raise FileFormatError(f"{owner}: {path!r}{what}: holds a {dtype} array; expected plain numbers")
     if any(d < 0 for d in shape):
         raise FileFormatError(f"{owner}: {path!r}{what}: the header declares a negative shape {shape}")
     count = math.prod(shape)
@@ -99,18 +106,22 @@ def _read_npz(fh, path, owner):
     return arr
 
 
-def _to_cloud(arr, path, owner):
+def _to_cloud(arr, path, owner, want_normals="auto"):
     if arr.ndim != 2 or arr.shape[1] < 3 or not np.issubdtype(arr.dtype, np.number) \
             or np.issubdtype(arr.dtype, np.complexfloating):
         raise FileFormatError(
             f"{owner}: {path!r} must hold a numeric array of shape (n_points, 3+), got {arr.dtype} {arr.shape}"
         )
     arr = widened(arr)
-    return Cloud(arr[:, :3], arr[:, 3:6] if arr.shape[1] >= 6 else None)
+    if arr.shape[1] == 6:  # x y z nx ny nz, as write_point_cloud writes normals
+        return Cloud(arr[:, :3], arr[:, 3:])
+    # a wider array (x y z r g b intensity, a grid of values) has normals in columns 4 to 6 only when they
+    # have unit length there, as a text table's
+    return cloud_of_table(arr, want_normals)
 
 
 def read_npy(path, owner, want_normals="auto"):
-    return _to_cloud(read_npy_array(path, owner), path, owner)
+    return _to_cloud(read_npy_array(path, owner), path, owner, want_normals)
 
 
 def _size(path, owner):
@@ -137,7 +148,7 @@ def _in_archive(path, owner, read):
 
 
 def read_npz(path, owner, want_normals="auto"):
-    return _to_cloud(_in_archive(path, owner, lambda fh: _read_npz(fh, path, owner)), path, owner)
+    return _to_cloud(_in_archive(path, owner, lambda fh: _read_npz(fh, path, owner)), path, owner, want_normals)
 
 
 def read_npy_array(path, owner):

@@ -75,10 +75,13 @@ def _guess_normals(arr):
 def read_xyz(path, data, owner, want_normals="auto"):
     """``.xyz``/``.txt``/``.csv`` (and the rows of ``.pts``)."""
     arr, _ = _table(path, data, owner)
-    return _columns(arr, want_normals)
+    return cloud_of_table(arr, want_normals)
 
 
-def _columns(arr, want_normals):
+def cloud_of_table(arr, want_normals):
+    """The Cloud of a float64 table: columns 1-3, and columns 4-6 as normals when they have unit length in
+    every row (or when ``want_normals`` is True); the text tables' rule, and the NumPy readers' for arrays
+    wider than 6 columns."""
     if want_normals is True and arr.shape[1] >= 6:
         return Cloud(arr[:, :3], arr[:, 3:6])
     return Cloud(arr[:, :3], _guess_normals(arr))
@@ -118,7 +121,7 @@ def read_pts(path, data, owner, want_normals="auto"):
                     f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
                     f"but the file holds {arr.shape[0]} rows"
                 )
-            return _columns(arr, want_normals)
+            return cloud_of_table(arr, want_normals)
     return read_xyz(path, data, owner, want_normals)
 
 

@@ -25,6 +25,26 @@ def test_npy_wrong_shape(tmp_path):
 
 
 
+def test_npy_wider_than_six_columns_has_normals_only_where_they_are_unit_vectors(tmp_path):
+    # columns 4 to 6 of a (100, 100) grid (PDAL's test data) or of x y z r g b intensity rows were returned as
+    # normals; they are normals only where every row there has unit length, as in a text table
+    from eppf.io import read_point_fields
+
+    rng = np.random.default_rng(0)
+    colour = np.column_stack([rng.normal(size=(5, 3)), rng.integers(0, 256, size=(5, 3)), rng.random(5)])
+    np.save(tmp_path / "colour.npy", colour)
+    assert_array_equal(read_point_cloud(tmp_path / "colour.npy"), colour[:, :3])
+    assert read_point_fields(tmp_path / "colour.npy")[1] == {}
+    assert_array_equal(read_point_cloud(tmp_path / "colour.npy", normals=True), colour[:, :6])
+    unit = rng.normal(size=(5, 3))
+    unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+    curvature = np.column_stack([colour[:, :3], unit, rng.random(5)])
+    np.savez(tmp_path / "curvature.npz", points=curvature)
+    assert_array_equal(read_point_cloud(tmp_path / "curvature.npz"), curvature[:, :6])
+    np.save(tmp_path / "six.npy", colour[:, :6])  # six columns: normals, as write_point_cloud writes them
+    assert_array_equal(read_point_cloud(tmp_path / "six.npy"), colour[:, :6])
+
+
 def _npy_bytes(arr):
     import io
 
@@ -83,7 +103,8 @@ def test_npy_shape_checked_against_the_file(tmp_path, shape, msg):
         (b"not numpy at all", "not a readable .npy array"),
         (_npy_bytes(np.array([[1, 2, 3]], dtype=object)), "pickled objects are refused"),
         (_npy_bytes(np.zeros((2, 3), dtype=complex)), "must hold a numeric array"),
-        (_npy_bytes(np.zeros(2, dtype=[("x", "f4"), ("y", "f4")])), "pickled objects are refused"),
+        (_npy_bytes(np.zeros(2, dtype=[("x", "f4"), ("y", "f4")])),
+         "holds a structured array with the fields ['x', 'y']; expected a plain numeric array"),
     ],
 )
 def test_npy_malformed(tmp_path, data, msg):
