@@ -14,7 +14,9 @@ hostile header makes laspy or lazrs allocate beyond the file:
   a record has beyond that;
 - uncompressed: the point count times the record length must fit the bytes
   after the offset of the point data;
-- LAZ: the chunk table's offset must lie inside the file and its number of
+- LAZ: the laszip VLR must name a chunked compressor (2 or 3; lazrs cannot
+  decode LASzip 1.x's point-wise data without chunks, compressor 1), the
+  chunk table's offset must lie inside the file and its number of
   chunks may not exceed the compressed bytes (every chunk holds at least its
   first point uncompressed); every chunk must lie inside the compressed
   points, declare at most 50,000 points (LASzip's default) or 64 times the
@@ -157,13 +159,22 @@ def check_header(fh, size, path, owner):
                           f"data type {dtype_id}")
         if user == b"laszip encoded":
             fh.seek(data_at)
-            laszip = fh.read(length)
+            laszip, laszip_at = fh.read(length), data_at
         pos = data_at + length
     if base + extra > record_length:
         _fail(owner, path, "byte 105", f"the extra-bytes descriptors describe {extra} bytes, but a record of "
               f"{record_length} bytes has only {record_length - base} beyond point format {fmt}")
     if compressed and laszip is None:
         _fail(owner, path, "byte 104", "the point format is marked compressed (LAZ), but there is no laszip VLR")
+    if compressed:
+        compressor = struct.unpack_from("<H", laszip, 0)[0] if len(laszip) >= 2 else None
+        if compressor == 1:  # lazrs decodes chunked data only: it would report a garbage chunk table
+            _fail(owner, path, f"byte {laszip_at}", "the LAZ file uses LASzip 1.x's point-wise compressor "
+                  "(compressor 1, without chunks), which the lazrs backend cannot decompress; recompress it with a "
+                  "current LASzip (laszip, PDAL)")
+        if compressor not in (2, 3):
+            _fail(owner, path, f"byte {laszip_at}", f"unknown LAZ compressor {compressor} in the laszip VLR "
+                  "(LASzip writes 2, point-wise chunked, or 3, layered chunked)")
     points_end = size
     if minor >= 4:
         evlr_start, n_evlrs = struct.unpack_from("<QI", head, 235)

@@ -2,6 +2,7 @@
 round trips, hostile headers bounded by the file's size, and the one-line hint when an extra is missing."""
 
 import os
+import re
 import struct
 import subprocess
 import sys
@@ -402,3 +403,21 @@ def test_hostile_laz_chunk_size_is_refused(tmp_path):
                     [("<I", lambda d: d.find(b"laszip encoded") - 2 + 54 + 12, 3_099_803_465)])
     with pytest.raises(FileFormatError, match="chunk.laz.*LAZ chunk 0 declares 3099803465 points"):
         read_point_fields(path)
+
+
+@pytest.mark.parametrize("compressor, msg", [
+    (1, "the LAZ file uses LASzip 1.x's point-wise compressor (compressor 1, without chunks), which the lazrs backend cannot"),
+    (0, "unknown LAZ compressor 0 in the laszip VLR"),
+    (7, "unknown LAZ compressor 7 in the laszip VLR"),
+])
+def test_laz_of_a_compressor_lazrs_cannot_decode_is_refused_naming_it(tmp_path, compressor, msg):
+    """LASzip 1.x wrote point-wise LAZ without chunks (compressor 1; PDAL's test data has one,
+    simple-laszip-compressor-version-1.2r0.laz): its first point bytes were read as a chunk table offset and
+    refused as 'LAZ chunk table offset ... outside'. The laszip VLR's compressor is checked first."""
+    _las_file(tmp_path / "src.laz", n=50, fmt=1, extra=False)
+    path = _patched(tmp_path, tmp_path / "src.laz", "old.laz",
+                    [("<H", lambda d: d.find(b"laszip encoded") - 2 + 54, compressor)])
+    for read in (read_point_cloud, read_point_fields):
+        with pytest.raises(FileFormatError, match=r"old\.laz' byte \d+: .*" + re.escape(msg)):
+            read(path)
+    assert read_point_fields(tmp_path / "src.laz")[0].shape == (50, 3)
