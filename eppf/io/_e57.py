@@ -135,9 +135,13 @@ def _scan(libe57, imf, scan, size, path, owner, k):
                .astype(spec[j][1], copy=False) for j, n in enumerate(names)}
     if set(_CARTESIAN) <= have:
         xyz = np.column_stack([widened(columns[n]) for n in _CARTESIAN])
+        state = columns.get("cartesianInvalidState")
     else:
         r, az, el = (widened(columns[n]) for n in _SPHERICAL)
         xyz = np.column_stack([r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)])
+        state = columns.get("sphericalInvalidState")  # (the state of the coordinates the points come from)
+    # 0: a valid point; 1: a direction without a range; 2: no point
+    valid = None if state is None else np.asarray(state) == 0
     if scan.isDefined("pose"):
         pose = libe57.StructureNode(scan.get("pose"))
         if pose.isDefined("rotation"):
@@ -154,17 +158,31 @@ def _scan(libe57, imf, scan, size, path, owner, k):
             tr = libe57.StructureNode(pose.get("translation"))
             xyz = xyz + np.array([libe57.FloatNode(tr.get(c)).value() for c in "xyz"])
     fields = {n: np.ascontiguousarray(columns[n]) for n in names if n not in _CARTESIAN}
-    return np.ascontiguousarray(xyz), fields
+    return np.ascontiguousarray(xyz), fields, valid
+
+
+def _reason(exc):
+    """The first line of an exception's message: libE57Format's add a blank line and a multi-line
+    "**** Got an e57 exception" report with debug context after the reason."""
+    lines = str(exc).strip().splitlines()
+    return lines[0].strip() if lines else type(exc).__name__
 
 
 def read_e57_fields(path, owner):
     """(points, fields) of every scan of an E57 file, one after the other."""
+    points, fields, _ = _read_scans(path, owner)
+    return points, fields
+
+
+def _read_scans(path, owner):
+    """(points, fields, valid) of every scan of an E57 file, one after the other; ``valid`` marks the points
+    whose invalid state (of the coordinates they come from) is 0, or is None when no scan has one."""
     size = check_header(path, owner)
     libe57 = pye57_module(owner, path)
     try:
         imf = libe57.ImageFile(path, "r")
     except Exception as exc:  # noqa: BLE001 - libE57Format's E57Exception: a corrupt file
-        raise FileFormatError(f"{owner}: {path!r}: malformed E57 file ({exc})") from None
+        raise FileFormatError(f"{owner}: {path!r}: malformed E57 file ({_reason(exc)})") from None
     try:
         root = imf.root()
         if not root.isDefined("data3D"):
@@ -175,33 +193,36 @@ def read_e57_fields(path, owner):
     except FileFormatError:
         raise
     except Exception as exc:  # noqa: BLE001
-        raise FileFormatError(f"{owner}: {path!r}: malformed E57 file ({type(exc).__name__}: {exc})") from None
+        raise FileFormatError(f"{owner}: {path!r}: malformed E57 file ({type(exc).__name__}: {_reason(exc)})") from None
     finally:
         imf.close()
     if not scans:
         raise FileFormatError(f"{owner}: {path!r}: the E57 file holds no scans")
-    common = [n for n in scans[0][1] if all(n in f for _, f in scans[1:])]
-    points = np.concatenate([p for p, _ in scans]) if len(scans) > 1 else scans[0][0]
-    fields = {n: (np.concatenate([f[n] for _, f in scans]) if len(scans) > 1 else scans[0][1][n]) for n in common}
+    common = [n for n in scans[0][1] if all(n in f for _, f, _ in scans[1:])]
+    points = np.concatenate([p for p, _, _ in scans]) if len(scans) > 1 else scans[0][0]
+    fields = {n: (np.concatenate([f[n] for _, f, _ in scans]) if len(scans) > 1 else scans[0][1][n])
+              for n in common}
     if len(scans) > 1:
-        fields["scan_index"] = np.repeat(np.arange(len(scans), dtype=np.uint32), [p.shape[0] for p, _ in scans])
-    return points, fields
+        fields["scan_index"] = np.repeat(np.arange(len(scans), dtype=np.uint32), [p.shape[0] for p, _, _ in scans])
+    valid = None
+    if any(v is not None for _, _, v in scans):
+        valid = np.concatenate([np.ones(p.shape[0], dtype=bool) if v is None else v for p, _, v in scans])
+    return points, fields, valid
 
 
 def read_e57(path, owner, want_normals="auto"):
-    """The Cloud of an E57 file: points whose ``cartesianInvalidState`` is not 0 are dropped.
+    """The Cloud of an E57 file: points whose ``cartesianInvalidState`` (``sphericalInvalidState`` for a scan
+    of spherical coordinates) is not 0 are dropped.
 
     Normals are those of the E57 surface-normals extension (``nor:normalX``,
     ``nor:normalY``, ``nor:normalZ``), turned by each scan's pose as its
     points are.
     """
-    points, fields = read_e57_fields(path, owner)
+    points, fields, valid = _read_scans(path, owner)
     normals = None
     if want_normals is not False and all(n in fields for n in _NORMALS):
         normals = np.column_stack([widened(fields[n]) for n in _NORMALS])
-    state = fields.get("cartesianInvalidState")
-    if state is not None:
-        keep = state == 0
-        points = points[keep]
-        normals = None if normals is None else normals[keep]
+    if valid is not None:
+        points = points[valid]
+        normals = None if normals is None else normals[valid]
     return Cloud(points, normals)

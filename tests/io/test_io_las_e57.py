@@ -421,3 +421,69 @@ def test_laz_of_a_compressor_lazrs_cannot_decode_is_refused_naming_it(tmp_path, 
         with pytest.raises(FileFormatError, match=r"old\.laz' byte \d+: .*" + re.escape(msg)):
             read(path)
     assert read_point_fields(tmp_path / "src.laz")[0].shape == (50, 3)
+
+
+def _e57_spherical(path, columns):
+    """One scan of spherical coordinates (pye57's writer takes cartesian ones only), through libE57Format's
+    node API: float64 range, azimuth and elevation, then int8 ``sphericalInvalidState`` if given."""
+    libe57 = pytest.importorskip("pye57.libe57")
+    imf = libe57.ImageFile(str(path), "w")
+    try:
+        root = imf.root()
+        root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
+        root.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000003}"))
+        root.set("versionMajor", libe57.IntegerNode(imf, 1))
+        root.set("versionMinor", libe57.IntegerNode(imf, 0))
+        data3d = libe57.VectorNode(imf, True)
+        root.set("data3D", data3d)
+        scan = libe57.StructureNode(imf)
+        data3d.append(scan)
+        scan.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000004}"))
+        proto = libe57.StructureNode(imf)
+        cols = {}
+        for name, values in columns.items():
+            if name.endswith("InvalidState"):
+                proto.set(name, libe57.IntegerNode(imf, 0, 0, 2))
+                cols[name] = np.ascontiguousarray(values, dtype=np.int8)
+            else:
+                proto.set(name, libe57.FloatNode(imf, 0.0))
+                cols[name] = np.ascontiguousarray(values, dtype=np.float64)
+        points = libe57.CompressedVectorNode(imf, proto, libe57.VectorNode(imf, True))
+        scan.set("points", points)
+        buffers = libe57.VectorSourceDestBuffer()
+        for name, c in cols.items():
+            buffers.append(libe57.SourceDestBuffer(imf, name, c, len(c), True, True))
+        writer = points.writer(buffers)
+        writer.write(len(next(iter(cols.values()))))
+        writer.close()
+    finally:
+        imf.close()
+
+
+def test_e57_spherical_points_marked_invalid_are_dropped(tmp_path):
+    # only cartesianInvalidState was looked at: a spherical scan's invalid points (range 0) came back as the
+    # scanner's origin
+    path = tmp_path / "spherical.e57"
+    half = np.pi / 2
+    _e57_spherical(path, {"sphericalRange": [1.0, 2, 3, 0, 5], "sphericalAzimuth": [0, half, 0, 0, np.pi],
+                          "sphericalElevation": [0, 0, half, 0, 0], "sphericalInvalidState": [0, 0, 0, 2, 1]})
+    cloud = read_point_cloud(path)
+    np.testing.assert_allclose(cloud, [[1, 0, 0], [0, 2, 0], [0, 0, 3]], rtol=0, atol=1e-15)
+    points, fields = read_point_fields(path)  # every point, as the file holds them
+    assert points.shape == (5, 3) and fields["sphericalInvalidState"].tolist() == [0, 0, 0, 2, 1]
+    np.testing.assert_array_equal(points[:3], cloud)
+
+
+def test_e57_errors_of_libe57format_are_one_line(tmp_path):
+    # libE57Format's messages go on with a blank line and a "**** Got an e57 exception" report of debug
+    # context; the FileFormatError keeps the reason
+    path = tmp_path / "scan.e57"
+    _e57_file(path)
+    data = bytearray(path.read_bytes())
+    data[1500] ^= 0xFF  # inside the first page: its checksum no longer matches
+    (tmp_path / "crc.e57").write_bytes(bytes(data))
+    with pytest.raises(FileFormatError) as info:
+        read_point_cloud(tmp_path / "crc.e57")
+    message = str(info.value)
+    assert "crc.e57" in message and "\n" not in message and "****" not in message
+    assert message.endswith("malformed E57 file (checksum mismatch, file is corrupted (ErrorBadChecksum))")
