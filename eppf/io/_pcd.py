@@ -5,6 +5,10 @@ Every count is checked against the file before anything is allocated:
 binary body; an ASCII body must have a line per point; a compressed block's
 declared size must be one LZF can reach from its compressed size (LZF writes
 at most 88 bytes per input byte, see :mod:`eppf.io._pcd_fast`).
+
+As PCL reads them, header entries may be separated by tabs, ``COLUMNS``
+names the fields of PCD v.5 files, and ASCII values may be separated by
+commas.
 """
 
 import struct
@@ -101,9 +105,12 @@ def _parse_header(data, path, owner):
             raise FileFormatError(f"{owner}: {path!r} line {lineno}: non-ASCII bytes in the header") from None
         if not line or line.startswith("#"):
             continue
-        key, _, rest = line.partition(" ")
-        header[key.upper()] = (rest.split(), lineno)
-        if key.upper() == "DATA":
+        key, *rest = line.split()  # (PCL separates header entries by spaces or tabs)
+        key = key.upper()
+        if key == "COLUMNS":  # PCD v.5's name of FIELDS, which PCL still reads
+            key = "FIELDS"
+        header[key] = (rest, lineno)
+        if key == "DATA":
             return header, min(pos, len(data)), lineno
 
 
@@ -216,6 +223,7 @@ def _columns(path, data, owner):
             text = body.decode("ascii", errors="replace").splitlines()
             idx, rows = content(text)
             idx = [i + lineno for i in idx]
+            rows = [r.replace(",", " ") for r in rows]  # PCL splits ASCII values at commas too
             if len(rows) < n_points:
                 raise FileFormatError(
                     f"{owner}: {path!r} line {lineno + len(text)}: file ends after {len(rows)} of {n_points} points (truncated)"
@@ -352,7 +360,8 @@ def _ascii_field(values, dtype, name, path, owner):
 def _ascii_wide_ints(data, pos, n_points, n_cols, path, owner):
     """The tokens of an ASCII body as an (n_points, n_cols) string array, for 8-byte integer fields
     (which float64 cannot hold exactly above 2**53)."""
-    rows = [line.split("#", 1)[0].split() for line in data[pos:].decode("ascii", "replace").splitlines()]
+    rows = [line.split("#", 1)[0].replace(",", " ").split()
+            for line in data[pos:].decode("ascii", "replace").splitlines()]
     rows = [r for r in rows if r][:n_points]
     return np.array(rows, dtype=str).reshape(n_points, n_cols)
 

@@ -329,3 +329,26 @@ def test_pcd_ascii_values_at_their_types_limits_are_read(write_file, tmp_path):
     assert points[0, 0] == float(np.finfo(np.float32).max) and np.isnan(points[1, 0]) and np.isinf(points[1, 1])
     assert_array_equal(fields["i"], np.array([255, 0, 7], dtype=np.uint8))
     assert_array_equal(read_point_cloud(path), [[np.finfo(np.float32).max, -1, 0], [1, 2, 3]])  # (NaN point dropped)
+
+
+def test_pcd_headers_and_values_as_pcl_reads_them(write_file, tmp_path):
+    # PCL's reader takes COLUMNS for FIELDS (PCD v.5), header entries separated by tabs, and ASCII values
+    # separated by commas; these were refused ("no FIELDS line", "header ends before its DATA line",
+    # "malformed number")
+    from eppf.io import read_point_fields
+
+    want = [[1, 2, 3], [4, 5, 6]]
+    old = write_file(tmp_path / "v5.pcd", "# .PCD v.5 - Point Cloud Data file format\nVERSION .5\nCOLUMNS x y z\n"
+                                          "SIZE 4 4 4\nTYPE F F F\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n")
+    tabs = write_file(tmp_path / "tabs.pcd", "VERSION 0.7\nFIELDS\tx\ty\tz\tlabel\nSIZE\t4\t4\t4\t8\nTYPE\tF\tF\tF\tU\n"
+                                             "COUNT\t1\t1\t1\t1\nWIDTH\t2\nHEIGHT\t1\nPOINTS\t2\nDATA\tascii\n"
+                                             "1\t2\t3\t9007199254740993\n4\t5\t6\t7\n")
+    commas = write_file(tmp_path / "commas.pcd", "VERSION 0.7\nFIELDS x y z label\nSIZE 4 4 4 8\nTYPE F F F U\n"
+                                                 "COUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n"
+                                                 "1,2,3,9007199254740993 # a comment: the general parser\n4,5,6,7\n")
+    for path in (old, tabs, commas):
+        assert_array_equal(read_point_cloud(path), want)
+    for path in (tabs, commas):
+        points, fields = read_point_fields(path)
+        assert_array_equal(points, want)
+        assert fields["label"].dtype == np.uint64 and fields["label"].tolist() == [9007199254740993, 7]
