@@ -321,7 +321,8 @@ def read_mesh(path, *, format=None):
     OFF files of ModelNet often glue the keyword to the counts on the first
     line (``OFF490 518 0``); such files are read as if the counts were on a
     line of their own. ``COFF``/``NOFF`` variants are read (extra vertex
-    columns are ignored), and ``#`` comments are skipped. STL files are
+    columns are ignored), ``4OFF``'s homogeneous vertices ``x y z w`` are
+    divided by ``w``, and ``#`` comments are skipped. STL files are
     binary when their size is ``84 + 50 n`` for the triangle count ``n``
     they declare, ASCII otherwise; their shared corners are merged into one
     vertex each.

@@ -1,6 +1,9 @@
 """OFF meshes (Princeton/ModelNet), including ModelNet's malformed first line
 where ``OFF`` is glued to the counts (``OFF490 518 0``), ``COFF``/``NOFF``
-variants (extra vertex columns ignored), ``#`` comments and polygons.
+variants (extra vertex columns ignored), Geomview's ``4OFF`` (homogeneous
+vertices ``x y z w``, divided by ``w``), ``#`` comments and polygons. Binary
+OFF (``OFF BINARY``) and n-dimensional ``nOFF`` files are refused, naming
+the variant.
 
 Three readers, fastest first, each giving up (None) on what it does not
 handle: a compiled parser of the plain all-triangle body, a vectorized NumPy
@@ -116,7 +119,26 @@ def _read_off_fast(text):
     return Mesh(verts.reshape(n_v, 3), np.ascontiguousarray(faces))
 
 
+def _check_variant(path, data, owner):
+    """Refuse the Geomview OFF variants this reader cannot read, naming them, before the text is decoded."""
+    first, pos = next_line(data, 0)
+    tokens = (first or b"").split(b"#", 1)[0].split()
+    if not tokens:
+        return
+    line = data[:pos].rstrip(b"\n").count(b"\n") + 1
+    kw = tokens[0].rstrip(b"0123456789.-+")
+    if not kw.upper().endswith(b"OFF"):
+        return
+    if len(tokens) > 1 and tokens[1].upper() == b"BINARY":
+        raise FileFormatError(f"{owner}: {path!r} line {line}: a binary OFF file ({first[:40].decode('ascii', 'replace')!r}); "
+                              "eppf reads text OFF only")
+    if b"n" in kw[:-3]:
+        raise FileFormatError(f"{owner}: {path!r} line {line}: an OFF file of n-dimensional vertices "
+                              f"({kw.decode('ascii', 'replace')!r}); eppf reads 3D vertices only")
+
+
 def read_off(path, data, owner):
+    _check_variant(path, data, owner)
     mesh = _read_off_compiled(data)
     if mesh is not None:
         return mesh
@@ -173,6 +195,18 @@ def _read_off_lines(path, data, owner):
     verts = parse_float_rows(vrows, vidx, path, owner, "vertex")
     if verts.shape[1] < 3:
         raise FileFormatError(f"{owner}: {path!r} line {vidx[0] + 1}: a vertex needs 3 coordinates, got {verts.shape[1]}")
+    if "4" in kw[:-3]:  # Geomview's 4OFF: homogeneous vertices x y z w, the point is (x, y, z) / w
+        if verts.shape[1] < 4:
+            raise FileFormatError(f"{owner}: {path!r} line {vidx[0] + 1}: a {kw} vertex needs 4 coordinates "
+                                  f"(x y z w), got {verts.shape[1]}")
+        w = verts[:, 3:4]
+        at_infinity = np.flatnonzero(w[:, 0] == 0)
+        if at_infinity.size:
+            k = int(at_infinity[0])
+            raise FileFormatError(f"{owner}: {path!r} line {vidx[k] + 1}: vertex {k} has w = 0 (a point at "
+                                  f"infinity): {vrows[k][:80]!r}")
+        with np.errstate(over="ignore"):  # (a quotient beyond float64's range is refused as not finite below)
+            verts = verts[:, :3] / w
     verts = np.ascontiguousarray(verts[:, :3])
     bad = np.flatnonzero(~np.isfinite(verts).all(axis=1))
     if bad.size:

@@ -159,3 +159,29 @@ def test_off_counts_checked_before_the_compiled_parser_allocates():
     assert not _off._fits(10 ** 9, 0, 20)
     assert _off._fits(3, 1, len("0 0 0\n1 0 0\n0 1 0\n3 0 1 2"))
     assert _off._read_off_compiled(b"OFF\n1000000000 0 0\n0 0 0\n") is None
+
+
+def test_off_homogeneous_vertices_are_divided_by_w(write_file, tmp_path):
+    # Geomview's 4OFF stores x y z w (then normals, colours); its first three columns were taken as the point
+    path = write_file(tmp_path / "h.off", "4OFF\n3 1 0\n0 0 0 2\n2 0 0 2\n0 3 0 0.5\n3 0 1 2\n")
+    mesh = read_mesh(path)
+    assert_array_equal(mesh.vertices, [[0, 0, 0], [1, 0, 0], [0, 6, 0]])
+    assert_array_equal(mesh.faces, [[0, 1, 2]])
+    path = write_file(tmp_path / "inf.off", "C4OFF\n3 1 0\n0 0 0 1 0 0 0\n1 0 0 0 0 0 0\n0 1 0 1 0 0 0\n3 0 1 2\n")
+    with pytest.raises(FileFormatError, match=re.escape("inf.off' line 4: vertex 1 has w = 0 (a point at infinity)")):
+        read_mesh(path)
+
+
+@pytest.mark.parametrize("head, body, msg", [
+    (b"OFF BINARY\n", b"\x00\x00\x00\x03\x00\x00\x00\x01\x00\x00\x00\x00" + b"\x80" * 36,
+     "line 1: a binary OFF file ('OFF BINARY'); eppf reads text OFF only"),
+    (b"\nOFF BINARY\n", b"3 1 0\n",  # (bytes that happen to decode: not read as counts either)
+     "line 2: a binary OFF file ('OFF BINARY'); eppf reads text OFF only"),
+    (b"nOFF\n3\n", b"3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+     "line 1: an OFF file of n-dimensional vertices ('nOFF'); eppf reads 3D vertices only"),
+])
+def test_off_variants_eppf_cannot_read_are_refused_naming_them(write_file, tmp_path, head, body, msg):
+    # these were refused as "not a text file (undecodable byte ...)" or "expected the counts ..."
+    path = write_file(tmp_path / "v.off", head + body, mode="wb")
+    with pytest.raises(FileFormatError, match=re.escape(f"v.off' {msg}")):
+        read_mesh(path)
