@@ -340,6 +340,11 @@ def read_in_child(path, timeout):
 # --------------------------------------------------------------------------- main
 
 
+def _read(path):
+    with open(path, "rb") as fh:  # (closed here: an open file left to the collector warns under -W error)
+        return fh.read()
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n-files", type=int, default=3000, help="mutated files in all (default 3000)")
@@ -358,7 +363,7 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as tmp:
         seeds = seed_files(tmp, rng)
         names = sorted(seeds)
-        originals = {name: open(path, "rb").read() for name, path in seeds.items()}
+        originals = {name: _read(path) for name, path in seeds.items()}
         # the valid files themselves must read
         for name in names:
             result = read_in_child(seeds[name], args.timeout)
