@@ -487,3 +487,17 @@ def test_e57_errors_of_libe57format_are_one_line(tmp_path):
     message = str(info.value)
     assert "crc.e57" in message and "\n" not in message and "****" not in message
     assert message.endswith("malformed E57 file (checksum mismatch, file is corrupted (ErrorBadChecksum))")
+
+
+def test_e57_invalid_points_of_one_scan_are_dropped_when_another_scan_has_no_state(tmp_path):
+    # the state was looked up among the fields every scan has: a second scan without one kept the first's
+    # invalid points
+    pye57 = pytest.importorskip("pye57")
+    path = tmp_path / "two.e57"
+    with pye57.E57(str(path), mode="w") as e57:
+        e57.write_scan_raw({"cartesianX": np.array([1.0, 2.0]), "cartesianY": np.zeros(2), "cartesianZ": np.zeros(2),
+                            "cartesianInvalidState": np.array([0, 2], dtype=np.int8)})
+        e57.write_scan_raw({"cartesianX": np.array([3.0]), "cartesianY": np.zeros(1), "cartesianZ": np.zeros(1)})
+    np.testing.assert_array_equal(read_point_cloud(path), [[1, 0, 0], [3, 0, 0]])
+    points, fields = read_point_fields(path)
+    assert points.shape == (3, 3) and list(fields) == ["scan_index"]
