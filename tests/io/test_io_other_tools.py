@@ -1,4 +1,4 @@
-"""LAS/LAZ and E57 files written by other tools (TerraScan, LAStools, PDAL, Global Mapper, YellowScan,
+"""LAS/LAZ and E57 files written by other tools (TerraScan, LAStools, LASzip 1.2, PDAL, Global Mapper, YellowScan,
 libE57Format, pye57; see tests/data/README.md): read as laspy/pye57 read them, and LAS/LAZ round trips."""
 
 import os
@@ -118,3 +118,19 @@ def test_e57_of_other_tools_read_as_pye57_reads_them(name, translation):
     else:
         assert fields == {}
         assert read_point_cloud(path).tobytes() == points.tobytes()
+
+
+def test_laz_of_laszip_1_2_point_wise_compressor_is_refused_naming_it():
+    # LASzip 1.x's point-wise LAZ has no chunk table: its first point bytes were taken for the table's offset
+    # and the file refused as "LAZ chunk table offset 364654882546516200 outside 341..22141"
+    laspy = pytest.importorskip("laspy")
+    if not laspy.LazBackend.detect_available():
+        pytest.skip("no LAZ backend (lazrs) installed")
+    path = os.path.join(LAS_DIR, "simple-laszip-compressor-version-1.2r0.laz")
+    for read in (read_point_cloud, read_point_fields):
+        with pytest.raises(ValueError) as info:
+            read(path)
+        assert str(info.value) == (
+            f"{read.__name__}: {path!r} byte 281: the LAZ file uses LASzip 1.x's point-wise compressor (compressor 1, "
+            "without chunks), which the lazrs backend cannot decompress; recompress it with a current LASzip "
+            "(laszip, PDAL)")
