@@ -387,11 +387,11 @@ def read_ply(path, data, owner, want_faces=True):
     if not want_faces or "face" not in spec:
         return cloud, None
     n_f, fprops = spec["face"]
+    if n_f == 0:  # (PCL writes every cloud with an "element face 0" of no properties)
+        return cloud, np.empty((0, 3), dtype=np.int64)
     name = next((n for n in ("vertex_indices", "vertex_index") if n in fprops), None)
     if name is None or fprops[name].count_code is None:
         raise FileFormatError(f"{owner}: {path!r}: PLY 'face' element has no 'vertex_indices' list")
-    if n_f == 0:
-        return cloud, np.empty((0, 3), dtype=np.int64)
     col = out["face"][name]
     if isinstance(col, np.ndarray) and col.ndim == 2 and col.shape[1] == 3:
         tri = np.asarray(col, dtype=np.float64)

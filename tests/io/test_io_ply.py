@@ -347,3 +347,26 @@ def test_ply_signalling_nan_is_dropped_without_a_warning(tmp_path, extra):
         points, _ = read_point_fields(path)
     assert_array_equal(cloud, rows[[0, 1, 3]].astype(np.float64))
     assert points.shape == (4, 3) and np.isnan(points[2, 1]) and points[3, 1] == 10.0  # every point kept there
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_ply_cloud_as_pcl_writes_it_with_an_empty_face_element(tmp_path, binary):
+    # PCL's PLYWriter writes every cloud with "element face 0" of no properties (then a camera element):
+    # read_point_cloud and read_mesh refused them ("'face' element has no 'vertex_indices' list")
+    from eppf.io import read_point_fields
+
+    head = ("ply\nformat {} 1.0\ncomment PCL generated\nelement vertex 2\nproperty float x\nproperty float y\n"
+            "property float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float curvature\n"
+            "element face 0\nelement camera 1\nproperty float view_px\nproperty float focal\nend_header\n")
+    rows = np.array([[1, 2, 3, 0, 0, 1, 0.5], [4, 5, 6, 0, 1, 0, 0.25]], dtype="<f4")
+    path = tmp_path / "pcl.ply"
+    if binary:
+        path.write_bytes(head.format("binary_little_endian").encode() + rows.tobytes()
+                         + np.array([0, 1], dtype="<f4").tobytes())
+    else:
+        path.write_text(head.format("ascii") + "1 2 3 0 0 1 0.5\n4 5 6 0 1 0 0.25\n0 1\n")
+    assert_array_equal(read_point_cloud(path), rows[:, :6])
+    mesh = read_mesh(path)
+    assert_array_equal(mesh.vertices, rows[:, :3])
+    assert mesh.faces.shape == (0, 3)
+    assert read_point_fields(path)[1]["curvature"].tolist() == [0.5, 0.25]
