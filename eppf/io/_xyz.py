@@ -95,6 +95,17 @@ def _has_rows(data, pos):
     return line is not None
 
 
+def _refuse_several_scans(path, data, owner, pos, count):
+    """A FileFormatError naming a second count line after the first ``count`` rows from byte ``pos``: Leica's
+    PTS files may hold several scans, each after its own count line (Open3D and PDAL read the first). Only
+    called once the file failed to read as one scan, so its lines are split here in Python."""
+    idx, rows = content(data[pos:].decode("utf-8", "replace").splitlines())
+    if len(rows) > count and rows[count].isdigit():
+        line = data[:pos].count(b"\n") + idx[count] + 1
+        raise FileFormatError(f"{owner}: {path!r} line {line}: a second count line ({rows[count]}): the file holds "
+                              "several scans, each after its count line; eppf reads .pts files of one scan")
+
+
 def read_pts(path, data, owner, want_normals="auto"):
     """Open3D's ``.pts``: an optional first line with the point count, then rows."""
     first, pos = next_line(data, 0)
@@ -115,8 +126,13 @@ def read_pts(path, data, owner, want_normals="auto"):
                     return Cloud(np.empty((0, 3)), None)
                 raise FileFormatError(f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
                                       "but the file holds no points (truncated)")
-            arr, idx = _table(path, data, owner, start=pos, start_line=line_no + 1)
+            try:
+                arr, idx = _table(path, data, owner, start=pos, start_line=line_no + 1)
+            except FileFormatError:
+                _refuse_several_scans(path, data, owner, pos, count)
+                raise
             if arr.shape[0] != count:
+                _refuse_several_scans(path, data, owner, pos, count)
                 raise FileFormatError(
                     f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
                     f"but the file holds {arr.shape[0]} rows"

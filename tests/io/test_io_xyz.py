@@ -158,6 +158,20 @@ def test_pts_count_line_without_rows_is_truncated(write_file, tmp_path):
         read_point_cloud(path)
 
 
+@pytest.mark.parametrize("text, line", [
+    ("2\n1 2 3 5\n4 5 6 7\n1\n7 8 9 1\n", 4),
+    ("2\r\n1 2 3\r\n4 5 6\r\n\r\n# the second scan\r\n1\r\n7 8 9\r\n", 6),
+])
+def test_pts_of_several_scans_is_refused_naming_the_second_count_line(write_file, tmp_path, text, line):
+    # Leica's PTS may hold several scans, each after its count line; the second count line was reported as a
+    # row of too few values ("expected 4 values in point 2, got 1")
+    path = write_file(tmp_path / "scans.pts", text.encode(), mode="wb")
+    with pytest.raises(FileFormatError, match=re.escape(
+            f"scans.pts' line {line}: a second count line (1): the file holds several scans, each after its count "
+            "line; eppf reads .pts files of one scan")):
+        read_point_cloud(path)
+
+
 def test_xyzn_always_normals_and_round_trip(make_cloud, write_file, tmp_path):
     # normals need not be unit length in an .xyzn file: the format says they are normals
     path = write_file(tmp_path / "p.xyzn", "1 2 3 0 0 2\n4 5 6 0 3 0\n")
