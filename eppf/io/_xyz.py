@@ -5,8 +5,9 @@
   line of names; columns 4 to 6 are normals when every row there has unit
   length (so ``x y z r g b`` files are not mistaken).
 - ``.pts`` (Open3D): the same rows, optionally after a first line holding
-  only the number of points; extra columns are intensity and color, read as
-  in ``.xyz``.
+  only the number of points (``0`` alone: a file of no points); extra
+  columns are intensity and color, read as in ``.xyz``. A Leica PTS file of
+  several scans, each after its count line, is refused naming the second.
 - ``.xyzn`` (Open3D): ``x y z nx ny nz``, normals always.
 - ``.xyzrgb`` (Open3D): ``x y z r g b``, the color is ignored.
 """
