@@ -221,6 +221,44 @@ def check_output(path, suffixes=None, option="--output"):
     return path
 
 
+def check_not_input(output, inputs, option="--output"):
+    """Refuse, before any work, an output that is one of the inputs: writing it would replace the input.
+
+    ``inputs`` are ``(option, path)`` pairs (option ``None`` for a positional input), ``None`` paths left out.
+    The same file under another spelling, through a symbolic link or as a hard link is found with
+    :func:`os.path.samefile`; an output that does not exist yet replaces nothing.
+    """
+    if output is None or not os.path.exists(output):
+        return
+    for name, path in inputs:
+        if path is None:
+            continue
+        try:
+            same = os.path.samefile(output, path)
+        except OSError:  # an input that does not exist: its command names it
+            continue
+        if same:
+            what = f"the input {path}" if name is None else f"the {name} {path}"
+            raise ValueError(f"{option} {output} is {what} (the same file); writing it would replace that "
+                             "input, so give another output file")
+
+
+def check_distinct_outputs(outputs):
+    """Refuse two outputs of one command that are one file (``(option, path)`` pairs; ``None`` paths left out):
+    the second would replace the first."""
+    seen = {}
+    for name, path in outputs:
+        if path is None:
+            continue
+        key = os.path.normcase(os.path.realpath(path))
+        same = seen.get(key)
+        if same is None and os.path.exists(path):
+            same = next((s for s in seen.values() if os.path.exists(s[1]) and os.path.samefile(s[1], path)), None)
+        if same is not None:
+            raise ValueError(f"{name} {path} and {same[0]} {same[1]} are the same file; give two file names")
+        seen[key] = (name, path)
+
+
 def emit(rows, header, output, out):
     """Rows as a printed table, or as a CSV file written atomically."""
     out = out or sys.stdout

@@ -21,9 +21,9 @@ import numpy as np
 
 from ..streaming import write_descriptors
 from ..utils._atomic import atomic_write
-from ._common import (Command, add_descriptor, count, fewest_points, add_runtime, add_sampling, check_output, descriptor_from_args,
-                      is_data_set_input, plan_inputs, progress_of, read_inputs, register, sampling_from_args,
-                      warn_tiny)
+from ._common import (Command, add_descriptor, count, fewest_points, add_runtime, add_sampling, check_not_input,
+                      check_output, descriptor_from_args, is_data_set_input, plan_inputs, progress_of, read_inputs,
+                      register, sampling_from_args, warn_tiny)
 
 __all__ = ["run_describe"]
 
@@ -59,6 +59,7 @@ def run_describe(args, out=None):
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf describe")
     output = check_output(args.output, (".npy", ".npz"))
+    check_not_input(output, [(None, str(i)) for i in args.inputs])
     progress = progress_of(args)
     t0 = time.perf_counter()
     sampling = sampling_from_args(args)

@@ -5,8 +5,9 @@ import sys
 import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_data_source, add_descriptor, add_runtime, add_sampling,
-                      check_output, count, descriptor_from_args, emit, fewest_points, load_labelled, load_model,
-                      model_sampling, progress_of, register, sampling_from_args, set_runtime, warn, warn_tiny)
+                      check_not_input, check_output, count, descriptor_from_args, emit, fewest_points, load_labelled,
+                      load_model, model_sampling, progress_of, register, sampling_from_args, set_runtime, warn,
+                      warn_tiny)
 
 __all__ = ["run_evaluate"]
 
@@ -63,6 +64,7 @@ def run_evaluate(args, out=None):
             raise ValueError(f"{given[0]}: with --model the files are read as the model's training files were "
                              "(its saved sampling settings); leave it out")
     check_output(args.output)
+    check_not_input(args.output, [("--data", args.data), ("--model", args.model)])
     saved = load_model(args.model, trust=args.trust) if args.model is not None else None
     sampling = model_sampling(saved, cmd) if saved is not None else sampling_from_args(args)
     est = None if args.no_retrieval else descriptor_from_args(args)

@@ -142,6 +142,21 @@ def add_arguments(parser):
     p.add_argument("--repeats", type=int, default=None, help="timing repeats, best kept (default 3, 1 with --quick)")
 
 
+def _check_outside_data(data, outputs):
+    """Refuse an output folder that is the ``--data`` folder or inside it: its tables, figures and cache would
+    be read as objects of the data set by the next run (a CSV is a point file)."""
+    if data == "builtin" or not os.path.isdir(data):
+        return
+    root = os.path.normcase(os.path.realpath(data))
+    for option, path in outputs:
+        if path is None:
+            continue
+        real = os.path.normcase(os.path.realpath(path))
+        if real == root or real.startswith(os.path.join(root, "")):
+            raise ValueError(f"{option} {path} is inside the --data folder {data}; the next run would read its "
+                             "files as objects of the data set, so give a folder outside it")
+
+
 def run_experiment(args):
     """Run one experiment from parsed ``eppf experiment`` arguments.
 
@@ -170,6 +185,7 @@ def run_experiment(args):
     command = "eppf " + shlex.join(argv) if argv else f"eppf experiment {args.experiment}"
     preset = getattr(args, "preset", None)
     out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
+    _check_outside_data(args.data, [("--out", out), ("--cache-dir", args.cache_dir)])
     common = dict(data=args.data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
                   cache_dir=args.cache_dir, verbose=not args.no_progress, command=command, scaling=args.scaling)
     draws = getattr(args, "draws", None)

@@ -12,8 +12,8 @@ import time
 import numpy as np
 
 from ..registry import CLASSIFIERS, DESCRIPTORS
-from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, DEFAULT_N_PAIRS, Command, add_data_source,
-                      add_descriptor, add_runtime, add_sampling, check_classes, check_output, descriptor_from_args,
+from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, DEFAULT_N_PAIRS, Command, add_data_source, add_descriptor,
+                      add_runtime, add_sampling, check_classes, check_not_input, check_output, descriptor_from_args,
                       load_labelled, count, fewest_points, positive_int, progress_of, register, sampling_from_args,
                       set_runtime, warn_tiny)
 
@@ -181,6 +181,7 @@ def run_train(args, out=None):
     if not 0 <= args.test_size < 1:
         raise ValueError(f"--test-size must be in [0, 1), got {args.test_size}")
     check_output(args.output)
+    check_not_input(args.output, [("--data", args.data)])
     model = make_pipeline_from_args(args)
     _check_saveable(model)
     sampling = sampling_from_args(args)

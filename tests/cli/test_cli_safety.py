@@ -1,14 +1,40 @@
-"""What the commands leave behind when they stop midway: no partial ``eppf segment`` folder."""
+"""What the commands refuse before any work, and what they leave behind when they stop midway: an output
+that is one of the inputs (under any spelling or link), a partial ``eppf segment`` folder."""
 
 import os
 
 import numpy as np
 import pytest
 
-from eppf.io import write_point_fields
+from eppf.io import write_point_cloud, write_point_fields
 
 from tests.cli._helpers import read_csv as _csv
 from tests.cli._helpers import run as _run
+
+
+def _same_file_spellings(path):
+    """``path`` under other names: another spelling, a symbolic link, a hard link (those the system has)."""
+    folder, name = os.path.split(str(path))
+    names = [("same path", str(path)), ("another spelling", os.path.join(folder, ".", "x", "..", name))]
+    os.makedirs(os.path.join(folder, "x"), exist_ok=True)
+    for label, make in (("symbolic link", os.symlink), ("hard link", os.link)):
+        link = os.path.join(folder, f"{label.replace(' ', '_')}_{name}")
+        try:
+            make(str(path), link)
+        except (OSError, NotImplementedError):
+            continue
+        names.append((label, link))
+    return names
+
+
+def _unchanged(path, before):
+    with open(path, "rb") as fh:
+        assert fh.read() == before, f"{path} was written"
+
+
+def _bytes(path):
+    with open(path, "rb") as fh:
+        return fh.read()
 
 
 def _refused(argv, capsys, *texts):
@@ -18,6 +44,75 @@ def _refused(argv, capsys, *texts):
     for text in texts:
         assert text in err, (argv, err)
     return err
+
+
+# ---------------------------------------------------------------------------
+# An output that is an input
+# ---------------------------------------------------------------------------
+
+
+def test_labelled_output_that_is_the_scene_is_refused_under_every_name(tmp_path, capsys):
+    scene = tmp_path / "tile.ply"
+    write_point_fields(scene, np.random.default_rng(0).normal(size=(50, 3)), {})
+    before = _bytes(scene)
+    model = tmp_path / "missing.eppf"  # refused before the model is read
+    for how, name in _same_file_spellings(scene):
+        err = _refused(["predict", "--model", model, scene, "--segment", "--labelled-output", name,
+                        "-o", tmp_path / "rows.csv"], capsys, f"--labelled-output {name}", str(scene), "same file")
+        assert "replace" in err, how
+        _unchanged(scene, before)
+    assert not (tmp_path / "rows.csv").exists()
+
+
+def test_predict_outputs_that_are_inputs_or_each_other_are_refused(tmp_path, capsys):
+    cloud = tmp_path / "a.xyz"
+    write_point_cloud(cloud, np.random.default_rng(0).normal(size=(50, 3)))
+    model = tmp_path / "m.eppf"
+    model.write_bytes(b"not read: refused before")
+    before, model_before = _bytes(cloud), _bytes(model)
+    for how, name in _same_file_spellings(cloud):
+        _refused(["predict", "--model", model, cloud, "-o", name], capsys, f"--output {name}", "same file")
+        _unchanged(cloud, before)
+    _refused(["predict", "--model", model, cloud, "-o", model], capsys, f"--model {model}")
+    _unchanged(model, model_before)
+    # the table and the labelled scene cannot be one file, even a new one
+    _refused(["predict", "--model", model, cloud, "--segment", "-o", tmp_path / "out.ply", "--labelled-output",
+              tmp_path / "x" / ".." / "out.ply"], capsys, "--labelled-output", "same file")
+    assert not (tmp_path / "out.ply").exists()
+
+
+def test_describe_train_evaluate_retrieve_refuse_writing_over_an_input(tmp_path, capsys):
+    cloud = tmp_path / "cloud.npy"
+    np.save(cloud, np.random.default_rng(0).normal(size=(50, 3)))
+    before = _bytes(cloud)
+    for how, name in _same_file_spellings(cloud):
+        _refused(["describe", cloud, "-o", name], capsys, f"--output {name}", f"the input {cloud}")
+        _unchanged(cloud, before)
+    data = tmp_path / "set.npz"
+    data.write_bytes(b"a data set: not read, refused before")
+    data_before = _bytes(data)
+    link = _same_file_spellings(data)[-1][1]
+    _refused(["train", "--data", data, "-o", link], capsys, f"--data {data}", "same file")
+    _refused(["evaluate", "--data", data, "-o", link], capsys, f"--data {data}")
+    _refused(["evaluate", "--data", data, "--model", cloud, "--no-retrieval", "-o", cloud], capsys,
+             f"--model {cloud}")
+    _refused(["retrieve", "--database", data, "-o", link, cloud], capsys, f"--database {data}")
+    _refused(["retrieve", "--database", cloud, "--query-descriptors", data, "-o", link], capsys,
+             f"--query-descriptors {data}")
+    _unchanged(data, data_before)
+    _unchanged(cloud, before)
+
+
+def test_experiment_output_inside_the_data_folder_is_refused(tmp_path, capsys, monkeypatch):
+    ran = []
+    monkeypatch.setattr("eppf.experiments.run_retrieval", lambda **kw: ran.append(kw))
+    (tmp_path / "data" / "box").mkdir(parents=True)
+    for out in (tmp_path / "data", tmp_path / "data" / "results"):
+        _refused(["experiment", "retrieval", "--data", tmp_path / "data", "--out", out], capsys,
+                 f"--out {out} is inside the --data folder")
+    _refused(["experiment", "retrieval", "--data", tmp_path / "data", "--out", tmp_path / "r", "--cache-dir",
+              tmp_path / "data" / "cache"], capsys, "--cache-dir")
+    assert ran == []
 
 
 # ---------------------------------------------------------------------------
