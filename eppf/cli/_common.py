@@ -487,6 +487,16 @@ class InputPlan:
         return Objects(clouds, ids, keys, labels, self.class_names, split, skipped, self.name)
 
 
+def refuse_sampling_of_data_set(args, data):
+    """Refuse ``--n-points``/``--resolution`` with a ``.npz`` data set: its clouds are read as they are stored, so
+    the option would be ignored (and ``train`` would record it in the model as how its objects were read)."""
+    given = [o for o, v in (("--n-points", getattr(args, "n_points", None)),
+                            ("--resolution", getattr(args, "resolution", None))) if v is not None]
+    if given:
+        raise ValueError(f"{given[0]}: {data} is a .npz data set, whose clouds are read as they are stored (the "
+                         "option samples mesh files and resamples point files); leave it out")
+
+
 def is_data_set_input(inputs):
     """True when the inputs are one ``.npz`` data set (read whole by :func:`read_inputs`)."""
     inputs = [str(i) for i in inputs]
@@ -631,6 +641,8 @@ def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
         raise FileNotFoundError(f"--data {data}: the {what} does not exist")
     if os.path.isfile(data) and not data.lower().endswith(".npz"):
         raise ValueError(f"--data {data}: give a .npz data set or a folder of class subfolders, not one file")
+    if os.path.isfile(data):
+        refuse_sampling_of_data_set(args, data)
     if os.path.isdir(data) and not sampling.get("root"):
         sampling = dict(sampling, root=os.path.realpath(data))
     objects = read_inputs([data], sampling, on_error=getattr(args, "on_error", "skip"),

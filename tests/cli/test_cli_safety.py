@@ -1,11 +1,13 @@
 """What the commands refuse before any work, and what they leave behind when they stop midway: an output
-that is one of the inputs (under any spelling or link), a partial ``eppf segment`` folder."""
+that is one of the inputs (under any spelling or link), options that the chosen mode would ignore, a partial
+``eppf segment`` folder."""
 
 import os
 
 import numpy as np
 import pytest
 
+from eppf.cli import build_parser, make_pipeline_from_args
 from eppf.io import write_point_cloud, write_point_fields
 
 from tests.cli._helpers import read_csv as _csv
@@ -178,3 +180,46 @@ def test_segment_into_an_empty_folder_keeps_it_when_stopped(tmp_path, capsys, mo
     monkeypatch.undo()
     assert _run(["segment", scene, "-o", out, *SEGMENT], capsys)[0] == 0
     assert len(_csv(out / "segments.csv")) == 3 and len(os.listdir(out)) == 4
+
+
+# ---------------------------------------------------------------------------
+# Options the chosen mode would ignore
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("classifier, option, value", [
+    ("kl", "--max-epochs", "3"), ("kl", "--recipe", "paper"), ("kl", "--precision", "float32"),
+    ("4d", "--n-neighbors", "3"), ("pointnet", "--recipe", "paper"), ("pointnet", "--precision", "bfloat16"),
+    ("pointnet", "--n-neighbors", "3"),
+])
+def test_train_refuses_options_its_classifier_ignores(tmp_path, capsys, classifier, option, value):
+    argv = ["train", "--built-in", "-o", tmp_path / "m.eppf", "--classifier", classifier, option, value]
+    err = _refused(argv, capsys, f"{option}: the {classifier} classifier does not use it")
+    assert "leave it out" in err
+    assert not (tmp_path / "m.eppf").exists()
+
+
+def test_train_options_keep_their_defaults_where_they_apply():
+    def clf(*extra):
+        args = build_parser().parse_args(["train", "--built-in", "-o", "m.eppf", *extra])
+        return make_pipeline_from_args(args)[-1]
+
+    assert clf().n_neighbors == 1 and clf("--n-neighbors", "3").n_neighbors == 3
+    assert clf("--classifier", "4d").max_epochs == 100
+    assert clf("--classifier", "4d", "--max-epochs", "7").max_epochs == 7
+    assert clf("--classifier", "pointnet", "--max-epochs", "7").max_epochs == 7
+    assert clf("--classifier", "4d", "--recipe", "paper").precision == "float32"
+
+
+def test_other_ignored_options_are_refused(tmp_path, capsys):
+    data = tmp_path / "set.npz"
+    rng = np.random.default_rng(0)
+    np.savez(data, points=rng.normal(size=(40, 3)), offsets=np.array([0, 10, 20, 30, 40]),
+             labels=np.array([0, 0, 1, 1]), class_names=np.array(["a", "b"]))
+    _refused(["train", "--built-in", "-o", tmp_path / "m.eppf", "--all", "--test-size", "0.5"], capsys,
+             "--test-size: --all trains on every object")
+    _refused(["evaluate", "--built-in", "--model", tmp_path / "m.eppf", "--no-retrieval", "--descriptor", "esf"],
+             capsys, "--descriptor: it sets the descriptor of the retrieval, which --no-retrieval skips")
+    for command in (["describe", data, "-o", tmp_path / "d.npy"], ["train", "--data", data, "-o", tmp_path / "m"]):
+        _refused([*command, "--n-points", "8"], capsys, f"--n-points: {data} is a .npz data set")
+    assert not (tmp_path / "d.npy").exists() and not (tmp_path / "m").exists()
