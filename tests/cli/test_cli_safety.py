@@ -1,13 +1,13 @@
-"""What the commands refuse before any work, and what they leave behind when they stop midway: an output
-that is one of the inputs (under any spelling or link), options that the chosen mode would ignore, a partial
-``eppf segment`` folder."""
+"""What the commands refuse before any work, and what they leave behind when they stop midway: an output that
+is one of the inputs (under any spelling or link), options that the chosen mode would ignore, a partial
+``eppf segment`` folder; and ``eppf experiment --on-error``."""
 
 import os
 
 import numpy as np
 import pytest
 
-from eppf.cli import build_parser, make_pipeline_from_args
+from eppf.cli import build_parser, make_pipeline_from_args, main
 from eppf.io import write_point_cloud, write_point_fields
 
 from tests.cli._helpers import read_csv as _csv
@@ -223,3 +223,50 @@ def test_other_ignored_options_are_refused(tmp_path, capsys):
     for command in (["describe", data, "-o", tmp_path / "d.npy"], ["train", "--data", data, "-o", tmp_path / "m"]):
         _refused([*command, "--n-points", "8"], capsys, f"--n-points: {data} is a .npz data set")
     assert not (tmp_path / "d.npy").exists() and not (tmp_path / "m").exists()
+
+
+# ---------------------------------------------------------------------------
+# eppf experiment --on-error
+# ---------------------------------------------------------------------------
+
+
+def _class_folder_with_a_bad_file(tmp_path):
+    rng = np.random.default_rng(0)
+    root = tmp_path / "objects"
+    for name in ("box", "ball"):
+        (root / name).mkdir(parents=True)
+        for k in range(3):
+            write_point_cloud(root / name / f"{k}.xyz", rng.normal(size=(40, 3)))
+    (root / "box" / "broken.xyz").write_text("1 2\nnot numbers\n")
+    return root
+
+
+def test_experiment_on_error_skips_or_stops(tmp_path, capsys, monkeypatch):
+    from eppf.experiments._common import load_or_pass
+
+    seen = []
+
+    def retrieval(data, quick, random_state, **kw):  # the experiment's loading, without its computing
+        seen.append(load_or_pass(data, quick=quick, random_state=random_state))
+
+    monkeypatch.setattr("eppf.experiments.run_retrieval", retrieval)
+    root = _class_folder_with_a_bad_file(tmp_path)
+    base = ["experiment", "retrieval", "--data", root, "--out", tmp_path / "r"]
+    err = _refused(base, capsys, "broken.xyz")  # the default: an experiment's figures are the whole data set's
+    assert seen == []
+    status, _, err = _run([*base, "--on-error", "skip"], capsys)
+    assert status == 0, err
+    assert err.startswith("eppf experiment: warning: ") and "broken.xyz" in err and len(err.splitlines()) == 1
+    (data,) = seen
+    assert len(data.clouds) == 6 and "1 of 7 files could not be read" in data.source  # in the report's data line
+    _refused([*base, "--on-error", "raise"], capsys, "broken.xyz")
+    with pytest.raises(SystemExit) as exc:  # a bad choice: argparse's one line
+        main([str(a) for a in base] + ["--on-error", "ignore"])
+    assert exc.value.code == 2 and "--on-error: invalid choice: 'ignore'" in capsys.readouterr().err
+
+
+def test_experiment_help_lists_on_error(capsys):
+    for name in ("retrieval", "ablation", "classification", "noise", "runtime"):
+        with pytest.raises(SystemExit):
+            main(["experiment", name, "--help"])
+        assert "--on-error {skip,raise}" in capsys.readouterr().out, name
