@@ -190,6 +190,9 @@ def check_output_folder(folder):
     parent = os.path.dirname(os.path.abspath(folder))
     if not os.path.isdir(parent):
         raise ValueError(f"--output {folder}: the folder {os.path.dirname(folder) or '.'} does not exist")
+    where = folder if os.path.isdir(folder) else (os.path.dirname(folder) or ".")
+    if not os.access(where, os.W_OK):  # (found now, not after the segmentation)
+        raise ValueError(f"--output {folder}: the folder {where} is not writable")
     return folder
 
 
@@ -206,12 +209,16 @@ def output_format(scene_path, chosen):
 
 
 def _partial_folder(folder):
-    """A new, empty, hidden folder beside ``folder`` (same file system: renamed into place at the end), made
-    with the permissions a new folder gets."""
-    parent = os.path.dirname(os.path.abspath(folder))
-    base = os.path.basename(os.path.normpath(os.path.abspath(folder)))
+    """A new, empty, hidden folder on the file system of ``folder`` (its files are renamed into place at the
+    end), made with the permissions a new folder gets: beside a new ``folder``, inside an existing one (which
+    may be a mount point or a link to another file system)."""
+    if os.path.isdir(folder):
+        parent, prefix = folder, ".eppf-partial-"
+    else:
+        parent = os.path.dirname(os.path.abspath(folder))
+        prefix = f".{os.path.basename(os.path.normpath(os.path.abspath(folder)))}.eppf-partial-"
     while True:
-        path = os.path.join(parent, f".{base}.eppf-partial-{secrets.token_hex(4)}")
+        path = os.path.join(parent, prefix + secrets.token_hex(4))
         try:
             os.mkdir(path)
         except FileExistsError:
@@ -246,9 +253,9 @@ def _write_segments(scene, folder, fmt, by, progress):
 
 
 def _publish(partial, folder):
-    """The complete ``partial`` folder becomes ``folder``: renamed when ``folder`` does not exist; moved into
-    it file by file (the index last) when it is an empty folder that was there before, which is kept."""
-    if not os.path.isdir(folder):
+    """The complete ``partial`` folder becomes ``folder``: renamed when ``folder`` does not exist; its files
+    moved into ``folder`` (the index last) when that is an empty folder that was there before, which is kept."""
+    if os.path.dirname(os.path.abspath(partial)) != os.path.abspath(folder):
         os.rename(partial, folder)
         return
     names = sorted(os.listdir(partial), key=lambda n: n == SEGMENT_INDEX)
@@ -288,8 +295,8 @@ def run_segment(args, out=None):
     folder = check_output_folder(args.output)
     fmt = output_format(args.scene, args.format)
     scene = segment_file(args.scene, segmentation_settings(args), cmd, progress)
-    # The files go into a new hidden sibling folder that becomes the output only when complete: an error or a
-    # Ctrl-C midway leaves no partial output (which would make the rerun refuse a folder that is not empty).
+    # The files go into a new hidden folder and reach the output only when complete: an error or a Ctrl-C
+    # midway leaves no partial output (which would make the rerun refuse a folder that is not empty).
     partial = _partial_folder(folder)
     try:
         _write_segments(scene, partial, fmt, args.by, progress)

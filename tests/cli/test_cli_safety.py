@@ -173,13 +173,26 @@ def test_segment_into_an_empty_folder_keeps_it_when_stopped(tmp_path, capsys, mo
     _refused(["segment", scene, "-o", out, *SEGMENT], capsys, "is not empty")
     assert os.listdir(out) == ["keep"]
     (out / "keep").rmdir()
-    _fail_on_second_file(monkeypatch, KeyboardInterrupt())
+    calls = _fail_on_second_file(monkeypatch, KeyboardInterrupt())
     assert _run(["segment", scene, "-o", out, *SEGMENT], capsys)[0] == 130
+    # written inside the folder given (its file system, were it a mount point), not beside it
+    assert os.path.dirname(os.path.dirname(str(calls[0]))) == str(out)
     assert out.is_dir() and os.listdir(out) == []  # the folder that was there is kept, empty
     assert sorted(os.listdir(tmp_path)) == ["objects", "room.pcd"]
     monkeypatch.undo()
     assert _run(["segment", scene, "-o", out, *SEGMENT], capsys)[0] == 0
     assert len(_csv(out / "segments.csv")) == 3 and len(os.listdir(out)) == 4
+
+
+def test_segment_into_a_folder_it_cannot_write_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    scene = _blobs_scene(tmp_path)
+    read = []
+    monkeypatch.setattr("eppf.io.read_point_fields", lambda *a, **k: read.append(a))
+    monkeypatch.setattr(os, "access", lambda path, mode: False)  # (root may write anywhere: no chmod test)
+    (tmp_path / "empty").mkdir()
+    for out in (tmp_path / "new", tmp_path / "empty"):
+        _refused(["segment", scene, "-o", out, *SEGMENT], capsys, f"--output {out}: the folder", "is not writable")
+    assert read == []
 
 
 # ---------------------------------------------------------------------------
