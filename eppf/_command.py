@@ -26,15 +26,18 @@ def is_eppf_command():
     """True when this process is the ``eppf`` command: the installed script or ``python -m eppf``."""
     main = sys.modules.get("__main__")
     spec = getattr(main, "__spec__", None)
-    if spec is not None:
-        return spec.name == "eppf.__main__"  # python -m eppf, once eppf.__main__ runs
+    if spec is not None and spec.name == "eppf.__main__":
+        return True  # python -m eppf, once eppf.__main__ runs
     if sys.argv[:1] == ["-m"]:
         # python -m eppf while runpy imports the package: sys.argv[0] is "-m" until the module is found
         argv = list(getattr(sys, "orig_argv", []))
         return any(a == "-m" and b == "eppf" for a, b in zip(argv, argv[1:])) or "-meppf" in argv
-    # the installed script (eppf, or eppf-script.py beside eppf.exe on Windows) run as the main program
-    script = getattr(main, "__file__", None)
-    return script is not None and os.path.splitext(os.path.basename(script))[0] in ("eppf", "eppf-script")
+    if spec is not None and spec.name != "__main__":
+        return False  # python -m another_module
+    # the installed script, run as the main program: eppf, or eppf.exe (a zip whose __main__ runs) and
+    # eppf-script.py on Windows
+    name = os.path.basename(sys.argv[0]) if sys.argv else ""
+    return os.path.splitext(name)[0] in ("eppf", "eppf-script")
 
 
 @contextlib.contextmanager

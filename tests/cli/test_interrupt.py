@@ -92,6 +92,32 @@ def test_ctrl_c_while_a_program_imports_eppf_is_its_keyboard_interrupt(tmp_path)
     assert "KeyboardInterrupt" in proc.stderr and "eppf: interrupted" not in proc.stderr
 
 
+@pytest.mark.parametrize("spec, argv, orig_argv, expected", [
+    (None, ["/usr/bin/eppf", "--version"], None, True),                  # pip's console script
+    ("__main__", ["/venv/Scripts/eppf.exe"], None, True),                # Windows: the .exe zip's __main__
+    (None, ["/venv/Scripts/eppf-script.py"], None, True),
+    ("eppf.__main__", ["/src/eppf/__main__.py"], None, True),            # python -m eppf, running
+    (None, ["-m"], ["python", "-X", "dev", "-m", "eppf", "run"], True),  # python -m eppf, importing eppf
+    (None, ["-m"], ["python", "-m", "pytest"], False),
+    ("pytest.__main__", ["/venv/bin/eppf"], None, False),
+    (None, ["/home/me/analysis.py"], None, False),
+    (None, ["-c"], None, False),
+    (None, [""], None, False),                                           # the interactive interpreter
+])
+def test_is_eppf_command(monkeypatch, spec, argv, orig_argv, expected):
+    import types
+    from importlib.machinery import ModuleSpec
+
+    from eppf._command import is_eppf_command
+
+    main = types.ModuleType("__main__")
+    main.__spec__ = None if spec is None else ModuleSpec(spec, None)
+    monkeypatch.setitem(sys.modules, "__main__", main)
+    monkeypatch.setattr(sys, "argv", argv)
+    monkeypatch.setattr(sys, "orig_argv", orig_argv or ["python", *argv], raising=False)
+    assert is_eppf_command() is expected
+
+
 def test_command_interrupt_guard(monkeypatch, capsys):
     import eppf._command as command
 
