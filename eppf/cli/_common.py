@@ -221,12 +221,36 @@ def check_output(path, suffixes=None, option="--output"):
     return path
 
 
+#: Starts of the CSV tables the commands write (predict, predict --segment, retrieve, evaluate).
+OWN_CSV_HEADERS = ("file,class", "segment,n_points,", "query,query_label,", "evaluation,metric,percent")
+
+
+def is_own_output(path):
+    """True for a file that an eppf command may have written: a CSV table with one of their headers, a
+    descriptor ``.npz`` of ``describe``, any ``.npy`` (a descriptor matrix cannot be told from a point cloud)."""
+    import zipfile
+
+    low = str(path).lower()
+    try:
+        if low.endswith(".npy"):
+            return True
+        if low.endswith(".npz"):
+            with zipfile.ZipFile(path) as zf:
+                return "descriptors.npy" in zf.namelist()
+        with open(path, newline="", encoding="utf-8", errors="replace") as fh:
+            return fh.readline(200).startswith(OWN_CSV_HEADERS)
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
 def check_not_input(output, inputs, option="--output"):
     """Refuse, before any work, an output that is one of the inputs: writing it would replace the input.
 
     ``inputs`` are ``(option, path)`` pairs (option ``None`` for a positional input), ``None`` paths left out.
     The same file under another spelling, through a symbolic link or as a hard link is found with
-    :func:`os.path.samefile`; an output that does not exist yet replaces nothing.
+    :func:`os.path.samefile`; an output that does not exist yet replaces nothing. An output inside an input
+    folder is left out of its listing (:func:`find_files`), so it must be this command's own earlier output
+    (:func:`is_own_output`) when it is a file the readers read: a data file there is refused too.
     """
     if output is None or not os.path.exists(output):
         return
@@ -237,10 +261,27 @@ def check_not_input(output, inputs, option="--output"):
             same = os.path.samefile(output, path)
         except OSError:  # an input that does not exist: its command names it
             continue
+        what = f"the input {path}" if name is None else f"the {name} {path}"
         if same:
-            what = f"the input {path}" if name is None else f"the {name} {path}"
             raise ValueError(f"{option} {output} is {what} (the same file); writing it would replace that "
                              "input, so give another output file")
+        if os.path.isdir(path) and _inside(output, path) and _readable_point_file(output) \
+                and not is_own_output(output):
+            where = f"the input folder {path}" if name is None else f"the {name} folder {path}"
+            raise ValueError(f"{option} {output} is a point file in {where}; writing it would replace that "
+                             "object, so give another output file")
+
+
+def _inside(path, folder):
+    real, root = os.path.realpath(path), os.path.realpath(folder)
+    return real.startswith(os.path.join(root, ""))
+
+
+def _readable_point_file(path):
+    from ..io import supported_extensions
+
+    name = os.path.basename(str(path))
+    return not name.startswith(".") and name.lower().endswith(tuple(e.lower() for e in supported_extensions()))
 
 
 def check_distinct_outputs(outputs):

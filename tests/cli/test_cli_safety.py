@@ -105,6 +105,27 @@ def test_describe_train_evaluate_retrieve_refuse_writing_over_an_input(tmp_path,
     _unchanged(cloud, before)
 
 
+def test_an_object_file_in_an_input_folder_is_not_taken_for_the_commands_own_output(tmp_path, capsys):
+    # a folder's listing leaves the output out (a command's CSV in its input folder, run twice): a data file
+    # named as the output was left out of the input and replaced
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    rng = np.random.default_rng(0)
+    np.savetxt(scans / "a.csv", rng.normal(size=(50, 3)), delimiter=",")
+    np.savez(scans / "b.npz", points=rng.normal(size=(50, 3)))
+    before = {n: _bytes(scans / n) for n in ("a.csv", "b.npz")}
+    model = tmp_path / "missing.eppf"
+    _refused(["predict", "--model", model, scans, "-o", scans / "a.csv"], capsys,
+             f"--output {scans / 'a.csv'} is a point file in the input folder {scans}")
+    _refused(["describe", scans, "-o", scans / "b.npz"], capsys, "is a point file in the input folder")
+    for name, data in before.items():
+        _unchanged(scans / name, data)
+    # the command's own table from an earlier run may be replaced (it is then read by nothing)
+    (scans / "labels.csv").write_text("file,class,distance,neighbour,unreliable\n")
+    err = _refused(["predict", "--model", model, scans, "-o", scans / "labels.csv"], capsys, str(model))
+    assert "point file" not in err
+
+
 def test_experiment_output_inside_the_data_folder_is_refused(tmp_path, capsys, monkeypatch):
     ran = []
     monkeypatch.setattr("eppf.experiments.run_retrieval", lambda **kw: ran.append(kw))
