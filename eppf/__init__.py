@@ -7,20 +7,24 @@ Descriptor", IEEE Robotics and Automation Letters, 2018.
 
 from ._version import __version__
 
-from .utils._simd import simd_cap as _simd_cap
+from ._command import command_interrupt_guard as _command_interrupt_guard
 
-_simd_cap()  # a wrong EPPF_SIMD is an error before any kernel reads it
+# The imports take about a second: Ctrl-C then ends the eppf command with its one line, not a traceback
+with _command_interrupt_guard():
+    from .utils._simd import simd_cap as _simd_cap
 
-from .descriptors import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
-from .descriptors import CVFHTransformer, GASDTransformer, GRSDTransformer, VFHTransformer
-from .descriptors import descriptor_pool
-from .neighbors import KLNearestNeighbors, symmetric_kl_distances
-from .classifiers import EPPF4DClassifier, PointNetClassifier
-from .preprocessing import estimate_normals
+    _simd_cap()  # a wrong EPPF_SIMD is an error before any kernel reads it
 
-from ._persist import load_model, save_model
-from ._simd import simd_levels
-from .streaming import describe_files
+    from .descriptors import FUNCTIONS, EPPFTransformer, ESFTransformer, OURCVFHTransformer, WahlTransformer
+    from .descriptors import CVFHTransformer, GASDTransformer, GRSDTransformer, VFHTransformer
+    from .descriptors import descriptor_pool
+    from .neighbors import KLNearestNeighbors, symmetric_kl_distances
+    from .classifiers import EPPF4DClassifier, PointNetClassifier
+    from .preprocessing import estimate_normals
+
+    from ._persist import load_model, save_model
+    from ._simd import simd_levels
+    from .streaming import describe_files
 
 __all__ = [
     "CVFHTransformer",

@@ -7,9 +7,12 @@
 ``_evaluate``, ``_bench`` and ``_experiment`` are the subcommands.
 """
 
-from ._common import load_model
-from ._main import build_parser, main
-from ._run import run_main_job
-from ._train import make_pipeline_from_args
+from .._command import command_interrupt_guard
+
+with command_interrupt_guard():  # (as eppf's own imports: Ctrl-C before main() runs is still one line)
+    from ._common import load_model
+    from ._main import build_parser, main
+    from ._run import run_main_job
+    from ._train import make_pipeline_from_args
 
 __all__ = ["build_parser", "load_model", "main", "make_pipeline_from_args", "run_main_job"]

@@ -221,6 +221,85 @@ def check_output(path, suffixes=None, option="--output"):
     return path
 
 
+#: Starts of the CSV tables the commands write (predict, predict --segment, retrieve, evaluate).
+OWN_CSV_HEADERS = ("file,class", "segment,n_points,", "query,query_label,", "evaluation,metric,percent")
+
+
+def is_own_output(path):
+    """True for a file that an eppf command may have written: a CSV table with one of their headers, a
+    descriptor ``.npz`` of ``describe``, any ``.npy`` (a descriptor matrix cannot be told from a point cloud)."""
+    import zipfile
+
+    low = str(path).lower()
+    try:
+        if low.endswith(".npy"):
+            return True
+        if low.endswith(".npz"):
+            with zipfile.ZipFile(path) as zf:
+                return "descriptors.npy" in zf.namelist()
+        with open(path, newline="", encoding="utf-8", errors="replace") as fh:
+            return fh.readline(200).startswith(OWN_CSV_HEADERS)
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
+def check_not_input(output, inputs, option="--output"):
+    """Refuse, before any work, an output that is one of the inputs: writing it would replace the input.
+
+    ``inputs`` are ``(option, path)`` pairs (option ``None`` for a positional input), ``None`` paths left out.
+    The same file under another spelling, through a symbolic link or as a hard link is found with
+    :func:`os.path.samefile`; an output that does not exist yet replaces nothing. An output inside an input
+    folder is left out of its listing (:func:`find_files`), so it must be this command's own earlier output
+    (:func:`is_own_output`) when it is a file the readers read: a data file there is refused too.
+    """
+    if output is None or not os.path.exists(output):
+        return
+    for name, path in inputs:
+        if path is None:
+            continue
+        try:
+            same = os.path.samefile(output, path)
+        except OSError:  # an input that does not exist: its command names it
+            continue
+        what = f"the input {path}" if name is None else f"the {name} {path}"
+        if same:
+            raise ValueError(f"{option} {output} is {what} (the same file); writing it would replace that "
+                             "input, so give another output file")
+        if os.path.isdir(path) and _inside(output, path) and _readable_point_file(output) \
+                and not is_own_output(output):
+            where = f"the input folder {path}" if name is None else f"the {name} folder {path}"
+            raise ValueError(f"{option} {output} is a point file in {where}; writing it would replace that "
+                             "object, so give another output file")
+
+
+def _inside(path, folder):
+    real, root = os.path.realpath(path), os.path.realpath(folder)
+    return real.startswith(os.path.join(root, ""))
+
+
+def _readable_point_file(path):
+    from ..io import supported_extensions
+
+    name = os.path.basename(str(path))
+    return not name.startswith(".") and name.lower().endswith(tuple(e.lower() for e in supported_extensions()))
+
+
+def check_distinct_outputs(outputs):
+    """Refuse two outputs of one command that are one file (``(option, path)`` pairs; ``None`` paths left out):
+    the second would replace the first."""
+    seen = {}
+    for name, path in outputs:
+        if path is None:
+            continue
+        key = os.path.normcase(os.path.realpath(path))
+        same = seen.get(key)
+        if same is None and os.path.exists(path):
+            same = next((s for s in seen.values() if os.path.exists(s[1]) and os.path.samefile(s[1], path)), None)
+        if same is not None:
+            raise ValueError(f"{name} {path} and {same[0]} {same[1]} are the same file; give two file names")
+        seen[key] = (name, path)
+
+
 def emit(rows, header, output, out):
     """Rows as a printed table, or as a CSV file written atomically."""
     out = out or sys.stdout
@@ -449,6 +528,16 @@ class InputPlan:
         return Objects(clouds, ids, keys, labels, self.class_names, split, skipped, self.name)
 
 
+def refuse_sampling_of_data_set(args, data):
+    """Refuse ``--n-points``/``--resolution`` with a ``.npz`` data set: its clouds are read as they are stored, so
+    the option would be ignored (and ``train`` would record it in the model as how its objects were read)."""
+    given = [o for o, v in (("--n-points", getattr(args, "n_points", None)),
+                            ("--resolution", getattr(args, "resolution", None))) if v is not None]
+    if given:
+        raise ValueError(f"{given[0]}: {data} is a .npz data set, whose clouds are read as they are stored (the "
+                         "option samples mesh files and resamples point files); leave it out")
+
+
 def is_data_set_input(inputs):
     """True when the inputs are one ``.npz`` data set (read whole by :func:`read_inputs`)."""
     inputs = [str(i) for i in inputs]
@@ -593,6 +682,8 @@ def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
         raise FileNotFoundError(f"--data {data}: the {what} does not exist")
     if os.path.isfile(data) and not data.lower().endswith(".npz"):
         raise ValueError(f"--data {data}: give a .npz data set or a folder of class subfolders, not one file")
+    if os.path.isfile(data):
+        refuse_sampling_of_data_set(args, data)
     if os.path.isdir(data) and not sampling.get("root"):
         sampling = dict(sampling, root=os.path.realpath(data))
     objects = read_inputs([data], sampling, on_error=getattr(args, "on_error", "skip"),

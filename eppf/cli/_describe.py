@@ -21,9 +21,9 @@ import numpy as np
 
 from ..streaming import write_descriptors
 from ..utils._atomic import atomic_write
-from ._common import (Command, add_descriptor, count, fewest_points, add_runtime, add_sampling, check_output, descriptor_from_args,
-                      is_data_set_input, plan_inputs, progress_of, read_inputs, register, sampling_from_args,
-                      warn_tiny)
+from ._common import (Command, add_descriptor, count, fewest_points, add_runtime, add_sampling, check_not_input,
+                      check_output, descriptor_from_args, is_data_set_input, plan_inputs, progress_of, read_inputs,
+                      refuse_sampling_of_data_set, register, sampling_from_args, warn_tiny)
 
 __all__ = ["run_describe"]
 
@@ -59,10 +59,12 @@ def run_describe(args, out=None):
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf describe")
     output = check_output(args.output, (".npy", ".npz"))
+    check_not_input(output, [(None, str(i)) for i in args.inputs])
     progress = progress_of(args)
     t0 = time.perf_counter()
     sampling = sampling_from_args(args)
     if is_data_set_input(args.inputs):
+        refuse_sampling_of_data_set(args, args.inputs[0])
         est = descriptor_from_args(args, progress)
         params = _saved_params(est)
         objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd,

@@ -4,9 +4,10 @@ import sys
 
 import numpy as np
 
-from ._common import (MODEL_HELP, TRUST_HELP, Command, add_data_source, add_descriptor, add_runtime, add_sampling,
-                      check_output, count, descriptor_from_args, emit, fewest_points, load_labelled, load_model,
-                      model_sampling, progress_of, register, sampling_from_args, set_runtime, warn, warn_tiny)
+from ._common import (DEFAULT_N_PAIRS, MODEL_HELP, TRUST_HELP, Command, add_data_source, add_descriptor, add_runtime,
+                      add_sampling, check_not_input, check_output, count, descriptor_from_args, emit, fewest_points,
+                      load_labelled, load_model, model_sampling, progress_of, register, sampling_from_args, set_runtime,
+                      warn, warn_tiny)
 
 __all__ = ["run_evaluate"]
 
@@ -56,6 +57,14 @@ def run_evaluate(args, out=None):
     cmd = getattr(args, "prog", "eppf evaluate")
     if args.no_retrieval and args.model is None:
         raise ValueError("nothing to evaluate: --no-retrieval without --model")
+    if args.no_retrieval:
+        # the descriptor options make the retrieval's descriptors only: without it they would be ignored
+        given = [o for o, v in (("--descriptor", args.descriptor != "eppf"),
+                                ("--n-pairs", args.n_pairs != DEFAULT_N_PAIRS), ("--scaling", args.scaling is not None),
+                                ("--normal-neighbors", args.normal_neighbors is not None)) if v]
+        if given:
+            raise ValueError(f"{given[0]}: it sets the descriptor of the retrieval, which --no-retrieval skips (the "
+                             "model keeps its own descriptor); leave it out")
     if args.model is not None:
         # the model's files are read as its training files were: a sampling option here would be ignored
         given = [o for o, v in (("--n-points", args.n_points), ("--resolution", args.resolution)) if v is not None]
@@ -63,6 +72,7 @@ def run_evaluate(args, out=None):
             raise ValueError(f"{given[0]}: with --model the files are read as the model's training files were "
                              "(its saved sampling settings); leave it out")
     check_output(args.output)
+    check_not_input(args.output, [("--data", args.data), ("--model", args.model)])
     saved = load_model(args.model, trust=args.trust) if args.model is not None else None
     sampling = model_sampling(saved, cmd) if saved is not None else sampling_from_args(args)
     est = None if args.no_retrieval else descriptor_from_args(args)

@@ -15,6 +15,7 @@ import os
 import shlex
 import sys
 import textwrap
+import warnings
 
 from ._common import Command, register
 
@@ -54,6 +55,10 @@ def _add_common(p, draws=False):
                         "layout (eppf.datasets.load_npz)")
     p.add_argument("--out", default=None, help="output folder (default: results/<experiment>/<data name>)")
     p.add_argument("--cache-dir", default=None, help="descriptor cache folder (default: OUT/cache)")
+    p.add_argument("--on-error", choices=["skip", "raise"], default="raise",
+                   help="a file of a --data folder that cannot be read: stop, naming it (the default: an "
+                        "experiment's figures are those of the whole data set), or skip it with a summary on stderr "
+                        "and a count in the report's data line")
     p.add_argument("--random-state", type=int, default=0, help="seed of everything random (default 0)")
     p.add_argument("--n-jobs", type=int, default=-1, help="threads (default -1: all cores)")
     p.add_argument("--quick", action="store_true", help="tiny settings for a smoke run (< 2 minutes on the built-in set)")
@@ -142,6 +147,21 @@ def add_arguments(parser):
     p.add_argument("--repeats", type=int, default=None, help="timing repeats, best kept (default 3, 1 with --quick)")
 
 
+def _check_outside_data(data, outputs):
+    """Refuse an output folder that is the ``--data`` folder or inside it: its tables, figures and cache would
+    be read as objects of the data set by the next run (a CSV is a point file)."""
+    if data == "builtin" or not os.path.isdir(data):
+        return
+    root = os.path.normcase(os.path.realpath(data))
+    for option, path in outputs:
+        if path is None:
+            continue
+        real = os.path.normcase(os.path.realpath(path))
+        if real == root or real.startswith(os.path.join(root, "")):
+            raise ValueError(f"{option} {path} is inside the --data folder {data}; the next run would read its "
+                             "files as objects of the data set, so give a folder outside it")
+
+
 def run_experiment(args):
     """Run one experiment from parsed ``eppf experiment`` arguments.
 
@@ -163,14 +183,23 @@ def run_experiment(args):
 
         return main(["experiment", *args])
     from ..experiments import run_ablation, run_classification, run_noise, run_retrieval, run_runtime
-    from ..experiments._common import data_name, load_data
+    from ..experiments._common import Dataset, data_name, load_data
     from ..experiments._presets import apply_preset
 
     argv = getattr(args, "argv", None)
     command = "eppf " + shlex.join(argv) if argv else f"eppf experiment {args.experiment}"
     preset = getattr(args, "preset", None)
     out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
-    common = dict(data=args.data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
+    _check_outside_data(args.data, [("--out", out), ("--cache-dir", args.cache_dir)])
+    data = args.data
+    if args.on_error == "skip" and os.path.isdir(data):
+        # loaded here, not by the experiment, to skip unreadable files (the report's data line counts them)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            data = load_data(data, quick=args.quick, random_state=args.random_state, on_error="skip")
+        for w in caught:  # (the skipped files' summary) one line each, as every subcommand warns
+            print(f"eppf experiment: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
+    common = dict(data=data, out=out, random_state=args.random_state, n_jobs=args.n_jobs, quick=args.quick,
                   cache_dir=args.cache_dir, verbose=not args.no_progress, command=command, scaling=args.scaling)
     draws = getattr(args, "draws", None)
     draws = draws if draws is not None else (2 if args.quick else 10)
@@ -187,8 +216,9 @@ def run_experiment(args):
             run_noise(levels=args.levels, preset=preset, **kw)
         else:
             if preset is not None:
-                kw["data"] = apply_preset(load_data(args.data, quick=args.quick, random_state=args.random_state),
-                                          preset, random_state=args.random_state)
+                loaded = data if isinstance(data, Dataset) else load_data(data, quick=args.quick,
+                                                                          random_state=args.random_state)
+                kw["data"] = apply_preset(loaded, preset, random_state=args.random_state)
             run_classification(**kw)
     else:
         run_runtime(n_objects=args.n_objects, repeats=args.repeats, **common)

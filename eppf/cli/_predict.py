@@ -6,9 +6,9 @@ import sys
 
 import numpy as np
 
-from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_output, class_name, count,
-                      emit, fewest_points, file_seeds, load_model, model_sampling, progress_of, read_inputs,
-                      register, set_runtime, too_few_points, warn, warn_tiny)
+from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_distinct_outputs,
+                      check_not_input, check_output, class_name, count, emit, fewest_points, file_seeds, load_model,
+                      model_sampling, progress_of, read_inputs, register, set_runtime, too_few_points, warn, warn_tiny)
 from ._segment import (FIELD_FORMATS, add_segmentation, coordinate, given_segmentation_options, segment_file,
                        segmentation_settings, stage, summary)
 
@@ -79,6 +79,8 @@ def run_predict(args, out=None):
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf predict")
     check_output(args.output)
+    inputs = [("--model", args.model)] + [(None, str(i)) for i in args.inputs]
+    check_not_input(args.output, inputs)
     if getattr(args, "segment", False):
         return run_predict_scene(args, out)
     given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else [])
@@ -137,6 +139,8 @@ def run_predict_scene(args, out):
         raise ValueError(f"--segment classifies the objects of one scene; got {len(args.inputs)} inputs")
     scene_path = str(args.inputs[0])
     labelled = check_output(args.labelled_output, LABELLED_SUFFIXES, "--labelled-output")
+    check_not_input(labelled, [(None, scene_path), ("--model", args.model)], "--labelled-output")
+    check_distinct_outputs([("--output", args.output), ("--labelled-output", labelled)])
     progress = progress_of(args)
     saved = load_model(args.model, trust=args.trust)
     model = saved["model"]

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..io._npy import read_npy_array, read_npz_arrays
 from ..registry import DESCRIPTORS, make_descriptor
-from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_output, emit, fewest_points,
+from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_not_input, check_output, emit, fewest_points,
                       positive_int, progress_of, read_inputs, register, warn_tiny)
 
 __all__ = ["run_retrieve"]
@@ -72,6 +72,8 @@ def run_retrieve(args, out=None):
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf retrieve")
     check_output(args.output)
+    check_not_input(args.output, [("--database", args.database), ("--query-descriptors", args.query_descriptors)]
+                    + [(None, str(q)) for q in args.queries])
     db = _load_descriptors(args.database, "database")
     X_db = np.asarray(db["descriptors"], dtype=np.float64)
     if X_db.ndim != 2 or len(X_db) == 0:

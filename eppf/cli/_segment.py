@@ -8,6 +8,8 @@ the segments' point clouds (:class:`Scene`).
 """
 
 import os
+import secrets
+import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -56,7 +58,8 @@ def add_arguments(p):
                                                   "or NumPy; every extension of eppf.io.supported_extensions() "
                                                   "but meshes)")
     p.add_argument("-o", "--output", required=True, metavar="FOLDER",
-                   help=f"a new or empty folder for one file per object and the index {SEGMENT_INDEX}")
+                   help=f"a new or empty folder for one file per object and the index {SEGMENT_INDEX}; they "
+                        "appear in it only when all are written (a run stopped midway leaves none)")
     add_segmentation(p)
     p.add_argument("--format", choices=FIELD_FORMATS, default=None,
                    help="format of the object files (default: the scene's when it is LAS, LAZ, PCD or PLY, "
@@ -187,6 +190,9 @@ def check_output_folder(folder):
     parent = os.path.dirname(os.path.abspath(folder))
     if not os.path.isdir(parent):
         raise ValueError(f"--output {folder}: the folder {os.path.dirname(folder) or '.'} does not exist")
+    where = folder if os.path.isdir(folder) else (os.path.dirname(folder) or ".")
+    if not os.access(where, os.W_OK):  # (found now, not after the segmentation)
+        raise ValueError(f"--output {folder}: the folder {where} is not writable")
     return folder
 
 
@@ -200,6 +206,72 @@ def output_format(scene_path, chosen):
     except ValueError:
         name = None
     return name if name in FIELD_FORMATS else FALLBACK_FORMAT
+
+
+def _partial_folder(folder):
+    """A new, empty, hidden folder on the file system of ``folder`` (its files are renamed into place at the
+    end), made with the permissions a new folder gets: beside a new ``folder``, inside an existing one (which
+    may be a mount point or a link to another file system)."""
+    if os.path.isdir(folder):
+        parent, prefix = folder, ".eppf-partial-"
+    else:
+        parent = os.path.dirname(os.path.abspath(folder))
+        prefix = f".{os.path.basename(os.path.normpath(os.path.abspath(folder)))}.eppf-partial-"
+    while True:
+        path = os.path.join(parent, prefix + secrets.token_hex(4))
+        try:
+            os.mkdir(path)
+        except FileExistsError:
+            continue
+        return path
+
+
+def _write_segments(scene, folder, fmt, by, progress):
+    """One file per segment and the index into ``folder``."""
+    import csv
+
+    from ..io import write_point_fields
+    from ..utils import progress_bar
+
+    width = max(3, len(str(max(scene.n_segments - 1, 0))))
+    header = SEGMENT_INDEX_HEADER.split(",") + ([by] if by else [])
+    rows = []
+    for k in progress_bar(range(scene.n_segments), desc="writing", unit="obj", enabled=progress):
+        idx = scene.indices(k)
+        name = f"segment_{k:0{width}d}.{fmt}"
+        write_point_fields(os.path.join(folder, name), scene.points[idx], {f: v[idx] for f, v in scene.fields.items()},
+                           format=fmt)
+        row = [k, name, len(idx), *map(coordinate, scene.centroid(k))]
+        if by:
+            row.append(scene.fields[by][idx[0]].item())
+        rows.append(row)
+    index = os.path.join(folder, SEGMENT_INDEX)
+    with atomic_write(index, "w", newline="", encoding="utf-8", errors="surrogateescape") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def _publish(partial, folder):
+    """The complete ``partial`` folder becomes ``folder``: renamed when ``folder`` does not exist; its files
+    moved into ``folder`` (the index last) when that is an empty folder that was there before, which is kept."""
+    if os.path.dirname(os.path.abspath(partial)) != os.path.abspath(folder):
+        os.rename(partial, folder)
+        return
+    names = sorted(os.listdir(partial), key=lambda n: n == SEGMENT_INDEX)
+    moved = []
+    try:
+        for name in names:
+            os.replace(os.path.join(partial, name), os.path.join(folder, name))
+            moved.append(name)
+    except BaseException:
+        for name in moved:  # this run's files only: the folder was empty
+            try:
+                os.remove(os.path.join(folder, name))
+            except OSError:
+                pass
+        raise
+    os.rmdir(partial)
 
 
 def run_segment(args, out=None):
@@ -217,36 +289,22 @@ def run_segment(args, out=None):
     scene : Scene
         The scene, its labels and segments.
     """
-    import csv
-
-    from ..io import write_point_fields
-    from ..utils import progress_bar
-
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf segment")
     progress = progress_of(args)
     folder = check_output_folder(args.output)
     fmt = output_format(args.scene, args.format)
     scene = segment_file(args.scene, segmentation_settings(args), cmd, progress)
-    os.makedirs(folder, exist_ok=True)
-    width = max(3, len(str(max(scene.n_segments - 1, 0))))
-    by = args.by
-    header = SEGMENT_INDEX_HEADER.split(",") + ([by] if by else [])
-    rows = []
-    for k in progress_bar(range(scene.n_segments), desc="writing", unit="obj", enabled=progress):
-        idx = scene.indices(k)
-        name = f"segment_{k:0{width}d}.{fmt}"
-        write_point_fields(os.path.join(folder, name), scene.points[idx], {f: v[idx] for f, v in scene.fields.items()},
-                           format=fmt)
-        row = [k, name, len(idx), *map(coordinate, scene.centroid(k))]
-        if by:
-            row.append(scene.fields[by][idx[0]].item())
-        rows.append(row)
+    # The files go into a new hidden folder and reach the output only when complete: an error or a Ctrl-C
+    # midway leaves no partial output (which would make the rerun refuse a folder that is not empty).
+    partial = _partial_folder(folder)
+    try:
+        _write_segments(scene, partial, fmt, args.by, progress)
+        _publish(partial, folder)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)  # this run's own folder: nothing that was there before
+        raise
     index = os.path.join(folder, SEGMENT_INDEX)
-    with atomic_write(index, "w", newline="", encoding="utf-8", errors="surrogateescape") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(header)
-        writer.writerows(rows)
     print(f"eppf: {summary(scene)} -> {count(scene.n_segments, fmt.upper() + ' file')} in {folder}, index "
           f"{index}", file=out)
     return scene

@@ -12,10 +12,10 @@ import time
 import numpy as np
 
 from ..registry import CLASSIFIERS, DESCRIPTORS
-from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, DEFAULT_N_PAIRS, Command, add_data_source,
-                      add_descriptor, add_runtime, add_sampling, check_classes, check_output, descriptor_from_args,
+from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, DEFAULT_N_PAIRS, Command, add_data_source, add_descriptor,
+                      add_runtime, add_sampling, check_classes, check_not_input, check_output, descriptor_from_args,
                       load_labelled, count, fewest_points, positive_int, progress_of, register, sampling_from_args,
-                      set_runtime, warn_tiny)
+                      set_runtime, warn, warn_tiny)
 
 __all__ = ["make_pipeline_from_args", "run_train"]
 
@@ -32,22 +32,25 @@ def add_arguments(p):
     add_descriptor(p)
     p.add_argument("--n-bins", type=positive_int, nargs=4, default=None, metavar=("F1", "F2", "F3", "F4"),
                    help="bins of EPPF's four functions (default: the descriptor's)")
-    p.add_argument("--n-neighbors", type=positive_int, default=1,
-                   help="neighbours of the KL classifier (not of the normals: see --normal-neighbors)")
-    p.add_argument("--max-epochs", type=positive_int, default=100, help="CNN/PointNet training epochs")
-    p.add_argument("--recipe", choices=["recommended", "paper"], default="recommended",
+    p.add_argument("--n-neighbors", type=positive_int, default=None,
+                   help="neighbours of the KL classifier (not of the normals: see --normal-neighbors); 'kl' only "
+                        "(default: 1)")
+    p.add_argument("--max-epochs", type=positive_int, default=None,
+                   help="CNN/PointNet training epochs (default: 100)")
+    p.add_argument("--recipe", choices=["recommended", "paper"], default=None,
                    help="how the 2d/3d/4d CNNs are trained: 'recommended' (default) describes every object 8 "
                         "times (stretched copies, a fresh draw every epoch, predictions averaged over copies), adds "
                         "GASD and 6 proportion ratios as side features, uses a smaller 4D network, halves the "
                         "learning rate on plateaus and computes in bfloat16 where the CPU does so natively; 'paper' "
-                        "is the network of Table I on one EPPF descriptor per object, in float32 by default")
+                        "is the network of Table I on one EPPF descriptor per object, in float32 by default; "
+                        "2d/3d/4d only")
     p.add_argument("--precision", choices=["auto", "float32", "bfloat16"], default=None,
                    help="CNN arithmetic: 'bfloat16' is mixed precision, faster on CPUs with native bfloat16 "
                         "(AVX512_BF16, AMX or ARM BF16), slower elsewhere; 'auto' chooses it only there (default: "
-                        "auto with --recipe recommended, float32 with --recipe paper)")
-    p.add_argument("--test-size", type=float, default=0.25,
+                        "auto with --recipe recommended, float32 with --recipe paper); 2d/3d/4d only")
+    p.add_argument("--test-size", type=float, default=None,
                    help="fraction held out (stratified) to score the model when the data has no train/test "
-                        "split; 0 trains on every object (default: 0.25)")
+                        "split; 0 trains on every object (default: 0.25; not with --all)")
     p.add_argument("--all", action="store_true", help="train on every object, ignoring a train/test split")
     add_sampling(p)
     add_runtime(p)
@@ -55,6 +58,30 @@ def add_arguments(p):
 
 def _classifier_name(args):
     return CLASSIFIER_ALIASES.get(args.classifier, args.classifier)
+
+
+#: Options of ``eppf train`` that one kind of classifier reads: (option, attribute, the classifiers that read it,
+#: its value when not given). Given to another classifier, it would be ignored and recorded in the model as used.
+CLASSIFIER_OPTIONS = (
+    ("--n-neighbors", "n_neighbors", ("kl",), 1),
+    ("--max-epochs", "max_epochs", ("2d", "3d", "4d", "pointnet"), 100),
+    ("--recipe", "recipe", ("2d", "3d", "4d"), "recommended"),
+    ("--precision", "precision", ("2d", "3d", "4d"), None),
+)
+
+
+def _classifier_options(args, name):
+    """The classifier options' values (their defaults where not given); one given to a classifier that does not
+    read it is refused, naming the option and the classifiers that read it."""
+    values = {}
+    for option, attr, readers, default in CLASSIFIER_OPTIONS:
+        value = getattr(args, attr, None)
+        if value is not None and name not in readers:
+            only = " and ".join(readers) if len(readers) < 3 else ", ".join(readers[:-1]) + " and " + readers[-1]
+            raise ValueError(f"{option}: the {name} classifier does not use it (only {only} "
+                             f"{'does' if len(readers) == 1 else 'do'}); leave it out")
+        values[attr] = default if value is None else value
+    return values
 
 
 def make_pipeline_from_args(args):
@@ -83,6 +110,7 @@ def make_pipeline_from_args(args):
     spec = CLASSIFIERS[name]
     cls = spec.estimator_class()
     torch_jobs = None if args.n_jobs < 0 else args.n_jobs
+    options = _classifier_options(args, name)
     if spec.input == "points":
         # it reads the points: a descriptor option would be ignored, and the model would record it as used
         given = [o for o, v in (("--descriptor", args.descriptor != "eppf"),
@@ -91,7 +119,7 @@ def make_pipeline_from_args(args):
                                 ("--normal-neighbors", args.normal_neighbors is not None)) if v]
         if given:
             raise ValueError(f"{given[0]}: the {name} classifier reads the points, not a descriptor; leave it out")
-        clf = cls(max_epochs=args.max_epochs, random_state=args.random_state, n_jobs=torch_jobs,
+        clf = cls(max_epochs=options["max_epochs"], random_state=args.random_state, n_jobs=torch_jobs,
                   verbose=1 if progress else 0)
         return Pipeline([("classifier", clf)])
     extra = {}
@@ -105,24 +133,24 @@ def make_pipeline_from_args(args):
             kl_names = ", ".join(k for k, s in DESCRIPTORS.items() if s.metric == "kl")
             raise ValueError(f"the {args.descriptor} descriptor is compared by L1, not by KL divergence; the "
                              f"'kl' classifier needs one of {kl_names}")
-        clf = cls(n_neighbors=args.n_neighbors, n_jobs=args.n_jobs)
+        clf = cls(n_neighbors=options["n_neighbors"], n_jobs=args.n_jobs)
     else:
         n_bins = descriptor.get_params().get("n_bins")
         # (the class through the registry, which imports it on use)
         if not isinstance(descriptor, DESCRIPTORS["eppf"].estimator_class()) or len(tuple(n_bins)) != 4:
             raise ValueError(f"the {name} classifier reads the 4D EPPF histogram; use --descriptor eppf or "
                              f"eppf_short, not {args.descriptor}")
-        if getattr(args, "recipe", "paper") == "recommended":
+        if options["recipe"] == "recommended":
             from ..registry import recommended_pipeline_parts
 
             descriptor, clf = recommended_pipeline_parts(
                 descriptor, conv=spec.fixed.get("conv", "4d"), n_jobs=args.n_jobs, random_state=args.random_state,
-                max_epochs=args.max_epochs, verbose=1 if progress else 0)
-            if args.precision is not None:
-                clf.set_params(precision=args.precision)
+                max_epochs=options["max_epochs"], verbose=1 if progress else 0)
+            if options["precision"] is not None:
+                clf.set_params(precision=options["precision"])
         else:
-            clf = cls(n_bins=tuple(n_bins), **spec.fixed, max_epochs=args.max_epochs,
-                      precision=args.precision or "float32",
+            clf = cls(n_bins=tuple(n_bins), **spec.fixed, max_epochs=options["max_epochs"],
+                      precision=options["precision"] or "float32",
                       random_state=args.random_state, n_jobs=torch_jobs, verbose=1 if progress else 0)
     return Pipeline([("descriptor", descriptor), ("classifier", clf)])
 
@@ -178,17 +206,21 @@ def run_train(args, out=None):
 
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf train")
-    if not 0 <= args.test_size < 1:
-        raise ValueError(f"--test-size must be in [0, 1), got {args.test_size}")
+    if args.all and args.test_size is not None:
+        raise ValueError("--test-size: --all trains on every object and holds none out; leave one of them out")
+    test_size = 0.25 if args.test_size is None else args.test_size
+    if not 0 <= test_size < 1:
+        raise ValueError(f"--test-size must be in [0, 1), got {test_size}")
     check_output(args.output)
+    check_not_input(args.output, [("--data", args.data)])
     model = make_pipeline_from_args(args)
     _check_saveable(model)
     sampling = sampling_from_args(args)
     objects = load_labelled(args, sampling, cmd, min_points=fewest_points(model))
     y, class_names, name = objects.labels, objects.class_names, objects.name
-    hold_out = not args.all and objects.split is None and args.test_size > 0
+    hold_out = not args.all and objects.split is None and test_size > 0
     check_classes(objects, cmd, need_two_per_class=hold_out)
-    if args.all or (objects.split is None and args.test_size == 0):
+    if args.all or (objects.split is None and test_size == 0):
         train = np.ones(len(y), dtype=bool)
         print(f"eppf train: training on all {count(len(y), 'object')} (nothing held out, so no held-out score)",
               file=out)
@@ -196,16 +228,18 @@ def run_train(args, out=None):
         train = objects.split == "train"
         if not train.any():
             raise ValueError(f"{name} has a split but no training objects")
+        if args.test_size is not None:
+            warn(cmd, f"--test-size is not used: {name} has its own train/test split")
         print(f"eppf train: training on the {count(int(train.sum()), 'object')} of the train split, scoring on "
               f"the {int((~train).sum())} of the test split", file=out)
     else:
         from sklearn.model_selection import train_test_split
 
-        idx, _ = train_test_split(np.arange(len(y)), test_size=args.test_size, stratify=y,
+        idx, _ = train_test_split(np.arange(len(y)), test_size=test_size, stratify=y,
                                   random_state=args.random_state)
         train = np.zeros(len(y), dtype=bool)
         train[idx] = True
-        print(f"eppf train: holding out {int((~train).sum())} of {len(y)} objects ({100 * args.test_size:g}%, "
+        print(f"eppf train: holding out {int((~train).sum())} of {len(y)} objects ({100 * test_size:g}%, "
               f"stratified) to score the model; --test-size 0 trains on all", file=out)
     fit_objects = objects.subset(train)
     if "descriptor" in model.named_steps:
@@ -222,6 +256,10 @@ def run_train(args, out=None):
         print(f"eppf train: held-out score on {count(int(held.sum()), 'object')}: {_scores_line(scores)}", file=out)
     params = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(args).items()
               if k not in ("func", "prog")}
+    # the values used (the defaults of the options not given); an option the classifier does not read stays None
+    readers = {attr: r for _, attr, r, _ in CLASSIFIER_OPTIONS}
+    params.update({k: v for k, v in _classifier_options(args, _classifier_name(args)).items()
+                   if _classifier_name(args) in readers[k]}, test_size=test_size)
     saved = {"format": MODEL_FORMAT, "model": model, "eppf_version": __version__, "params": params,
              "classes": [str(c) for c in class_names], "data": str(name), "sampling": objects.sampling or sampling,
              "train_ids": [str(i) for i in fit_objects.ids], "train_keys": list(fit_objects.keys)}

@@ -268,7 +268,7 @@ def data_name(spec):
     return spec if spec == "builtin" else os.path.splitext(os.path.basename(os.path.normpath(spec)))[0]
 
 
-def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=None):
+def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=None, on_error="raise"):
     """Load the data set named by ``spec``.
 
     Parameters
@@ -288,6 +288,11 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
     n_per_class, n_points : int, default=None
         Size of the built-in set (defaults: 40 and 1024, or 6 and 256 with
         ``quick``); ``n_points`` also resamples the objects of a folder.
+    on_error : {"raise", "skip"}, default="raise"
+        A file of a folder that cannot be read stops the loading, or is
+        skipped with a warning (:func:`eppf.datasets.load_folder`); the
+        returned ``source`` then says how many were skipped, so a report
+        shows that its figures are not those of the whole folder.
 
     Returns
     -------
@@ -331,13 +336,15 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
             split_source="make_shapes' stratified split (test_size=0.25)",
             default_scaling="fit",
         )
+    if on_error not in ("raise", "skip"):
+        raise ExperimentError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
     if not os.path.exists(spec):
         raise ExperimentError(f"--data: no such file or folder: {spec!r}")
     from ..datasets import load_folder, load_npz
 
     try:
         if os.path.isdir(spec):
-            b = load_folder(spec, n_points=n_points, normals=False, random_state=random_state)
+            b = load_folder(spec, n_points=n_points, normals=False, on_error=on_error, random_state=random_state)
         else:
             b = load_npz(spec)
     except (ValueError, OSError) as exc:
@@ -353,9 +360,14 @@ def load_data(spec, *, quick=False, random_state=0, n_per_class=None, n_points=N
         split = _stratified_split(y, 0.3, random_state)
         split_source = f"{GENERATED_SPLIT} (random_state={random_state})"
     clouds = [np.ascontiguousarray(c[:, :3], dtype=np.float64) for c in b.data]
+    skipped = len(getattr(b, "skipped", None) or [])
+    source = f"`{_base_name(spec)}`"
+    if skipped:
+        source += (f" ({skipped} of {skipped + len(clouds)} files could not be read and were left out, the first: "
+                   f"`{os.path.relpath(b.skipped[0][0], spec)}`)")
     return Dataset(
         name=data_name(spec),
-        source=f"`{_base_name(spec)}`",
+        source=source,
         clouds=clouds,
         y=y,
         target_names=np.asarray(b.target_names).astype(str),

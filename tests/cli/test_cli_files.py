@@ -237,7 +237,8 @@ def test_train_holds_out_says_so_and_evaluate_warns_about_seen_objects(tmp_path,
     assert status == 0
     assert "holding out 6 of 24 objects" in out and "held-out score on 6 objects: accuracy" in out
     assert "on 18 objects" in out
-    status, out, err = _run(["evaluate", "--data", folder, "--model", model, "--no-retrieval", *COMMON], capsys)
+    # (no --n-pairs: it sets the retrieval's descriptor, and --no-retrieval refuses it)
+    status, out, err = _run(["evaluate", "--data", folder, "--model", model, "--no-retrieval", *COMMON[2:]], capsys)
     assert status == 0 and "model, all objects (24)" in out
     assert "18 of the 24 objects scored were seen in training" in err
     # the held-out objects are scored on their own too, as train scored them
