@@ -199,3 +199,45 @@ def test_slope_envelope_is_the_exact_chamfer_envelope():
             chamfer = (np.maximum(di, dj) - np.minimum(di, dj)) * step + np.minimum(di, dj) * diagonal
             expected[a, b] = np.min(zmin + chamfer)
     np.testing.assert_allclose(surface, expected, rtol=1e-12)
+
+
+def test_ransac_subset_of_a_big_scene_takes_memory_of_the_subset_only(monkeypatch):
+    # the 50,000 points RANSAC scores its planes on were the head of a permutation of the whole scene: 8 bytes
+    # a point (800 MB at 10^8 points) for a subset of 400 KB
+    import tracemalloc
+
+    from eppf.segmentation import _ground
+
+    monkeypatch.setattr(_ground, "_RANSAC_SAMPLE", 200)
+    monkeypatch.setattr(_ground, "_PERMUTED", 800, raising=False)
+    rng = np.random.default_rng(7)
+    points = np.column_stack([rng.uniform(0, 100, (10**6, 2)), np.zeros(10**6)])
+    tracemalloc.start()
+    try:
+        nrm, offset, _ = _plane_ransac(points, 0.1, 20, np.random.RandomState(0))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 10**6  # the permutation took 8 MB
+    np.testing.assert_allclose(np.abs(nrm), [0, 0, 1], atol=1e-12)
+    assert abs(offset) < 1e-12
+
+
+def test_ransac_subset_is_distinct_uniform_and_seeded():
+    from eppf.segmentation._ground import _PERMUTED, _subset
+
+    n, k = 10**7, 5000
+    first = _subset(n, k, np.random.RandomState(3))
+    np.testing.assert_array_equal(_subset(n, k, np.random.RandomState(3)), first)  # same seed, same subset
+    assert not np.array_equal(_subset(n, k, np.random.RandomState(4)), first)
+    assert len(np.unique(first)) == k and first[0] >= 0 and first[-1] < n and (np.diff(first) > 0).all()
+    # uniform: as many in each tenth of the range, within six standard deviations of the binomial's 500
+    counts = np.bincount(first * 10 // n, minlength=10)
+    assert np.abs(counts - k / 10).max() < 6 * np.sqrt(k * 0.1 * 0.9)
+    # a scene just over the subset: every index but a few, still distinct
+    assert len(np.unique(_subset(k + 3, k, np.random.RandomState(0)))) == k
+    # up to _PERMUTED points, the subset of the earlier draw: those scenes keep their ground
+    for m in (k + 1, _PERMUTED):
+        np.testing.assert_array_equal(_subset(m, k, np.random.RandomState(5)),
+                                      np.sort(np.random.RandomState(5).choice(m, k, replace=False)))
+    assert len(np.unique(_subset(_PERMUTED + 1, 50000, np.random.RandomState(0)))) == 50000
