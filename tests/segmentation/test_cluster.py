@@ -217,3 +217,42 @@ def test_derived_tolerance_searches_coincident_points_once(monkeypatch):
     points = np.vstack([np.zeros((200000, 3)), [[1.0, 2.0, 2.0]]])
     assert default_tolerance(points) == TOLERANCE_FACTOR * 3.0
     assert searched and max(searched) == 2
+
+
+def _exact_derived_tolerance(points):
+    """Five times the median distance from the derived tolerance's sample points to their nearest other point,
+    computed as the kernel does (the squares summed x, y, z), for points with no coincident ones."""
+    from eppf.segmentation._cluster import _SPACING_SAMPLE, TOLERANCE_FACTOR
+
+    sample = np.unique(np.linspace(0, len(points) - 1, min(len(points), _SPACING_SAMPLE)).astype(np.int64))
+    _, nearest = cKDTree(points).query(points[sample], k=2)
+    d = points[sample] - points[nearest[:, 1]]
+    dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+    return TOLERANCE_FACTOR * np.partition(dist, len(sample) // 2)[len(sample) // 2]
+
+
+@pytest.mark.parametrize("scene", ["blob and a far point", "two flat blobs far apart"])
+def test_derived_tolerance_on_dense_blobs_searches_few_points(monkeypatch, scene):
+    # the first cells come from the bounding box: a dense blob (points within 1e-6 of each other) and a far
+    # point, or two blobs 1 apart, put each blob in one cell, searched in full for each of its sample points
+    # (3.6 s for 200,000 points); finer cells now part the crowd, and the tolerance is the same, to the bit
+    from eppf.segmentation import _cluster, _cluster_fast
+    from eppf.segmentation._cluster import default_tolerance
+
+    compared, search = [], _cluster_fast.nearest_distances
+
+    def nearest_distances(pts, cells, order, start, cell, sample):
+        rows = {tuple(c): k for k, c in enumerate(cell)} if len(cell) < 10**5 else None
+        own = [start[rows[tuple(cells[p])] + 1] - start[rows[tuple(cells[p])]] for p in sample]
+        compared.append(int(np.sum(own)))
+        return search(pts, cells, order, start, cell, sample)
+
+    monkeypatch.setattr(_cluster._cluster_fast, "nearest_distances", nearest_distances)
+    rng = np.random.default_rng(8)
+    blob = rng.uniform(0, 1e-6, (6000, 3))
+    if scene == "blob and a far point":
+        points = np.vstack([blob, [[1.0, 1.0, 1.0]]])
+    else:
+        points = np.vstack([blob * [1, 1, 1e-3], blob * [1, 1, 1e-3] + [0, 0, 1.0]])
+    assert default_tolerance(points) == _exact_derived_tolerance(points)
+    assert compared and max(compared) < 100 * 6000  # a whole blob per sample point: 6000 * 6000
