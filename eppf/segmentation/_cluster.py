@@ -122,23 +122,52 @@ _MAX_CELLS = 2**30
 _PACKED = 2**21
 
 
+def _gapped_cells(x, side):
+    """Cell coordinates along one axis of coordinates ``x`` spanning too many cells of ``side``: the points
+    part into runs at gaps of at least two cells (no two points across one are within a tolerance, or a
+    cell's side, of each other), each run gets cells from its own lowest point, and the runs follow each
+    other in cell coordinates with empty cells between them. None when a run spans :data:`_MAX_CELLS` cells.
+
+    So a stray point far from the scene (1e12 away, a scanner's bad return) costs a run of its own, not
+    2**40 cells' worth of coordinates whose rounding would exceed the margin of the cells' side.
+    """
+    order = np.argsort(x, kind="stable")
+    xs = x[order]
+    first = np.concatenate([[0], np.flatnonzero(np.diff(xs) >= 2.0 * side) + 1])
+    last = np.append(first[1:], len(xs)) - 1
+    span = (xs[last] - xs[first]) / side
+    if not (span < _MAX_CELLS).all():
+        return None
+    # four more than the run's cells: room for the floor's rounding and for two empty cells between runs
+    offset = np.concatenate([[0], np.cumsum(np.floor(span[:-1]).astype(np.int64) + 4)])
+    run = np.repeat(np.arange(len(first)), last - first + 1)
+    out = np.empty(len(xs), dtype=np.int64)
+    out[order] = np.floor((xs - xs[first][run]) * (1.0 / side)).astype(np.int64) + offset[run]
+    return out
+
+
 def grid_cells(points, side, owner):
     """The cubic cells of ``side`` holding ``points``: (cell of each point, order, start, occupied cells).
 
     ``order`` sorts the points by cell lexicographically; the points of the
-    ``a``-th occupied cell are ``order[start[a]:start[a + 1]]``. Raises a
-    ValueError naming ``owner`` when the scene spans more than 2**30 cells
-    along an axis (a tolerance too small for the scene's extent).
+    ``a``-th occupied cell are ``order[start[a]:start[a + 1]]``. Along an axis
+    where the scene spans 2**30 cells or more, the cells come from
+    :func:`_gapped_cells`. Raises a ValueError naming ``owner`` when even a run
+    of points without gaps of two cells spans 2**30 cells along an axis (a
+    tolerance too small for the scene's extent).
     """
     lo = points.min(axis=0)
     with np.errstate(over="ignore"):
         span = (points.max(axis=0) - lo) / side
-    if not (span < _MAX_CELLS).all():
-        axis = "xyz"[int(np.argmax(~(span < _MAX_CELLS)))]
-        raise ValueError(f"{owner}: the scene spans more than 2**30 cells of the tolerance along {axis} "
-                         f"(extent {np.ptp(points, axis=0).max():.6g}, cell {side:.6g}); give a larger tolerance "
-                         f"or split the scene")
     cells = _cluster_fast.cells(points, lo[0], lo[1], lo[2], 1.0 / side, _MAX_CELLS)
+    for axis in np.flatnonzero(~(span < _MAX_CELLS)):
+        gapped = _gapped_cells(np.ascontiguousarray(points[:, axis]), side)
+        if gapped is None:
+            raise ValueError(f"{owner}: the scene spans more than 2**30 cells of the tolerance along "
+                             f"{'xyz'[axis]} (extent {np.ptp(points, axis=0).max():.6g}, cell {side:.6g}) without "
+                             f"a gap; give a larger tolerance or split the scene")
+        cells[:, axis] = gapped
+        span[axis] = float(gapped.max())
     if (span < _PACKED - 1).all():
         # the order of the points within a cell does not matter: any sort will do
         order = np.argsort((cells[:, 0] * _PACKED + cells[:, 1]) * _PACKED + cells[:, 2])
@@ -191,8 +220,9 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
         values, are fewer than two or all identical, span more than 1e100 or
-        (along their longest axis) less than 1e-100, or a parameter is out of
-        range.
+        (along their longest axis) less than 1e-100, a run of points without
+        gaps of a tolerance spans more than 2**30 tolerances along an axis
+        (far stray points are no such run), or a parameter is out of range.
     TypeError
         If the points are not numbers or a parameter has a wrong type.
 

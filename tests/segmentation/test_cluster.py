@@ -123,7 +123,6 @@ def test_float32_and_int_input():
     (np.zeros((3, 3)), 1.0, ValueError, r"all 3 points identical"),
     (np.array([[-1e308, 0, 0], [1e308, 0, 0]]), 1.0, ValueError, r"extent overflows"),
     (np.array([[0, 0, 0], [1e200, 0, 0]]), 1.0, ValueError, r"spans 1e\+200 along one axis; at most 1e\+100"),
-    (np.array([[0, 0, 0], [1e9, 0, 0]]), 1e-9, ValueError, r"more than 2\*\*30 cells"),
     (np.array([["a", "b", "c"]] * 2), 1.0, TypeError, r"must hold numbers"),
     (np.eye(3), 0.0, ValueError, r"tolerance must be None or a float in \(0.0, inf\), got 0.0"),
     (np.eye(3), -1.0, ValueError, r"tolerance"),
@@ -256,3 +255,35 @@ def test_derived_tolerance_on_dense_blobs_searches_few_points(monkeypatch, scene
         points = np.vstack([blob * [1, 1, 1e-3], blob * [1, 1, 1e-3] + [0, 0, 1.0]])
     assert default_tolerance(points) == _exact_derived_tolerance(points)
     assert compared and max(compared) < 100 * 6000  # a whole blob per sample point: 6000 * 6000
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_stray_points_far_from_the_scene_match_the_reference(seed):
+    # a point 1e12 away (a bad return) made the grid span more than 2**30 cells of the tolerance: an error
+    # telling to take a larger tolerance, which would have merged the scene's objects
+    from eppf.segmentation import segment_scene
+
+    rng = np.random.default_rng(seed)
+    scene = rng.uniform(0, 1, (1500, 3)) * [8, 6, 2]
+    stray = np.array([[1e12, 0, 0], [0, -1e12, 3], [1e12, 1e12, -1e12], [1e12 + 0.01, 0, 0], [-7e11, 5, 5]])
+    points = np.vstack([scene, stray])[rng.permutation(len(scene) + len(stray))]
+    tolerance = float(rng.uniform(0.2, 0.6))
+    np.testing.assert_array_equal(euclidean_clusters(points, tolerance), reference(points, tolerance))
+    # the stray points change neither the derived tolerance nor the scene's segments
+    alone = segment_scene(scene, ground="none", min_points=3)
+    labels = segment_scene(np.vstack([scene, stray]), ground="none", min_points=3)
+    np.testing.assert_array_equal(labels[:len(scene)], alone)
+    assert (labels[len(scene):] == -1).all()
+
+
+def test_a_run_of_points_spanning_too_many_cells_is_refused(monkeypatch):
+    from eppf.segmentation import _cluster
+
+    monkeypatch.setattr(_cluster, "_MAX_CELLS", 1000)  # 2**30 cells take 5e8 points without a gap
+    points = np.column_stack([np.arange(2000) * 0.5, np.zeros(2000), np.zeros(2000)])
+    with pytest.raises(ValueError, match=r"^euclidean_clusters: the scene spans more than 2\*\*30 cells of the "
+                                         r"tolerance along x \(extent 999.5, cell 0.57735\) without a gap; give"):
+        euclidean_clusters(points, 1.0)
+    # the same points in runs with gaps: clustered run by run
+    points[:, 0] += np.repeat(np.arange(20) * 10.0, 100)
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.0), reference(points, 1.0))
