@@ -145,7 +145,9 @@ def _grid_surface(points, cell, max_slope):
         if surface.shape[axis] > 1:
             gradient[axis] = np.gradient(surface, cell, axis=axis)
     steep = np.hypot(gradient[0], gradient[1])
-    gradient *= np.minimum(1.0, max_slope / np.maximum(steep, 1e-300))
+    # only where steeper than max_slope: max_slope over a nearly flat surface's slope overflowed (max_slope 1e308)
+    over = steep > max_slope
+    gradient[:, over] *= max_slope / steep[over]
     # where the ground surface is known: the lowest point of each cell, else the cell's center
     anchor = (np.indices(tuple(shape)).reshape(2, -1).T + 0.5) * cell
     lowest = np.flatnonzero(points[:, 2] == zmin[flat])

@@ -241,3 +241,12 @@ def test_ransac_subset_is_distinct_uniform_and_seeded():
         np.testing.assert_array_equal(_subset(m, k, np.random.RandomState(5)),
                                       np.sort(np.random.RandomState(5).choice(m, k, replace=False)))
     assert len(np.unique(_subset(_PERMUTED + 1, 50000, np.random.RandomState(0)))) == 50000
+
+
+def test_no_slope_limit_raises_no_overflow_warning():
+    # max_slope over a flat surface's slope (max_slope / 1e-300) overflowed for max_slope near 1e308
+    points, _ = _scene()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mask = remove_ground(points, method="grid", max_slope=1e308)
+    np.testing.assert_array_equal(mask, remove_ground(points, method="grid", max_slope=1e6))
