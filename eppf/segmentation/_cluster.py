@@ -5,7 +5,7 @@ import numbers
 import numpy as np
 
 from . import _cluster_fast
-from ._checks import check_field, check_scene, check_tolerance
+from ._checks import MIN_TOLERANCE, check_field, check_scene, check_tolerance
 from ..utils._param_validation import Interval, validate_parameter
 
 __all__ = ["MIN_POINTS", "MAX_POINTS", "TOLERANCE_FACTOR", "default_tolerance", "euclidean_clusters",
@@ -31,9 +31,10 @@ def default_tolerance(points, owner="segment_scene"):
     evenly through the array (the same points on every call). The distances are
     found on a grid whose cells start at twice the spacing the points would have
     on the bounding box's two longest sides (finer where most of those points
-    lie in crowded cells, see :func:`_finer_side`), and grow fourfold until more
-    than half of those points have a neighbor within one cell: the median is
-    then exact.
+    lie in crowded cells, see :func:`_finer_side`), and grow at least fourfold,
+    up to the median distance found, until more than half of those points have
+    a neighbor within one cell: the median is then exact. Raises a ValueError
+    naming ``owner`` when the tolerance would be below :data:`MIN_TOLERANCE`.
     """
     n = len(points)
     sample = np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.int64))
@@ -43,8 +44,9 @@ def default_tolerance(points, owner="segment_scene"):
     distinct, copy = sample[first], copy.reshape(-1)
     extent = np.sort(points.max(axis=0) - points.min(axis=0))
     side = 2.0 * float(np.sqrt(extent[2]) * np.sqrt(max(extent[1], extent[2] * 1e-6)) / np.sqrt(n))
-    # finer cells than this would span more than the 2**30 along an axis that grid_cells allows
-    finest = float(extent[2]) / 2**29
+    # finer cells would hold squared distances that underflow (and scenes of points far apart take them
+    # run by run, see grid_cells)
+    finest = MIN_TOLERANCE
     middle = len(sample) // 2
     shrink = True
     while True:
@@ -58,8 +60,15 @@ def default_tolerance(points, owner="segment_scene"):
         dist = _cluster_fast.nearest_distances(points, *grid, distinct)[copy]
         spacing = float(np.partition(dist, middle)[middle])
         if spacing <= side:
-            return TOLERANCE_FACTOR * spacing
-        side *= 4.0
+            break
+        # every distance found is that of a point, so the median is at most the one found: with cells that
+        # wide the next round ends (cells at least four times wider keep the rounds few where none was found)
+        side = max(4.0 * side, spacing) if np.isfinite(spacing) else 4.0 * side
+    if TOLERANCE_FACTOR * spacing < MIN_TOLERANCE:
+        raise ValueError(f"{owner}: the median nearest-neighbor distance of the points is {spacing:.6g}, so the "
+                         f"tolerance derived from it ({TOLERANCE_FACTOR:g} times that) is below {MIN_TOLERANCE:g}, "
+                         "where squared distances underflow float64: rescale the coordinates")
+    return TOLERANCE_FACTOR * spacing
 
 
 def _finer_side(points, grid, distinct, side, finest):
@@ -198,9 +207,10 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
         The scene (normals, when given, are ignored); at least two points,
         all finite.
     tolerance : float, default=None
-        Largest distance (excluded) between two connected points, > 0, in the
-        units of ``points``. None derives it from the point spacing: five
-        times the median nearest-neighbor distance.
+        Largest distance (excluded) between two connected points, at least
+        1e-150 (smaller squared distances underflow float64), in the units of
+        ``points``. None derives it from the point spacing: five times the
+        median nearest-neighbor distance.
     min_points : int, default=1
         Smallest kept cluster (PCL's ``setMinClusterSize``).
     max_points : int, default=None
@@ -222,7 +232,8 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
         values, are fewer than two or all identical, span more than 1e100 or
         (along their longest axis) less than 1e-100, a run of points without
         gaps of a tolerance spans more than 2**30 tolerances along an axis
-        (far stray points are no such run), or a parameter is out of range.
+        (far stray points are no such run), the derived tolerance is below
+        1e-150, or a parameter is out of range.
     TypeError
         If the points are not numbers or a parameter has a wrong type.
 

@@ -238,7 +238,8 @@ cdef int64_t _first_at_or_after(const int64_t[:, ::1] cell, int64_t m, int64_t x
 def nearest_distances(const double[:, ::1] pts, const int64_t[:, ::1] cells, const int64_t[::1] order,
                       const int64_t[::1] start, const int64_t[:, ::1] cell, const int64_t[::1] sample):
     """For each point of ``sample``, the distance to its nearest point at a positive distance among those of
-    its own and the 26 adjacent cells (+inf when there is none). Exact for distances up to the cells' side.
+    its own and the 26 adjacent cells (+inf when there is none). Exact for distances up to the cells' side
+    (0 where the squared distance underflows).
 
     ``cells`` holds each point's cell; ``order``, ``start`` and ``cell`` the occupied cells (see :func:`runs`).
     """
@@ -266,7 +267,8 @@ def nearest_distances(const double[:, ::1] pts, const int64_t[:, ::1] cells, con
                             ey = pts[p, 1] - pts[q, 1]
                             ez = pts[p, 2] - pts[q, 2]
                             d = ex * ex + ey * ey + ez * ez
-                            if d > 0.0 and d < best:
+                            # coincident points are left out; a point apart whose square underflows to 0 is not
+                            if d < best and (ex != 0.0 or ey != 0.0 or ez != 0.0):
                                 best = d
                         b += 1
             out[s] = sqrt(best)

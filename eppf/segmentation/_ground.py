@@ -275,8 +275,8 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
         values, are fewer than two or all identical, span more than 1e100 or
-        (along their longest axis) less than 1e-100, or a parameter is out of
-        range.
+        (along their longest axis) less than 1e-100, the tolerance derived for
+        ``threshold=None`` is below 1e-150, or a parameter is out of range.
 
     See Also
     --------

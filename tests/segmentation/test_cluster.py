@@ -129,6 +129,7 @@ def test_float32_and_int_input():
     (np.eye(3), np.nan, ValueError, r"tolerance"),
     (np.eye(3), np.inf, ValueError, r"tolerance"),
     (np.eye(3), True, TypeError, r"tolerance"),
+    (np.eye(3), 1e-320, ValueError, r"tolerance must be at least 1e-150 \(squared distances below it underflow"),
     (np.eye(3), "1", TypeError, r"tolerance"),
 ])
 def test_bad_input_is_named(points, tolerance, kind, pattern):
@@ -230,7 +231,7 @@ def _exact_derived_tolerance(points):
     return TOLERANCE_FACTOR * np.partition(dist, len(sample) // 2)[len(sample) // 2]
 
 
-@pytest.mark.parametrize("scene", ["blob and a far point", "two flat blobs far apart"])
+@pytest.mark.parametrize("scene", ["blob and a far point", "two flat blobs far apart", "blob and a point 1e12 away"])
 def test_derived_tolerance_on_dense_blobs_searches_few_points(monkeypatch, scene):
     # the first cells come from the bounding box: a dense blob (points within 1e-6 of each other) and a far
     # point, or two blobs 1 apart, put each blob in one cell, searched in full for each of its sample points
@@ -251,6 +252,8 @@ def test_derived_tolerance_on_dense_blobs_searches_few_points(monkeypatch, scene
     blob = rng.uniform(0, 1e-6, (6000, 3))
     if scene == "blob and a far point":
         points = np.vstack([blob, [[1.0, 1.0, 1.0]]])
+    elif scene == "blob and a point 1e12 away":  # the cells were kept wider than 1e12 / 2**29
+        points = np.vstack([blob, [[1e12, 0.0, 0.0]]])
     else:
         points = np.vstack([blob * [1, 1, 1e-3], blob * [1, 1, 1e-3] + [0, 0, 1.0]])
     assert default_tolerance(points) == _exact_derived_tolerance(points)
@@ -287,3 +290,31 @@ def test_a_run_of_points_spanning_too_many_cells_is_refused(monkeypatch):
     # the same points in runs with gaps: clustered run by run
     points[:, 0] += np.repeat(np.arange(20) * 10.0, 100)
     np.testing.assert_array_equal(euclidean_clusters(points, 1.0), reference(points, 1.0))
+
+
+def test_a_derived_tolerance_whose_squares_underflow_is_refused():
+    # most points a few subnormal steps apart beside a unit-scale scene: their squared distances underflow to 0,
+    # so they were taken for coincident points and left out of the spacing (and a finer search took minutes)
+    from eppf.segmentation import remove_ground, segment_scene
+
+    rng = np.random.default_rng(9)
+    crowd = np.column_stack([np.arange(1500) * 5e-324, np.zeros((1500, 2))])
+    points = np.vstack([crowd, rng.uniform(0, 1, (500, 3))])
+    for function in (euclidean_clusters, remove_ground, segment_scene):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(ValueError, match=rf"^{function.__name__}: the median nearest-neighbor distance of "
+                                                 r"the points is 0, so the tolerance derived .* below 1e-150"):
+                function(points)
+
+
+def test_tiny_tolerances_are_refused_by_segment_scene_too():
+    from eppf.segmentation import SceneSegmenter, segment_scene
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the cells' side overflowed in 1 / side
+        with pytest.raises(ValueError, match=r"^segment_scene: tolerance must be at least 1e-150"):
+            segment_scene(np.eye(3), tolerance=1e-320)
+        with pytest.raises(ValueError, match=r"^SceneSegmenter: tolerance must be at least 1e-150"):
+            SceneSegmenter(tolerance=1e-200).fit(np.eye(3))
+    assert segment_scene(np.eye(3), ground="none", tolerance=1e-150, min_points=1).tolist() == [0, 1, 2]
