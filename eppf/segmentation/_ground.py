@@ -32,6 +32,8 @@ _REFITS = 10
 _FLAT = 1e-3
 #: Share of the lowest-surface cells that must lie on the plane for "auto" to keep it.
 _PLANAR_SHARE = 0.9
+#: Most runs of points far apart the grid model takes one by one (see :func:`_apart`); beyond, one grid.
+_MAX_RUNS = 64
 
 
 def _toward_objects(local, nrm, d, threshold):
@@ -115,7 +117,56 @@ def _plane_ransac(points, threshold, n_trials, rng):
     return nrm, d + center @ nrm, sigma
 
 
+def _cells_over_budget(points, cell):
+    """Whether the grid of ``cell`` over ``points`` has more cells than its budget (then its cells widen)."""
+    extent = np.ptp(points[:, :2], axis=0)
+    budget = max(4.0 * len(points), 2.0**20)
+    with np.errstate(over="ignore"):
+        cells = (extent[0] / cell + 1.0) * (extent[1] / cell + 1.0)
+    return not cells <= budget
+
+
+def _apart(points, cell, max_slope):
+    """The runs of points (index arrays) along x, then along y within each, parted by horizontal gaps across
+    which the lowest surface does not reach: wider than the scene's height range over ``max_slope`` and three
+    cells; None when there is one run, or more than :data:`_MAX_RUNS`."""
+    height = float(np.ptp(points[:, 2]))
+    if max_slope == 0 and height > 0:
+        return None
+    gap = height / max_slope + 3.0 * cell if height > 0 else 3.0 * cell
+    runs = [np.arange(len(points))]
+    for axis in (0, 1):
+        parted = []
+        for run in runs:
+            order = run[np.argsort(points[run, axis], kind="stable")]
+            cuts = np.flatnonzero(np.diff(points[order, axis]) > gap) + 1
+            parted.extend(np.split(order, cuts))
+            if len(parted) > _MAX_RUNS:
+                return None
+        runs = parted
+    return [np.sort(run) for run in runs] if len(runs) > 1 else None
+
+
 def _grid_surface(points, cell, max_slope):
+    """:func:`_one_grid` of the scene, or of each of its runs (:func:`_apart`) where the scene's grid would be
+    over its budget: stray points far from the scene (1e12 away) widened the cells of the whole scene, and
+    the ground model with them, where the lowest surface between them and the scene is never reached.
+    The runs' cells are numbered one run after the other."""
+    runs = _apart(points, cell, max_slope) if _cells_over_budget(points, cell) else None
+    if runs is None:
+        return _one_grid(points, cell, max_slope)
+    rise = np.empty(len(points))
+    flat = np.empty(len(points), dtype=np.int64)
+    zmins, first = [], 0
+    for run in runs:
+        rise[run], run_flat, run_zmin, _ = _one_grid(points[run], cell, max_slope)
+        flat[run] = run_flat + first
+        zmins.append(run_zmin)
+        first += len(run_zmin)
+    return rise, flat, np.concatenate(zmins), cell
+
+
+def _one_grid(points, cell, max_slope):
     """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side).
 
     The cells' lowest points give the surface ``S(c) = min over cells c' of
@@ -231,10 +282,16 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
       around it; the ground under a point is that surface carried from its
       cell's lowest point along the surface's gradient, and ground is every
       point less than ``threshold`` above it. The vertical axis is z.
-      Limits: a flat object of height ``h`` is taken for ground where it is
-      farther than ``h / max_slope`` from its edge (the middle of a large flat
-      roof), and terrain steeper than ``max_slope`` is partly left out of the
-      ground.
+      Points farther apart horizontally than the scene's height range over
+      ``max_slope`` (stray points far from the scene), where the surface of
+      one never reaches the other, get grids of their own when one grid
+      would widen its cells (up to 64 such runs). Limits: a flat object of
+      height ``h`` is taken for ground where it is farther than
+      ``h / max_slope`` from its edge (the middle of a large flat roof),
+      terrain steeper than ``max_slope`` is partly left out of the ground,
+      and a point far below the ground (low noise) pulls the surface down
+      around it, as the model has it: remove such points first, or use
+      ``"plane"``.
     - ``"auto"``: the plane when the lowest points of at least 90% of the
       grid's ground cells lie within the grid's threshold of it (a floor,
       flat or evenly tilted ground), else the grid.

@@ -250,3 +250,18 @@ def test_no_slope_limit_raises_no_overflow_warning():
         warnings.simplefilter("error")
         mask = remove_ground(points, method="grid", max_slope=1e308)
     np.testing.assert_array_equal(mask, remove_ground(points, method="grid", max_slope=1e6))
+
+
+@pytest.mark.parametrize("method", ["grid", "auto"])
+def test_stray_points_far_away_leave_the_grid_ground_as_it_was(method):
+    # a point 1e12 away made the grid's cells 1e9 wide (four cells a point at most): the whole scene in one
+    # cell, ground 9325 of 20,000 floor points and no object left apart; now each far run has its own grid
+    points, n_ground = _scene(height=lambda x, y: np.sin(x / 3) * 2 + 0.1 * y)
+    stray = np.array([[1e12, 0, 0], [0, -1e12, 0.5], [3e3, 3e3, 0], [1e12, 1e12, 2.0]])
+    alone = remove_ground(points, method=method, threshold=0.3)
+    mask = remove_ground(np.vstack([points, stray]), method=method, threshold=0.3)
+    np.testing.assert_array_equal(mask[:len(points)], alone)
+    assert mask[len(points):].all()  # each the lowest point of its own grid
+    flat, _ = _scene()
+    mask = remove_ground(np.vstack([flat, [[1e12, 0, 0]]]), method=method)
+    assert mask[:n_ground].all() and not mask[n_ground:-1].any()
