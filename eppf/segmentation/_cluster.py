@@ -80,10 +80,10 @@ def _finer_side(points, grid, distinct, side, finest):
     each other, a far point or two widening the box) put the whole blob in one cell, searched in full for
     each of its sample points (seconds for 200,000 points). The finer side aims at :data:`_CROWDED` points a
     cell in the crowds' boxes (their median count and longest side), at most half ``side`` (a flat or thin
-    crowd fills its box less), never finer than ``finest`` (None when ``side`` is already that fine). Piles of coincident points are no crowds: finer cells do not part
-    them, and each is searched once (for its one distinct sample point).
-    Whatever the side, the median :func:`default_tolerance` returns is exact, so finer cells change its
-    time, not its value.
+    crowd fills its box less), never finer than ``finest`` (None when ``side`` is already that fine). Piles
+    of coincident points are no crowds: finer cells do not part them, and each is searched once (for its one
+    distinct sample point). Whatever the side, the median :func:`default_tolerance` returns is exact, so
+    finer cells change its time, not its value.
     """
     count, width = _cluster_fast.crowding(points, *grid, distinct)
     crowded = (count > _CROWDED) & (width > 0)  # a pile of coincident points is no crowd: no cell parts it

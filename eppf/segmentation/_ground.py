@@ -118,7 +118,8 @@ def _plane_ransac(points, threshold, n_trials, rng):
 
 
 def _cells_over_budget(points, cell):
-    """Whether the grid of ``cell`` over ``points`` has more cells than its budget (then its cells widen)."""
+    """Whether the grid of ``cell`` over ``points`` has more cells than its budget, the one of :func:`_one_grid`
+    (which then widens its cells)."""
     extent = np.ptp(points[:, :2], axis=0)
     budget = max(4.0 * len(points), 2.0**20)
     with np.errstate(over="ignore"):
