@@ -7,7 +7,7 @@ import numpy as np
 from ..utils._param_validation import Interval, validate_parameter
 from ..utils._validation import check_point_cloud
 
-__all__ = ["MAX_EXTENT", "MIN_EXTENT", "TOLERANCE", "check_field", "check_scene", "check_tolerance"]
+__all__ = ["MAX_EXTENT", "MIN_EXTENT", "MIN_TOLERANCE", "TOLERANCE", "check_field", "check_scene", "check_tolerance"]
 
 #: The largest scene extent per axis: squared distances and the plane fit's sums of squares
 #: (up to 1e9 points) stay finite below it, with a wide margin over any real scan (1e7 m).
@@ -16,6 +16,10 @@ MAX_EXTENT = 1e100
 #: The smallest largest extent of a scene: below it, cell sides derived from the extent or a tolerance
 #: consistent with it reach subnormal numbers, whose reciprocals overflow (a real scan spans 1e-3 m at least).
 MIN_EXTENT = 1e-100
+
+#: The smallest clustering distance: below it the squares of the distances compared with it underflow
+#: float64 (1e-150 squared is 1e-300, still a normal number), and the cells' sides with them.
+MIN_TOLERANCE = 1e-150
 
 #: ``tolerance``: None (derived from the point spacing) or a positive distance.
 TOLERANCE = [None, Interval(numbers.Real, 0, None, closed="neither")]
@@ -48,9 +52,15 @@ def check_scene(points, owner):
 
 
 def check_tolerance(tolerance, owner):
-    """``tolerance`` as a float (None stays None), or the validator's error naming ``owner``."""
+    """``tolerance`` as a float (None stays None), or the validator's error naming ``owner``; a ValueError
+    too for a tolerance below :data:`MIN_TOLERANCE`."""
     validate_parameter(tolerance, TOLERANCE, name="tolerance", owner=owner)
-    return None if tolerance is None else float(tolerance)
+    if tolerance is None:
+        return None
+    if tolerance < MIN_TOLERANCE:
+        raise ValueError(f"{owner}: tolerance must be at least {MIN_TOLERANCE:g} (squared distances below it "
+                         f"underflow float64), got {float(tolerance)!r}: rescale the coordinates")
+    return float(tolerance)
 
 
 def check_field(values, n_points, owner, name="values"):

@@ -5,7 +5,7 @@ import numbers
 import numpy as np
 
 from . import _cluster_fast
-from ._checks import check_field, check_scene, check_tolerance
+from ._checks import MIN_TOLERANCE, check_field, check_scene, check_tolerance
 from ..utils._param_validation import Interval, validate_parameter
 
 __all__ = ["MIN_POINTS", "MAX_POINTS", "TOLERANCE_FACTOR", "default_tolerance", "euclidean_clusters",
@@ -19,6 +19,8 @@ MAX_POINTS = [None, Interval(numbers.Integral, 1, None, closed="left")]
 TOLERANCE_FACTOR = 5.0
 #: Points whose nearest-neighbor distance the derived tolerance is taken from.
 _SPACING_SAMPLE = 20000
+#: Points in a cell above which the derived tolerance's search takes finer cells (see :func:`_finer_side`).
+_CROWDED = 64
 
 
 def default_tolerance(points, owner="segment_scene"):
@@ -28,8 +30,11 @@ def default_tolerance(points, owner="segment_scene"):
     other point (coincident points left out), over up to 20,000 points spread
     evenly through the array (the same points on every call). The distances are
     found on a grid whose cells start at twice the spacing the points would have
-    on the bounding box's two longest sides, and grow fourfold until more than
-    half of those points have a neighbor within one cell: the median is then exact.
+    on the bounding box's two longest sides (finer where most of those points
+    lie in crowded cells, see :func:`_finer_side`), and grow at least fourfold,
+    up to the median distance found, until more than half of those points have
+    a neighbor within one cell: the median is then exact. Raises a ValueError
+    naming ``owner`` when the tolerance would be below :data:`MIN_TOLERANCE`.
     """
     n = len(points)
     sample = np.unique(np.linspace(0, n - 1, min(n, _SPACING_SAMPLE)).astype(np.int64))
@@ -39,13 +44,54 @@ def default_tolerance(points, owner="segment_scene"):
     distinct, copy = sample[first], copy.reshape(-1)
     extent = np.sort(points.max(axis=0) - points.min(axis=0))
     side = 2.0 * float(np.sqrt(extent[2]) * np.sqrt(max(extent[1], extent[2] * 1e-6)) / np.sqrt(n))
+    # finer cells would hold squared distances that underflow (and scenes of points far apart take them
+    # run by run, see grid_cells)
+    finest = MIN_TOLERANCE
     middle = len(sample) // 2
+    shrink = True
     while True:
-        dist = _cluster_fast.nearest_distances(points, *grid_cells(points, side, owner), distinct)[copy]
+        grid = grid_cells(points, side, owner)
+        if shrink:
+            finer = _finer_side(points, grid, distinct, side, finest)
+            if finer is not None:
+                side = finer
+                continue
+            shrink = False
+        dist = _cluster_fast.nearest_distances(points, *grid, distinct)[copy]
         spacing = float(np.partition(dist, middle)[middle])
         if spacing <= side:
-            return TOLERANCE_FACTOR * spacing
-        side *= 4.0
+            break
+        # every distance found is that of a point, so the median is at most the one found: with cells that
+        # wide the next round ends (cells at least four times wider keep the rounds few where none was found)
+        side = max(4.0 * side, spacing) if np.isfinite(spacing) else 4.0 * side
+    if TOLERANCE_FACTOR * spacing < MIN_TOLERANCE:
+        raise ValueError(f"{owner}: the median nearest-neighbor distance of the points is {spacing:.6g}, so the "
+                         f"tolerance derived from it ({TOLERANCE_FACTOR:g} times that) is below {MIN_TOLERANCE:g}, "
+                         "where squared distances underflow float64: rescale the coordinates")
+    return TOLERANCE_FACTOR * spacing
+
+
+def _finer_side(points, grid, distinct, side, finest):
+    """A side of cells finer than ``side`` for :func:`default_tolerance` when most of the ``distinct`` sample
+    points lie in crowded cells of the ``grid`` (each search would compare with every point of a crowd),
+    else None.
+
+    The side from the bounding box suits points spread over it; a dense blob (most points within 1e-6 of
+    each other, a far point or two widening the box) put the whole blob in one cell, searched in full for
+    each of its sample points (seconds for 200,000 points). The finer side aims at :data:`_CROWDED` points a
+    cell in the crowds' boxes (their median count and longest side), at most half ``side`` (a flat or thin
+    crowd fills its box less), never finer than ``finest`` (None when ``side`` is already that fine). Piles
+    of coincident points are no crowds: finer cells do not part them, and each is searched once (for its one
+    distinct sample point). Whatever the side, the median :func:`default_tolerance` returns is exact, so
+    finer cells change its time, not its value.
+    """
+    count, width = _cluster_fast.crowding(points, *grid, distinct)
+    crowded = (count > _CROWDED) & (width > 0)  # a pile of coincident points is no crowd: no cell parts it
+    if 2 * np.count_nonzero(crowded) <= len(distinct):
+        return None
+    target = float(np.median(width[crowded])) * float(np.cbrt(_CROWDED / np.median(count[crowded])))
+    finer = max(min(target, 0.5 * side), finest)  # at least halved: the target is for crowds filling 3D boxes
+    return finer if finer < side else None
 
 
 def number_segments(roots, min_points, max_points):
@@ -85,23 +131,52 @@ _MAX_CELLS = 2**30
 _PACKED = 2**21
 
 
+def _gapped_cells(x, side):
+    """Cell coordinates along one axis of coordinates ``x`` spanning too many cells of ``side``: the points
+    part into runs at gaps of at least two cells (no two points across one are within a tolerance, or a
+    cell's side, of each other), each run gets cells from its own lowest point, and the runs follow each
+    other in cell coordinates with empty cells between them. None when a run spans :data:`_MAX_CELLS` cells.
+
+    So a stray point far from the scene (1e12 away, a scanner's bad return) costs a run of its own, not
+    2**40 cells' worth of coordinates whose rounding would exceed the margin of the cells' side.
+    """
+    order = np.argsort(x, kind="stable")
+    xs = x[order]
+    first = np.concatenate([[0], np.flatnonzero(np.diff(xs) >= 2.0 * side) + 1])
+    last = np.append(first[1:], len(xs)) - 1
+    span = (xs[last] - xs[first]) / side
+    if not (span < _MAX_CELLS).all():
+        return None
+    # four more than the run's cells: room for the floor's rounding and for two empty cells between runs
+    offset = np.concatenate([[0], np.cumsum(np.floor(span[:-1]).astype(np.int64) + 4)])
+    run = np.repeat(np.arange(len(first)), last - first + 1)
+    out = np.empty(len(xs), dtype=np.int64)
+    out[order] = np.floor((xs - xs[first][run]) * (1.0 / side)).astype(np.int64) + offset[run]
+    return out
+
+
 def grid_cells(points, side, owner):
     """The cubic cells of ``side`` holding ``points``: (cell of each point, order, start, occupied cells).
 
     ``order`` sorts the points by cell lexicographically; the points of the
-    ``a``-th occupied cell are ``order[start[a]:start[a + 1]]``. Raises a
-    ValueError naming ``owner`` when the scene spans more than 2**30 cells
-    along an axis (a tolerance too small for the scene's extent).
+    ``a``-th occupied cell are ``order[start[a]:start[a + 1]]``. Along an axis
+    where the scene spans 2**30 cells or more, the cells come from
+    :func:`_gapped_cells`. Raises a ValueError naming ``owner`` when even a run
+    of points without gaps of two cells spans 2**30 cells along an axis (a
+    tolerance too small for the scene's extent).
     """
     lo = points.min(axis=0)
     with np.errstate(over="ignore"):
         span = (points.max(axis=0) - lo) / side
-    if not (span < _MAX_CELLS).all():
-        axis = "xyz"[int(np.argmax(~(span < _MAX_CELLS)))]
-        raise ValueError(f"{owner}: the scene spans more than 2**30 cells of the tolerance along {axis} "
-                         f"(extent {np.ptp(points, axis=0).max():.6g}, cell {side:.6g}); give a larger tolerance "
-                         f"or split the scene")
     cells = _cluster_fast.cells(points, lo[0], lo[1], lo[2], 1.0 / side, _MAX_CELLS)
+    for axis in np.flatnonzero(~(span < _MAX_CELLS)):
+        gapped = _gapped_cells(np.ascontiguousarray(points[:, axis]), side)
+        if gapped is None:
+            raise ValueError(f"{owner}: the scene spans more than 2**30 cells of the tolerance along "
+                             f"{'xyz'[axis]} (extent {np.ptp(points, axis=0).max():.6g}, cell {side:.6g}) without "
+                             f"a gap; give a larger tolerance or split the scene")
+        cells[:, axis] = gapped
+        span[axis] = float(gapped.max())
     if (span < _PACKED - 1).all():
         # the order of the points within a cell does not matter: any sort will do
         order = np.argsort((cells[:, 0] * _PACKED + cells[:, 1]) * _PACKED + cells[:, 2])
@@ -132,9 +207,10 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
         The scene (normals, when given, are ignored); at least two points,
         all finite.
     tolerance : float, default=None
-        Largest distance (excluded) between two connected points, > 0, in the
-        units of ``points``. None derives it from the point spacing: five
-        times the median nearest-neighbor distance.
+        Largest distance (excluded) between two connected points, at least
+        1e-150 (smaller squared distances underflow float64), in the units of
+        ``points``. None derives it from the point spacing: five times the
+        median nearest-neighbor distance.
     min_points : int, default=1
         Smallest kept cluster (PCL's ``setMinClusterSize``).
     max_points : int, default=None
@@ -154,8 +230,10 @@ def euclidean_clusters(points, tolerance=None, *, min_points=1, max_points=None)
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
         values, are fewer than two or all identical, span more than 1e100 or
-        (along their longest axis) less than 1e-100, or a parameter is out of
-        range.
+        (along their longest axis) less than 1e-100, a run of points without
+        gaps of a tolerance spans more than 2**30 tolerances along an axis
+        (far stray points are no such run), the derived tolerance is below
+        1e-150, or a parameter is out of range.
     TypeError
         If the points are not numbers or a parameter has a wrong type.
 

@@ -238,7 +238,8 @@ cdef int64_t _first_at_or_after(const int64_t[:, ::1] cell, int64_t m, int64_t x
 def nearest_distances(const double[:, ::1] pts, const int64_t[:, ::1] cells, const int64_t[::1] order,
                       const int64_t[::1] start, const int64_t[:, ::1] cell, const int64_t[::1] sample):
     """For each point of ``sample``, the distance to its nearest point at a positive distance among those of
-    its own and the 26 adjacent cells (+inf when there is none). Exact for distances up to the cells' side.
+    its own and the 26 adjacent cells (+inf when there is none). Exact for distances up to the cells' side
+    (0 where the squared distance underflows).
 
     ``cells`` holds each point's cell; ``order``, ``start`` and ``cell`` the occupied cells (see :func:`runs`).
     """
@@ -266,8 +267,50 @@ def nearest_distances(const double[:, ::1] pts, const int64_t[:, ::1] cells, con
                             ey = pts[p, 1] - pts[q, 1]
                             ez = pts[p, 2] - pts[q, 2]
                             d = ex * ex + ey * ey + ez * ez
-                            if d > 0.0 and d < best:
+                            # coincident points are left out; a point apart whose square underflows to 0 is not
+                            if d < best and (ex != 0.0 or ey != 0.0 or ez != 0.0):
                                 best = d
                         b += 1
             out[s] = sqrt(best)
     return out_arr
+
+
+def crowding(const double[:, ::1] pts, const int64_t[:, ::1] cells, const int64_t[::1] order,
+             const int64_t[::1] start, const int64_t[:, ::1] cell, const int64_t[::1] sample):
+    """For each point of ``sample``: (the number of points in its cell, the longest side of their bounding box).
+
+    Each cell's box is measured once, however many sample points it holds: linear time in the points.
+    ``cells``, ``order``, ``start`` and ``cell`` as for :func:`nearest_distances`.
+    """
+    cdef Py_ssize_t ns = sample.shape[0]
+    cdef int64_t m = cell.shape[0]
+    cdef int64_t s, p, q, b, j
+    cdef int d
+    cdef double lo, hi, w
+    count_arr = np.empty(ns, dtype=np.int64)
+    width_arr = np.empty(ns)
+    known_arr = np.full(max(m, 1), -1.0)
+    cdef int64_t[::1] count = count_arr
+    cdef double[::1] width = width_arr
+    cdef double[::1] known = known_arr
+    with nogil:
+        for s in range(ns):
+            p = sample[s]
+            b = _first_at_or_after(cell, m, cells[p, 0], cells[p, 1], cells[p, 2])  # p's own cell
+            count[s] = start[b + 1] - start[b]
+            if known[b] < 0.0:
+                known[b] = 0.0
+                for d in range(3):
+                    lo = pts[p, d]
+                    hi = lo
+                    for j in range(start[b], start[b + 1]):
+                        q = order[j]
+                        if pts[q, d] < lo:
+                            lo = pts[q, d]
+                        if pts[q, d] > hi:
+                            hi = pts[q, d]
+                    w = hi - lo
+                    if w > known[b]:
+                        known[b] = w
+            width[s] = known[b]
+    return count_arr, width_arr

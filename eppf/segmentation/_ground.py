@@ -22,12 +22,18 @@ _CONSTRAINTS = {
 }
 #: Points the RANSAC hypotheses are scored on (a fixed random subset of the scene).
 _RANSAC_SAMPLE = 50000
+#: Largest scene whose RANSAC subset is drawn from a permutation of all its points (as before the draw of
+#: :func:`_subset` existed, so such scenes keep their ground): beyond it the permutation's memory (8 bytes a
+#: point, 800 MB for 10^8 points) is not proportional to the subset's.
+_PERMUTED = 4 * _RANSAC_SAMPLE
 #: Most least-squares refits of the RANSAC plane (each on the band its noise leaves, till it settles).
 _REFITS = 10
 #: Narrowest band of a refit, as a share of RANSAC's inlier distance (a noise-free plane).
 _FLAT = 1e-3
 #: Share of the lowest-surface cells that must lie on the plane for "auto" to keep it.
 _PLANAR_SHARE = 0.9
+#: Most runs of points far apart the grid model takes one by one (see :func:`_apart`); beyond, one grid.
+_MAX_RUNS = 64
 
 
 def _toward_objects(local, nrm, d, threshold):
@@ -36,6 +42,25 @@ def _toward_objects(local, nrm, d, threshold):
     dist = local @ nrm - d
     flip = np.count_nonzero(dist <= -threshold) > np.count_nonzero(dist >= threshold)
     return (-nrm, -d) if flip else (nrm, d)
+
+
+def _subset(n, k, rng):
+    """``k`` distinct indices of ``range(n)`` (``k < n``), sorted: a uniformly random subset, drawn with memory
+    proportional to ``k`` and the same for the same state of ``rng``.
+
+    Up to :data:`_PERMUTED` points, the first ``k`` of a permutation (``rng.choice``); beyond, indices drawn
+    with replacement in batches, kept in the order drawn with repeats dropped (each new index uniform among
+    those not yet kept), until there are ``k``: a batch of ``k`` or fewer draws holds under a quarter of
+    repeats, so there are few batches.
+    """
+    if n <= _PERMUTED:
+        return np.sort(rng.choice(n, k, replace=False))
+    kept = np.empty(0, dtype=np.int64)
+    while len(kept) < k:
+        drawn = np.concatenate([kept, rng.randint(0, n, size=k - len(kept), dtype=np.int64)])
+        _, first = np.unique(drawn, return_index=True)
+        kept = drawn[np.sort(first)]  # the kept ones first, then the new ones in the order drawn
+    return np.sort(kept)
 
 
 def _plane_ransac(points, threshold, n_trials, rng):
@@ -48,7 +73,7 @@ def _plane_ransac(points, threshold, n_trials, rng):
     median distance of the points less than ``threshold`` under it), where there are no objects.
     """
     n = len(points)
-    sample = points if n <= _RANSAC_SAMPLE else points[np.sort(rng.choice(n, _RANSAC_SAMPLE, replace=False))]
+    sample = points if n <= _RANSAC_SAMPLE else points[_subset(n, _RANSAC_SAMPLE, rng)]
     center = sample.mean(axis=0)
     local = sample - center
     picks = rng.randint(0, len(sample), size=(n_trials, 3))
@@ -92,7 +117,57 @@ def _plane_ransac(points, threshold, n_trials, rng):
     return nrm, d + center @ nrm, sigma
 
 
+def _cells_over_budget(points, cell):
+    """Whether the grid of ``cell`` over ``points`` has more cells than its budget, the one of :func:`_one_grid`
+    (which then widens its cells)."""
+    extent = np.ptp(points[:, :2], axis=0)
+    budget = max(4.0 * len(points), 2.0**20)
+    with np.errstate(over="ignore"):
+        cells = (extent[0] / cell + 1.0) * (extent[1] / cell + 1.0)
+    return not cells <= budget
+
+
+def _apart(points, cell, max_slope):
+    """The runs of points (index arrays) along x, then along y within each, parted by horizontal gaps across
+    which the lowest surface does not reach: wider than the scene's height range over ``max_slope`` and three
+    cells; None when there is one run, or more than :data:`_MAX_RUNS`."""
+    height = float(np.ptp(points[:, 2]))
+    if max_slope == 0 and height > 0:
+        return None
+    gap = height / max_slope + 3.0 * cell if height > 0 else 3.0 * cell
+    runs = [np.arange(len(points))]
+    for axis in (0, 1):
+        parted = []
+        for run in runs:
+            order = run[np.argsort(points[run, axis], kind="stable")]
+            cuts = np.flatnonzero(np.diff(points[order, axis]) > gap) + 1
+            parted.extend(np.split(order, cuts))
+            if len(parted) > _MAX_RUNS:
+                return None
+        runs = parted
+    return [np.sort(run) for run in runs] if len(runs) > 1 else None
+
+
 def _grid_surface(points, cell, max_slope):
+    """:func:`_one_grid` of the scene, or of each of its runs (:func:`_apart`) where the scene's grid would be
+    over its budget: stray points far from the scene (1e12 away) widened the cells of the whole scene, and
+    the ground model with them, where the lowest surface between them and the scene is never reached.
+    The runs' cells are numbered one run after the other."""
+    runs = _apart(points, cell, max_slope) if _cells_over_budget(points, cell) else None
+    if runs is None:
+        return _one_grid(points, cell, max_slope)
+    rise = np.empty(len(points))
+    flat = np.empty(len(points), dtype=np.int64)
+    zmins, first = [], 0
+    for run in runs:
+        rise[run], run_flat, run_zmin, _ = _one_grid(points[run], cell, max_slope)
+        flat[run] = run_flat + first
+        zmins.append(run_zmin)
+        first += len(run_zmin)
+    return rise, flat, np.concatenate(zmins), cell
+
+
+def _one_grid(points, cell, max_slope):
     """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side).
 
     The cells' lowest points give the surface ``S(c) = min over cells c' of
@@ -122,7 +197,9 @@ def _grid_surface(points, cell, max_slope):
         if surface.shape[axis] > 1:
             gradient[axis] = np.gradient(surface, cell, axis=axis)
     steep = np.hypot(gradient[0], gradient[1])
-    gradient *= np.minimum(1.0, max_slope / np.maximum(steep, 1e-300))
+    # only where steeper than max_slope: max_slope over a nearly flat surface's slope overflowed (max_slope 1e308)
+    over = steep > max_slope
+    gradient[:, over] *= max_slope / steep[over]
     # where the ground surface is known: the lowest point of each cell, else the cell's center
     anchor = (np.indices(tuple(shape)).reshape(2, -1).T + 0.5) * cell
     lowest = np.flatnonzero(points[:, 2] == zmin[flat])
@@ -206,10 +283,16 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
       around it; the ground under a point is that surface carried from its
       cell's lowest point along the surface's gradient, and ground is every
       point less than ``threshold`` above it. The vertical axis is z.
-      Limits: a flat object of height ``h`` is taken for ground where it is
-      farther than ``h / max_slope`` from its edge (the middle of a large flat
-      roof), and terrain steeper than ``max_slope`` is partly left out of the
-      ground.
+      Points farther apart horizontally than the scene's height range over
+      ``max_slope`` (stray points far from the scene), where the surface of
+      one never reaches the other, get grids of their own when one grid
+      would widen its cells (up to 64 such runs). Limits: a flat object of
+      height ``h`` is taken for ground where it is farther than
+      ``h / max_slope`` from its edge (the middle of a large flat roof),
+      terrain steeper than ``max_slope`` is partly left out of the ground,
+      and a point far below the ground (low noise) pulls the surface down
+      around it, as the model has it: remove such points first, or use
+      ``"plane"``.
     - ``"auto"``: the plane when the lowest points of at least 90% of the
       grid's ground cells lie within the grid's threshold of it (a floor,
       flat or evenly tilted ground), else the grid.
@@ -250,8 +333,8 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
         values, are fewer than two or all identical, span more than 1e100 or
-        (along their longest axis) less than 1e-100, or a parameter is out of
-        range.
+        (along their longest axis) less than 1e-100, the tolerance derived for
+        ``threshold=None`` is below 1e-150, or a parameter is out of range.
 
     See Also
     --------

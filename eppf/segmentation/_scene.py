@@ -4,7 +4,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, ClusterMixin
 from sklearn.utils import check_random_state
 
-from ._checks import TOLERANCE, check_field, check_scene
+from ._checks import TOLERANCE, check_field, check_scene, check_tolerance
 from ._cluster import (
     MAX_POINTS, MIN_POINTS, check_sizes, cluster_roots, default_tolerance, number_segments, split_field,
 )
@@ -33,7 +33,7 @@ def _segment(points, fields, by, ground, tolerance, min_points, max_points, rand
         if by not in fields:
             raise ValueError(f"{owner}: by={by!r} is not a field of the scene; its fields are {sorted(fields)}")
         field = check_field(fields[by], len(pts), owner, name=f"field {by!r}")
-    tol = float(tolerance) if tolerance is not None else None
+    tol = check_tolerance(tolerance, owner)
     if tol is None and (by is None or ground not in ("none", "auto")):
         tol = default_tolerance(pts, owner)
     method = "none" if ground == "none" or (ground == "auto" and by is not None) else ground
@@ -77,12 +77,12 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
         and are not clustered), or "none" to keep every point. With ``by``,
         "auto" removes no ground (the field tells objects apart).
     tolerance : float, default=None
-        Clustering distance, > 0, in the units of the points (meters for
-        LiDAR), also the scale of the ground model (RANSAC's inlier distance,
-        the grid's cell; see :func:`remove_ground` with ``threshold=None``).
-        None derives it from the point spacing (five times the median
-        nearest-neighbor distance), which suits LiDAR in meters and CAD-scale
-        scenes alike.
+        Clustering distance, at least 1e-150, in the units of the points
+        (meters for LiDAR), also the scale of the ground model (RANSAC's
+        inlier distance, the grid's cell; see :func:`remove_ground` with
+        ``threshold=None``). None derives it from the point spacing (five
+        times the median nearest-neighbor distance), which suits LiDAR in
+        meters and CAD-scale scenes alike.
     min_points : int, default=30
         Smallest kept segment; smaller ones (noise, bits of ground) get -1.
     max_points : int, default=None
@@ -106,7 +106,8 @@ def segment_scene(points, fields=None, *, by=None, ground="auto", tolerance=None
     ValueError
         If the points are not of shape (n, 3) or (n, 6), hold NaN or infinite
         values, are fewer than two or all identical, span more than 1e100 or
-        (along their longest axis) less than 1e-100, ``by`` names no field,
+        (along their longest axis) less than 1e-100, the derived tolerance is
+        below 1e-150, ``by`` names no field,
         the field has the wrong length, or a parameter is out of range.
     TypeError
         If the points are not numbers, the field is not an integer field, or
@@ -150,8 +151,8 @@ class SceneSegmenter(ClusterMixin, BaseEstimator):
         The ground model of :func:`remove_ground`, or "none" to keep every
         point. With ``by``, "auto" removes no ground.
     tolerance : float, default=None
-        Clustering distance and scale of the ground model, > 0, in the units
-        of the points; None derives it from the point spacing.
+        Clustering distance and scale of the ground model, at least 1e-150,
+        in the units of the points; None derives it from the point spacing.
     min_points : int, default=30
         Smallest kept segment (>= 1).
     max_points : int, default=None

@@ -123,13 +123,13 @@ def test_float32_and_int_input():
     (np.zeros((3, 3)), 1.0, ValueError, r"all 3 points identical"),
     (np.array([[-1e308, 0, 0], [1e308, 0, 0]]), 1.0, ValueError, r"extent overflows"),
     (np.array([[0, 0, 0], [1e200, 0, 0]]), 1.0, ValueError, r"spans 1e\+200 along one axis; at most 1e\+100"),
-    (np.array([[0, 0, 0], [1e9, 0, 0]]), 1e-9, ValueError, r"more than 2\*\*30 cells"),
     (np.array([["a", "b", "c"]] * 2), 1.0, TypeError, r"must hold numbers"),
     (np.eye(3), 0.0, ValueError, r"tolerance must be None or a float in \(0.0, inf\), got 0.0"),
     (np.eye(3), -1.0, ValueError, r"tolerance"),
     (np.eye(3), np.nan, ValueError, r"tolerance"),
     (np.eye(3), np.inf, ValueError, r"tolerance"),
     (np.eye(3), True, TypeError, r"tolerance"),
+    (np.eye(3), 1e-320, ValueError, r"tolerance must be at least 1e-150 \(squared distances below it underflow"),
     (np.eye(3), "1", TypeError, r"tolerance"),
 ])
 def test_bad_input_is_named(points, tolerance, kind, pattern):
@@ -217,3 +217,104 @@ def test_derived_tolerance_searches_coincident_points_once(monkeypatch):
     points = np.vstack([np.zeros((200000, 3)), [[1.0, 2.0, 2.0]]])
     assert default_tolerance(points) == TOLERANCE_FACTOR * 3.0
     assert searched and max(searched) == 2
+
+
+def _exact_derived_tolerance(points):
+    """Five times the median distance from the derived tolerance's sample points to their nearest other point,
+    computed as the kernel does (the squares summed x, y, z), for points with no coincident ones."""
+    from eppf.segmentation._cluster import _SPACING_SAMPLE, TOLERANCE_FACTOR
+
+    sample = np.unique(np.linspace(0, len(points) - 1, min(len(points), _SPACING_SAMPLE)).astype(np.int64))
+    _, nearest = cKDTree(points).query(points[sample], k=2)
+    d = points[sample] - points[nearest[:, 1]]
+    dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+    return TOLERANCE_FACTOR * np.partition(dist, len(sample) // 2)[len(sample) // 2]
+
+
+@pytest.mark.parametrize("scene", ["blob and a far point", "two flat blobs far apart", "blob and a point 1e12 away"])
+def test_derived_tolerance_on_dense_blobs_searches_few_points(monkeypatch, scene):
+    # the first cells come from the bounding box: a dense blob (points within 1e-6 of each other) and a far
+    # point, or two blobs 1 apart, put each blob in one cell, searched in full for each of its sample points
+    # (3.6 s for 200,000 points); finer cells now part the crowd, and the tolerance is the same, to the bit
+    from eppf.segmentation import _cluster, _cluster_fast
+    from eppf.segmentation._cluster import default_tolerance
+
+    compared, search = [], _cluster_fast.nearest_distances
+
+    def nearest_distances(pts, cells, order, start, cell, sample):
+        rows = {tuple(c): k for k, c in enumerate(cell)} if len(cell) < 10**5 else None
+        own = [start[rows[tuple(cells[p])] + 1] - start[rows[tuple(cells[p])]] for p in sample]
+        compared.append(int(np.sum(own)))
+        return search(pts, cells, order, start, cell, sample)
+
+    monkeypatch.setattr(_cluster._cluster_fast, "nearest_distances", nearest_distances)
+    rng = np.random.default_rng(8)
+    blob = rng.uniform(0, 1e-6, (6000, 3))
+    if scene == "blob and a far point":
+        points = np.vstack([blob, [[1.0, 1.0, 1.0]]])
+    elif scene == "blob and a point 1e12 away":  # the cells were kept wider than 1e12 / 2**29
+        points = np.vstack([blob, [[1e12, 0.0, 0.0]]])
+    else:
+        points = np.vstack([blob * [1, 1, 1e-3], blob * [1, 1, 1e-3] + [0, 0, 1.0]])
+    assert default_tolerance(points) == _exact_derived_tolerance(points)
+    assert compared and max(compared) < 100 * 6000  # a whole blob per sample point: 6000 * 6000
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_stray_points_far_from_the_scene_match_the_reference(seed):
+    # a point 1e12 away (a bad return) made the grid span more than 2**30 cells of the tolerance: an error
+    # telling to take a larger tolerance, which would have merged the scene's objects
+    from eppf.segmentation import segment_scene
+
+    rng = np.random.default_rng(seed)
+    scene = rng.uniform(0, 1, (1500, 3)) * [8, 6, 2]
+    stray = np.array([[1e12, 0, 0], [0, -1e12, 3], [1e12, 1e12, -1e12], [1e12 + 0.01, 0, 0], [-7e11, 5, 5]])
+    points = np.vstack([scene, stray])[rng.permutation(len(scene) + len(stray))]
+    tolerance = float(rng.uniform(0.2, 0.6))
+    np.testing.assert_array_equal(euclidean_clusters(points, tolerance), reference(points, tolerance))
+    # the stray points change neither the derived tolerance nor the scene's segments
+    alone = segment_scene(scene, ground="none", min_points=3)
+    labels = segment_scene(np.vstack([scene, stray]), ground="none", min_points=3)
+    np.testing.assert_array_equal(labels[:len(scene)], alone)
+    assert (labels[len(scene):] == -1).all()
+
+
+def test_a_run_of_points_spanning_too_many_cells_is_refused(monkeypatch):
+    from eppf.segmentation import _cluster
+
+    monkeypatch.setattr(_cluster, "_MAX_CELLS", 1000)  # 2**30 cells take 5e8 points without a gap
+    points = np.column_stack([np.arange(2000) * 0.5, np.zeros(2000), np.zeros(2000)])
+    with pytest.raises(ValueError, match=r"^euclidean_clusters: the scene spans more than 2\*\*30 cells of the "
+                                         r"tolerance along x \(extent 999.5, cell 0.57735\) without a gap; give"):
+        euclidean_clusters(points, 1.0)
+    # the same points in runs with gaps: clustered run by run
+    points[:, 0] += np.repeat(np.arange(20) * 10.0, 100)
+    np.testing.assert_array_equal(euclidean_clusters(points, 1.0), reference(points, 1.0))
+
+
+def test_a_derived_tolerance_whose_squares_underflow_is_refused():
+    # most points a few subnormal steps apart beside a unit-scale scene: their squared distances underflow to 0,
+    # so they were taken for coincident points and left out of the spacing (and a finer search took minutes)
+    from eppf.segmentation import remove_ground, segment_scene
+
+    rng = np.random.default_rng(9)
+    crowd = np.column_stack([np.arange(1500) * 5e-324, np.zeros((1500, 2))])
+    points = np.vstack([crowd, rng.uniform(0, 1, (500, 3))])
+    for function in (euclidean_clusters, remove_ground, segment_scene):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(ValueError, match=rf"^{function.__name__}: the median nearest-neighbor distance of "
+                                                 r"the points is 0, so the tolerance derived .* below 1e-150"):
+                function(points)
+
+
+def test_tiny_tolerances_are_refused_by_segment_scene_too():
+    from eppf.segmentation import SceneSegmenter, segment_scene
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the cells' side overflowed in 1 / side
+        with pytest.raises(ValueError, match=r"^segment_scene: tolerance must be at least 1e-150"):
+            segment_scene(np.eye(3), tolerance=1e-320)
+        with pytest.raises(ValueError, match=r"^SceneSegmenter: tolerance must be at least 1e-150"):
+            SceneSegmenter(tolerance=1e-200).fit(np.eye(3))
+    assert segment_scene(np.eye(3), ground="none", tolerance=1e-150, min_points=1).tolist() == [0, 1, 2]

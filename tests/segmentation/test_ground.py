@@ -199,3 +199,69 @@ def test_slope_envelope_is_the_exact_chamfer_envelope():
             chamfer = (np.maximum(di, dj) - np.minimum(di, dj)) * step + np.minimum(di, dj) * diagonal
             expected[a, b] = np.min(zmin + chamfer)
     np.testing.assert_allclose(surface, expected, rtol=1e-12)
+
+
+def test_ransac_subset_of_a_big_scene_takes_memory_of_the_subset_only(monkeypatch):
+    # the 50,000 points RANSAC scores its planes on were the head of a permutation of the whole scene: 8 bytes
+    # a point (800 MB at 10^8 points) for a subset of 400 KB
+    import tracemalloc
+
+    from eppf.segmentation import _ground
+
+    monkeypatch.setattr(_ground, "_RANSAC_SAMPLE", 200)
+    monkeypatch.setattr(_ground, "_PERMUTED", 800, raising=False)
+    rng = np.random.default_rng(7)
+    points = np.column_stack([rng.uniform(0, 100, (10**6, 2)), np.zeros(10**6)])
+    tracemalloc.start()
+    try:
+        nrm, offset, _ = _plane_ransac(points, 0.1, 20, np.random.RandomState(0))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 10**6  # the permutation took 8 MB
+    np.testing.assert_allclose(np.abs(nrm), [0, 0, 1], atol=1e-12)
+    assert abs(offset) < 1e-12
+
+
+def test_ransac_subset_is_distinct_uniform_and_seeded():
+    from eppf.segmentation._ground import _PERMUTED, _subset
+
+    n, k = 10**7, 5000
+    first = _subset(n, k, np.random.RandomState(3))
+    np.testing.assert_array_equal(_subset(n, k, np.random.RandomState(3)), first)  # same seed, same subset
+    assert not np.array_equal(_subset(n, k, np.random.RandomState(4)), first)
+    assert len(np.unique(first)) == k and first[0] >= 0 and first[-1] < n and (np.diff(first) > 0).all()
+    # uniform: as many in each tenth of the range, within six standard deviations of the binomial's 500
+    counts = np.bincount(first * 10 // n, minlength=10)
+    assert np.abs(counts - k / 10).max() < 6 * np.sqrt(k * 0.1 * 0.9)
+    # a scene just over the subset: every index but a few, still distinct
+    assert len(np.unique(_subset(k + 3, k, np.random.RandomState(0)))) == k
+    # up to _PERMUTED points, the subset of the earlier draw: those scenes keep their ground
+    for m in (k + 1, _PERMUTED):
+        np.testing.assert_array_equal(_subset(m, k, np.random.RandomState(5)),
+                                      np.sort(np.random.RandomState(5).choice(m, k, replace=False)))
+    assert len(np.unique(_subset(_PERMUTED + 1, 50000, np.random.RandomState(0)))) == 50000
+
+
+def test_no_slope_limit_raises_no_overflow_warning():
+    # max_slope over a flat surface's slope (max_slope / 1e-300) overflowed for max_slope near 1e308
+    points, _ = _scene()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mask = remove_ground(points, method="grid", max_slope=1e308)
+    np.testing.assert_array_equal(mask, remove_ground(points, method="grid", max_slope=1e6))
+
+
+@pytest.mark.parametrize("method", ["grid", "auto"])
+def test_stray_points_far_away_leave_the_grid_ground_as_it_was(method):
+    # a point 1e12 away made the grid's cells 1e9 wide (four cells a point at most): the whole scene in one
+    # cell, ground 9325 of 20,000 floor points and no object left apart; now each far run has its own grid
+    points, n_ground = _scene(height=lambda x, y: np.sin(x / 3) * 2 + 0.1 * y)
+    stray = np.array([[1e12, 0, 0], [0, -1e12, 0.5], [3e3, 3e3, 0], [1e12, 1e12, 2.0]])
+    alone = remove_ground(points, method=method, threshold=0.3)
+    mask = remove_ground(np.vstack([points, stray]), method=method, threshold=0.3)
+    np.testing.assert_array_equal(mask[:len(points)], alone)
+    assert mask[len(points):].all()  # each the lowest point of its own grid
+    flat, _ = _scene()
+    mask = remove_ground(np.vstack([flat, [[1e12, 0, 0]]]), method=method)
+    assert mask[:n_ground].all() and not mask[n_ground:-1].any()
