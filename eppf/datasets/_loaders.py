@@ -15,6 +15,11 @@ downloads), returns a :class:`~sklearn.utils.Bunch` (or ``(X, y)`` with
   gets its own seed from ``random_state`` and its path inside the folder, so
   a cloud does not depend on ``n_jobs``, ``subset`` or on which other files
   could be read.
+- Paths may be ``str``, ``bytes`` or path-like (:func:`os.fsdecode` makes
+  them ``str``; anything else is a TypeError naming the parameter), and a
+  folder's symbolic links are followed.
+- ``n_points`` is at most a billion (:data:`MAX_N_POINTS`), refused before
+  anything is allocated.
 """
 
 import glob
@@ -31,7 +36,8 @@ from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
 from ..utils._param_validation import Interval, Options, Satisfies, validate_parameter
-from ..utils._sampling import check_n_points, check_resolution
+from ..utils._sampling import check_n_points as _check_n_points
+from ..utils._sampling import check_resolution
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
 
@@ -47,11 +53,43 @@ S3DIS_CLASSES = ("beam", "board", "bookcase", "chair", "column", "door", "sofa",
 # --------------------------------------------------------------------------- shared checks
 
 
-def check_dir(path, owner):
-    path = os.fspath(path)
+def check_path(path, name, owner):
+    """``path`` as a ``str``: a ``str``, ``bytes`` or :class:`os.PathLike` path (decoded by :func:`os.fsdecode`).
+
+    Every path parameter of :mod:`eppf.datasets` accepts these three kinds
+    alike; anything else is a TypeError naming ``owner`` and ``name``
+    (``os.fspath``'s own message names neither, and a bytes path used to
+    fail deep inside, where it met a ``str``).
+    """
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise TypeError(f"{owner}: {name} must be a str, bytes or os.PathLike path, got {type(path).__name__}")
+    try:
+        return os.fsdecode(path)
+    except TypeError:  # (a PathLike whose __fspath__ returns neither str nor bytes)
+        raise TypeError(f"{owner}: {name} must be a str, bytes or os.PathLike path; {path!r} is a "
+                        f"{type(path).__name__} whose __fspath__ returns neither") from None
+
+
+def check_dir(path, owner, name="path"):
+    path = check_path(path, name, owner)
     if not os.path.isdir(path):
         raise FileNotFoundError(f"{owner}: no such folder: {path!r}")
     return path
+
+
+#: Most points per object that a loader (or :func:`eppf.datasets.make_shapes`) samples or resamples
+#: to: a billion points are 24 GB of float64 coordinates (48 GB with normals) in one object. A larger
+#: ``n_points`` is refused before anything is allocated, where NumPy's "Unable to allocate" came out
+#: of the middle of the reading, naming neither the loader nor the parameter.
+MAX_N_POINTS = 10**9
+
+
+def check_n_points(n_points, owner, allow_none=True):
+    """``n_points`` checked as :mod:`eppf.utils._sampling` does and against :data:`MAX_N_POINTS`; an int or None."""
+    n_points = _check_n_points(n_points, owner, allow_none=allow_none)
+    if n_points is not None and n_points > MAX_N_POINTS:
+        raise ValueError(f"{owner}: n_points must be at most {MAX_N_POINTS:,} points per object, got {n_points:,}")
+    return n_points
 
 
 #: ModelNet's ``version`` (:mod:`eppf.utils._param_validation`), for the loader and the fetcher.

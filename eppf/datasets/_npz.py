@@ -8,6 +8,7 @@ from sklearn.utils import Bunch
 
 from ..io._npy import read_npz_arrays
 from ..utils._atomic import atomic_write
+from ._loaders import check_path
 
 __all__ = ["load_npz", "save_npz"]
 
@@ -66,7 +67,7 @@ def load_npz(path, *, return_X_y=False):
     >>> data.target_names[data.target].tolist(), data.split.tolist()
     (['table', 'chair'], ['train', 'test'])
     """
-    path = os.fspath(path)
+    path = check_path(path, "path", "load_npz")
     if not os.path.exists(path):
         raise FileNotFoundError(f"load_npz: no such file: {path!r}")
     archive = read_npz_arrays(path, "load_npz")  # (headers checked against the stored bytes before allocating)
@@ -180,7 +181,7 @@ def save_npz(path, clouds, labels, class_names, *, split=None, ids=None):
     ([(3, 3), (2, 3)], [1, 0], ['chair', 'table'])
     """
     owner = "save_npz"
-    path = os.fspath(path)
+    path = check_path(path, "path", owner)
     if isinstance(clouds, np.ndarray) and clouds.ndim == 3:
         clouds = list(clouds)
     if isinstance(clouds, (str, bytes)) or not hasattr(clouds, "__len__"):

@@ -24,6 +24,7 @@ from ..preprocessing._perturb import (
 )
 from ..utils._param_validation import Interval, Options, StrOptions, validate_parameter
 from ..utils._sampling import CONSTRAINTS as SAMPLING_CONSTRAINTS
+from ._loaders import MAX_N_POINTS
 
 __all__ = ["make_shapes"]
 
@@ -424,7 +425,10 @@ def make_shapes(
     Raises
     ------
     ValueError
-        If a parameter is out of range or a class name is unknown.
+        If a parameter is out of range or a class name is unknown, or if the
+        data set would hold more than a billion points in all
+        (``n_samples_per_class * len(classes) * n_points``; 24 GB of float64
+        coordinates), which is refused before anything is drawn.
     TypeError
         If a parameter has the wrong type.
 
@@ -449,6 +453,11 @@ def make_shapes(
         validate_parameter(value, _CONSTRAINTS[name], name=name, owner=_OWNER)
     n_per_class, n_points = int(n_samples_per_class), int(n_points)
     classes = _check_classes(classes)
+    total = n_per_class * len(classes) * n_points
+    if total > MAX_N_POINTS:  # (NumPy's "Unable to allocate" came from the middle of the drawing, or never)
+        raise ValueError(
+            f"{_OWNER}: n_samples_per_class={n_per_class:,} objects of {len(classes)} classes with n_points="
+            f"{n_points:,} are {total:,} points in all, more than the {MAX_N_POINTS:,} a data set may hold")
     noise, occlusion, size_variation, test_size = float(noise), float(occlusion), float(size_variation), float(test_size)
     rotate = rotate if isinstance(rotate, str) else bool(rotate)
     rng = check_random_state(random_state)

@@ -377,3 +377,44 @@ def test_hdf5_without_h5py_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "h5py", None)
     with pytest.raises(ImportError, match=re.escape("the HDF5 layout needs the 'h5py' package; install it with `pip install eppf[io]`")):
         load_modelnet(base, n_points=None)
+
+
+# --------------------------------------------------------------------------- paths and sizes, every loader
+
+
+@pytest.mark.parametrize("loader", [load_modelnet, load_scannet_objects, load_s3dis_objects])
+def test_a_path_of_another_type_is_a_type_error_naming_the_loader(loader):
+    # os.fspath's "expected str, bytes or os.PathLike object, not int" named no loader
+    with pytest.raises(TypeError, match=rf"{loader.__name__}: path must be a str, bytes or os\.PathLike path, got int"):
+        loader(5)
+
+
+def test_loaders_read_a_bytes_path(tmp_path):
+    _modelnet_official(tmp_path)
+    by_str = load_modelnet(str(tmp_path), n_points=32)
+    by_bytes = load_modelnet(os.fsencode(tmp_path), n_points=32)
+    assert by_bytes.filenames.tolist() == by_str.filenames.tolist()
+    for a, b in zip(by_bytes.data, by_str.data):
+        assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("loader", [load_modelnet, load_scannet_objects, load_s3dis_objects])
+def test_a_huge_n_points_is_refused_by_every_loader(tmp_path, loader):
+    with pytest.raises(ValueError, match=rf"{loader.__name__}: n_points must be at most 1,000,000,000 points per object"):
+        loader(tmp_path, n_points=10**12)
+
+
+def test_npz_and_data_home_paths(tmp_path):
+    from eppf.datasets import fetch_file, get_data_home, load_npz, save_npz
+
+    clouds = [np.zeros((3, 3)), np.ones((2, 3))]
+    path = os.fsencode(tmp_path / "pair.npz")
+    assert save_npz(path, clouds, [0, 1], ["a", "b"]) == str(tmp_path / "pair.npz")
+    assert load_npz(path).filename == str(tmp_path / "pair.npz")
+    assert get_data_home(os.fsencode(tmp_path / "home")) == str(tmp_path / "home")
+    for call, name in ((lambda: load_npz(1.5), "load_npz: path"), (lambda: save_npz(None, clouds, [0, 1], ["a", "b"]), "save_npz: path"),
+                       (lambda: get_data_home(7), "get_data_home: data_home"),
+                       (lambda: fetch_file("file:///x", data_home=7, download_if_missing=False), "fetch_file: data_home"),
+                       (lambda: fetch_file("file:///x", data_home=tmp_path, filename=3), "fetch_file: filename")):
+        with pytest.raises(TypeError, match=rf"{name} must be a str, bytes or os\.PathLike path"):
+            call()
