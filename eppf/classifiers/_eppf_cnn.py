@@ -53,7 +53,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
     n_hidden : int, default=1024
         Units of the first dense layer.
     filters : tuple of 3 ints, default=(32, 64, 48)
-        Filters of the three convolutions (Table I).
+        Filters of the three convolutions (Table I). With ``n_bins``,
+        ``n_hidden``, ``side_hidden`` and the number of classes they set the
+        network's size, which may be at most a billion parameters
+        (``eppf.classifiers._base.MAX_PARAMETERS``; the paper's network has
+        15 million): a larger one is refused in ``fit`` before it is built.
     early_stopping : bool, default=True
         Hold out ``validation_fraction`` of the training objects (stratified,
         drawn from ``random_state``), stop when the validation loss has not
@@ -330,11 +334,22 @@ class EPPF4DClassifier(SkorchClassifierBase):
         "swa_epochs": [Interval(numbers.Integral, 0, None, closed="left")],
     }
     _seed_names = ("torch", "split", "draws")
+    _size_parameters = ("n_bins", "filters", "n_hidden", "side_hidden")
 
     # ------------------------------------------------------------------ hooks
     def _check_params(self):
         super()._check_params()
         self._n_bins = tuple(int(b) for b in self.n_bins)
+
+    def _parameter_lower_bound(self, n_classes):
+        # Every convolution has at least in * out weights; the first dense layer reads at least
+        # filters[2] * ceil(prod(n_bins) / 4) values (the 2 x 2 max-pool of a plane or volume of
+        # prod(n_bins) cells), and the side branch's units, if any.
+        f0, f1, f2 = (int(f) for f in self.filters)
+        n_hidden = int(self.n_hidden)
+        n_side = getattr(self, "n_side_features_", 0)
+        n_in = f2 * -(-math.prod(self._n_bins) // 4) + (int(self.side_hidden) if n_side else 0)
+        return f0 + f0 * f1 + f1 * f2 + n_in * n_hidden + n_hidden * n_classes
 
     def _validate_X(self, X, n_features, n_side=0):
         """Return X as float32 of shape (n_objects, n_draws, n_features + n_side)."""
@@ -506,6 +521,14 @@ class EPPF4DClassifier(SkorchClassifierBase):
         KeyboardInterrupt
             On Ctrl-C during training (skorch alone would swallow it and
             return a half-trained network).
+
+        Notes
+        -----
+        ``fit`` is all or nothing: when it raises (an error found midway,
+        a ``KeyboardInterrupt``), the estimator is left exactly as it was
+        before the call. A fitted estimator keeps its previous fit, with
+        ``classes_``, ``net_`` and every other fitted attribute from that
+        one fit; an unfitted one stays unfitted.
         """
         return super().fit(X, y)
 
