@@ -239,7 +239,10 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         owner = self._owner
         if y is None:  # (np.asarray makes it a 0-d array, which the shape check would name as shape ())
             raise ValueError(f"{owner}: y is None; class labels are needed")
-        y = np.asarray(y)
+        try:
+            y = np.asarray(y)
+        except ValueError as exc:  # (ragged nested labels: NumPy's message names neither the estimator nor y)
+            raise ValueError(f"{owner}: y must be a 1D sequence of class labels ({exc})") from None
         if y.ndim != 1:
             raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")
         if y.shape[0] != n_objects:

@@ -292,6 +292,15 @@ def test_pointnet_order_preserving_relabelling_changes_nothing_but_the_names():
     np.testing.assert_array_equal(np.where(a.predict(X) == "a", "alpha", "beta"), b.predict(X))
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_ragged_labels_are_named(kind):
+    # NumPy's bare "setting an array element with a sequence" named neither the estimator nor y
+    clf, X, y = _make(kind, max_epochs=1, verbose=0)
+    ragged = [[0], [1, 2]] * (len(X) // 2)
+    with pytest.raises(ValueError, match=f"{type(clf).__name__}: y must be a 1D sequence of class labels"):
+        clf.fit(X, ragged)
+
+
 # ---------------------------------------------------------------- not fitted
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("method", ["predict", "predict_proba"])
