@@ -7,6 +7,7 @@ import numpy as np
 from sklearn.utils import Bunch
 
 from ..io import read_point_cloud, supported_extensions
+from ..utils._param_validation import RANDOM_STATE, validate_parameter
 from ._loaders import check_choice, check_class_names, check_dir, check_n_points, file_seeds, load_all
 
 __all__ = ["folder_layout", "load_folder", "object_files"]
@@ -198,6 +199,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     classes = check_class_names(classes, owner, allow_none=True)
 
     files = object_files(root)

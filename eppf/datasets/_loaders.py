@@ -35,7 +35,7 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
-from ..utils._param_validation import Interval, Options, Satisfies, validate_parameter
+from ..utils._param_validation import RANDOM_STATE, Interval, Options, Satisfies, validate_parameter
 from ..utils._sampling import check_n_points as _check_n_points
 from ..utils._sampling import check_resolution
 
@@ -387,6 +387,7 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     if resolution is not None and n_points is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both (set n_points=None to use resolution)")
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     layout, folder = _find_modelnet(root, version)
     splits = _subset_splits(subset)
     if layout == "official":
@@ -560,6 +561,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     resolution = check_resolution(resolution, owner)
     if n_points is None and resolution is None:
         raise ValueError(f"{owner}: give n_points or resolution (meshes must be sampled)")
@@ -680,6 +682,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)
     names = check_class_names(classes, owner)
     index = {n: k for k, n in enumerate(names)}

@@ -22,7 +22,7 @@ from ..preprocessing._perturb import (
     random_unit_vector,
     rotate_array,
 )
-from ..utils._param_validation import Interval, Options, StrOptions, validate_parameter
+from ..utils._param_validation import RANDOM_STATE, Interval, Options, StrOptions, validate_parameter
 from ..utils._sampling import CONSTRAINTS as SAMPLING_CONSTRAINTS
 from ._loaders import MAX_N_POINTS
 
@@ -41,6 +41,7 @@ _CONSTRAINTS = {
     "size_variation": PERTURB_CONSTRAINTS["fraction"],
     "rotate": [Options(bool, description="True, False"), StrOptions(["z"])],
     "test_size": PERTURB_CONSTRAINTS["fraction"],
+    "random_state": RANDOM_STATE,
 }
 
 
@@ -447,7 +448,7 @@ def make_shapes(
     """
     params = {
         "n_samples_per_class": n_samples_per_class, "n_points": n_points, "noise": noise, "occlusion": occlusion,
-        "size_variation": size_variation, "rotate": rotate, "test_size": test_size,
+        "size_variation": size_variation, "rotate": rotate, "test_size": test_size, "random_state": random_state,
     }
     for name, value in params.items():
         validate_parameter(value, _CONSTRAINTS[name], name=name, owner=_OWNER)

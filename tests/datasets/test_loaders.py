@@ -418,3 +418,15 @@ def test_npz_and_data_home_paths(tmp_path):
                        (lambda: fetch_file("file:///x", data_home=tmp_path, filename=3), "fetch_file: filename")):
         with pytest.raises(TypeError, match=rf"{name} must be a str, bytes or os\.PathLike path"):
             call()
+
+
+@pytest.mark.parametrize("random_state, exc", [(1.5, TypeError), ("seed", TypeError), (-1, ValueError)])
+def test_a_bad_random_state_is_named_by_every_loader(tmp_path, random_state, exc):
+    # scikit-learn's "1.5 cannot be used to seed a numpy.random.RandomState instance" named no loader
+    from eppf.datasets import load_folder, make_shapes
+
+    for loader in (load_modelnet, load_scannet_objects, load_s3dis_objects, load_folder):
+        with pytest.raises(exc, match=rf"{loader.__name__}: random_state must be "):
+            loader(tmp_path, random_state=random_state)
+    with pytest.raises(exc, match=r"make_shapes: random_state must be "):
+        make_shapes(1, n_points=8, random_state=random_state)
