@@ -73,6 +73,8 @@ COMMON_CONSTRAINTS = {
 
 #: Most parameters a network of the classifiers may have: 4 GB of float32 weights, and about four
 #: times that to train (gradients and Adam's two moments). The paper's 4D network has 15 million.
+#: (The bound of the networks of eppf.nn too, ``eppf.nn._networks.MAX_PARAMETERS``: not imported from
+#: there, since this module imports no torch.)
 MAX_PARAMETERS = 10**9
 
 

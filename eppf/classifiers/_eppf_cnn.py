@@ -342,14 +342,10 @@ class EPPF4DClassifier(SkorchClassifierBase):
         self._n_bins = tuple(int(b) for b in self.n_bins)
 
     def _parameter_lower_bound(self, n_classes):
-        # Every convolution has at least in * out weights; the first dense layer reads at least
-        # filters[2] * ceil(prod(n_bins) / 4) values (the 2 x 2 max-pool of a plane or volume of
-        # prod(n_bins) cells), and the side branch's units, if any.
-        f0, f1, f2 = (int(f) for f in self.filters)
-        n_hidden = int(self.n_hidden)
-        n_side = getattr(self, "n_side_features_", 0)
-        n_in = f2 * -(-math.prod(self._n_bins) // 4) + (int(self.side_hidden) if n_side else 0)
-        return f0 + f0 * f1 + f1 * f2 + n_in * n_hidden + n_hidden * n_classes
+        from ..nn._networks import parameter_lower_bound
+
+        return parameter_lower_bound(self._n_bins, self.n_hidden, n_classes, self.filters,
+                                     getattr(self, "n_side_features_", 0), self.side_hidden)
 
     def _validate_X(self, X, n_features, n_side=0):
         """Return X as float32 of shape (n_objects, n_draws, n_features + n_side)."""
