@@ -615,6 +615,21 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
 # --------------------------------------------------------------------------- S3DIS
 
 
+def _check_areas(areas, owner):
+    """``areas`` as a list of non-negative ints, or an error naming ``owner``.
+
+    (``int(a)`` for ``a`` in ``areas`` read the string "12" as areas 1 and 2,
+    a float 1.7 as area 1, and an int failed with "'int' object is not iterable".)
+    """
+    if isinstance(areas, (str, bytes)) or not hasattr(areas, "__iter__"):
+        raise TypeError(f"{owner}: areas must be None or a sequence of area numbers (ints), got {areas!r}")
+    areas = list(areas)
+    bad = [a for a in areas if not isinstance(a, numbers.Integral) or isinstance(a, bool) or a < 0]
+    if bad:
+        raise ValueError(f"{owner}: areas must be non-negative ints (the n of Area_<n>), got {bad[0]!r}")
+    return [int(a) for a in areas]
+
+
 def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None, train_size=0.6, n_points=None,
                        on_error="raise", n_jobs=None, random_state=0, return_X_y=False):
     """Load the object instances of the Stanford indoor data set (S3DIS).
@@ -685,13 +700,14 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)
     names = check_class_names(classes, owner)
+    areas = None if areas is None else _check_areas(areas, owner)
     index = {n: k for k, n in enumerate(names)}
     pattern = os.path.join("Area_*", "*", "Annotations", "*.txt")
     files = sorted(glob.glob(os.path.join(root, pattern))) or sorted(glob.glob(os.path.join(root, "*", pattern)))
     if not files:
         raise ValueError(f"{owner}: no Area_<n>/<room>/Annotations/<class>_<k>.txt files under {root!r}")
     if areas is not None:
-        wanted = {f"Area_{int(a)}" for a in areas}
+        wanted = {f"Area_{a}" for a in areas}
         files = [f for f in files if f.split(os.sep)[-4] in wanted]
     entries = []
     for f in files:

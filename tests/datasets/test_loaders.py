@@ -430,3 +430,17 @@ def test_a_bad_random_state_is_named_by_every_loader(tmp_path, random_state, exc
             loader(tmp_path, random_state=random_state)
     with pytest.raises(exc, match=r"make_shapes: random_state must be "):
         make_shapes(1, n_points=8, random_state=random_state)
+
+
+@pytest.mark.parametrize("areas, exc, msg", [
+    ("12", TypeError, "load_s3dis_objects: areas must be None or a sequence of area numbers (ints), got '12'"),
+    (2, TypeError, "load_s3dis_objects: areas must be None or a sequence of area numbers (ints), got 2"),
+    ([1.7], ValueError, "load_s3dis_objects: areas must be non-negative ints (the n of Area_<n>), got 1.7"),
+    ([True], ValueError, "load_s3dis_objects: areas must be non-negative ints (the n of Area_<n>), got True"),
+])
+def test_s3dis_areas_that_are_not_area_numbers(tmp_path, areas, exc, msg):
+    # int(a) for a in areas read "12" as areas 1 and 2 and 1.7 as area 1, silently
+    _s3dis(tmp_path, S3DIS_LAYOUT)
+    with pytest.raises(exc, match=re.escape(msg)):
+        load_s3dis_objects(tmp_path, areas=areas)
+    assert {i.split("/")[0] for i in load_s3dis_objects(tmp_path, areas=(a for a in [2])).ids} == {"Area_2"}
