@@ -36,6 +36,7 @@ from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
 from ..utils._param_validation import RANDOM_STATE, Interval, Options, Satisfies, validate_parameter
+from ..utils._validation import check_n_jobs
 from ..utils._sampling import check_n_points as _check_n_points
 from ..utils._sampling import check_resolution
 
@@ -161,6 +162,8 @@ def load_all(jobs, *, owner, on_error, n_jobs):
 
     Returns the list of results (None for skipped) and the skipped list.
     """
+    if n_jobs is not None:  # (joblib's "n_jobs == 0 in Parallel has no meaning" named no loader; 1.5 passed)
+        check_n_jobs(n_jobs, owner=owner)
     results = Parallel(n_jobs=n_jobs)(delayed(_guarded)(func, args) for _, func, args in jobs)
     skipped = []
     for (filename, _, _), (_, err) in zip(jobs, results):

@@ -1,5 +1,6 @@
 """Reader and writer of the flat ``.npz`` layout of point-cloud data sets."""
 
+import errno
 import numbers
 import os
 
@@ -158,6 +159,8 @@ def save_npz(path, clouds, labels, class_names, *, split=None, ids=None):
         non-finite or out of range; the message names the offending object.
     FileNotFoundError
         If the folder of ``path`` does not exist.
+    IsADirectoryError
+        If ``path`` is a folder.
 
     See Also
     --------
@@ -235,6 +238,8 @@ def save_npz(path, clouds, labels, class_names, *, split=None, ids=None):
         raise ValueError(f"{owner}: labels must lie in 0..{names.size - 1} (indices into class_names); "
                          f"object {k} has {lab[k]}")
 
+    if os.path.isdir(path):  # (the rename into place failed naming the temporary file, not save_npz)
+        raise IsADirectoryError(errno.EISDIR, f"{owner}: a folder, not a file", path)
     out = {"points": points, "offsets": offsets, "labels": lab, "class_names": names}
     split_arr = _strings(split, "split", n, owner)
     if split_arr is not None:

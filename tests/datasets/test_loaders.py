@@ -444,3 +444,22 @@ def test_s3dis_areas_that_are_not_area_numbers(tmp_path, areas, exc, msg):
     with pytest.raises(exc, match=re.escape(msg)):
         load_s3dis_objects(tmp_path, areas=areas)
     assert {i.split("/")[0] for i in load_s3dis_objects(tmp_path, areas=(a for a in [2])).ids} == {"Area_2"}
+
+
+@pytest.mark.parametrize("n_jobs, exc, msg", [(0, ValueError, "n_jobs must be None or a non-zero int"),
+                                              (1.5, TypeError, "n_jobs must be None or a non-zero int"),
+                                              (10**9, ValueError, "n_jobs=1000000000 asks for more threads")])
+def test_loaders_check_n_jobs(tmp_path, n_jobs, exc, msg):
+    # joblib's "n_jobs == 0 in Parallel has no meaning" named no loader, and 1.5 was taken
+    _modelnet_official(tmp_path)
+    with pytest.raises(exc, match=re.escape(f"load_modelnet: {msg}")):
+        load_modelnet(tmp_path, n_points=32, n_jobs=n_jobs)
+
+
+def test_save_npz_to_a_folder_names_itself(tmp_path):
+    # the rename into place failed with "Is a directory: '.../.pair.npz.xxxx.tmp' -> ...", naming a temporary file
+    from eppf.datasets import save_npz
+
+    with pytest.raises(IsADirectoryError, match=re.escape("save_npz: a folder, not a file")):
+        save_npz(tmp_path, [np.zeros((2, 3))], [0], ["a"])
+    assert os.listdir(tmp_path) == []
