@@ -204,7 +204,8 @@ class RepeatedRetrievalResult:
     ----------
     per_repeat : dict of str to ndarray of shape (n_repeats,)
         Each metric of :func:`retrieval_scores`, one value per draw (kept as
-        the attribute of the same name).
+        the attribute of the same name); at least one metric, each with at
+        least one value (an empty result is a ValueError).
     seeds : ndarray of shape (n_repeats,)
         The ``random_state`` given to the transformer for each draw (kept as
         the attribute of the same name).
@@ -237,6 +238,17 @@ class RepeatedRetrievalResult:
     std: dict = field(init=False)
 
     def __post_init__(self):
+        # Refused here, not where it failed: str() of an empty result raised max()'s "arg is an empty
+        # sequence", and a metric without draws had a NaN mean with NumPy's "Mean of empty slice".
+        owner = type(self).__name__
+        if not hasattr(self.per_repeat, "items"):
+            raise TypeError(f"{owner}: per_repeat must be a dict of metric name to per-draw values, "
+                            f"got {type(self.per_repeat).__name__}")
+        if not self.per_repeat:
+            raise ValueError(f"{owner}: per_repeat is empty; a result needs at least one metric")
+        for k, v in self.per_repeat.items():
+            if np.size(v) == 0:
+                raise ValueError(f"{owner}: metric {k!r} has no values; a result needs at least one draw")
         self.mean = {k: float(np.mean(v)) for k, v in self.per_repeat.items()}
         self.std = {k: float(np.std(v)) for k, v in self.per_repeat.items()}
 

@@ -42,7 +42,7 @@ from sklearn.utils import Bunch
 
 from .utils import check_n_jobs, ordered_map, progress_bar
 from .utils._atomic import atomic_write
-from .utils._param_validation import Interval, validate_parameter
+from .utils._param_validation import RANDOM_STATE, Interval, validate_parameter
 from .utils._stream import RowWriter
 
 __all__ = ["describe_files"]
@@ -97,12 +97,15 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     normals : {"auto", True, False}, default="auto"
         Normals read from the files (face normals for meshes): when present,
         always, or never.
-    random_state : int, default=0
+    random_state : int, RandomState instance or None, default=0
         Seed of mesh sampling and resampling: each file gets its own seed
         from this one and its path relative to the folder it was found in
         (its own folder for a file named directly), the seeds of
-        :func:`eppf.datasets.load_folder`. The descriptor's draws follow the
-        descriptor's own ``random_state``.
+        :func:`eppf.datasets.load_folder`, which takes the same values: an
+        int in 0..2**32-1, a RandomState or None (a fresh seed), from which
+        every folder or file of ``files`` draws its base seed in turn, as
+        ``load_folder`` does for its folder. The descriptor's draws follow
+        the descriptor's own ``random_state``.
     n_jobs : int, default=None
         Threads (joblib's meaning); None takes the descriptor's ``n_jobs``.
         With more than one, files are read on up to two threads while chunks
@@ -130,10 +133,13 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     ------
     ValueError
         If a file cannot be read and ``on_error="raise"``, if no file could
-        be read, or if a cloud cannot be described (the message names the
-        file).
+        be read, if a cloud cannot be described (the message names the
+        file), or if ``n_points`` is above a billion.
     TypeError
-        If ``descriptor`` is not an eppf descriptor.
+        If ``descriptor`` is not an eppf descriptor, or ``files``,
+        ``output`` or ``random_state`` is of a type they do not take.
+    FileNotFoundError
+        If a file or folder of ``files`` does not exist.
 
     See Also
     --------
@@ -160,18 +166,26 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     True
     """
     from .datasets._folder import object_files
-    from .datasets._loaders import file_seeds
+    from .datasets._loaders import check_n_points, check_path, file_seeds
     from .io._api import check_sampling_args
 
     owner = "describe_files"
     if on_error not in ("raise", "skip"):
         raise ValueError(f"{owner}: on_error must be 'raise' or 'skip', got {on_error!r}")
     check_sampling_args(owner, normals, n_points, resolution)  # (once: not per file, where "skip" hid them)
+    check_n_points(n_points, owner)  # (the loaders' bound: a huge count is refused before any file is read)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
+    if output is not None and not (hasattr(output, "write") or isinstance(output, (str, bytes, os.PathLike))):
+        raise TypeError(f"{owner}: output must be a .npy path or a binary file open for writing, "
+                        f"got {type(output).__name__}")
     if isinstance(files, (str, bytes, os.PathLike)):
         files = [files]
+    elif not hasattr(files, "__iter__"):
+        raise TypeError(f"{owner}: files must be a path or a sequence of paths, got {type(files).__name__}")
+    files = list(files)
     names, seeds = [], []
-    for item in files:
-        path = os.fspath(item)
+    for k, item in enumerate(files):
+        path = check_path(item, f"files[{k}]", owner)
         if os.path.isdir(path):
             found = object_files(path)
             root = path
@@ -182,7 +196,7 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
         names += found
         seeds += file_seeds(random_state, root, found)
     if not names:
-        raise ValueError(f"{owner}: no point cloud or mesh files in {[os.fspath(f) for f in files]}")
+        raise ValueError(f"{owner}: no point cloud or mesh files in {[os.fsdecode(f) for f in files]}")
 
     def read(k):
         from .io import read_point_cloud
@@ -208,7 +222,7 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
         X, result = None, write_descriptors(output, names, read, descriptor, n_jobs=n_jobs, unreadable=unreadable,
                                             chunk_size=chunk_size, progress=progress)
     else:
-        output = os.fspath(output)
+        output = check_path(output, "output", owner)
         if not output.lower().endswith(".npy"):
             raise ValueError(f"{owner}: output must be a .npy path or a binary file, got {output}")
         with atomic_write(output) as fh:

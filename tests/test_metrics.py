@@ -326,3 +326,15 @@ def test_repeated_retrieval_with_eppf_transformer():
     assert result.per_repeat["total_accuracy"].shape == (2,)
     # four clearly different shapes: retrieval is far above chance (25%)
     assert result.mean["total_accuracy"] > 0.6
+
+
+def test_repeated_retrieval_result_without_metrics_or_draws_is_refused():
+    # str() of an empty result raised max()'s bare "arg is an empty sequence"
+    with pytest.raises(ValueError, match="RepeatedRetrievalResult: per_repeat is empty; a result needs at least one metric"):
+        RepeatedRetrievalResult(per_repeat={}, seeds=np.zeros(0, dtype=int))
+    with pytest.raises(ValueError, match="RepeatedRetrievalResult: metric 'total_accuracy' has no values"):
+        RepeatedRetrievalResult(per_repeat={"total_accuracy": np.zeros(0)}, seeds=np.zeros(0, dtype=int))
+    with pytest.raises(TypeError, match="RepeatedRetrievalResult: per_repeat must be a dict"):
+        RepeatedRetrievalResult(per_repeat=[0.5], seeds=np.zeros(1, dtype=int))
+    one = RepeatedRetrievalResult(per_repeat={"total_accuracy": np.array([0.5])}, seeds=np.array([3]))
+    assert str(one).splitlines() == ["metric          mean (std) over 1 draw", "total_accuracy  50.00 (±0.00)"]

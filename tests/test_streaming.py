@@ -246,3 +246,50 @@ def test_side_by_side_rows_run_on_other_threads_with_one_thread_each(monkeypatch
             assert all(t == here and j == own for t, j in seen)
         else:
             assert all(t != here and j == 1 for t, j in seen)
+
+
+def test_random_state_takes_what_load_folder_takes(tmp_path):
+    # the docstring said int, a RandomState was used without a word, and a float failed inside
+    # scikit-learn's check_random_state with a message naming neither describe_files nor the parameter
+    from eppf.datasets._folder import object_files
+    from eppf.datasets._loaders import file_seeds
+
+    folder = _folder(tmp_path, n=1)
+    est = EPPFTransformer(n_pairs=200, random_state=0)
+    by_int = describe_files(folder, est, random_state=5)
+    by_rs = describe_files(folder, est, random_state=np.random.RandomState(5))
+    # a RandomState draws the folder's base seed as load_folder draws it: the same clouds as reading them so
+    files = object_files(str(folder))
+    seeds = file_seeds(np.random.RandomState(5), str(folder), files)
+    same = est.fit_transform([read_point_cloud(f, random_state=s) for f, s in zip(files, seeds)])
+    assert_array_equal(by_rs.descriptors, same)
+    assert by_int.files == by_rs.files
+    assert describe_files(folder, est, random_state=None).descriptors.shape == by_int.descriptors.shape
+    for bad, exc in ((1.5, TypeError), ("0", TypeError), (-1, ValueError), (2**40, ValueError)):
+        with pytest.raises(exc, match=r"describe_files: random_state must be "):
+            describe_files(folder, est, random_state=bad)
+
+
+def test_paths_of_every_kind_and_of_no_kind(tmp_path):
+    import os
+
+    folder = _folder(tmp_path, n=1)
+    est = EPPFTransformer(n_pairs=200, random_state=0)
+    expected = describe_files(folder, est)
+    # a bytes folder gave bytes names, which the reading and the file seeds then failed on
+    for files in (os.fsencode(folder), [os.fsencode(folder)], [str(folder)], (f for f in [folder])):
+        result = describe_files(files, est)
+        assert result.files == expected.files
+        assert_array_equal(result.descriptors, expected.descriptors)
+    out = os.fsencode(tmp_path / "rows.npy")
+    assert describe_files(folder, est, output=out).descriptors is None
+    assert_array_equal(np.load(tmp_path / "rows.npy"), expected.descriptors)
+    with pytest.raises(TypeError, match=r"describe_files: files\[1\] must be a str, bytes or os\.PathLike path, got int"):
+        describe_files([folder, 3], est)
+    with pytest.raises(TypeError, match=r"describe_files: files must be a path or a sequence of paths, got int"):
+        describe_files(3, est)
+    with pytest.raises(TypeError, match=r"describe_files: output must be a \.npy path or a binary file open for "
+                                        r"writing, got int"):
+        describe_files(folder, est, output=4)
+    with pytest.raises(ValueError, match=r"describe_files: n_points must be at most 1,000,000,000 points per object"):
+        describe_files(folder, est, n_points=10**12)

@@ -71,6 +71,13 @@ COMMON_CONSTRAINTS = {
 }
 
 
+#: Most parameters a network of the classifiers may have: 4 GB of float32 weights, and about four
+#: times that to train (gradients and Adam's two moments). The paper's 4D network has 15 million.
+#: (The bound of the networks of eppf.nn too, ``eppf.nn._networks.MAX_PARAMETERS``: not imported from
+#: there, since this module imports no torch.)
+MAX_PARAMETERS = 10**9
+
+
 class _torch_threads:
     """Set torch's intra-op thread count for a block; None changes nothing.
 
@@ -145,6 +152,8 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
 
     _parameter_constraints = dict(COMMON_CONSTRAINTS)
     _seed_names = ("torch", "split")
+    #: The parameters that set the network's size, named when it would be too large.
+    _size_parameters = ()
 
     # ------------------------------------------------------------------ hooks
     def _check_params(self):
@@ -170,6 +179,12 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
                 f"{self._owner}: device={self.device!r} but only {torch.cuda.device_count()} CUDA device(s) exist"
             )
 
+    def _parameter_lower_bound(self, n_classes):
+        """A lower bound of the network's parameter count, in Python ints (no torch): a network far
+        beyond :data:`MAX_PARAMETERS` is refused from it before its exact count is taken, whose layer
+        shapes may overflow torch's 64-bit sizes. 0 (the default) always counts exactly."""
+        return 0
+
     def _fit_inputs(self, X, seeds):  # pragma: no cover - abstract
         raise NotImplementedError
 
@@ -187,6 +202,31 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
     def _owner(self):
         return type(self).__name__
 
+    def _check_network_size(self, n_classes):
+        """A ValueError naming the size parameters when the network would have more than
+        :data:`MAX_PARAMETERS` parameters; checked before the network (or its data) is built, where
+        torch's allocator failed with a RuntimeError ("you tried to allocate 57600000000000 bytes")."""
+        n = self._parameter_lower_bound(n_classes)
+        exact = n <= MAX_PARAMETERS
+        if exact:
+            import torch
+
+            from ..nn import count_parameters
+
+            params = self._net_params(n_classes, 0)
+            kwargs = {k[len("module__"):]: v for k, v in params.items() if k.startswith("module__")}
+            with torch.device("meta"):  # (shapes only: no memory is allocated)
+                n = count_parameters(params["module"](**kwargs))
+        if n > MAX_PARAMETERS:
+            sizes = ", ".join([f"{name}={getattr(self, name)!r}" for name in self._size_parameters]
+                              + [f"{n_classes:,} classes"])
+            raise ValueError(
+                f"{self._owner}: the network would have {'' if exact else 'at least '}{n:,} parameters "
+                f"({sizes}), more than the {MAX_PARAMETERS:,} it may have "
+                f"({4 * MAX_PARAMETERS / 1e9:g} GB of float32 weights, four times that to train); "
+                f"use smaller layers"
+            )
+
     def _n_threads(self):
         """Torch threads for fit and predict, or None to leave torch alone."""
         if self.n_jobs is None:
@@ -201,7 +241,10 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         owner = self._owner
         if y is None:  # (np.asarray makes it a 0-d array, which the shape check would name as shape ())
             raise ValueError(f"{owner}: y is None; class labels are needed")
-        y = np.asarray(y)
+        try:
+            y = np.asarray(y)
+        except ValueError as exc:  # (ragged nested labels: NumPy's message names neither the estimator nor y)
+            raise ValueError(f"{owner}: y must be a 1D sequence of class labels ({exc})") from None
         if y.ndim != 1:
             raise ValueError(f"{owner}: y must be 1D, got shape {y.shape}")
         if y.shape[0] != n_objects:
@@ -300,13 +343,35 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         KeyboardInterrupt
             On Ctrl-C during training (skorch alone would swallow it and
             return a half-trained network).
+
+        Notes
+        -----
+        ``fit`` is all or nothing: when it raises (an error found midway,
+        a ``KeyboardInterrupt``), the estimator is left exactly as it was
+        before the call. A fitted estimator keeps its previous fit, with
+        ``classes_``, ``net_`` and every other fitted attribute from that
+        one fit; an unfitted one stays unfitted.
         """
+        # Every attribute fit sets is set anew (none is changed in place), so the state before the
+        # call is its attribute dict, copied: restored on failure, a refit that failed midway left a
+        # new classes_ beside the old net_, which then predicted the old classes under the new names.
+        before = dict(self.__dict__)
+        try:
+            return self._fit(X, y)
+        except BaseException:
+            self.__dict__.clear()
+            self.__dict__.update(before)
+            raise
+
+    def _fit(self, X, y):
+        """``fit``'s work, which may leave the estimator half changed when it raises."""
         self._check_params()
         rng = check_random_state(self.random_state)
         seeds = dict(zip(self._seed_names, (int(s) for s in rng.randint(0, 2**31 - 1, size=len(self._seed_names)))))
         X = self._fit_inputs(X, seeds)
         y_enc = self._encode_labels(y, X.shape[0])
         n_classes = len(self.classes_)
+        self._check_network_size(n_classes)
 
         train_idx = np.arange(X.shape[0])
         valid_idx = None
@@ -379,6 +444,7 @@ class SkorchClassifierBase(ClassifierMixin, BaseEstimator):
         from skorch import NeuralNetClassifier
 
         self._check_params()
+        self._check_network_size(n_classes)
         params = dict(
             lr=float(self.lr),
             max_epochs=int(self.max_epochs),

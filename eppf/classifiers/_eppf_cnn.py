@@ -53,7 +53,11 @@ class EPPF4DClassifier(SkorchClassifierBase):
     n_hidden : int, default=1024
         Units of the first dense layer.
     filters : tuple of 3 ints, default=(32, 64, 48)
-        Filters of the three convolutions (Table I).
+        Filters of the three convolutions (Table I). With ``n_bins``,
+        ``n_hidden``, ``side_hidden`` and the number of classes they set the
+        network's size, which may be at most a billion parameters
+        (``eppf.classifiers._base.MAX_PARAMETERS``; the paper's network has
+        15 million): a larger one is refused in ``fit`` before it is built.
     early_stopping : bool, default=True
         Hold out ``validation_fraction`` of the training objects (stratified,
         drawn from ``random_state``), stop when the validation loss has not
@@ -330,11 +334,18 @@ class EPPF4DClassifier(SkorchClassifierBase):
         "swa_epochs": [Interval(numbers.Integral, 0, None, closed="left")],
     }
     _seed_names = ("torch", "split", "draws")
+    _size_parameters = ("n_bins", "filters", "n_hidden", "side_hidden")
 
     # ------------------------------------------------------------------ hooks
     def _check_params(self):
         super()._check_params()
         self._n_bins = tuple(int(b) for b in self.n_bins)
+
+    def _parameter_lower_bound(self, n_classes):
+        from ..nn._networks import parameter_lower_bound
+
+        return parameter_lower_bound(self._n_bins, self.n_hidden, n_classes, self.filters,
+                                     getattr(self, "n_side_features_", 0), self.side_hidden)
 
     def _validate_X(self, X, n_features, n_side=0):
         """Return X as float32 of shape (n_objects, n_draws, n_features + n_side)."""
@@ -506,6 +517,14 @@ class EPPF4DClassifier(SkorchClassifierBase):
         KeyboardInterrupt
             On Ctrl-C during training (skorch alone would swallow it and
             return a half-trained network).
+
+        Notes
+        -----
+        ``fit`` is all or nothing: when it raises (an error found midway,
+        a ``KeyboardInterrupt``), the estimator is left exactly as it was
+        before the call. A fitted estimator keeps its previous fit, with
+        ``classes_``, ``net_`` and every other fitted attribute from that
+        one fit; an unfitted one stays unfitted.
         """
         return super().fit(X, y)
 

@@ -10,6 +10,9 @@ from ._base import COMMON_CONSTRAINTS, SkorchClassifierBase
 
 __all__ = ["PointNetClassifier"]
 
+#: Most points per object ``PointNetClassifier`` feeds its network (``n_points``).
+MAX_N_POINTS = 2**24
+
 
 def _softmax(logits):
     import torch
@@ -80,7 +83,9 @@ class PointNetClassifier(SkorchClassifierBase):
         object is normalized to the unit cube (centered on its bounding-box
         center and divided by the bounding box's largest side), then
         subsampled without replacement when larger, or topped up with points
-        drawn with replacement when smaller.
+        drawn with replacement when smaller. At most 2**24 (16,777,216): the
+        network's widest layer holds 1,024 values per point, 64 GiB for one
+        object of that many.
     max_epochs : int, default=100
         Upper bound on training epochs.
     lr : float, default=1e-3
@@ -241,6 +246,13 @@ class PointNetClassifier(SkorchClassifierBase):
     _seed_names = ("torch", "split", "augment", "fit_sample", "predict")
 
     # ------------------------------------------------------------------ hooks
+    def _check_params(self):
+        super()._check_params()
+        # (the network's widest layer holds 1,024 float32 values per point, 64 GiB for an object of
+        # MAX_N_POINTS; a larger count failed in NumPy's allocator, resampling, or torch's)
+        if self.n_points > MAX_N_POINTS:
+            raise ValueError(f"{self._owner}: n_points must be at most 2**24 = {MAX_N_POINTS:,}, got {self.n_points:,}")
+
     def _prepare(self, X, seed):
         clouds = check_point_clouds(X, owner=self._owner, min_points=2)
         return _normalise_and_sample(clouds, int(self.n_points), object_seeds(seed, len(clouds)), self._owner)
@@ -305,6 +317,14 @@ class PointNetClassifier(SkorchClassifierBase):
         KeyboardInterrupt
             On Ctrl-C during training (skorch alone would swallow it and
             return a half-trained network).
+
+        Notes
+        -----
+        ``fit`` is all or nothing: when it raises (an error found midway,
+        a ``KeyboardInterrupt``), the estimator is left exactly as it was
+        before the call. A fitted estimator keeps its previous fit, with
+        ``classes_``, ``net_`` and every other fitted attribute from that
+        one fit; an unfitted one stays unfitted.
         """
         return super().fit(X, y)
 

@@ -33,7 +33,7 @@ import warnings
 import zipfile
 
 from ..utils._param_validation import validate_parameter
-from ._loaders import MODELNET_VERSION, load_modelnet
+from ._loaders import MODELNET_VERSION, check_path, load_modelnet
 
 __all__ = ["clear_data_home", "fetch_file", "fetch_modelnet", "get_data_home"]
 
@@ -72,9 +72,14 @@ def get_data_home(data_home=None):
     >>> from eppf.datasets import get_data_home
     >>> home = get_data_home(tempfile.mkdtemp())
     """
+    return _data_home(data_home, "get_data_home")
+
+
+def _data_home(data_home, owner):
+    """:func:`get_data_home` for ``owner``, whose name a bad ``data_home``'s error carries."""
     if data_home is None:
         data_home = os.environ.get("EPPF_DATA", os.path.join("~", "eppf_data"))
-    data_home = os.path.expanduser(os.fspath(data_home))
+    data_home = os.path.expanduser(check_path(data_home, "data_home", owner))
     os.makedirs(data_home, exist_ok=True)
     return data_home
 
@@ -98,7 +103,7 @@ def clear_data_home(data_home=None):
     >>> os.path.isdir(home)
     False
     """
-    shutil.rmtree(get_data_home(data_home))
+    shutil.rmtree(_data_home(data_home, "clear_data_home"))
 
 
 def _sha256(path):
@@ -292,7 +297,7 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
         ``<filename>.sha256`` and later calls check the file against it.
     data_home : str or path-like, default=None
         Folder to download into; see :func:`get_data_home`.
-    filename : str, default=None
+    filename : str or path-like, default=None
         Name of the file in ``data_home``; default: the last part of the URL.
     download_if_missing : bool, default=True
         If False and the file is absent, raise instead of downloading.
@@ -348,9 +353,10 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
         sha256 = _check_sha256(KNOWN_SHA256[url], owner)
     if filename is None:
         filename = os.path.basename(url.split("?", 1)[0].rstrip("/")) or "download"
+    filename = check_path(filename, "filename", owner)
     if os.sep in filename or (os.altsep and os.altsep in filename) or filename in (".", ".."):
         raise ValueError(f"{owner}: filename must be a plain file name, got {filename!r}")
-    home = get_data_home(data_home)
+    home = _data_home(data_home, owner)
     target = os.path.join(home, filename)
     record = target + ".sha256"
     if os.path.exists(target):
@@ -501,7 +507,7 @@ def fetch_modelnet(version=40, *, data_home=None, url=None, sha256=None, downloa
     """
     owner = "fetch_modelnet"
     validate_parameter(version, MODELNET_VERSION, name="version", owner=owner)
-    home = get_data_home(data_home)
+    home = _data_home(data_home, owner)
     folder = os.path.join(home, f"ModelNet{version}")
     if not os.path.isdir(folder):
         archive = fetch_file(url or MODELNET_URLS[version], sha256=sha256, data_home=home,

@@ -7,6 +7,7 @@ import numpy as np
 from sklearn.utils import Bunch
 
 from ..io import read_point_cloud, supported_extensions
+from ..utils._param_validation import RANDOM_STATE, validate_parameter
 from ._loaders import check_choice, check_class_names, check_dir, check_n_points, file_seeds, load_all
 
 __all__ = ["folder_layout", "load_folder", "object_files"]
@@ -15,15 +16,39 @@ __all__ = ["folder_layout", "load_folder", "object_files"]
 SPLITS = ("train", "test")
 
 
+def _identity(path):
+    """The (device, inode) of the folder ``path`` leads to, links followed; None when it cannot be read."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
 def object_files(folder):
     """Point cloud and mesh files under ``folder``, searched recursively, sorted by path.
 
     Every extension of :func:`eppf.io.supported_extensions` counts, in any
     case; hidden files and folders (names starting with ``.``) are skipped.
+    Symbolic links are followed, to files and to folders alike (a class
+    folder may be a link to where the scans are kept), and listed under the
+    link's path; a link back to a folder it sits in (a cycle) is not
+    descended into, so the search ends.
     """
     found, extensions = [], supported_extensions()
-    for dirpath, dirnames, filenames in os.walk(folder):
-        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+    # Per folder still to be visited, the identities of the folders above it
+    # (and its own): a subfolder that is one of them is a link back up.
+    above = {}
+    for dirpath, dirnames, filenames in os.walk(folder, followlinks=True):
+        chain = above.pop(dirpath, frozenset()) | {_identity(dirpath)}
+        kept = []
+        for d in sorted(d for d in dirnames if not d.startswith(".")):
+            sub = os.path.join(dirpath, d)
+            identity = _identity(sub)
+            if identity is not None and identity not in chain:
+                above[sub] = chain
+                kept.append(d)
+        dirnames[:] = kept
         found += [os.path.join(dirpath, f) for f in filenames
                   if not f.startswith(".") and os.path.splitext(f)[1].lower() in extensions]
     return sorted(found)
@@ -103,11 +128,13 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     point files (PLY without faces, PCD, XYZ, TXT, CSV, PTS, XYZN, XYZRGB,
     NPY, NPZ) as they are, meshes (OFF, OBJ, STL, PLY with faces) sampled
     area-uniformly. Hidden files and folders and other extensions are
-    ignored.
+    ignored. Symbolic links to files and folders are followed (a class
+    folder may be a link), except a link back to a folder above it, which
+    would make the search endless.
 
     Parameters
     ----------
-    path : str or path-like
+    path : str, bytes or path-like
         The folder.
     classes : sequence of str, default=None
         Class folders to keep, in the order of ``target_names``; None keeps
@@ -118,7 +145,8 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     n_points : int, default=None
         If given, every object is resampled (point files) or sampled (meshes)
         to this many points. If None, point files are kept as they are and
-        meshes are sampled with 2,048 points.
+        meshes are sampled with 2,048 points. At most a billion
+        (``eppf.datasets._loaders.MAX_N_POINTS``).
     normals : {"auto", True, False}, default="auto"
         Whether to return normals (columns 3 to 5) when the files have them
         (face normals for meshes).
@@ -143,6 +171,10 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
 
     Raises
     ------
+    TypeError
+        If ``path`` is not a str, bytes or path-like object.
+    FileNotFoundError
+        If ``path`` is not a folder.
     ValueError
         If the folder holds no class folders or no object files of the
         requested classes, if a requested class has no folder, or if a file
@@ -167,6 +199,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     classes = check_class_names(classes, owner, allow_none=True)
 
     files = object_files(root)

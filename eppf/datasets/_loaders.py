@@ -15,6 +15,11 @@ downloads), returns a :class:`~sklearn.utils.Bunch` (or ``(X, y)`` with
   gets its own seed from ``random_state`` and its path inside the folder, so
   a cloud does not depend on ``n_jobs``, ``subset`` or on which other files
   could be read.
+- Paths may be ``str``, ``bytes`` or path-like (:func:`os.fsdecode` makes
+  them ``str``; anything else is a TypeError naming the parameter), and a
+  folder's symbolic links are followed.
+- ``n_points`` is at most a billion (:data:`MAX_N_POINTS`), refused before
+  anything is allocated.
 """
 
 import glob
@@ -30,8 +35,10 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
-from ..utils._param_validation import Interval, Options, Satisfies, validate_parameter
-from ..utils._sampling import check_n_points, check_resolution
+from ..utils._param_validation import RANDOM_STATE, Interval, Options, Satisfies, validate_parameter
+from ..utils._validation import check_n_jobs
+from ..utils._sampling import check_n_points as _check_n_points
+from ..utils._sampling import check_resolution
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
 
@@ -47,11 +54,43 @@ S3DIS_CLASSES = ("beam", "board", "bookcase", "chair", "column", "door", "sofa",
 # --------------------------------------------------------------------------- shared checks
 
 
-def check_dir(path, owner):
-    path = os.fspath(path)
+def check_path(path, name, owner):
+    """``path`` as a ``str``: a ``str``, ``bytes`` or :class:`os.PathLike` path (decoded by :func:`os.fsdecode`).
+
+    Every path parameter of :mod:`eppf.datasets` accepts these three kinds
+    alike; anything else is a TypeError naming ``owner`` and ``name``
+    (``os.fspath``'s own message names neither, and a bytes path used to
+    fail deep inside, where it met a ``str``).
+    """
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise TypeError(f"{owner}: {name} must be a str, bytes or os.PathLike path, got {type(path).__name__}")
+    try:
+        return os.fsdecode(path)
+    except TypeError:  # (a PathLike whose __fspath__ returns neither str nor bytes)
+        raise TypeError(f"{owner}: {name} must be a str, bytes or os.PathLike path; {path!r} is a "
+                        f"{type(path).__name__} whose __fspath__ returns neither") from None
+
+
+def check_dir(path, owner, name="path"):
+    path = check_path(path, name, owner)
     if not os.path.isdir(path):
         raise FileNotFoundError(f"{owner}: no such folder: {path!r}")
     return path
+
+
+#: Most points per object that a loader (or :func:`eppf.datasets.make_shapes`) samples or resamples
+#: to: a billion points are 24 GB of float64 coordinates (48 GB with normals) in one object. A larger
+#: ``n_points`` is refused before anything is allocated, where NumPy's "Unable to allocate" came out
+#: of the middle of the reading, naming neither the loader nor the parameter.
+MAX_N_POINTS = 10**9
+
+
+def check_n_points(n_points, owner, allow_none=True):
+    """``n_points`` checked as :mod:`eppf.utils._sampling` does and against :data:`MAX_N_POINTS`; an int or None."""
+    n_points = _check_n_points(n_points, owner, allow_none=allow_none)
+    if n_points is not None and n_points > MAX_N_POINTS:
+        raise ValueError(f"{owner}: n_points must be at most {MAX_N_POINTS:,} points per object, got {n_points:,}")
+    return n_points
 
 
 #: ModelNet's ``version`` (:mod:`eppf.utils._param_validation`), for the loader and the fetcher.
@@ -123,6 +162,8 @@ def load_all(jobs, *, owner, on_error, n_jobs):
 
     Returns the list of results (None for skipped) and the skipped list.
     """
+    if n_jobs is not None:  # (joblib's "n_jobs == 0 in Parallel has no meaning" named no loader; 1.5 passed)
+        check_n_jobs(n_jobs, owner=owner)
     results = Parallel(n_jobs=n_jobs)(delayed(_guarded)(func, args) for _, func, args in jobs)
     skipped = []
     for (filename, _, _), (_, err) in zip(jobs, results):
@@ -349,6 +390,7 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     if resolution is not None and n_points is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both (set n_points=None to use resolution)")
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     layout, folder = _find_modelnet(root, version)
     splits = _subset_splits(subset)
     if layout == "official":
@@ -522,6 +564,7 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     check_choice(normals, "normals", ("auto", True, False), owner)
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     resolution = check_resolution(resolution, owner)
     if n_points is None and resolution is None:
         raise ValueError(f"{owner}: give n_points or resolution (meshes must be sampled)")
@@ -573,6 +616,21 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
 
 
 # --------------------------------------------------------------------------- S3DIS
+
+
+def _check_areas(areas, owner):
+    """``areas`` as a list of non-negative ints, or an error naming ``owner``.
+
+    (``int(a)`` for ``a`` in ``areas`` read the string "12" as areas 1 and 2,
+    a float 1.7 as area 1, and an int failed with "'int' object is not iterable".)
+    """
+    if isinstance(areas, (str, bytes)) or not hasattr(areas, "__iter__"):
+        raise TypeError(f"{owner}: areas must be None or a sequence of area numbers (ints), got {areas!r}")
+    areas = list(areas)
+    bad = [a for a in areas if not isinstance(a, numbers.Integral) or isinstance(a, bool) or a < 0]
+    if bad:
+        raise ValueError(f"{owner}: areas must be non-negative ints (the n of Area_<n>), got {bad[0]!r}")
+    return [int(a) for a in areas]
 
 
 def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None, train_size=0.6, n_points=None,
@@ -642,15 +700,17 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
     n_points = check_n_points(n_points, owner)
+    validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)
     names = check_class_names(classes, owner)
+    areas = None if areas is None else _check_areas(areas, owner)
     index = {n: k for k, n in enumerate(names)}
     pattern = os.path.join("Area_*", "*", "Annotations", "*.txt")
     files = sorted(glob.glob(os.path.join(root, pattern))) or sorted(glob.glob(os.path.join(root, "*", pattern)))
     if not files:
         raise ValueError(f"{owner}: no Area_<n>/<room>/Annotations/<class>_<k>.txt files under {root!r}")
     if areas is not None:
-        wanted = {f"Area_{int(a)}" for a in areas}
+        wanted = {f"Area_{a}" for a in areas}
         files = [f for f in files if f.split(os.sep)[-4] in wanted]
     entries = []
     for f in files:

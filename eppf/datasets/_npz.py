@@ -1,5 +1,6 @@
 """Reader and writer of the flat ``.npz`` layout of point-cloud data sets."""
 
+import errno
 import numbers
 import os
 
@@ -8,6 +9,7 @@ from sklearn.utils import Bunch
 
 from ..io._npy import read_npz_arrays
 from ..utils._atomic import atomic_write
+from ._loaders import check_path
 
 __all__ = ["load_npz", "save_npz"]
 
@@ -66,7 +68,7 @@ def load_npz(path, *, return_X_y=False):
     >>> data.target_names[data.target].tolist(), data.split.tolist()
     (['table', 'chair'], ['train', 'test'])
     """
-    path = os.fspath(path)
+    path = check_path(path, "path", "load_npz")
     if not os.path.exists(path):
         raise FileNotFoundError(f"load_npz: no such file: {path!r}")
     archive = read_npz_arrays(path, "load_npz")  # (headers checked against the stored bytes before allocating)
@@ -157,6 +159,8 @@ def save_npz(path, clouds, labels, class_names, *, split=None, ids=None):
         non-finite or out of range; the message names the offending object.
     FileNotFoundError
         If the folder of ``path`` does not exist.
+    IsADirectoryError
+        If ``path`` is a folder.
 
     See Also
     --------
@@ -180,7 +184,7 @@ def save_npz(path, clouds, labels, class_names, *, split=None, ids=None):
     ([(3, 3), (2, 3)], [1, 0], ['chair', 'table'])
     """
     owner = "save_npz"
-    path = os.fspath(path)
+    path = check_path(path, "path", owner)
     if isinstance(clouds, np.ndarray) and clouds.ndim == 3:
         clouds = list(clouds)
     if isinstance(clouds, (str, bytes)) or not hasattr(clouds, "__len__"):
@@ -234,6 +238,8 @@ def save_npz(path, clouds, labels, class_names, *, split=None, ids=None):
         raise ValueError(f"{owner}: labels must lie in 0..{names.size - 1} (indices into class_names); "
                          f"object {k} has {lab[k]}")
 
+    if os.path.isdir(path):  # (the rename into place failed naming the temporary file, not save_npz)
+        raise IsADirectoryError(errno.EISDIR, f"{owner}: a folder, not a file", path)
     out = {"points": points, "offsets": offsets, "labels": lab, "class_names": names}
     split_arr = _strings(split, "split", n, owner)
     if split_arr is not None:

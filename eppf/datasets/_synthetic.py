@@ -22,8 +22,9 @@ from ..preprocessing._perturb import (
     random_unit_vector,
     rotate_array,
 )
-from ..utils._param_validation import Interval, Options, StrOptions, validate_parameter
+from ..utils._param_validation import RANDOM_STATE, Interval, Options, StrOptions, validate_parameter
 from ..utils._sampling import CONSTRAINTS as SAMPLING_CONSTRAINTS
+from ._loaders import MAX_N_POINTS
 
 __all__ = ["make_shapes"]
 
@@ -40,6 +41,7 @@ _CONSTRAINTS = {
     "size_variation": PERTURB_CONSTRAINTS["fraction"],
     "rotate": [Options(bool, description="True, False"), StrOptions(["z"])],
     "test_size": PERTURB_CONSTRAINTS["fraction"],
+    "random_state": RANDOM_STATE,
 }
 
 
@@ -424,7 +426,10 @@ def make_shapes(
     Raises
     ------
     ValueError
-        If a parameter is out of range or a class name is unknown.
+        If a parameter is out of range or a class name is unknown, or if the
+        data set would hold more than a billion points in all
+        (``n_samples_per_class * len(classes) * n_points``; 24 GB of float64
+        coordinates), which is refused before anything is drawn.
     TypeError
         If a parameter has the wrong type.
 
@@ -443,12 +448,17 @@ def make_shapes(
     """
     params = {
         "n_samples_per_class": n_samples_per_class, "n_points": n_points, "noise": noise, "occlusion": occlusion,
-        "size_variation": size_variation, "rotate": rotate, "test_size": test_size,
+        "size_variation": size_variation, "rotate": rotate, "test_size": test_size, "random_state": random_state,
     }
     for name, value in params.items():
         validate_parameter(value, _CONSTRAINTS[name], name=name, owner=_OWNER)
     n_per_class, n_points = int(n_samples_per_class), int(n_points)
     classes = _check_classes(classes)
+    total = n_per_class * len(classes) * n_points
+    if total > MAX_N_POINTS:  # (NumPy's "Unable to allocate" came from the middle of the drawing, or never)
+        raise ValueError(
+            f"{_OWNER}: n_samples_per_class={n_per_class:,} objects of {len(classes)} classes with n_points="
+            f"{n_points:,} are {total:,} points in all, more than the {MAX_N_POINTS:,} a data set may hold")
     noise, occlusion, size_variation, test_size = float(noise), float(occlusion), float(size_variation), float(test_size)
     rotate = rotate if isinstance(rotate, str) else bool(rotate)
     rng = check_random_state(random_state)

@@ -6,6 +6,10 @@ follow from ``n_bins``; nothing is hard-coded to the (20, 4, 5, 3) histogram.
 
 How Table I is read is documented in :mod:`eppf.nn`.
 
+A network of more than a billion parameters (:data:`MAX_PARAMETERS`; the
+paper's 4D network has 15 million) is refused with a ValueError naming its
+sizes before any layer is built.
+
 Precision
 ---------
 Every network takes ``precision="float32"`` (default) or ``"bfloat16"``. The
@@ -183,6 +187,39 @@ def _check_options(owner, n_side, side_hidden, batch_norm):
     return int(n_side), int(side_hidden), bool(batch_norm)
 
 
+#: Most parameters of a network built here: a larger one is refused before any layer is built (torch's
+#: allocator failed with a RuntimeError, "you tried to allocate 57600000000000 bytes", or torch.empty
+#: with an overflow TypeError). 4 GB of float32 weights; the paper's 4D network has 15 million.
+#: (``eppf.classifiers._base.MAX_PARAMETERS``, the classifiers' bound, is the same.)
+MAX_PARAMETERS = 10**9
+
+
+def parameter_lower_bound(n_bins, n_hidden, n_classes, filters, n_side, side_hidden):
+    """A lower bound of the parameter count of the 2D, 3D and 4D networks, in Python ints.
+
+    The layers' own shapes could overflow torch's 64-bit sizes, so sizes are
+    bounded from this before any layer is built: every convolution has at
+    least in * out weights, and the first dense layer reads at least
+    ``filters[2] * ceil(prod(n_bins) / 4)`` values (the 2 x 2 max-pool of the
+    plane or volume of ``prod(n_bins)`` cells), plus the side branch's units.
+    """
+    f0, f1, f2 = (int(f) for f in filters)
+    n_hidden, n_side, side_hidden = int(n_hidden), int(n_side), int(side_hidden)
+    n_in = f2 * -(-math.prod(int(b) for b in n_bins) // 4) + (side_hidden if n_side else 0)
+    return f0 + f0 * f1 + f1 * f2 + n_side * side_hidden + n_in * n_hidden + n_hidden * int(n_classes)
+
+
+def _check_size(owner, n_bins, n_hidden, n_classes, filters, n_side, side_hidden):
+    """A ValueError naming ``owner`` and the sizes when the network would certainly exceed :data:`MAX_PARAMETERS`."""
+    lower = parameter_lower_bound(n_bins, n_hidden, n_classes, filters, n_side, side_hidden)
+    if lower > MAX_PARAMETERS:
+        raise ValueError(
+            f"{owner}: the network would have at least {lower:,} parameters (n_bins={n_bins}, filters={filters}, "
+            f"n_hidden={n_hidden}, n_classes={n_classes}), more than the {MAX_PARAMETERS:,} it may have "
+            "(4 GB of float32 weights); use smaller layers"
+        )
+
+
 class _MaxPool2d(nn.MaxPool2d):
     """``MaxPool2d`` that pools a spatial-major tensor from a channels-last copy.
 
@@ -219,8 +256,9 @@ class _EPPFNetBase(nn.Module):
     input, and call :meth:`_init_options` before building their layers.
     """
 
-    def _init_options(self, owner, n_side, side_hidden, batch_norm, filters):
+    def _init_options(self, owner, n_side, side_hidden, batch_norm, filters, size):
         self.n_side, self.side_hidden, self.batch_norm = _check_options(owner, n_side, side_hidden, batch_norm)
+        _check_size(owner, *size, filters, self.n_side, self.side_hidden)
         if self.batch_norm:
             self.norms = nn.ModuleList(_ChannelNorm(f) for f in filters)
 
@@ -379,7 +417,7 @@ class EPPFNet4D(_EPPFNetBase):
         )
         _check("EPPFNet4D", conv_impl=conv_impl)
         self.conv_impl = conv_impl
-        self._init_options("EPPFNet4D", n_side, side_hidden, batch_norm, filters)
+        self._init_options("EPPFNet4D", n_side, side_hidden, batch_norm, filters, size=(n_bins, n_hidden, n_classes))
         self.precision = check_precision(precision, owner="EPPFNet4D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
@@ -507,7 +545,7 @@ class EPPFNet2D(_EPPFNetBase):
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet2D", n_bins, n_classes, dropout, filters, n_hidden
         )
-        self._init_options("EPPFNet2D", n_side, side_hidden, batch_norm, filters)
+        self._init_options("EPPFNet2D", n_side, side_hidden, batch_norm, filters, size=(n_bins, n_hidden, n_classes))
         self.precision = check_precision(precision, owner="EPPFNet2D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)
@@ -599,7 +637,7 @@ class EPPFNet3D(_EPPFNetBase):
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet3D", n_bins, n_classes, dropout, filters, n_hidden
         )
-        self._init_options("EPPFNet3D", n_side, side_hidden, batch_norm, filters)
+        self._init_options("EPPFNet3D", n_side, side_hidden, batch_norm, filters, size=(n_bins, n_hidden, n_classes))
         self.precision = check_precision(precision, owner="EPPFNet3D")
         self.n_bins = n_bins
         self.n_features = math.prod(n_bins)

@@ -7,6 +7,8 @@ trained network (or a skorch net holding one) needs nothing special.
 import torch
 from torch import nn
 
+from ._networks import MAX_PARAMETERS, _check
+
 __all__ = ["PointNet", "PointNetLoss", "TNet", "orthogonality_penalty"]
 
 
@@ -80,9 +82,11 @@ class PointNet(nn.Module):
     Parameters
     ----------
     n_classes : int
-        Number of classes.
+        Number of classes, at least 2; the network (3.5 million parameters
+        besides the last layer's ``257 * n_classes``) may have at most a
+        billion parameters.
     dropout : float, default=0.3
-        Dropout probability before the last dense layer.
+        Dropout probability before the last dense layer, in [0, 1).
 
     See Also
     --------
@@ -113,6 +117,13 @@ class PointNet(nn.Module):
 
     def __init__(self, n_classes, dropout=0.3):
         super().__init__()
+        # (checked before any layer: a float n_classes failed in torch.empty, a huge one in torch's
+        # allocator with a RuntimeError, and 0 classes or a dropout of 2 built a network that could not train)
+        _check("PointNet", n_classes=n_classes, dropout=dropout)
+        n_classes, dropout = int(n_classes), float(dropout)
+        if 257 * n_classes > MAX_PARAMETERS:
+            raise ValueError(f"PointNet: n_classes={n_classes:,} gives the last layer {257 * n_classes:,} parameters, "
+                             f"more than the {MAX_PARAMETERS:,} a network may have; use fewer classes")
         self.input_tnet = TNet(3)
         self.mlp1 = nn.Sequential(
             nn.Conv1d(3, 64, 1), nn.BatchNorm1d(64), nn.ReLU(),

@@ -292,6 +292,15 @@ def test_pointnet_order_preserving_relabelling_changes_nothing_but_the_names():
     np.testing.assert_array_equal(np.where(a.predict(X) == "a", "alpha", "beta"), b.predict(X))
 
 
+@pytest.mark.parametrize("kind", KINDS)
+def test_ragged_labels_are_named(kind):
+    # NumPy's bare "setting an array element with a sequence" named neither the estimator nor y
+    clf, X, y = _make(kind, max_epochs=1, verbose=0)
+    ragged = [[0], [1, 2]] * (len(X) // 2)
+    with pytest.raises(ValueError, match=f"{type(clf).__name__}: y must be a 1D sequence of class labels"):
+        clf.fit(X, ragged)
+
+
 # ---------------------------------------------------------------- not fitted
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("method", ["predict", "predict_proba"])
@@ -299,6 +308,59 @@ def test_not_fitted(kind, method):
     clf, X, _ = _make(kind)
     with pytest.raises(NotFittedError, match=type(clf).__name__):
         getattr(clf, method)(X)
+
+
+# ---------------------------------------------------------------- failed refit
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("error", [RuntimeError("boom"), KeyboardInterrupt()])
+def test_a_failed_refit_leaves_the_previous_fit(kind, error, monkeypatch):
+    # a refit that raised midway (after the labels were encoded) left the new classes_ beside the old
+    # net_: predict then named the old network's classes with the new labels
+    from eppf.nn import EPPFNet4D, PointNet
+
+    clf, X, y = _make(kind, max_epochs=1, early_stopping=False, random_state=0, verbose=0)
+    clf.fit(X, y)
+    before = dict(clf.__dict__)
+    proba = clf.predict_proba(X)
+    module = EPPFNet4D if kind == "eppf" else PointNet
+    forward, calls = module.forward, []
+
+    def failing_forward(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:  # midway through the first epoch
+            raise error
+        return forward(self, *args, **kwargs)
+
+    monkeypatch.setattr(module, "forward", failing_forward)
+    new_y = np.where(y == y[0], "first", "second")
+    new_y[-1] = "third"
+    with pytest.raises(type(error)):
+        clf.fit(X, new_y)
+    assert len(calls) == 2
+    monkeypatch.setattr(module, "forward", forward)
+    assert clf.__dict__.keys() == before.keys()
+    assert all(clf.__dict__[k] is v for k, v in before.items())  # the very objects of the first fit
+    assert list(clf.classes_) == sorted(set(y))
+    np.testing.assert_array_equal(clf.predict_proba(X), proba)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("error", [ValueError("late"), KeyboardInterrupt()])
+def test_a_failed_first_fit_leaves_the_estimator_unfitted(kind, error, monkeypatch):
+    clf, X, y = _make(kind, max_epochs=1, early_stopping=False, random_state=0, verbose=0)
+    params = clf.get_params()
+
+    def failing_datasets(*args, **kwargs):  # after the inputs and labels were taken in
+        raise error
+
+    monkeypatch.setattr(type(clf), "_make_datasets", failing_datasets)
+    with pytest.raises(type(error)):
+        clf.fit(X, y)
+    assert not hasattr(clf, "classes_") and not hasattr(clf, "n_features_in_")
+    assert not [k for k in vars(clf) if k.endswith("_") or k.startswith("_")]
+    assert clf.get_params() == params
+    with pytest.raises(NotFittedError):
+        clf.predict(X)
 
 
 # -------------------------------------------------------- validation split

@@ -742,3 +742,38 @@ def test_conv_impl_reaches_the_4d_network_and_survives_save_and_load(tmp_path):
     assert not hasattr(clf3.net_.module_, "conv_impl")
     with pytest.raises(ValueError, match="conv_impl must be one of"):
         EPPF4DClassifier(n_bins=N_BINS, conv_impl="fft", **SMALL).fit(X, y)
+
+
+@pytest.mark.parametrize("conv, params", [
+    (conv, params) for conv in ["4d", "3d", "2d"]
+    for params in [{"n_hidden": 10**12}, {"n_hidden": 10**30}, {"filters": (10**6, 10**6, 4)}]
+] + [(conv, {"n_hidden": 6 * 10**7}) for conv in ["4d", "2d"]])  # (these two: refused by the exact count)
+def test_a_network_too_large_is_refused_before_it_is_built(conv, params, monkeypatch):
+    # torch's allocator failed with a RuntimeError ("you tried to allocate 57600000000000 bytes"),
+    # or torch.empty with an overflow TypeError, instead of an error naming the parameters
+    built = []  # (the training data are made just before the network)
+    monkeypatch.setattr(EPPF4DClassifier, "_make_datasets", lambda *a, **k: built.append(1))
+    rng = np.random.default_rng(0)
+    X, y = rng.dirichlet(np.ones(12), size=12), np.arange(12) % 3
+    clf = EPPF4DClassifier(n_bins=(2, 2, 3, 1), conv=conv, max_epochs=1, early_stopping=False, verbose=0,
+                           **{**SMALL, **params})
+    with pytest.raises(ValueError, match=r"EPPF4DClassifier: the network would have (at least )?[\d,]+ parameters "
+                                         r"\(n_bins=\(2, 2, 3, 1\), .*, 3 classes\), more than the 1,000,000,000 it may have"):
+        clf.fit(X, y)
+    assert not built and not hasattr(clf, "classes_")
+
+
+def test_the_exact_parameter_count_decides_near_the_bound():
+    from eppf.classifiers import _base
+
+    clf = EPPF4DClassifier(n_bins=(2, 2, 3, 1), conv="2d", verbose=0, **SMALL)
+    clf._check_params()
+    with torch.device("meta"):
+        n = count_parameters(EPPFNet2D(n_bins=(2, 2, 3, 1), n_classes=3, filters=(4, 8, 4), n_hidden=16))
+    assert clf._parameter_lower_bound(3) <= n
+    clf._check_network_size(3)
+    import unittest.mock
+
+    with unittest.mock.patch.object(_base, "MAX_PARAMETERS", n - 1):
+        with pytest.raises(ValueError, match=f"the network would have {n:,} parameters"):
+            clf._check_network_size(3)

@@ -273,3 +273,39 @@ def test_augmentation():
     again = _make_dataset(pts, y, seed=0, rotation="z", jitter=True, scale=True)
     same = _make_dataset(pts, y, seed=0, rotation="z", jitter=True, scale=True)
     np.testing.assert_array_equal(again[0][0].numpy(), same[0][0].numpy())
+
+
+def test_a_huge_n_points_is_refused_in_parameter_validation():
+    # NumPy's "Unable to allocate" came out of the resampling (or torch's allocator out of the first batch)
+    rng = np.random.default_rng(0)
+    X, y = [rng.normal(size=(20, 3)) for _ in range(4)], [0, 1, 0, 1]
+    with pytest.raises(ValueError, match=re.escape("PointNetClassifier: n_points must be at most 2**24 = 16,777,216, "
+                                                   "got 1,000,000,000,000")):
+        PointNetClassifier(n_points=10**12, verbose=0).fit(X, y)
+
+
+def test_too_many_classes_for_the_network_are_refused_before_it_is_built(monkeypatch):
+    # a network of 10**7 classes has 2.6 billion weights in its last layer alone
+    from eppf.classifiers import _base
+
+    monkeypatch.setattr(_base, "MAX_PARAMETERS", 3_000_000)  # (the default network has 3.5 million)
+    rng = np.random.default_rng(0)
+    X, y = [rng.normal(size=(20, 3)) for _ in range(4)], [0, 1, 0, 1]
+    with pytest.raises(ValueError, match=r"PointNetClassifier: the network would have 3,[\d,]+ parameters \(2 classes\), "
+                                         r"more than the 3,000,000 it may have"):
+        PointNetClassifier(n_points=8, max_epochs=1, early_stopping=False, verbose=0).fit(X, y)
+
+
+@pytest.mark.parametrize("kwargs, exc, msg", [
+    ({"n_classes": 10**12}, ValueError, "PointNet: n_classes=1,000,000,000,000 gives the last layer 257,000,000,000,000 "
+                                        "parameters, more than the 1,000,000,000 a network may have"),
+    ({"n_classes": 10**30}, ValueError, "PointNet: n_classes=1,000,000,000,000,000,000,000,000,000,000 gives the last layer"),
+    ({"n_classes": 2.5}, TypeError, "PointNet: n_classes must be an int >= 2, got 2.5"),
+    ({"n_classes": 0}, ValueError, "PointNet: n_classes must be an int >= 2, got 0"),
+    ({"n_classes": 3, "dropout": 2}, ValueError, "PointNet: dropout must be a float in [0, 1), got 2"),
+])
+def test_pointnet_module_checks_its_arguments_before_building(kwargs, exc, msg):
+    # torch's allocator raised RuntimeError for a huge n_classes, torch.empty an overflow or type
+    # TypeError, and 0 classes or dropout=2 built a network that could not train
+    with pytest.raises(exc, match=re.escape(msg)):
+        PointNet(**kwargs)

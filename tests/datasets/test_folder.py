@@ -221,3 +221,60 @@ def test_classes_that_are_not_a_collection(tmp_path):
     # any iterable of names is read once, in its order
     data = load_folder(tmp_path, classes=(name for name in ["mug", "box"]))
     assert data.target_names.tolist() == ["mug", "box"]
+
+
+def _symlink_or_skip(target, link, **kwargs):
+    try:
+        os.symlink(target, link, **kwargs)
+    except (OSError, NotImplementedError, AttributeError) as exc:  # (Windows without the privilege, ...)
+        pytest.skip(f"symbolic links are not supported here ({exc})")
+
+
+def test_symlinked_class_folders_and_files_are_followed(tmp_path):
+    # os.walk does not follow links by default: a class folder that is a link was left out
+    root, store = tmp_path / "data", tmp_path / "store"
+    os.makedirs(root / "mug")
+    write_point_cloud(root / "mug" / "o0.xyz", CLOUDS["mug"][0])
+    os.makedirs(store / "boxes")
+    write_point_cloud(store / "boxes" / "o0.xyz", CLOUDS["box"][0])
+    write_point_cloud(store / "lone.xyz", CLOUDS["mug"][1])
+    _symlink_or_skip(store / "boxes", root / "box", target_is_directory=True)
+    _symlink_or_skip(store / "lone.xyz", root / "mug" / "o1.xyz")
+    data = load_folder(root)
+    assert data.target_names.tolist() == ["box", "mug"]
+    assert data.ids.tolist() == ["box/o0", "mug/o0", "mug/o1"]
+    np.testing.assert_allclose(data.data[0], CLOUDS["box"][0], rtol=1e-6)
+    np.testing.assert_allclose(data.data[2], CLOUDS["mug"][1], rtol=1e-6)
+
+
+def test_a_symlink_back_up_the_tree_is_not_followed(tmp_path):
+    # following links must not loop forever on a link to a folder above it
+    _write_flat(tmp_path)
+    _symlink_or_skip(tmp_path, tmp_path / "mug" / "deeper" / "up", target_is_directory=True)
+    _symlink_or_skip(tmp_path / "mug", tmp_path / "mug" / "again", target_is_directory=True)
+    data = load_folder(tmp_path)
+    assert data.ids.tolist() == ["box/deeper/o2", "box/o0", "box/o1", "mug/deeper/o2", "mug/o0", "mug/o1"]
+
+
+@pytest.mark.parametrize("kind", ["str", "bytes", "pathlib"])
+def test_path_may_be_str_bytes_or_path_like(tmp_path, kind):
+    # a bytes path failed inside os.walk ("startswith first arg must be bytes")
+    _write_flat(tmp_path)
+    path = {"str": str(tmp_path), "bytes": os.fsencode(tmp_path), "pathlib": tmp_path}[kind]
+    data = load_folder(path)
+    assert data.ids.tolist() == ["box/deeper/o2", "box/o0", "box/o1", "mug/deeper/o2", "mug/o0", "mug/o1"]
+    assert all(isinstance(f, str) for f in data.filenames.tolist())
+
+
+@pytest.mark.parametrize("path", [3, None, ["a"]])
+def test_a_path_of_another_type_is_a_type_error_naming_it(path):
+    with pytest.raises(TypeError, match=r"load_folder: path must be a str, bytes or os\.PathLike path, got "):
+        load_folder(path)
+
+
+def test_a_huge_n_points_is_refused_before_allocating(tmp_path):
+    # NumPy's "Unable to allocate 7.28 TiB" came out of the resampling, naming neither loader nor parameter
+    _write_flat(tmp_path)
+    with pytest.raises(ValueError, match=re.escape("load_folder: n_points must be at most 1,000,000,000 points "
+                                                   "per object, got 1,000,000,000,000")):
+        load_folder(tmp_path, n_points=10**12)

@@ -377,3 +377,89 @@ def test_hdf5_without_h5py_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "h5py", None)
     with pytest.raises(ImportError, match=re.escape("the HDF5 layout needs the 'h5py' package; install it with `pip install eppf[io]`")):
         load_modelnet(base, n_points=None)
+
+
+# --------------------------------------------------------------------------- paths and sizes, every loader
+
+
+@pytest.mark.parametrize("loader", [load_modelnet, load_scannet_objects, load_s3dis_objects])
+def test_a_path_of_another_type_is_a_type_error_naming_the_loader(loader):
+    # os.fspath's "expected str, bytes or os.PathLike object, not int" named no loader
+    with pytest.raises(TypeError, match=rf"{loader.__name__}: path must be a str, bytes or os\.PathLike path, got int"):
+        loader(5)
+
+
+def test_loaders_read_a_bytes_path(tmp_path):
+    _modelnet_official(tmp_path)
+    by_str = load_modelnet(str(tmp_path), n_points=32)
+    by_bytes = load_modelnet(os.fsencode(tmp_path), n_points=32)
+    assert by_bytes.filenames.tolist() == by_str.filenames.tolist()
+    for a, b in zip(by_bytes.data, by_str.data):
+        assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("loader", [load_modelnet, load_scannet_objects, load_s3dis_objects])
+def test_a_huge_n_points_is_refused_by_every_loader(tmp_path, loader):
+    with pytest.raises(ValueError, match=rf"{loader.__name__}: n_points must be at most 1,000,000,000 points per object"):
+        loader(tmp_path, n_points=10**12)
+
+
+def test_npz_and_data_home_paths(tmp_path):
+    from eppf.datasets import fetch_file, get_data_home, load_npz, save_npz
+
+    clouds = [np.zeros((3, 3)), np.ones((2, 3))]
+    path = os.fsencode(tmp_path / "pair.npz")
+    assert save_npz(path, clouds, [0, 1], ["a", "b"]) == str(tmp_path / "pair.npz")
+    assert load_npz(path).filename == str(tmp_path / "pair.npz")
+    assert get_data_home(os.fsencode(tmp_path / "home")) == str(tmp_path / "home")
+    for call, name in ((lambda: load_npz(1.5), "load_npz: path"), (lambda: save_npz(None, clouds, [0, 1], ["a", "b"]), "save_npz: path"),
+                       (lambda: get_data_home(7), "get_data_home: data_home"),
+                       (lambda: fetch_file("file:///x", data_home=7, download_if_missing=False), "fetch_file: data_home"),
+                       (lambda: fetch_file("file:///x", data_home=tmp_path, filename=3), "fetch_file: filename")):
+        with pytest.raises(TypeError, match=rf"{name} must be a str, bytes or os\.PathLike path"):
+            call()
+
+
+@pytest.mark.parametrize("random_state, exc", [(1.5, TypeError), ("seed", TypeError), (-1, ValueError)])
+def test_a_bad_random_state_is_named_by_every_loader(tmp_path, random_state, exc):
+    # scikit-learn's "1.5 cannot be used to seed a numpy.random.RandomState instance" named no loader
+    from eppf.datasets import load_folder, make_shapes
+
+    for loader in (load_modelnet, load_scannet_objects, load_s3dis_objects, load_folder):
+        with pytest.raises(exc, match=rf"{loader.__name__}: random_state must be "):
+            loader(tmp_path, random_state=random_state)
+    with pytest.raises(exc, match=r"make_shapes: random_state must be "):
+        make_shapes(1, n_points=8, random_state=random_state)
+
+
+@pytest.mark.parametrize("areas, exc, msg", [
+    ("12", TypeError, "load_s3dis_objects: areas must be None or a sequence of area numbers (ints), got '12'"),
+    (2, TypeError, "load_s3dis_objects: areas must be None or a sequence of area numbers (ints), got 2"),
+    ([1.7], ValueError, "load_s3dis_objects: areas must be non-negative ints (the n of Area_<n>), got 1.7"),
+    ([True], ValueError, "load_s3dis_objects: areas must be non-negative ints (the n of Area_<n>), got True"),
+])
+def test_s3dis_areas_that_are_not_area_numbers(tmp_path, areas, exc, msg):
+    # int(a) for a in areas read "12" as areas 1 and 2 and 1.7 as area 1, silently
+    _s3dis(tmp_path, S3DIS_LAYOUT)
+    with pytest.raises(exc, match=re.escape(msg)):
+        load_s3dis_objects(tmp_path, areas=areas)
+    assert {i.split("/")[0] for i in load_s3dis_objects(tmp_path, areas=(a for a in [2])).ids} == {"Area_2"}
+
+
+@pytest.mark.parametrize("n_jobs, exc, msg", [(0, ValueError, "n_jobs must be None or a non-zero int"),
+                                              (1.5, TypeError, "n_jobs must be None or a non-zero int"),
+                                              (10**9, ValueError, "n_jobs=1000000000 asks for more threads")])
+def test_loaders_check_n_jobs(tmp_path, n_jobs, exc, msg):
+    # joblib's "n_jobs == 0 in Parallel has no meaning" named no loader, and 1.5 was taken
+    _modelnet_official(tmp_path)
+    with pytest.raises(exc, match=re.escape(f"load_modelnet: {msg}")):
+        load_modelnet(tmp_path, n_points=32, n_jobs=n_jobs)
+
+
+def test_save_npz_to_a_folder_names_itself(tmp_path):
+    # the rename into place failed with "Is a directory: '.../.pair.npz.xxxx.tmp' -> ...", naming a temporary file
+    from eppf.datasets import save_npz
+
+    with pytest.raises(IsADirectoryError, match=re.escape("save_npz: a folder, not a file")):
+        save_npz(tmp_path, [np.zeros((2, 3))], [0], ["a"])
+    assert os.listdir(tmp_path) == []

@@ -379,3 +379,10 @@ def test_noise_beyond_float64_is_an_error():
     # noise=1e308 passed the parameter check and gave inf coordinates
     with pytest.raises(ValueError, match=re.escape("make_shapes: the noisy point cloud overflows float64")):
         make_shapes(1, n_points=20, classes=["box"], noise=1e308)
+
+
+@pytest.mark.parametrize("kwargs", [{"n_points": 10**12}, {"n_samples_per_class": 10**8, "n_points": 64}])
+def test_a_data_set_too_large_is_refused_before_drawing(kwargs):
+    # NumPy's "Unable to allocate" (or a drawing loop that did not end) instead of an error naming make_shapes
+    with pytest.raises(ValueError, match=r"make_shapes: .* points in all, more than the 1,000,000,000 a data set may hold"):
+        make_shapes(**kwargs)

@@ -166,3 +166,24 @@ def test_same_conv_pads_as_tensorflow_with_or_without_autograd(kernel):
         out = same_conv(x, w, b)
     torch.testing.assert_close(out, ref, rtol=1e-6, atol=1e-5)
     torch.testing.assert_close(same_conv(x, w, b).detach(), ref)
+
+
+@pytest.mark.parametrize("cls", [EPPFNet2D, EPPFNet3D, EPPFNet4D])
+@pytest.mark.parametrize("kwargs", [{"n_hidden": 10**12}, {"n_hidden": 10**30}, {"filters": (10**6, 10**6, 4)},
+                                    {"n_bins": (10**9, 10**9, 1, 1)}, {"n_side": 10**6, "side_hidden": 10**6}])
+def test_a_network_too_large_is_refused_before_any_layer_is_built(cls, kwargs):
+    # torch's allocator raised RuntimeError ("you tried to allocate 57600000000000 bytes"), torch.empty an
+    # overflow TypeError, or plane_shape searched a divisor of 10**18 for minutes
+    with pytest.raises(ValueError, match=rf"{cls.__name__}: the network would have at least [\d,]+ parameters \(n_bins="
+                                         r".*\), more than the 1,000,000,000 it may have"):
+        cls(n_classes=3, **kwargs)
+
+
+def test_the_lower_bound_is_below_the_parameter_count():
+    from eppf.nn._networks import parameter_lower_bound
+
+    for cls in (EPPFNet2D, EPPFNet3D, EPPFNet4D):
+        for n_bins, filters, n_side in (((20, 4, 5, 3), (32, 64, 48), 0), ((3, 1, 1, 1), (1, 1, 1), 0),
+                                        ((5, 3, 3, 2), (4, 8, 4), 7), ((7, 1, 1, 1), (2, 3, 5), 2)):
+            net = cls(n_bins=n_bins, n_classes=4, filters=filters, n_hidden=16, n_side=n_side, side_hidden=8)
+            assert parameter_lower_bound(n_bins, 16, 4, filters, n_side, 8) <= count_parameters(net)
