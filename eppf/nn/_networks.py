@@ -61,7 +61,7 @@ NETWORK_CONSTRAINTS = {
 }
 
 
-def _check(owner, **values):
+def check_network_values(owner, **values):
     """Check each named value against :data:`NETWORK_CONSTRAINTS` (an error naming ``owner``)."""
     for name, value in values.items():
         validate_parameter(value, NETWORK_CONSTRAINTS[name], name=name, owner=owner)
@@ -91,7 +91,7 @@ def check_n_bins(n_bins, *, owner=None):
         ...
     eppf.utils._param_validation.InvalidParameterError: MyNet: n_bins must be a tuple of 4 positive ints, got (20, 4, 5)
     """
-    _check(owner or "check_n_bins", n_bins=n_bins)
+    check_network_values(owner or "check_n_bins", n_bins=n_bins)
     return tuple(int(v) for v in n_bins)
 
 
@@ -178,12 +178,13 @@ class _SamePadConv(nn.Module):
 
 
 def _check_network_args(owner, n_bins, n_classes, dropout, filters, n_hidden):
-    _check(owner, n_bins=n_bins, n_classes=n_classes, dropout=dropout, filters=filters, n_hidden=n_hidden)
+    check_network_values(owner, n_bins=n_bins, n_classes=n_classes, dropout=dropout, filters=filters,
+                         n_hidden=n_hidden)
     return tuple(int(b) for b in n_bins), int(n_classes), float(dropout), tuple(int(f) for f in filters), int(n_hidden)
 
 
 def _check_options(owner, n_side, side_hidden, batch_norm):
-    _check(owner, n_side=n_side, side_hidden=side_hidden, batch_norm=batch_norm)
+    check_network_values(owner, n_side=n_side, side_hidden=side_hidden, batch_norm=batch_norm)
     return int(n_side), int(side_hidden), bool(batch_norm)
 
 
@@ -415,7 +416,7 @@ class EPPFNet4D(_EPPFNetBase):
         n_bins, n_classes, dropout, filters, n_hidden = _check_network_args(
             "EPPFNet4D", n_bins, n_classes, dropout, filters, n_hidden
         )
-        _check("EPPFNet4D", conv_impl=conv_impl)
+        check_network_values("EPPFNet4D", conv_impl=conv_impl)
         self.conv_impl = conv_impl
         self._init_options("EPPFNet4D", n_side, side_hidden, batch_norm, filters, size=(n_bins, n_hidden, n_classes))
         self.precision = check_precision(precision, owner="EPPFNet4D")

@@ -7,7 +7,7 @@ trained network (or a skorch net holding one) needs nothing special.
 import torch
 from torch import nn
 
-from ._networks import MAX_PARAMETERS, _check
+from ._networks import MAX_PARAMETERS, check_network_values
 
 __all__ = ["PointNet", "PointNetLoss", "TNet", "orthogonality_penalty"]
 
@@ -119,7 +119,7 @@ class PointNet(nn.Module):
         super().__init__()
         # (checked before any layer: a float n_classes failed in torch.empty, a huge one in torch's
         # allocator with a RuntimeError, and 0 classes or a dropout of 2 built a network that could not train)
-        _check("PointNet", n_classes=n_classes, dropout=dropout)
+        check_network_values("PointNet", n_classes=n_classes, dropout=dropout)
         n_classes, dropout = int(n_classes), float(dropout)
         if 257 * n_classes > MAX_PARAMETERS:
             raise ValueError(f"PointNet: n_classes={n_classes:,} gives the last layer {257 * n_classes:,} parameters, "
