@@ -256,6 +256,22 @@ def test_e57_points_and_fields_as_pye57_reads_them(tmp_path):
     np.testing.assert_array_equal(read_point_cloud(path), points[valid])
 
 
+def _e57_scan(libe57, imf, serial):
+    """The one data3D scan of a new E57 file ``imf``, whose root gets a format name, version 1.0 and a guid
+    ending in ``serial`` (the scan's: ``serial`` + 1)."""
+    root = imf.root()
+    root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
+    root.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-%012d}" % serial))
+    root.set("versionMajor", libe57.IntegerNode(imf, 1))
+    root.set("versionMinor", libe57.IntegerNode(imf, 0))
+    data3d = libe57.VectorNode(imf, True)
+    root.set("data3D", data3d)
+    scan = libe57.StructureNode(imf)
+    data3d.append(scan)
+    scan.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-%012d}" % (serial + 1)))
+    return scan
+
+
 def _e57_with_normals(path, xyz, normals, quaternion, translation, invalid=None):
     """One scan with the E57 surface-normals extension (``nor:normalX/Y/Z``), written through libE57Format's
     own node API (pye57's writer knows no extension fields)."""
@@ -263,16 +279,7 @@ def _e57_with_normals(path, xyz, normals, quaternion, translation, invalid=None)
     imf = libe57.ImageFile(str(path), "w")
     try:
         imf.extensionsAdd("nor", "http://www.libe57.org/E57_NOR_surface_normals.txt")
-        root = imf.root()
-        root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
-        root.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000001}"))
-        root.set("versionMajor", libe57.IntegerNode(imf, 1))
-        root.set("versionMinor", libe57.IntegerNode(imf, 0))
-        data3d = libe57.VectorNode(imf, True)
-        root.set("data3D", data3d)
-        scan = libe57.StructureNode(imf)
-        data3d.append(scan)
-        scan.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000002}"))
+        scan = _e57_scan(libe57, imf, 1)
         pose, rot, tr = libe57.StructureNode(imf), libe57.StructureNode(imf), libe57.StructureNode(imf)
         scan.set("pose", pose)
         pose.set("rotation", rot)
@@ -429,16 +436,7 @@ def _e57_spherical(path, columns):
     libe57 = pytest.importorskip("pye57.libe57")
     imf = libe57.ImageFile(str(path), "w")
     try:
-        root = imf.root()
-        root.set("formatName", libe57.StringNode(imf, "ASTM E57 3D Imaging Data File"))
-        root.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000003}"))
-        root.set("versionMajor", libe57.IntegerNode(imf, 1))
-        root.set("versionMinor", libe57.IntegerNode(imf, 0))
-        data3d = libe57.VectorNode(imf, True)
-        root.set("data3D", data3d)
-        scan = libe57.StructureNode(imf)
-        data3d.append(scan)
-        scan.set("guid", libe57.StringNode(imf, "{6107aa1c-0000-4000-8000-000000000004}"))
+        scan = _e57_scan(libe57, imf, 3)
         proto = libe57.StructureNode(imf)
         cols = {}
         for name, values in columns.items():
