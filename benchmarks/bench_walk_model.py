@@ -17,6 +17,9 @@ along the axis (``E = 1 + min E`` of the voxels a step can reach), capped at
 
 - ``cone``: today's cone (a step moves by -1, 0 or +1 in both other axes);
   cap 3 is today's codes, cap 1 a walk without skips;
+- ``cone@s``: today's cone, the walk beginning a share ``s`` of the way into
+  the line and taking the voxels before that point last (the surface the line
+  leaves is walked only if the bin is still uncertain);
 - ``quadrant``: four cones a step direction, one per sign of the two other
   axes' slopes (a step moves by 0 or +1 times that sign in each), chosen by
   the line: narrower, so longer skips near the surface, but four grids an
@@ -32,7 +35,7 @@ statistics). Lines without inner voxels (L <= 1) are not walked and not
 counted. The counts depend on the data only, not on the CPU.
 
 Measured with ``python benchmarks/bench_walk_model.py --data-dir DIR``
-(100 objects, 4,000 pairs each; 45 s)::
+(100 objects, 4,000 pairs each)::
 
     scheme     cap  look-ups per walked line  vs today's codes
     cone         1                     20.30              2.20
@@ -42,8 +45,12 @@ Measured with ``python benchmarks/bench_walk_model.py --data-dir DIR``
     quadrant     3                      8.27              0.89
     quadrant     7                      5.91              0.64
     quadrant   any                      5.39              0.58
+    cone@0.25    3                      9.32              1.01
+    cone@0.25  any                      7.79              0.84
+    cone@0.5     3                      9.69              1.05
+    cone@0.5   any                      8.34              0.90
 
-(95.8% of the walked lines end in the bottom f4 bin.) Longer skips of
+(95.8% of the walked lines end in the bottom f4 bin; 76 s with the last rows.) Longer skips of
 today's cone save 15% of the look-ups at cap 7 (a third bit plane and three
 times the cone steps to build it) and 16% without a cap: a line spends its
 look-ups near its two ends, on the surface, where the wide cone meets other
@@ -52,7 +59,9 @@ need 12 grids of 3 bit planes (1.2 MB at 64^3, beyond a Zen 2 core's 512 KB
 L2 cache) instead of 3 grids of 2 (192 KB), built per object with 12 times
 the cone steps: building today's grids takes about 3% of the AVX2 kernel's
 time (perf), so about 36% for these, against about 20% saved in the walk
-(36% of its 55%). Neither halves the kernel.
+(36% of its 55%). Beginning the walks inside the line saves nothing (1.01 and
+1.05 at cap 3): lines meet occupied voxels along their length too, not only
+at the surface they leave. None halves the kernel.
 """
 
 import argparse
@@ -72,6 +81,9 @@ GRID, N4 = 64, 3
 #: No cap: larger than any line.
 ANY = 1 << 20
 SCHEMES = (("cone", (1, 3, 7, ANY)), ("quadrant", (3, 7, ANY)))
+#: Walks of today's cone that begin this share of the way into the line (the surface the line leaves is
+#: left for last), at these caps.
+STARTS, START_CAPS = (0.25, 0.5), (3, ANY)
 
 
 def voxels(points, grid=GRID):
@@ -107,16 +119,22 @@ def code_grids(occupied, scheme):
             for a in range(3) for sy in (-1, 1) for sz in (-1, 1)}
 
 
-def lookups(inner_occupied, inner_e, lo, hi, cap):
-    """Look-ups of one line's walk: (occupied flags, E) of its inner voxels in walk order, bin thresholds."""
-    occ, k, count, rem = 2, 0, 0, len(inner_occupied)
-    while rem and occ < hi and occ + rem >= lo:
-        count += 1
-        if inner_occupied[k]:
-            occ, k, rem = occ + 1, k + 1, rem - 1
-        else:
-            step = min(int(inner_e[k]), cap, rem)
-            k, rem = k + step, rem - step
+def lookups(inner_occupied, inner_e, lo, hi, cap, start=0):
+    """Look-ups of one line's walk: (occupied flags, E) of its inner voxels in walk order, bin thresholds.
+
+    The walk begins at inner voxel ``start`` (0: the first, as the kernels walk) and goes to the line's
+    end, then walks the voxels before ``start`` (its skips there stop at ``start``): the voxels counted,
+    and so the bin, are the same from any start.
+    """
+    occ, count, rem = 2, 0, len(inner_occupied)
+    for k, stop in ((start, len(inner_occupied)), (0, start)):
+        while k < stop and rem and occ < hi and occ + rem >= lo:
+            count += 1
+            if inner_occupied[k]:
+                occ, k, rem = occ + 1, k + 1, rem - 1
+            else:
+                step = min(int(inner_e[k]), cap, stop - k)
+                k, rem = k + step, rem - step
     return count
 
 
@@ -131,6 +149,7 @@ def model_object(points, rng, n_pairs, schemes=SCHEMES):
     second = rng.integers(0, n - 1, n_pairs)
     second += second >= first
     totals = {(name, cap): [0, 0] for name, caps in schemes for cap in caps}
+    totals.update({(share, cap): [0, 0] for share in STARTS for cap in START_CAPS})
     bins = np.zeros(N4, dtype=np.int64)
     for a, b in zip(first, second):
         delta = vox[b] - vox[a]
@@ -155,6 +174,13 @@ def model_object(points, rng, n_pairs, schemes=SCHEMES):
                 counted = totals[(name, cap)]
                 counted[0] += lookups(inner_occupied, inner_e, thresholds[0], thresholds[-1], cap)
                 counted[1] += 1
+            if name == "cone":
+                for share in STARTS:
+                    for cap in START_CAPS:
+                        counted = totals[(share, cap)]
+                        counted[0] += lookups(inner_occupied, inner_e, thresholds[0], thresholds[-1], cap,
+                                              start=int(share * len(inner)))
+                        counted[1] += 1
     return totals, bins
 
 
@@ -173,14 +199,15 @@ def main(argv=None):
         points, offsets = data["points"], data["offsets"]
     pick = np.linspace(0, len(offsets) - 2, args.objects).astype(int)
     rng = np.random.default_rng(args.seed)
-    totals = {(name, cap): [0, 0] for name, caps in SCHEMES for cap in caps}
+    totals = {}
     bins = np.zeros(N4, dtype=np.int64)
     start = time.perf_counter()
     for done, k in enumerate(pick, 1):
         got, got_bins = model_object(points[offsets[k]:offsets[k + 1]], rng, args.pairs)
         for key, (n_lookups, n_lines) in got.items():
-            totals[key][0] += n_lookups
-            totals[key][1] += n_lines
+            counted = totals.setdefault(key, [0, 0])
+            counted[0] += n_lookups
+            counted[1] += n_lines
         bins += got_bins
         print(f"object {done}/{len(pick)} ({time.perf_counter() - start:.0f} s)", flush=True)
     print(f"\n{len(pick)} ModelNet10 objects, {args.pairs:,} random pairs each, {GRID}^3 grid; walked lines' f4 bins: "
@@ -192,6 +219,11 @@ def main(argv=None):
             per_line = totals[(name, cap)][0] / totals[(name, cap)][1]
             label = "any" if cap == ANY else str(cap)
             print(f"{name:<9}{label:>5}  {per_line:>24.2f}  {per_line / today:>16.2f}")
+    for share in STARTS:
+        for cap in START_CAPS:
+            per_line = totals[(share, cap)][0] / totals[(share, cap)][1]
+            label = "any" if cap == ANY else str(cap)
+            print(f"{'cone@' + format(share, 'g'):<9}{label:>5}  {per_line:>24.2f}  {per_line / today:>16.2f}")
 
 
 if __name__ == "__main__":

@@ -226,3 +226,10 @@ def test_walk_model_codes_and_lookups():
     assert wm.lookups(inner_occ, inner_e, 4, 7, wm.ANY) == 3  # skips 5, 1, 1 (the codes of voxels 5 and 6)
     assert wm.lookups(np.array([True]), np.array([0]), 1, 3, 3) == 1  # T = 3: one look-up, occupied: top
     assert wm.lookups(np.array([False]), np.array([1]), 1, 2, 3) == 0  # both ends reach hi = 2 at once
+    # from inner voxel 4: skips 2 and 1, the occupied last voxel, then voxels 0-3: a skip of 3 and one of 1
+    # (its code 3 cut at the start voxel): occ + rem stays at lo until the last voxel is seen
+    assert wm.lookups(inner_occ, inner_e, 4, 7, 3, start=4) == 5
+    assert wm.lookups(inner_occ, inner_e, 4, 7, 3, start=0) == 3
+    full = np.array([1, 1, 1, 1, 1, 1, 1, 1], dtype=bool)  # every voxel occupied: hi reached, from any start
+    for start in range(8):
+        assert wm.lookups(full, np.zeros(8, dtype=int), 4, 7, 3, start=start) == 5
