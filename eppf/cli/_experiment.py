@@ -17,7 +17,7 @@ import sys
 import textwrap
 import warnings
 
-from ._common import Command, register
+from ._common import Command, n_jobs_type, register
 
 __all__ = ["run_experiment"]
 
@@ -60,7 +60,7 @@ def _add_common(p, draws=False):
                         "experiment's figures are those of the whole data set), or skip it with a summary on stderr "
                         "and a count in the report's data line")
     p.add_argument("--random-state", type=int, default=0, help="seed of everything random (default 0)")
-    p.add_argument("--n-jobs", type=int, default=-1, help="threads (default -1: all cores)")
+    p.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (default -1: all cores)")
     p.add_argument("--quick", action="store_true", help="tiny settings for a smoke run (< 2 minutes on the built-in set)")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
     p.add_argument("--quiet", action=_Quiet, help=argparse.SUPPRESS)

@@ -113,12 +113,12 @@ def run_main_job(args, out=None):
         times.append(time.perf_counter() - t0)
         X_first = X if X_first is None else X_first
         t0 = time.perf_counter()
-        pred = leave_one_out_retrieval(X, y)
+        pred = leave_one_out_retrieval(X, y, n_jobs=args.n_jobs)
         loo_time = time.perf_counter() - t0
         loo.append(retrieval_scores(y, pred))
 
     train, test = split == "train", split == "test"
-    clf = KLNearestNeighbors().fit(X_first[train], y[train])
+    clf = KLNearestNeighbors(n_jobs=args.n_jobs).fit(X_first[train], y[train])
     test_scores = retrieval_scores(y[test], clf.predict(X_first[test]))
 
     metrics = ["total_accuracy", "mean_class_accuracy", "macro_precision", "macro_recall", "macro_f1"]

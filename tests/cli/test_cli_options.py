@@ -1,0 +1,100 @@
+"""Options reach the work they say they control, or are refused: --n-jobs of every command, --on-error and
+--test-size where the mode asked for reads no file or has its own split, --out of ``eppf experiment``, and
+the partial folders that a killed ``eppf segment`` leaves behind."""
+
+import os
+
+import numpy as np
+import pytest
+
+import eppf
+import eppf.cli._evaluate as evaluate_module
+import eppf.metrics
+from eppf.cli import main
+
+from tests.cli._helpers import run as _run
+
+FAST = ["--n-pairs", "400", "--no-progress"]
+
+
+def _write_npz(path, with_split=True, n_per_class=4):
+    """Two classes (blobs, sticks) of ``n_per_class`` clouds, with a train/test split when asked."""
+    rng = np.random.default_rng(0)
+    pts, offsets, labels = [], [0], []
+    for label, stretch in enumerate(([1.0, 1.0, 1.0], [2.0, 0.3, 0.3])):
+        for _ in range(n_per_class):
+            pts.append(rng.normal(size=(60, 3)) * stretch)
+            offsets.append(offsets[-1] + 60)
+            labels.append(label)
+    arrays = dict(points=np.vstack(pts), offsets=np.array(offsets), labels=np.array(labels),
+                  class_names=np.array(["blob", "stick"]))
+    if with_split:
+        arrays["split"] = np.array((["train"] * (n_per_class // 2) + ["test"] * (n_per_class - n_per_class // 2)) * 2)
+    np.savez(path, **arrays)
+    return path
+
+
+@pytest.fixture(scope="module")
+def data_and_model(tmp_path_factory):
+    root = tmp_path_factory.mktemp("options")
+    data = _write_npz(root / "d.npz")
+    assert main(["train", "--data", str(data), "-o", str(root / "m.eppf"), "--n-jobs", "1", *FAST]) == 0
+    return data, root / "m.eppf"
+
+
+# ---------------------------------------------------------------------------
+# --n-jobs
+# ---------------------------------------------------------------------------
+
+
+def _jobs_of(model):
+    """The n_jobs of every eppf estimator inside a model that has one."""
+    from eppf.cli._common import _estimators
+
+    return {type(e).__name__: e.get_params(deep=False)["n_jobs"] for e in _estimators(model)
+            if type(e).__module__.startswith("eppf.") and "n_jobs" in e.get_params(deep=False)}
+
+
+def test_evaluate_n_jobs_reaches_the_saved_model(data_and_model, capsys, monkeypatch):
+    data, model = data_and_model
+    loaded = []
+
+    def load_and_keep(path, trust=False):
+        saved = eppf.cli._common.load_model(path, trust=trust)
+        loaded.append(saved["model"])
+        return saved
+
+    monkeypatch.setattr(evaluate_module, "load_model", load_and_keep)
+    status, _, err = _run(["evaluate", "--data", data, "--model", model, "--no-retrieval", "--n-jobs", "2",
+                           "--no-progress"], capsys)
+    assert status == 0, err
+    jobs = _jobs_of(loaded[0])
+    assert jobs and set(jobs.values()) == {2}, jobs  # (trained with --n-jobs 1)
+
+
+def test_run_n_jobs_reaches_the_retrieval_and_the_classifier(tmp_path, capsys, monkeypatch):
+    data = _write_npz(tmp_path / "d.npz")
+    seen = []
+    original = eppf.metrics.leave_one_out_retrieval
+
+    def retrieval(X, y, **kw):
+        seen.append(("retrieval", kw.get("n_jobs")))
+        return original(X, y, **kw)
+
+    class Recorded(eppf.KLNearestNeighbors):
+        def predict(self, X):
+            seen.append(("classifier", self.n_jobs))
+            return super().predict(X)
+
+    monkeypatch.setattr(eppf.metrics, "leave_one_out_retrieval", retrieval)
+    monkeypatch.setattr(eppf, "KLNearestNeighbors", Recorded)
+    status, _, err = _run(["run", "--data", data, "--n-jobs", "2", *FAST], capsys)
+    assert status == 0, err
+    assert sorted(seen) == [("classifier", 2), ("retrieval", 2)]
+
+
+def test_experiment_n_jobs_zero_is_refused_as_in_every_command(capsys):
+    with pytest.raises(SystemExit) as exc:  # (argparse's error: one line, status 2)
+        main(["experiment", "retrieval", "--n-jobs", "0"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "--n-jobs: 0 has no meaning" in err, err
