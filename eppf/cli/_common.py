@@ -150,8 +150,10 @@ def add_sampling(parser):
     add_on_error(parser)
 
 
-def add_on_error(parser):
-    parser.add_argument("--on-error", choices=["skip", "raise"], default="skip",
+def add_on_error(parser, refusable=False):
+    """``--on-error``; ``refusable``: its default is None (read as "skip"), so that a mode of the command that
+    reads no files can refuse it when given instead of ignoring it."""
+    parser.add_argument("--on-error", choices=["skip", "raise"], default=None if refusable else "skip",
                         help="a file that cannot be read: skip it with a summary on stderr (default) or stop")
 
 

@@ -192,6 +192,11 @@ def run_experiment(args):
     out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
     _check_outside_data(args.data, [("--out", out), ("--cache-dir", args.cache_dir)])
     data = args.data
+    if args.on_error == "skip" and (data == "builtin" or os.path.isfile(data)):
+        # nothing of them can be skipped: the option would do nothing
+        what = ("is generated, not read from files" if data == "builtin" else
+                "is a .npz data set, read whole (no part of it is a file that can be skipped)")
+        raise ValueError(f"--on-error skip: --data {data} {what}; it applies to a --data folder, so leave it out")
     if args.on_error == "skip" and os.path.isdir(data):
         # loaded here, not by the experiment, to skip unreadable files (the report's data line counts them)
         with warnings.catch_warnings(record=True) as caught:

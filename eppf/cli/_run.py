@@ -39,8 +39,9 @@ def add_arguments(parser, defaults_only=False):
                         help=argparse.SUPPRESS)
     parser.add_argument("--repeats", type=positive_int, default=1,
                         help=h("descriptor draws for retrieval mean and std (the paper uses 10)"))
-    parser.add_argument("--test-size", type=float, default=0.25,
-                        help=h("test fraction when the data has no split"))
+    parser.add_argument("--test-size", type=float, default=None,
+                        help=h("test fraction when the data has no train/test split (default: 0.25; refused "
+                               "with data that has one)"))
     if defaults_only:
         # checked as `eppf run` checks them: `eppf --data x` is the README's spelling of `eppf run --data x`
         group = parser.add_mutually_exclusive_group()
@@ -77,8 +78,9 @@ def run_main_job(args, out=None):
 
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf")
-    if not 0 < args.test_size < 1:
-        raise ValueError(f"--test-size must be in (0, 1), got {args.test_size}")
+    test_size = 0.25 if args.test_size is None else args.test_size
+    if not 0 < test_size < 1:
+        raise ValueError(f"--test-size must be in (0, 1), got {test_size}")
     normal_neighbors = args.normal_neighbors
     if getattr(args, "old_n_neighbors", None) is not None:
         warn(cmd, "--n-neighbors is now --normal-neighbors (the PCA neighbourhood of the normals)")
@@ -88,8 +90,12 @@ def run_main_job(args, out=None):
     check_classes(objects, cmd, need_two_per_class=objects.split is None)
     clouds, y, class_names, name = objects.clouds, objects.labels, objects.class_names, objects.name
     split = objects.split
+    if split is not None and args.test_size is not None:
+        # the data's own split is the one scored: the option would be ignored
+        raise ValueError(f"--test-size: {name} has its own train/test split, which the classification uses; "
+                         "leave it out")
     if split is None:
-        _, test = train_test_split(np.arange(len(y)), test_size=args.test_size, stratify=y,
+        _, test = train_test_split(np.arange(len(y)), test_size=test_size, stratify=y,
                                    random_state=args.random_state)
         split = np.full(len(y), "train", dtype=object)
         split[test] = "test"

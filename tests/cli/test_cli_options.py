@@ -98,3 +98,71 @@ def test_experiment_n_jobs_zero_is_refused_as_in_every_command(capsys):
         main(["experiment", "retrieval", "--n-jobs", "0"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "--n-jobs: 0 has no meaning" in err, err
+
+
+# ---------------------------------------------------------------------------
+# Options the mode asked for would ignore: refused, naming them
+# ---------------------------------------------------------------------------
+
+
+def _scene(path):
+    """A small scene: two boxes of points on a plane."""
+    from eppf.io import write_point_cloud
+
+    rng = np.random.default_rng(1)
+    ground = np.column_stack([rng.uniform(0, 10, (600, 2)), np.zeros(600)])
+    boxes = [rng.uniform(0, 1, (150, 3)) + [2, 2, 0.2], rng.uniform(0, 1, (150, 3)) + [6, 6, 0.2]]
+    write_point_cloud(path, np.vstack([ground, *boxes]))
+    return path
+
+
+@pytest.mark.parametrize("value", ["skip", "raise"])
+def test_predict_segment_refuses_on_error(tmp_path, data_and_model, capsys, value):
+    _, model = data_and_model
+    scene = _scene(tmp_path / "scene.xyz")
+    status, out, err = _run(["predict", "--model", model, scene, "--segment", "--on-error", value, "--no-progress"],
+                            capsys)
+    assert status == 2 and out == "", err
+    assert err.startswith("eppf predict: error: --on-error: --segment reads one scene file") and "leave it out" in err
+    # without it, the scene is classified
+    status, out, err = _run(["predict", "--model", model, scene, "--segment", "--no-progress", "--n-jobs", "1"],
+                            capsys)
+    assert status == 0, err
+
+
+@pytest.mark.parametrize("value", ["skip", "raise"])
+def test_retrieve_query_descriptors_refuses_on_error(tmp_path, capsys, value):
+    np.savez(tmp_path / "db.npz", descriptors=np.full((3, 4), 0.25), ids=np.array(["a", "b", "c"]))
+    np.save(tmp_path / "q.npy", np.full((1, 4), 0.25))
+    argv = ["retrieve", "--database", tmp_path / "db.npz", "--query-descriptors", tmp_path / "q.npy"]
+    status, out, err = _run([*argv, "--on-error", value], capsys)
+    assert status == 2 and out == "", err
+    assert err.startswith("eppf retrieve: error: --on-error: with --query-descriptors no point file is read")
+    status, out, err = _run(argv, capsys)
+    assert status == 0 and "a" in out, err
+
+
+@pytest.mark.parametrize("data", ["builtin", "npz"])
+def test_experiment_on_error_skip_is_refused_without_a_folder(tmp_path, capsys, data):
+    if data == "npz":
+        data = str(_write_npz(tmp_path / "d.npz"))
+    status, out, err = _run(["experiment", "retrieval", "--data", data, "--on-error", "skip", "--out",
+                             tmp_path / "out", "--quick", "--no-progress"], capsys)
+    assert status == 2, err
+    assert err.startswith(f"eppf experiment: error: --on-error skip: --data {data} ") and "leave it out" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_run_test_size_is_refused_with_data_that_has_its_own_split(tmp_path, capsys):
+    with_split = _write_npz(tmp_path / "split.npz")
+    status, out, err = _run(["run", "--data", with_split, "--test-size", "0.5", "--n-jobs", "1", *FAST], capsys)
+    assert status == 2, err
+    assert err.strip() == (f"eppf run: error: --test-size: {with_split} has its own train/test split, which the "
+                           "classification uses; leave it out")
+    assert "Total accuracy" not in out
+    # the same without a subcommand; and data without a split takes it
+    status, _, err = _run(["--data", with_split, "--test-size", "0.5", "--n-jobs", "1", *FAST], capsys)
+    assert status == 2 and err.startswith("eppf: error: --test-size:"), err
+    no_split = _write_npz(tmp_path / "flat.npz", with_split=False)
+    status, out, err = _run(["run", "--data", no_split, "--test-size", "0.5", "--n-jobs", "1", *FAST], capsys)
+    assert status == 0 and "Train/test 1-NN (4/4)" in out, err
