@@ -162,6 +162,22 @@ def _check_outside_data(data, outputs):
                              "files as objects of the data set, so give a folder outside it")
 
 
+def _check_folders(outputs):
+    """Refuse, before any work, an output folder (``(option, path)`` pairs, ``None`` paths left out) that is a
+    file or would be made inside one: the experiment would stop when it makes it, with a bare errno line."""
+    for option, path in outputs:
+        if path is None:
+            continue
+        if os.path.lexists(path) and not os.path.isdir(path):
+            what = "is a file" if os.path.isfile(path) else "exists and is not a folder"
+            raise ValueError(f"{option} {path} {what}; give a new or existing folder")
+        above = os.path.dirname(os.path.abspath(path))
+        while not os.path.lexists(above) and os.path.dirname(above) != above:
+            above = os.path.dirname(above)
+        if not os.path.isdir(above):
+            raise ValueError(f"{option} {path}: {above} is not a folder, so the folder cannot be made in it")
+
+
 def run_experiment(args):
     """Run one experiment from parsed ``eppf experiment`` arguments.
 
@@ -191,6 +207,7 @@ def run_experiment(args):
     preset = getattr(args, "preset", None)
     out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
     _check_outside_data(args.data, [("--out", out), ("--cache-dir", args.cache_dir)])
+    _check_folders([("--out", out), ("--cache-dir", args.cache_dir)])
     data = args.data
     if args.on_error == "skip" and (data == "builtin" or os.path.isfile(data)):
         # nothing of them can be skipped: the option would do nothing

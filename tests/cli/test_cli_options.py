@@ -166,3 +166,25 @@ def test_run_test_size_is_refused_with_data_that_has_its_own_split(tmp_path, cap
     no_split = _write_npz(tmp_path / "flat.npz", with_split=False)
     status, out, err = _run(["run", "--data", no_split, "--test-size", "0.5", "--n-jobs", "1", *FAST], capsys)
     assert status == 0 and "Train/test 1-NN (4/4)" in out, err
+
+
+# ---------------------------------------------------------------------------
+# eppf experiment --out
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("option", ["--out", "--cache-dir"])
+def test_experiment_output_folder_that_is_a_file_is_one_clear_line(tmp_path, capsys, option):
+    taken = tmp_path / "taken.txt"
+    taken.write_text("mine\n")
+    argv = ["experiment", "retrieval", "--quick", "--no-progress"]
+    if option == "--cache-dir":
+        argv += ["--out", tmp_path / "out"]
+    status, _, err = _run([*argv, option, taken], capsys)
+    assert status == 2
+    assert err.strip() == f"eppf experiment: error: {option} {taken} is a file; give a new or existing folder"
+    status, _, err = _run([*argv, option, taken / "sub"], capsys)  # a folder to be made inside the file
+    assert status == 2
+    assert err.strip() == (f"eppf experiment: error: {option} {taken / 'sub'}: {taken} is not a folder, so the "
+                           "folder cannot be made in it")
+    assert taken.read_text() == "mine\n" and sorted(os.listdir(tmp_path)) == ["taken.txt"]
