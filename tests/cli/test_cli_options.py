@@ -3,6 +3,7 @@
 the partial folders that a killed ``eppf segment`` leaves behind."""
 
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -188,3 +189,88 @@ def test_experiment_output_folder_that_is_a_file_is_one_clear_line(tmp_path, cap
     assert err.strip() == (f"eppf experiment: error: {option} {taken / 'sub'}: {taken} is not a folder, so the "
                            "folder cannot be made in it")
     assert taken.read_text() == "mine\n" and sorted(os.listdir(tmp_path)) == ["taken.txt"]
+
+
+# ---------------------------------------------------------------------------
+# eppf segment after a run that was killed outright
+# ---------------------------------------------------------------------------
+
+#: A process id that no process has (above the largest that Linux or macOS gives).
+GONE = 2 ** 22 + 1
+
+posix_only = pytest.mark.skipif(os.name != "posix", reason="stale partial folders are told by a POSIX process check")
+
+
+def _left_partial(parent, prefix=".eppf-partial-", pid=GONE, age=3600, host=None):
+    """A partial folder as a killed ``eppf segment`` leaves it: a segment file in it, untouched for ``age``
+    seconds."""
+    from eppf.cli._segment import _host
+
+    path = parent / f"{prefix}{host or _host()}-{pid}-0123abcd"
+    path.mkdir()
+    (path / "segment_000.ply").write_bytes(b"ply\n")
+    old = os.path.getmtime(path) - age
+    os.utime(path, (old, old))
+    return path
+
+
+@posix_only
+def test_segment_removes_the_stale_partial_folder_of_a_killed_run(tmp_path, capsys):
+    scene = _scene(tmp_path / "scene.xyz")
+    out = tmp_path / "objects"
+    out.mkdir()
+    stale = _left_partial(out)
+    status, _, err = _run(["segment", scene, "-o", out, "--no-progress"], capsys)
+    assert status == 0, err
+    assert not stale.exists()
+    assert "segments.csv" in os.listdir(out) and not [n for n in os.listdir(out) if n.startswith(".")]
+    # beside a new folder: removed too, and only that folder's
+    beside = _left_partial(tmp_path, prefix=".new.eppf-partial-")
+    other = _left_partial(tmp_path, prefix=".other.eppf-partial-")
+    status, _, err = _run(["segment", scene, "-o", tmp_path / "new", "--no-progress"], capsys)
+    assert status == 0, err
+    assert not beside.exists() and other.exists() and (tmp_path / "new" / "segments.csv").exists()
+
+
+@posix_only
+@pytest.mark.parametrize("case", ["running", "recent", "other machine", "earlier eppf"])
+def test_segment_names_a_partial_folder_that_may_be_in_use(tmp_path, capsys, case):
+    scene = _scene(tmp_path / "scene.xyz")
+    out = tmp_path / "objects"
+    out.mkdir()
+    if case == "earlier eppf":  # (its name says no process)
+        left = out / ".eppf-partial-0123abcd"
+        left.mkdir()
+        (left / "segment_000.ply").write_bytes(b"ply\n")
+    else:
+        left = _left_partial(out, pid=os.getppid() if case == "running" else GONE,
+                             age=0 if case == "recent" else 3600, host="ffffffff" if case == "other machine" else None)
+    status, _, err = _run(["segment", scene, "-o", out, "--no-progress"], capsys)
+    assert status == 2
+    assert err.strip() == (f"eppf segment: error: --output {out} is not empty: it holds {left.name}, the partial "
+                           "folder of an eppf segment run that was stopped or is still running; if no eppf segment "
+                           "is writing into the folder, delete it and run again")
+    assert os.listdir(out) == [left.name] and os.listdir(left)  # left as it was
+    shutil.rmtree(left)  # as the message says
+    status, _, err = _run(["segment", scene, "-o", out, "--no-progress"], capsys)
+    assert status == 0, err
+
+
+@posix_only
+def test_segment_leaves_partial_folders_alone_in_a_folder_with_other_files(tmp_path, capsys):
+    out = tmp_path / "objects"
+    out.mkdir()
+    stale = _left_partial(out)
+    (out / "mine.txt").write_text("x")
+    status, _, err = _run(["segment", _scene(tmp_path / "scene.xyz"), "-o", out, "--no-progress"], capsys)
+    assert status == 2 and f"--output {out} is not empty; give a new or empty folder" in err
+    assert stale.exists()
+
+
+def test_the_partial_folder_name_says_which_process_writes_it(tmp_path):
+    from eppf.cli._segment import _host, _partial_folder
+
+    inside = _partial_folder(str(tmp_path))
+    beside = _partial_folder(str(tmp_path / "new"))
+    assert os.path.basename(inside).startswith(f".eppf-partial-{_host()}-{os.getpid()}-")
+    assert os.path.basename(beside).startswith(f".new.eppf-partial-{_host()}-{os.getpid()}-")
