@@ -109,13 +109,15 @@ def n_jobs_type(text):
     return value
 
 
-def add_runtime(parser, n_jobs=True):
-    """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand."""
+def add_runtime(parser, n_jobs=True, random_state=True):
+    """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand (a command whose
+    work draws nothing at random, or draws it with seeds of its own, leaves ``--random-state`` out)."""
     if n_jobs:
         parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (-1: all cores)")
-    parser.add_argument("--random-state", type=int, default=0,
-                        help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's RANSAC "
-                             "ground plane (default: 0)")
+    if random_state:
+        parser.add_argument("--random-state", type=int, default=0,
+                            help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's "
+                                 "RANSAC ground plane (default: 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
 
 

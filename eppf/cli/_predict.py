@@ -36,7 +36,10 @@ def add_arguments(p):
                        help="with --segment: write the scene with every field and two more per point, 'segment' "
                             "(-1: ground or no segment) and 'class' (the class's number in the model, as "
                             "printed; -1: none), as .ply, .pcd, .las or .laz")
-    add_runtime(p)
+    # files are read and described with the seeds the model saved: only a scene's ground plane draws more
+    scene.add_argument("--random-state", type=int, default=None,
+                       help="with --segment: seed of the RANSAC fit of the ground plane (default: 0)")
+    add_runtime(p, random_state=False)
 
 
 def _evidence(model, clouds, saved):
@@ -83,7 +86,8 @@ def run_predict(args, out=None):
     check_not_input(args.output, inputs)
     if getattr(args, "segment", False):
         return run_predict_scene(args, out)
-    given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else [])
+    given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else []) \
+        + (["--random-state"] if getattr(args, "random_state", None) is not None else [])
     if given:
         raise ValueError(f"{given[0]} applies to scenes: add --segment")
     saved = load_model(args.model, trust=args.trust)

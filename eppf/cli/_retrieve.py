@@ -1,5 +1,6 @@
 """``eppf retrieve``: top-k database neighbors by the descriptor's metric."""
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -23,7 +24,9 @@ def add_arguments(p):
     p.add_argument("-k", "--top-k", type=positive_int, default=5, help="neighbours per query (default: 5)")
     p.add_argument("-o", "--output", help="write a CSV file instead of printing a table")
     add_on_error(p, refusable=True)
-    add_runtime(p)
+    add_runtime(p, random_state=False)
+    # (listed by earlier versions, which ignored it: refused by run_retrieve)
+    p.add_argument("--random-state", type=int, default=None, help=argparse.SUPPRESS)
 
 
 def _load_descriptors(path, owner):
@@ -84,6 +87,9 @@ def run_retrieve(args, out=None):
     db_labels = _named_labels(db, len(X_db), args.database)
     if (args.query_descriptors is None) == (not args.queries):
         raise ValueError("give query files or --query-descriptors (exactly one of the two)")
+    if getattr(args, "random_state", None) is not None:
+        raise ValueError("--random-state: the queries are sampled and described with the seeds that "
+                         f"{args.database} records (as its objects were); leave it out")
     if args.query_descriptors is not None and getattr(args, "on_error", None) is not None:
         raise ValueError("--on-error: with --query-descriptors no point file is read (the queries are "
                          "precomputed descriptors); leave it out")

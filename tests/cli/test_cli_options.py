@@ -274,3 +274,28 @@ def test_the_partial_folder_name_says_which_process_writes_it(tmp_path):
     beside = _partial_folder(str(tmp_path / "new"))
     assert os.path.basename(inside).startswith(f".eppf-partial-{_host()}-{os.getpid()}-")
     assert os.path.basename(beside).startswith(f".new.eppf-partial-{_host()}-{os.getpid()}-")
+
+
+# ---------------------------------------------------------------------------
+# --random-state where the seeds are the saved ones
+# ---------------------------------------------------------------------------
+
+
+def test_predict_random_state_without_segment_is_refused(tmp_path, data_and_model, capsys):
+    data, model = data_and_model
+    status, out, err = _run(["predict", "--model", model, data, "--random-state", "3", "--no-progress"], capsys)
+    assert status == 2 and out == ""
+    assert err.strip() == "eppf predict: error: --random-state applies to scenes: add --segment"
+    status, out, err = _run(["predict", "--model", model, _scene(tmp_path / "scene.xyz"), "--segment",
+                             "--random-state", "3", "--no-progress", "--n-jobs", "1"], capsys)
+    assert status == 0, err
+
+
+def test_retrieve_random_state_is_refused(tmp_path, capsys):
+    np.savez(tmp_path / "db.npz", descriptors=np.full((3, 4), 0.25), ids=np.array(["a", "b", "c"]))
+    np.save(tmp_path / "q.npy", np.full((1, 4), 0.25))
+    status, out, err = _run(["retrieve", "--database", tmp_path / "db.npz", "--query-descriptors", tmp_path / "q.npy",
+                             "--random-state", "3"], capsys)
+    assert status == 2 and out == ""
+    assert err.startswith("eppf retrieve: error: --random-state: the queries are sampled and described with the "
+                          f"seeds that {tmp_path / 'db.npz'} records")
