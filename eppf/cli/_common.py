@@ -113,7 +113,7 @@ def add_runtime(parser, n_jobs=True, random_state=True):
     """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand (a command whose
     work draws nothing at random, or draws it with seeds of its own, leaves ``--random-state`` out)."""
     if n_jobs:
-        parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (-1: all cores)")
+        parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (default: -1, all cores)")
     if random_state:
         parser.add_argument("--random-state", type=int, default=0,
                             help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's "
@@ -132,7 +132,7 @@ def add_descriptor(parser, choice=True, default="eppf"):
                             help=f"which registered descriptor (default: {default})")
     parser.add_argument("--n-pairs", type=positive_int, default=DEFAULT_N_PAIRS,
                         help="random samples per object: point pairs (EPPF, Wahl) or triplets (ESF); "
-                             "deterministic descriptors ignore it")
+                             f"deterministic descriptors ignore it (default: {DEFAULT_N_PAIRS})")
     parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,
                         help="descriptor scaling: 'fit' (the paper's data-set scale, EPPF's default), "
                              "'object' (each object to unit size; for files in mixed units) or 'none'; "

@@ -67,7 +67,8 @@ def _add_common(p, draws=False):
     from ..experiments._common import SCALINGS
 
     p.add_argument("--scaling", choices=SCALINGS, default="auto",
-                   help="EPPF scaling: auto = fit for the built-in set, object (per-object unit cube) for files")
+                   help="EPPF scaling (default: auto = fit for the built-in set, object (per-object unit cube) "
+                        "for files)")
     if draws:
         p.add_argument("--draws", type=int, default=None, help="descriptor draws (default 10, 2 with --quick)")
 
@@ -125,7 +126,8 @@ def add_arguments(parser):
     sub = parser.add_subparsers(dest="experiment", required=True, metavar="NAME", parser_class=_Parser)
     p = sub.add_parser("retrieval", help="Table II: leave-one-out KL 1-NN retrieval of all descriptors")
     _add_common(p, draws=True)
-    p.add_argument("--descriptors", nargs="+", choices=list(DESCRIPTORS), default=list(DESCRIPTORS))
+    p.add_argument("--descriptors", nargs="+", choices=list(DESCRIPTORS), default=list(DESCRIPTORS), metavar="NAME",
+                   help=f"descriptors to compare: {', '.join(DESCRIPTORS)} (default: all)")
     p = sub.add_parser("ablation", help="EPPF retrieval with each point-pair function removed")
     _add_common(p, draws=True)
     p = sub.add_parser("classification", help="Table III: PointNet and the EPPF 2D/3D/4D CNNs on the test split",

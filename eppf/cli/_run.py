@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from ._common import (Command, add_sampling, load_labelled, n_jobs_type, positive_float, positive_int, register,
-                      sampling_from_args, warn, warn_tiny)
+from ._common import (DEFAULT_N_PAIRS, Command, add_sampling, load_labelled, n_jobs_type, positive_float,
+                      positive_int, register, sampling_from_args, warn, warn_tiny)
 
 __all__ = ["run_main_job"]
 
@@ -29,16 +29,17 @@ def add_arguments(parser, defaults_only=False):
     parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,
                         help=h("descriptor scaling (default: 'fit', the paper's data-set scale; use 'object' "
                                "for data in mixed units such as raw CAD files)"))
-    parser.add_argument("--n-pairs", type=positive_int, default=20000, help=h("point pairs per object"))
+    parser.add_argument("--n-pairs", type=positive_int, default=DEFAULT_N_PAIRS,
+                        help=h(f"point pairs per object (default: {DEFAULT_N_PAIRS})"))
     parser.add_argument("--n-bins", type=positive_int, nargs=4, default=(20, 4, 5, 3),
-                        metavar=("F1", "F2", "F3", "F4"), help=h("bins of the four functions"))
+                        metavar=("F1", "F2", "F3", "F4"), help=h("bins of the four functions (default: 20 4 5 3)"))
     parser.add_argument("--normal-neighbors", type=positive_int, default=None,
                         help=h("neighbours of the PCA normal estimation (default: the descriptor's)"))
     # eppf 0.1 spelled it --n-neighbors; kept, hidden, with a warning
     parser.add_argument("--n-neighbors", dest="old_n_neighbors", type=positive_int, default=None,
                         help=argparse.SUPPRESS)
     parser.add_argument("--repeats", type=positive_int, default=1,
-                        help=h("descriptor draws for retrieval mean and std (the paper uses 10)"))
+                        help=h("descriptor draws for retrieval mean and std (default: 1; the paper uses 10)"))
     parser.add_argument("--test-size", type=float, default=None,
                         help=h("test fraction when the data has no train/test split (default: 0.25; refused "
                                "with data that has one)"))
@@ -50,8 +51,8 @@ def add_arguments(parser, defaults_only=False):
         parser.add_argument("--on-error", choices=["skip", "raise"], default="skip", help=argparse.SUPPRESS)
     else:
         add_sampling(parser)
-    parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help=h("threads (-1: all cores)"))
-    parser.add_argument("--random-state", type=int, default=0, help=h("seed of everything random"))
+    parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help=h("threads (default: -1, all cores)"))
+    parser.add_argument("--random-state", type=int, default=0, help=h("seed of everything random (default: 0)"))
     parser.add_argument("--no-progress", action="store_true", help=h("hide progress bars"))
 
 

@@ -299,3 +299,51 @@ def test_retrieve_random_state_is_refused(tmp_path, capsys):
     assert status == 2 and out == ""
     assert err.startswith("eppf retrieve: error: --random-state: the queries are sampled and described with the "
                           f"seeds that {tmp_path / 'db.npz'} records")
+
+
+# ---------------------------------------------------------------------------
+# --help and docs/cli.rst
+# ---------------------------------------------------------------------------
+
+
+def _options(parser, name="eppf"):
+    """``(command, action)`` of every option of ``parser`` and its subcommands, hidden ones included."""
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub_name, sub in action.choices.items():
+                yield from _options(sub, f"{name} {sub_name}")
+        elif action.option_strings:
+            yield name, action
+
+
+def test_every_option_with_a_default_says_it_in_its_help():
+    import argparse
+
+    from eppf.cli import build_parser
+
+    silent = [f"{name} {a.option_strings[-1]}" for name, a in _options(build_parser())
+              if a.help != argparse.SUPPRESS and a.nargs != 0 and a.default not in (None, False, argparse.SUPPRESS)
+              and "default" not in (a.help or "")]
+    assert silent == []
+
+
+def test_eppf_alone_has_the_defaults_of_eppf_run():
+    from eppf.cli import build_parser
+
+    parser = build_parser()
+    alone, run = vars(parser.parse_args([])), vars(parser.parse_args(["run"]))
+    assert {k: v for k, v in alone.items() if k != "command"} == {k: v for k, v in run.items() if k != "command"}
+
+
+def test_every_option_in_the_cli_docs_is_an_option_of_the_command():
+    import re
+    from pathlib import Path
+
+    from eppf.cli import build_parser
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "cli.rst").read_text(encoding="utf-8")
+    known = {s for _, a in _options(build_parser()) for s in a.option_strings}
+    documented = set(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", text))
+    assert documented and documented - known == set()
