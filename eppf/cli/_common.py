@@ -149,7 +149,7 @@ def add_sampling(parser):
                             "files resampled to it (default: kept as they are)")
     group.add_argument("--resolution", type=positive_float, default=None,
                        help="instead of --n-points, sample meshes on a voxel grid of this cell size")
-    add_on_error(parser)
+    add_on_error(parser, refusable=True)  # (refused with --built-in: no file is read)
 
 
 def add_on_error(parser, refusable=False):
@@ -673,6 +673,14 @@ def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
     skipped as unreadable files are."""
     if getattr(args, "built_in", False):
         from ..datasets import make_shapes
+
+        # no file is read: a reading option would be ignored (and train would record it as how its objects were read)
+        given = [o for o, v in (("--n-points", getattr(args, "n_points", None)),
+                                ("--resolution", getattr(args, "resolution", None)),
+                                ("--on-error", getattr(args, "on_error", None))) if v is not None]
+        if given:
+            raise ValueError(f"{given[0]}: the built-in synthetic shapes are made in memory, not read from files; "
+                             "leave it out")
 
         bunch = make_shapes(random_state=args.random_state)
         n = len(bunch.data)

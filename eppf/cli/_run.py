@@ -48,7 +48,7 @@ def add_arguments(parser, defaults_only=False):
         group = parser.add_mutually_exclusive_group()
         group.add_argument("--n-points", type=positive_int, default=None, help=argparse.SUPPRESS)
         group.add_argument("--resolution", type=positive_float, default=None, help=argparse.SUPPRESS)
-        parser.add_argument("--on-error", choices=["skip", "raise"], default="skip", help=argparse.SUPPRESS)
+        parser.add_argument("--on-error", choices=["skip", "raise"], default=None, help=argparse.SUPPRESS)
     else:
         add_sampling(parser)
     parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help=h("threads (default: -1, all cores)"))

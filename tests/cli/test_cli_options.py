@@ -347,3 +347,16 @@ def test_every_option_in_the_cli_docs_is_an_option_of_the_command():
     known = {s for _, a in _options(build_parser()) for s in a.option_strings}
     documented = set(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", text))
     assert documented and documented - known == set()
+
+
+@pytest.mark.parametrize("argv", [["train", "--built-in", "-o", "m.eppf", "--n-points", "300"],
+                                  ["evaluate", "--built-in", "--on-error", "raise"],
+                                  ["run", "--resolution", "0.1"], ["--on-error", "skip"]])
+def test_reading_options_are_refused_with_the_built_in_shapes(tmp_path, capsys, monkeypatch, argv):
+    monkeypatch.chdir(tmp_path)
+    status, out, err = _run([*argv, "--no-progress"], capsys)
+    option = argv[-2]
+    assert status == 2, err
+    assert err.strip().endswith(f"error: {option}: the built-in synthetic shapes are made in memory, not read from "
+                                "files; leave it out")
+    assert os.listdir(tmp_path) == []
