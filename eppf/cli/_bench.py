@@ -16,11 +16,13 @@ def add_arguments(p):
     p.add_argument("--descriptor", choices=DESCRIPTOR_NAMES, default="eppf", help="which registered descriptor "
                                                                                   "(default: eppf)")
     p.add_argument("--n-pairs", type=positive_int, nargs="+", default=[5000, 20000],
-                   help="sample counts to time (pairs or triplets; deterministic descriptors: one row each)")
-    p.add_argument("--n-per-class", type=positive_int, default=10, help="objects per class (10 classes)")
-    p.add_argument("--n-points", type=positive_int, default=1024, help="points per object")
-    p.add_argument("--repeats", type=positive_int, default=3, help="timings per row (the best is shown)")
-    p.add_argument("--n-jobs", type=n_jobs_type, nargs="+", default=[-1], help="thread counts to time")
+                   help="sample counts to time (pairs or triplets; deterministic descriptors: one row each; "
+                        "default: 5000 20000)")
+    p.add_argument("--n-per-class", type=positive_int, default=10, help="objects per class (10 classes; default: 10)")
+    p.add_argument("--n-points", type=positive_int, default=1024, help="points per object (default: 1024)")
+    p.add_argument("--repeats", type=positive_int, default=3, help="timings per row, the best shown (default: 3)")
+    p.add_argument("--n-jobs", type=n_jobs_type, nargs="+", default=[-1],
+                   help="thread counts to time (default: -1, all cores)")
     add_runtime(p, n_jobs=False)
 
 

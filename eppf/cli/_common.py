@@ -109,13 +109,15 @@ def n_jobs_type(text):
     return value
 
 
-def add_runtime(parser, n_jobs=True):
-    """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand."""
+def add_runtime(parser, n_jobs=True, random_state=True):
+    """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand (a command whose
+    work draws nothing at random, or draws it with seeds of its own, leaves ``--random-state`` out)."""
     if n_jobs:
-        parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (-1: all cores)")
-    parser.add_argument("--random-state", type=int, default=0,
-                        help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's RANSAC "
-                             "ground plane (default: 0)")
+        parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (default: -1, all cores)")
+    if random_state:
+        parser.add_argument("--random-state", type=int, default=0,
+                            help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's "
+                                 "RANSAC ground plane (default: 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
 
 
@@ -130,7 +132,7 @@ def add_descriptor(parser, choice=True, default="eppf"):
                             help=f"which registered descriptor (default: {default})")
     parser.add_argument("--n-pairs", type=positive_int, default=DEFAULT_N_PAIRS,
                         help="random samples per object: point pairs (EPPF, Wahl) or triplets (ESF); "
-                             "deterministic descriptors ignore it")
+                             f"deterministic descriptors ignore it (default: {DEFAULT_N_PAIRS})")
     parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,
                         help="descriptor scaling: 'fit' (the paper's data-set scale, EPPF's default), "
                              "'object' (each object to unit size; for files in mixed units) or 'none'; "
@@ -147,11 +149,13 @@ def add_sampling(parser):
                             "files resampled to it (default: kept as they are)")
     group.add_argument("--resolution", type=positive_float, default=None,
                        help="instead of --n-points, sample meshes on a voxel grid of this cell size")
-    add_on_error(parser)
+    add_on_error(parser, refusable=True)  # (refused with --built-in: no file is read)
 
 
-def add_on_error(parser):
-    parser.add_argument("--on-error", choices=["skip", "raise"], default="skip",
+def add_on_error(parser, refusable=False):
+    """``--on-error``; ``refusable``: its default is None (read as "skip"), so that a mode of the command that
+    reads no files can refuse it when given instead of ignoring it."""
+    parser.add_argument("--on-error", choices=["skip", "raise"], default=None if refusable else "skip",
                         help="a file that cannot be read: skip it with a summary on stderr (default) or stop")
 
 
@@ -669,6 +673,14 @@ def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
     skipped as unreadable files are."""
     if getattr(args, "built_in", False):
         from ..datasets import make_shapes
+
+        # no file is read: a reading option would be ignored (and train would record it as how its objects were read)
+        given = [o for o, v in (("--n-points", getattr(args, "n_points", None)),
+                                ("--resolution", getattr(args, "resolution", None)),
+                                ("--on-error", getattr(args, "on_error", None))) if v is not None]
+        if given:
+            raise ValueError(f"{given[0]}: the built-in synthetic shapes are made in memory, not read from files; "
+                             "leave it out")
 
         bunch = make_shapes(random_state=args.random_state)
         n = len(bunch.data)

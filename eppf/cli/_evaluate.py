@@ -105,7 +105,7 @@ def run_evaluate(args, out=None):
                       f"seen in training by {args.model}; "
                       "its score on them is optimistic (train with a held-out split, or evaluate on other files)")
         model = saved["model"]
-        set_runtime(model, None, progress_of(args))
+        set_runtime(model, args.n_jobs, progress_of(args))  # --n-jobs: the threads of its predictions too
         pred = model.predict(scored.clouds)
         classes = saved.get("classes")
         if classes is not None and list(classes) != [str(c) for c in objects.class_names]:

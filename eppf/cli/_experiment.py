@@ -17,7 +17,7 @@ import sys
 import textwrap
 import warnings
 
-from ._common import Command, register
+from ._common import Command, n_jobs_type, register
 
 __all__ = ["run_experiment"]
 
@@ -60,14 +60,15 @@ def _add_common(p, draws=False):
                         "experiment's figures are those of the whole data set), or skip it with a summary on stderr "
                         "and a count in the report's data line")
     p.add_argument("--random-state", type=int, default=0, help="seed of everything random (default 0)")
-    p.add_argument("--n-jobs", type=int, default=-1, help="threads (default -1: all cores)")
+    p.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (default -1: all cores)")
     p.add_argument("--quick", action="store_true", help="tiny settings for a smoke run (< 2 minutes on the built-in set)")
     p.add_argument("--no-progress", action="store_true", help="no progress lines")
     p.add_argument("--quiet", action=_Quiet, help=argparse.SUPPRESS)
     from ..experiments._common import SCALINGS
 
     p.add_argument("--scaling", choices=SCALINGS, default="auto",
-                   help="EPPF scaling: auto = fit for the built-in set, object (per-object unit cube) for files")
+                   help="EPPF scaling (default: auto = fit for the built-in set, object (per-object unit cube) "
+                        "for files)")
     if draws:
         p.add_argument("--draws", type=int, default=None, help="descriptor draws (default 10, 2 with --quick)")
 
@@ -125,7 +126,8 @@ def add_arguments(parser):
     sub = parser.add_subparsers(dest="experiment", required=True, metavar="NAME", parser_class=_Parser)
     p = sub.add_parser("retrieval", help="Table II: leave-one-out KL 1-NN retrieval of all descriptors")
     _add_common(p, draws=True)
-    p.add_argument("--descriptors", nargs="+", choices=list(DESCRIPTORS), default=list(DESCRIPTORS))
+    p.add_argument("--descriptors", nargs="+", choices=list(DESCRIPTORS), default=list(DESCRIPTORS), metavar="NAME",
+                   help=f"descriptors to compare: {', '.join(DESCRIPTORS)} (default: all)")
     p = sub.add_parser("ablation", help="EPPF retrieval with each point-pair function removed")
     _add_common(p, draws=True)
     p = sub.add_parser("classification", help="Table III: PointNet and the EPPF 2D/3D/4D CNNs on the test split",
@@ -162,6 +164,22 @@ def _check_outside_data(data, outputs):
                              "files as objects of the data set, so give a folder outside it")
 
 
+def _check_folders(outputs):
+    """Refuse, before any work, an output folder (``(option, path)`` pairs, ``None`` paths left out) that is a
+    file or would be made inside one: the experiment would stop when it makes it, with a bare errno line."""
+    for option, path in outputs:
+        if path is None:
+            continue
+        if os.path.lexists(path) and not os.path.isdir(path):
+            what = "is a file" if os.path.isfile(path) else "exists and is not a folder"
+            raise ValueError(f"{option} {path} {what}; give a new or existing folder")
+        above = os.path.dirname(os.path.abspath(path))
+        while not os.path.lexists(above) and os.path.dirname(above) != above:
+            above = os.path.dirname(above)
+        if not os.path.isdir(above):
+            raise ValueError(f"{option} {path}: {above} is not a folder, so the folder cannot be made in it")
+
+
 def run_experiment(args):
     """Run one experiment from parsed ``eppf experiment`` arguments.
 
@@ -191,7 +209,13 @@ def run_experiment(args):
     preset = getattr(args, "preset", None)
     out = args.out or os.path.join("results", args.experiment, data_name(args.data) + (f"_{preset}" if preset else ""))
     _check_outside_data(args.data, [("--out", out), ("--cache-dir", args.cache_dir)])
+    _check_folders([("--out", out), ("--cache-dir", args.cache_dir)])
     data = args.data
+    if args.on_error == "skip" and (data == "builtin" or os.path.isfile(data)):
+        # nothing of them can be skipped: the option would do nothing
+        what = ("is generated, not read from files" if data == "builtin" else
+                "is a .npz data set, read whole (no part of it is a file that can be skipped)")
+        raise ValueError(f"--on-error skip: --data {data} {what}; it applies to a --data folder, so leave it out")
     if args.on_error == "skip" and os.path.isdir(data):
         # loaded here, not by the experiment, to skip unreadable files (the report's data line counts them)
         with warnings.catch_warnings(record=True) as caught:

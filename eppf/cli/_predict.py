@@ -26,7 +26,7 @@ def add_arguments(p):
     p.add_argument("--model", required=True, metavar="MODEL", help=MODEL_HELP)
     p.add_argument("--trust", action="store_true", help=TRUST_HELP)
     p.add_argument("-o", "--output", help="write a CSV file instead of printing a table")
-    add_on_error(p)
+    add_on_error(p, refusable=True)
     scene = p.add_argument_group("scenes", "classify every object of a scan (the options of 'eppf segment')")
     scene.add_argument("--segment", action="store_true",
                        help="split the scene into objects first and classify each: one row per segment with "
@@ -36,7 +36,10 @@ def add_arguments(p):
                        help="with --segment: write the scene with every field and two more per point, 'segment' "
                             "(-1: ground or no segment) and 'class' (the class's number in the model, as "
                             "printed; -1: none), as .ply, .pcd, .las or .laz")
-    add_runtime(p)
+    # files are read and described with the seeds the model saved: only a scene's ground plane draws more
+    scene.add_argument("--random-state", type=int, default=None,
+                       help="with --segment: seed of the RANSAC fit of the ground plane (default: 0)")
+    add_runtime(p, random_state=False)
 
 
 def _evidence(model, clouds, saved):
@@ -83,13 +86,14 @@ def run_predict(args, out=None):
     check_not_input(args.output, inputs)
     if getattr(args, "segment", False):
         return run_predict_scene(args, out)
-    given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else [])
+    given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else []) \
+        + (["--random-state"] if getattr(args, "random_state", None) is not None else [])
     if given:
         raise ValueError(f"{given[0]} applies to scenes: add --segment")
     saved = load_model(args.model, trust=args.trust)
     model = saved["model"]
     set_runtime(model, args.n_jobs, progress_of(args))
-    objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=args.on_error,
+    objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=args.on_error or "skip",
                           progress=progress_of(args), cmd=cmd, labelled=False, min_points=fewest_points(model),
                           exclude=[args.output])
     unreliable = warn_unreliable(model, objects.clouds, objects.ids, cmd)
@@ -137,6 +141,10 @@ def run_predict_scene(args, out):
     cmd = getattr(args, "prog", "eppf predict")
     if len(args.inputs) != 1:
         raise ValueError(f"--segment classifies the objects of one scene; got {len(args.inputs)} inputs")
+    if getattr(args, "on_error", None) is not None:
+        # one file, read whole: an unreadable scene stops the command, there is no other file to go on with
+        raise ValueError("--on-error: --segment reads one scene file, which stops the command when it cannot be "
+                         "read (there is no other file to skip to); leave it out")
     scene_path = str(args.inputs[0])
     labelled = check_output(args.labelled_output, LABELLED_SUFFIXES, "--labelled-output")
     check_not_input(labelled, [(None, scene_path), ("--model", args.model)], "--labelled-output")

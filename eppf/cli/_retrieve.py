@@ -1,5 +1,6 @@
 """``eppf retrieve``: top-k database neighbors by the descriptor's metric."""
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -22,8 +23,10 @@ def add_arguments(p):
                                                                "instead of files")
     p.add_argument("-k", "--top-k", type=positive_int, default=5, help="neighbours per query (default: 5)")
     p.add_argument("-o", "--output", help="write a CSV file instead of printing a table")
-    add_on_error(p)
-    add_runtime(p)
+    add_on_error(p, refusable=True)
+    add_runtime(p, random_state=False)
+    # (listed by earlier versions, which ignored it: refused by run_retrieve)
+    p.add_argument("--random-state", type=int, default=None, help=argparse.SUPPRESS)
 
 
 def _load_descriptors(path, owner):
@@ -84,6 +87,12 @@ def run_retrieve(args, out=None):
     db_labels = _named_labels(db, len(X_db), args.database)
     if (args.query_descriptors is None) == (not args.queries):
         raise ValueError("give query files or --query-descriptors (exactly one of the two)")
+    if getattr(args, "random_state", None) is not None:
+        raise ValueError("--random-state: the queries are sampled and described with the seeds that "
+                         f"{args.database} records (as its objects were); leave it out")
+    if args.query_descriptors is not None and getattr(args, "on_error", None) is not None:
+        raise ValueError("--on-error: with --query-descriptors no point file is read (the queries are "
+                         "precomputed descriptors); leave it out")
     q_labels = None
     descriptor = str(db["descriptor"]) if "descriptor" in db else None
     if args.query_descriptors is not None:
@@ -103,8 +112,8 @@ def run_retrieve(args, out=None):
             {"n_points": None, "resolution": None, "normals": "auto", "random_state": 0, "seed_rule": SEED_RULE}
         settings = dict(params, n_jobs=args.n_jobs, verbose=1 if progress_of(args) else 0)
         est = make_descriptor(descriptor, **settings)
-        objects = read_inputs(args.queries, sampling, on_error=args.on_error, progress=progress_of(args), cmd=cmd,
-                              min_points=fewest_points(est), exclude=[args.output])
+        objects = read_inputs(args.queries, sampling, on_error=args.on_error or "skip", progress=progress_of(args),
+                              cmd=cmd, min_points=fewest_points(est), exclude=[args.output])
         q_ids = objects.ids
         if objects.labels is not None:
             q_labels = objects.class_names[objects.labels]

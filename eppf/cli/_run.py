@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from ._common import (Command, add_sampling, load_labelled, n_jobs_type, positive_float, positive_int, register,
-                      sampling_from_args, warn, warn_tiny)
+from ._common import (DEFAULT_N_PAIRS, Command, add_sampling, load_labelled, n_jobs_type, positive_float,
+                      positive_int, register, sampling_from_args, warn, warn_tiny)
 
 __all__ = ["run_main_job"]
 
@@ -29,28 +29,30 @@ def add_arguments(parser, defaults_only=False):
     parser.add_argument("--scaling", choices=["fit", "object", "none"], default=None,
                         help=h("descriptor scaling (default: 'fit', the paper's data-set scale; use 'object' "
                                "for data in mixed units such as raw CAD files)"))
-    parser.add_argument("--n-pairs", type=positive_int, default=20000, help=h("point pairs per object"))
+    parser.add_argument("--n-pairs", type=positive_int, default=DEFAULT_N_PAIRS,
+                        help=h(f"point pairs per object (default: {DEFAULT_N_PAIRS})"))
     parser.add_argument("--n-bins", type=positive_int, nargs=4, default=(20, 4, 5, 3),
-                        metavar=("F1", "F2", "F3", "F4"), help=h("bins of the four functions"))
+                        metavar=("F1", "F2", "F3", "F4"), help=h("bins of the four functions (default: 20 4 5 3)"))
     parser.add_argument("--normal-neighbors", type=positive_int, default=None,
                         help=h("neighbours of the PCA normal estimation (default: the descriptor's)"))
     # eppf 0.1 spelled it --n-neighbors; kept, hidden, with a warning
     parser.add_argument("--n-neighbors", dest="old_n_neighbors", type=positive_int, default=None,
                         help=argparse.SUPPRESS)
     parser.add_argument("--repeats", type=positive_int, default=1,
-                        help=h("descriptor draws for retrieval mean and std (the paper uses 10)"))
-    parser.add_argument("--test-size", type=float, default=0.25,
-                        help=h("test fraction when the data has no split"))
+                        help=h("descriptor draws for retrieval mean and std (default: 1; the paper uses 10)"))
+    parser.add_argument("--test-size", type=float, default=None,
+                        help=h("test fraction when the data has no train/test split (default: 0.25; refused "
+                               "with data that has one)"))
     if defaults_only:
         # checked as `eppf run` checks them: `eppf --data x` is the README's spelling of `eppf run --data x`
         group = parser.add_mutually_exclusive_group()
         group.add_argument("--n-points", type=positive_int, default=None, help=argparse.SUPPRESS)
         group.add_argument("--resolution", type=positive_float, default=None, help=argparse.SUPPRESS)
-        parser.add_argument("--on-error", choices=["skip", "raise"], default="skip", help=argparse.SUPPRESS)
+        parser.add_argument("--on-error", choices=["skip", "raise"], default=None, help=argparse.SUPPRESS)
     else:
         add_sampling(parser)
-    parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help=h("threads (-1: all cores)"))
-    parser.add_argument("--random-state", type=int, default=0, help=h("seed of everything random"))
+    parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help=h("threads (default: -1, all cores)"))
+    parser.add_argument("--random-state", type=int, default=0, help=h("seed of everything random (default: 0)"))
     parser.add_argument("--no-progress", action="store_true", help=h("hide progress bars"))
 
 
@@ -77,8 +79,9 @@ def run_main_job(args, out=None):
 
     out = out or sys.stdout
     cmd = getattr(args, "prog", "eppf")
-    if not 0 < args.test_size < 1:
-        raise ValueError(f"--test-size must be in (0, 1), got {args.test_size}")
+    test_size = 0.25 if args.test_size is None else args.test_size
+    if not 0 < test_size < 1:
+        raise ValueError(f"--test-size must be in (0, 1), got {test_size}")
     normal_neighbors = args.normal_neighbors
     if getattr(args, "old_n_neighbors", None) is not None:
         warn(cmd, "--n-neighbors is now --normal-neighbors (the PCA neighbourhood of the normals)")
@@ -88,8 +91,12 @@ def run_main_job(args, out=None):
     check_classes(objects, cmd, need_two_per_class=objects.split is None)
     clouds, y, class_names, name = objects.clouds, objects.labels, objects.class_names, objects.name
     split = objects.split
+    if split is not None and args.test_size is not None:
+        # the data's own split is the one scored: the option would be ignored
+        raise ValueError(f"--test-size: {name} has its own train/test split, which the classification uses; "
+                         "leave it out")
     if split is None:
-        _, test = train_test_split(np.arange(len(y)), test_size=args.test_size, stratify=y,
+        _, test = train_test_split(np.arange(len(y)), test_size=test_size, stratify=y,
                                    random_state=args.random_state)
         split = np.full(len(y), "train", dtype=object)
         split[test] = "test"
@@ -113,12 +120,12 @@ def run_main_job(args, out=None):
         times.append(time.perf_counter() - t0)
         X_first = X if X_first is None else X_first
         t0 = time.perf_counter()
-        pred = leave_one_out_retrieval(X, y)
+        pred = leave_one_out_retrieval(X, y, n_jobs=args.n_jobs)
         loo_time = time.perf_counter() - t0
         loo.append(retrieval_scores(y, pred))
 
     train, test = split == "train", split == "test"
-    clf = KLNearestNeighbors().fit(X_first[train], y[train])
+    clf = KLNearestNeighbors(n_jobs=args.n_jobs).fit(X_first[train], y[train])
     test_scores = retrieval_scores(y[test], clf.predict(X_first[test]))
 
     metrics = ["total_accuracy", "mean_class_accuracy", "macro_precision", "macro_recall", "macro_f1"]

@@ -7,9 +7,13 @@ options (:func:`add_segmentation`), reading and splitting a scene the one way (:
 the segments' point clouds (:class:`Scene`).
 """
 
+import hashlib
 import os
+import re
 import secrets
 import shutil
+import socket
+import stat
 import sys
 import time
 from dataclasses import dataclass
@@ -179,14 +183,91 @@ def coordinate(value):
     return format(float(value), ".12g")
 
 
+#: What names a partial folder of ``eppf segment`` (:func:`_partial_folder`), inside an existing output folder or
+#: after ``.<name of a new one>`` beside it.
+PARTIAL_MARK = ".eppf-partial-"
+#: The rest of its name: this machine (a hash of its host name), the process that writes it, a random part.
+_PARTIAL_TAIL = re.compile(r"([0-9a-f]{8})-([0-9]+)-[0-9a-f]{8}")
+#: Seconds without a change after which the partial folder of a process that is gone is removed.
+STALE_AFTER = 120
+
+
+def _host():
+    return hashlib.blake2b(socket.gethostname().encode("utf-8", "surrogateescape"), digest_size=4).hexdigest()
+
+
+def _is_stale_partial(path, tail):
+    """True for a partial folder that no eppf process can be writing: named by :func:`_partial_folder` on this
+    machine (``tail``, the name after :data:`PARTIAL_MARK`), by a process that no longer runs, a real folder of
+    this user unchanged for :data:`STALE_AFTER` seconds. Anything else (another machine on a shared disk, a
+    running or reused process id, a folder of an earlier eppf without the process id) is not, and is left
+    alone."""
+    match = _PARTIAL_TAIL.fullmatch(tail)
+    if match is None or match.group(1) != _host() or os.name != "posix":
+        return False  # (elsewhere, a signal 0 is not a harmless probe)
+    pid = int(match.group(2))
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    if (pid == os.getpid() or not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid()
+            or time.time() - info.st_mtime < STALE_AFTER):
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except (OSError, OverflowError):
+        return False
+    return False
+
+
+def _remove_stale_partials(parent, prefix):
+    """Remove the stale partial folders (:func:`_is_stale_partial`) named ``prefix`` + tail in ``parent``, left by
+    a run that was killed outright (SIGKILL, a power cut: its own cleanup never ran); the names of the others
+    with that prefix."""
+    try:
+        names = [n for n in os.listdir(parent) if n.startswith(prefix)]
+    except OSError:
+        return []
+    left = []
+    for name in names:
+        path = os.path.join(parent, name)
+        if not _is_stale_partial(path, name[len(prefix):]):
+            left.append(name)
+            continue
+        try:
+            shutil.rmtree(path)
+        except OSError as exc:
+            raise OSError(f"cannot remove {path}, the partial folder of an eppf segment run that was killed "
+                          f"({exc.strerror or exc}); delete it") from None
+    return left
+
+
 def check_output_folder(folder):
-    """A new or empty folder for the segment files (refused before any work)."""
+    """A new or empty folder for the segment files (refused before any work).
+
+    The partial folders that a killed run left (in the folder, or beside it for a new one) are removed when no
+    eppf process can be writing them (:func:`_is_stale_partial`); a folder that holds only other partial
+    folders is refused with their names, to delete when no ``eppf segment`` is writing into it.
+    """
     folder = str(folder)
     if os.path.exists(folder) and not os.path.isdir(folder):
         raise ValueError(f"--output {folder} is a file; give a new or empty folder")
-    if os.path.isdir(folder) and os.listdir(folder):
-        raise ValueError(f"--output {folder} is not empty; give a new or empty folder (the segment files of "
-                         "another run would mix with these)")
+    names = os.listdir(folder) if os.path.isdir(folder) else None
+    if names:
+        if any(not n.startswith(PARTIAL_MARK) for n in names):
+            raise ValueError(f"--output {folder} is not empty; give a new or empty folder (the segment files of "
+                             "another run would mix with these)")
+        left = _remove_stale_partials(folder, PARTIAL_MARK)
+        if left:
+            raise ValueError(f"--output {folder} is not empty: it holds {', '.join(sorted(left))}, the partial "
+                             f"folder{'s' if len(left) > 1 else ''} of an eppf segment run that was stopped or is "
+                             "still running; if no eppf segment is writing into the folder, delete "
+                             f"{'them' if len(left) > 1 else 'it'} and run again")
+    elif names is None:
+        # (beside a new folder they block nothing, but would stay there, hidden, for good)
+        _remove_stale_partials(os.path.dirname(os.path.abspath(folder)), _beside_prefix(folder))
     parent = os.path.dirname(os.path.abspath(folder))
     if not os.path.isdir(parent):
         raise ValueError(f"--output {folder}: the folder {os.path.dirname(folder) or '.'} does not exist")
@@ -208,17 +289,23 @@ def output_format(scene_path, chosen):
     return name if name in FIELD_FORMATS else FALLBACK_FORMAT
 
 
+def _beside_prefix(folder):
+    """The start of the name of a partial folder beside the new ``folder``."""
+    return f".{os.path.basename(os.path.normpath(os.path.abspath(folder)))}{PARTIAL_MARK}"
+
+
 def _partial_folder(folder):
     """A new, empty, hidden folder on the file system of ``folder`` (its files are renamed into place at the
     end), made with the permissions a new folder gets: beside a new ``folder``, inside an existing one (which
-    may be a mount point or a link to another file system)."""
+    may be a mount point or a link to another file system). Its name says which machine and process write it,
+    so that a later run can tell when it is stale (:func:`_is_stale_partial`)."""
     if os.path.isdir(folder):
-        parent, prefix = folder, ".eppf-partial-"
+        parent, prefix = folder, PARTIAL_MARK
     else:
         parent = os.path.dirname(os.path.abspath(folder))
-        prefix = f".{os.path.basename(os.path.normpath(os.path.abspath(folder)))}.eppf-partial-"
+        prefix = _beside_prefix(folder)
     while True:
-        path = os.path.join(parent, prefix + secrets.token_hex(4))
+        path = os.path.join(parent, f"{prefix}{_host()}-{os.getpid()}-{secrets.token_hex(4)}")
         try:
             os.mkdir(path)
         except FileExistsError:
