@@ -228,8 +228,8 @@ def run_train(args, out=None):
         train = objects.split == "train"
         if not train.any():
             raise ValueError(f"{name} has a split but no training objects")
-        if args.test_size is not None:
-            warn(cmd, f"--test-size is not used: {name} has its own train/test split")
+        if args.test_size is not None:  # (as eppf run: the data's own split is the one scored)
+            raise ValueError(f"--test-size: {name} has its own train/test split, which training uses; leave it out")
         print(f"eppf train: training on the {count(int(train.sum()), 'object')} of the train split, scoring on "
               f"the {int((~train).sum())} of the test split", file=out)
     else:

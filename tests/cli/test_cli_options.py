@@ -169,6 +169,18 @@ def test_run_test_size_is_refused_with_data_that_has_its_own_split(tmp_path, cap
     assert status == 0 and "Train/test 1-NN (4/4)" in out, err
 
 
+def test_train_test_size_is_refused_with_data_that_has_its_own_split(tmp_path, capsys):
+    # as eppf run: the data's own split is the one trained and scored on, so the option would do nothing
+    with_split = _write_npz(tmp_path / "split.npz")
+    model = tmp_path / "m.joblib"
+    status, out, err = _run(["train", "--data", with_split, "--classifier", "kl", "--test-size", "0.5",
+                             "--n-pairs", "400", "-o", model, "--no-progress"], capsys)
+    assert status == 2, err
+    assert err.strip() == (f"eppf train: error: --test-size: {with_split} has its own train/test split, which "
+                           "training uses; leave it out")
+    assert not model.exists()
+
+
 # ---------------------------------------------------------------------------
 # eppf experiment --out
 # ---------------------------------------------------------------------------
