@@ -146,7 +146,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
         If given, every object is resampled (point files) or sampled (meshes)
         to this many points. If None, point files are kept as they are and
         meshes are sampled with 2,048 points. At most a billion
-        (``eppf.datasets._loaders.MAX_N_POINTS``).
+        (``eppf.utils._sampling.MAX_N_POINTS``).
     normals : {"auto", True, False}, default="auto"
         Whether to return normals (columns 3 to 5) when the files have them
         (face normals for meshes).

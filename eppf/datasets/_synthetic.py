@@ -24,7 +24,7 @@ from ..preprocessing._perturb import (
 )
 from ..utils._param_validation import RANDOM_STATE, Interval, Options, StrOptions, validate_parameter
 from ..utils._sampling import CONSTRAINTS as SAMPLING_CONSTRAINTS
-from ._loaders import MAX_N_POINTS
+from ..utils._sampling import MAX_N_POINTS
 
 __all__ = ["make_shapes"]
 

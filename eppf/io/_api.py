@@ -194,7 +194,9 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         when neither ``n_points`` nor ``resolution`` is given); point files
         are resampled to it (:func:`eppf.preprocessing.resample`: without
         replacement when they have more points, every point plus random
-        repeats when fewer). None keeps point files as they are.
+        repeats when fewer). None keeps point files as they are. At most a
+        billion, as in the loaders of :mod:`eppf.datasets` (a larger count is
+        refused before any file is read).
     resolution : float, default=None
         Instead of ``n_points``, sample meshes on a voxel grid of this cell
         size (see :func:`eppf.preprocessing.sample_mesh`); point files are

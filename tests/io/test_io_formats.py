@@ -97,6 +97,8 @@ def test_missing_file_and_folder(tmp_path):
         (read_point_cloud, ("x.pcd",), {"mesh": "faces"}, ValueError, "mesh must be 'sample' or 'vertices'"),
         (read_point_cloud, ("x.pcd",), {"n_points": 1}, ValueError, "n_points must be None or an int >= 2, got 1"),
         (read_point_cloud, ("x.pcd",), {"n_points": 2.5}, TypeError, "n_points must be None or an int >= 2, got 2.5"),
+        (read_point_cloud, ("x.pcd",), {"n_points": 10**12}, ValueError,
+         "read_point_cloud: n_points must be at most 1,000,000,000 points per object, got 1,000,000,000,000"),
         (read_point_cloud, ("x.pcd",), {"resolution": np.nan}, ValueError, "resolution must be None or a positive finite float, got nan"),
         (read_point_cloud, ("x.pcd",), {"n_points": 10, "resolution": 0.1}, ValueError, "give n_points or resolution, not both"),
         (read_point_cloud, ("x.pcd",), {"random_state": -1}, ValueError, "an int random_state must lie in 0..2**64-1"),
@@ -113,6 +115,21 @@ def test_argument_errors(tmp_path, monkeypatch, func, args, kwargs, exc, msg):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(exc, match=re.escape(msg)):
         func(*args, **kwargs)
+
+
+def test_the_readers_and_the_loaders_share_one_bound_on_n_points(tmp_path):
+    # read_point_cloud had no upper bound (10**12 reached NumPy's allocator, naming neither it nor n_points)
+    # while the loaders refused more than a billion: one check serves both, and resample too
+    from eppf.datasets import load_folder
+    from eppf.utils._sampling import MAX_N_POINTS, resample
+
+    path = tmp_path / "c.npy"
+    write_point_cloud(path, np.eye(3))
+    for func, args in ((read_point_cloud, (path,)), (load_folder, (tmp_path,)), (resample, (np.eye(3),))):
+        with pytest.raises(ValueError, match=re.escape(f"{func.__name__}: n_points must be at most 1,000,000,000 "
+                                                       f"points per object, got {MAX_N_POINTS + 1:,}")):
+            func(*args, n_points=MAX_N_POINTS + 1)
+    assert MAX_N_POINTS == 10**9
 
 
 def test_core_import_needs_no_optional_dependency(tmp_path):
