@@ -216,9 +216,10 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     FileNotFoundError, IsADirectoryError, PermissionError
         If the file cannot be opened; the message names it.
     FileFormatError
-        A :class:`ValueError`: the file is empty, truncated or malformed, a
-        header count does not fit the file, a mesh cannot be sampled (no
-        faces, non-finite vertices, zero area) or a cloud cannot be
+        A :class:`ValueError`: the file is empty, truncated or malformed, it
+        holds no points (a well-formed file of no points or vertices, in
+        every format, or only NaN points), a header count does not fit the
+        file, a mesh cannot be sampled (no faces, non-finite vertices, zero area) or a cloud cannot be
         resampled to ``n_points`` (fewer than two distinct points); the
         message names the file and the line (text) or byte (binary) where
         reading failed.
@@ -262,6 +263,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     if shape is not None and (mesh == "vertices" or fmt.name == "ply" and shape.faces.shape[0] == 0):
         cloud, shape = (cloud if fmt.name == "ply" else Cloud(shape.vertices, None)), None
     if shape is not None:
+        if shape.vertices.shape[0] == 0:  # (as a point file of no points, not as a mesh without faces)
+            raise FileFormatError(f"{owner}: {path!r} holds no points")
         _check_vertices(shape, path, owner)
         if shape.faces.shape[0] == 0:
             raise FileFormatError(f"{owner}: {path!r} has no faces, so it cannot be sampled; pass mesh='vertices'")
@@ -299,7 +302,10 @@ def read_mesh(path, *, format=None):
         ``(vertices, faces)``: float64 (n_vertices, 3) and int64 (n_faces, 3).
         Polygons are split into triangles by a fan from their first vertex.
         OBJ texture and normal indices are ignored. A PLY file without a
-        ``face`` element gives a mesh with no faces.
+        ``face`` element gives a mesh with no faces, and a well-formed file
+        of no vertices (PLY ``element vertex 0``, OFF counts ``0 0 0``, an
+        STL of no facets, an OBJ of no ``v`` and no ``f`` lines) an empty
+        mesh, as :func:`read_point_fields` gives a file of no points.
 
     Raises
     ------

@@ -3,7 +3,8 @@
 - ``.xyz``, ``.txt``, ``.csv``: rows ``x y z [more columns]`` separated by
   spaces, tabs, commas or semicolons, ``#`` comments, and one optional header
   line of names; columns 4 to 6 are normals when every row there has unit
-  length (so ``x y z r g b`` files are not mistaken).
+  length (so ``x y z r g b`` files are not mistaken). A table of no rows (a
+  header line or comments only) is a file of no points.
 - ``.pts`` (Open3D): the same rows, optionally after a first line holding
   only the number of points (``0`` alone: a file of no points); extra
   columns are intensity and color, read as in ``.xyz``. A Leica PTS file of
@@ -47,15 +48,22 @@ def _table(path, data, owner, start=0, start_line=0):
     idx, rows = content(lines[start_line:])
     idx = [i + start_line for i in idx]
     rows = [r.replace(",", " ").replace(";", " ") for r in rows]
+    # a table of no rows (only blank or comment lines, or a header line) is a file of no points, as an empty
+    # PLY, PCD, NPY, LAS or E57 file is: read_point_fields gives it, read_point_cloud says it holds no points
     if not rows:
-        raise FileFormatError(f"{owner}: {path!r} holds no points (only blank or comment lines)")
+        return np.empty((0, 3)), []
     # one header line of names (e.g. "x,y,z") is allowed
     try:
         [float(t) for t in rows[0].split()]
     except ValueError:
+        if len(rows) == 1:
+            width = len(rows[0].split())
+            if width < 3:
+                raise FileFormatError(
+                    f"{owner}: {path!r} line {idx[0] + 1}: expected at least 3 columns (x y z), got {width}"
+                ) from None
+            return np.empty((0, width)), []
         idx, rows = idx[1:], rows[1:]
-        if not rows:
-            raise FileFormatError(f"{owner}: {path!r} holds no points (only a header line)") from None
     arr = parse_float_rows(rows, idx, path, owner, "point")
     if arr.shape[1] < 3:
         raise FileFormatError(
@@ -144,6 +152,8 @@ def read_pts(path, data, owner, want_normals="auto"):
 
 def _fixed(path, data, owner, what):
     arr, idx = _table(path, data, owner)
+    if arr.shape == (0, 3) and not idx:  # (no rows and no header line: no points, of any width)
+        return np.empty((0, 6))
     if arr.shape[1] != 6:
         line = idx[0] + 1 if idx else 1
         raise FileFormatError(f"{owner}: {path!r} line {line}: a .{what} row holds 6 values, got {arr.shape[1]}")

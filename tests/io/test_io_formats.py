@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
+from eppf.io import (FileFormatError, Mesh, read_mesh, read_point_cloud, read_point_fields, write_mesh,
+                     write_point_cloud, write_point_fields)
 
 
 
@@ -64,6 +65,89 @@ def test_empty_file(write_file, tmp_path, ext):
     for reader in readers:
         with pytest.raises(FileFormatError, match=re.escape(f"{path!r} is empty")):
             reader(path)
+
+
+_PCD_HEAD = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 0\nHEIGHT 1\n" \
+            "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA "
+_PLY_HEAD = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
+
+
+def _no_fields(path):
+    write_point_fields(path, np.zeros((0, 3)), {"intensity": np.zeros(0, np.float32)})
+
+
+def _las(path):
+    pytest.importorskip("laspy")
+    _no_fields(path)
+
+
+def _e57(path):
+    from .test_io_las_e57 import _e57_with_normals  # (skips without laspy, as that module does)
+
+    pytest.importorskip("pye57")
+    _e57_with_normals(path, np.zeros((0, 3)), np.zeros((0, 3)), [1, 0, 0, 0], [0, 0, 0])
+
+
+def _text(content):
+    def write(path):
+        with open(path, "wb") as fh:
+            fh.write(content.encode() if isinstance(content, str) else content)
+    return write
+
+
+#: A file of no points (or a mesh of no vertices) in every format, as its writers (or its tools) write one.
+_NO_POINTS = {
+    "ascii.pcd": _text(_PCD_HEAD + "ascii\n"),
+    "binary.pcd": _text(_PCD_HEAD + "binary\n"),
+    "compressed.pcd": _text((_PCD_HEAD + "binary_compressed\n").encode() + bytes(8)),
+    "compressed_no_sizes.pcd": _text(_PCD_HEAD + "binary_compressed\n"),
+    "written.pcd": _no_fields,
+    "ascii.ply": _text(_PLY_HEAD + "property float intensity\nend_header\n"),
+    "written.ply": _no_fields,
+    "a.npy": lambda path: np.save(path, np.zeros((0, 3))),
+    "a.npz": lambda path: np.savez(path, np.zeros((0, 6))),
+    "points.npz": lambda path: np.savez(path, points=np.zeros((0, 3))),
+    "open3d.pts": _text("0\r\n"),
+    "header.xyz": _text("x y z intensity\n"),
+    "comment.txt": _text("# no points\n\n"),
+    "header.csv": _text("x,y,z\n"),
+    "comment.xyzn": _text("# no points\n"),
+    "header.xyzrgb": _text("x y z r g b\n"),
+    "a.las": _las,
+    "a.laz": _las,
+    "a.e57": _e57,
+    # meshes
+    "a.off": _text("OFF\n0 0 0\n"),
+    "a.obj": _text("# no vertices\no nothing\n"),
+    "binary.stl": _text(b"empty".ljust(80) + bytes(4)),
+    "ascii.stl": _text("solid empty\nendsolid empty\n"),
+    "mesh.ply": _text(_PLY_HEAD + "element face 0\nproperty list uchar int vertex_indices\nend_header\n"),
+}
+
+
+@pytest.mark.parametrize("name", list(_NO_POINTS))
+def test_a_file_of_no_points_reads_alike_in_every_format(tmp_path, name):
+    # PCD's POINTS 0 was refused by every reader, as were an OFF of no vertices, an STL of no facets, an OBJ of
+    # no 'v' lines and a text table of only a header or comments, while a PLY, NPY, LAS, E57 or .pts file of no
+    # points was read. Now every format agrees: the readers of a file's content (read_point_fields, read_mesh)
+    # give it with no rows, read_point_cloud, whose cloud needs points, says the file holds none.
+    path = str(tmp_path / name)
+    _NO_POINTS[name](path)
+    if name.endswith((".off", ".obj", ".stl")) or name == "mesh.ply":
+        mesh = read_mesh(path)
+        assert mesh.vertices.shape == (0, 3) and mesh.faces.shape == (0, 3) and mesh.faces.dtype == np.int64
+        modes = ("sample", "vertices")
+    else:
+        points, fields = read_point_fields(path)
+        assert points.shape == (0, 3) and points.dtype == np.float64
+        assert all(v.shape[0] == 0 for v in fields.values())
+        if name in ("ascii.pcd", "written.pcd", "ascii.ply", "written.ply", "header.xyz", "a.las", "a.laz"):
+            assert "intensity" in fields
+        modes = ("sample",)
+    for mesh_mode in modes:
+        with pytest.raises(FileFormatError) as info:
+            read_point_cloud(path, mesh=mesh_mode)
+        assert str(info.value) == f"read_point_cloud: {path!r} holds no points"
 
 
 def test_missing_file_and_folder(tmp_path):
