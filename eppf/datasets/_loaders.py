@@ -36,6 +36,7 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
+from ..io._api import check_flag, check_normals
 from ..utils._param_validation import RANDOM_STATE, Interval, Options, Satisfies, validate_parameter
 from ..utils._validation import check_n_jobs
 from ..utils._sampling import check_n_points, check_resolution
@@ -370,7 +371,8 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     validate_parameter(version, MODELNET_VERSION, name="version", owner=owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    check_choice(normals, "normals", ("auto", True, False), owner)
+    normals = check_normals(normals, owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     resolution = check_resolution(resolution, owner)
     if resolution is not None and n_points is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both (set n_points=None to use resolution)")
@@ -547,7 +549,8 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     root = check_dir(path, owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    check_choice(normals, "normals", ("auto", True, False), owner)
+    normals = check_normals(normals, owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     n_points = check_n_points(n_points, owner)
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     resolution = check_resolution(resolution, owner)
@@ -684,6 +687,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     root = check_dir(path, owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     n_points = check_n_points(n_points, owner)
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)

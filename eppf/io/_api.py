@@ -6,13 +6,15 @@ import os
 import numpy as np
 from sklearn.utils import check_random_state
 
+from ..utils._param_validation import Options, validate_parameter
 from ..utils._sampling import check_n_points, check_resolution, object_rng, resample, sample_mesh
 from . import _ply
 from ._common import Cloud, Mesh, read_bytes
 from ._errors import FileFormatError
 from ._formats import lookup
 
-__all__ = ["MESH_POINTS", "read_mesh", "read_point_cloud", "write_mesh", "write_point_cloud"]
+__all__ = ["MESH_POINTS", "NORMALS", "check_flag", "check_normals", "read_mesh", "read_point_cloud", "write_mesh",
+           "write_point_cloud"]
 
 # points drawn from a mesh when neither n_points nor resolution is given (as load_folder does)
 MESH_POINTS = 2048
@@ -21,15 +23,31 @@ MESH_POINTS = 2048
 # --------------------------------------------------------------------------- argument checks
 
 
-def _check_normals_arg(normals, owner):
-    if normals not in ("auto", True, False):
-        raise ValueError(f"{owner}: normals must be 'auto', True or False, got {normals!r}")
+#: ``normals`` of the readers and of the loaders of :mod:`eppf.datasets`
+#: (:mod:`eppf.utils._param_validation`): "auto", or a bool (``numpy.bool_`` too). It was compared with
+#: ``in ("auto", True, False)``, which took 1, 0 and 1.0 (equal to True and False) and then, since
+#: ``normals is True`` did not hold for them, read them as "auto".
+NORMALS = [Options((str, bool), values=["auto", True, False], description="'auto', True or False")]
+
+
+def check_normals(normals, owner):
+    """``normals`` checked against :data:`NORMALS`: ``"auto"``, True or False (a ``numpy.bool_`` as its bool)."""
+    validate_parameter(normals, NORMALS, name="normals", owner=owner)
+    return normals if isinstance(normals, str) else bool(normals)
+
+
+def check_flag(value, name, owner):
+    """A bool parameter (``remove_nan``, ``binary``, ``return_X_y``, ...) as the estimators check theirs
+    (``Options(bool)``): True or False, or a ``numpy.bool_``; anything else (``"yes"``, 1, None) is an
+    InvalidParameterError, a TypeError, naming ``owner`` and ``name``, where truthiness took it."""
+    validate_parameter(value, [Options(bool)], name=name, owner=owner)
+    return bool(value)
 
 
 def check_sampling_args(owner, normals, n_points, resolution):
     """``(n_points, resolution)`` checked as :func:`read_point_cloud` takes them, with ``normals``: for
     callers that read many files, so that a bad option fails once, before any file is read."""
-    _check_normals_arg(normals, owner)
+    check_normals(normals, owner)
     n_points = check_n_points(n_points, owner)
     resolution = check_resolution(resolution, owner)
     if n_points is not None and resolution is not None:
@@ -225,6 +243,10 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         reading failed.
     ValueError
         If the extension is unknown or an argument is invalid.
+    TypeError
+        If ``normals`` or ``remove_nan`` is not one of the values listed
+        (``numpy.bool_`` is taken as a bool; ``1``, ``0`` or ``"yes"`` are
+        not); the error is a ValueError too.
 
     See Also
     --------
@@ -255,6 +277,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     if mesh not in ("sample", "vertices"):
         raise ValueError(f"{owner}: mesh must be 'sample' or 'vertices', got {mesh!r}")
     n_points, resolution = check_sampling_args(owner, normals, n_points, resolution)
+    normals = check_normals(normals, owner)
+    remove_nan = check_flag(remove_nan, "remove_nan", owner)
     # the generator is made only for a file that is sampled (a mesh, or resampling to n_points)
     _check_random_state_arg(random_state, owner)
     path = os.fspath(path)
@@ -396,6 +420,7 @@ def write_point_cloud(path, cloud, *, format=None, binary=True):
     owner = "write_point_cloud"
     path = os.fspath(path)
     fmt = lookup(path, format, owner, kind="cloud")
+    binary = check_flag(binary, "binary", owner)
     if fmt.writer is None:
         raise ValueError(f"{owner}: eppf does not write {fmt.name} files (clouds have no colour); write .xyz instead")
     cloud = _check_cloud_arg(cloud, owner)
@@ -438,6 +463,7 @@ def write_mesh(path, vertices, faces, *, format=None, binary=True):
     owner = "write_mesh"
     path = os.fspath(path)
     fmt = lookup(path, format, owner, kind="mesh")
+    binary = check_flag(binary, "binary", owner)
     vertices = _check_cloud_arg(vertices, owner)
     if vertices.shape[1] != 3:
         raise ValueError(f"{owner}: vertices must have shape (n_vertices, 3), got {vertices.shape}")

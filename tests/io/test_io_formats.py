@@ -201,6 +201,33 @@ def test_argument_errors(tmp_path, monkeypatch, func, args, kwargs, exc, msg):
         func(*args, **kwargs)
 
 
+@pytest.mark.parametrize("value", ["yes", 1, 0, None, 1.0])
+@pytest.mark.parametrize("func, args, name", [
+    (read_point_cloud, ("x.npy",), "normals"),
+    (read_point_cloud, ("x.npy",), "remove_nan"),
+    (write_point_cloud, ("x.ply", np.eye(3)), "binary"),
+    (write_mesh, ("x.ply", np.eye(3), [[0, 1, 2]]), "binary"),
+])
+def test_a_flag_that_is_not_a_bool_is_refused(tmp_path, monkeypatch, func, args, name, value):
+    # remove_nan and binary were taken by truthiness ("yes" wrote a binary file, None an ASCII one), normals
+    # by ==, which took 1 and 0 and then read them as "auto" (normals=0 kept a file's normals)
+    monkeypatch.chdir(tmp_path)
+    accepted = "'auto', True or False" if name == "normals" else "True or False"
+    with pytest.raises(TypeError, match=re.escape(f"{func.__name__}: {name} must be {accepted}, got {value!r}")):
+        func(*args, **{name: value})
+    assert not os.listdir(tmp_path)  # (refused before any file is written)
+
+
+def test_a_numpy_bool_flag_is_the_bool_it_holds(make_cloud, tmp_path):
+    path = tmp_path / "c.ply"
+    write_point_cloud(path, make_cloud(n=5), binary=np.False_)
+    assert path.read_bytes().startswith(b"ply\nformat ascii")
+    assert read_point_cloud(path, normals=np.False_).shape == (5, 3)  # (np.False_ read as "auto": (5, 6))
+    write_point_cloud(tmp_path / "d.ply", make_cloud(n=5, normals=False))
+    with pytest.raises(FileFormatError, match="has no normals, but normals=True"):  # (np.True_ read as "auto")
+        read_point_cloud(tmp_path / "d.ply", normals=np.True_)
+
+
 def test_the_readers_and_the_loaders_share_one_bound_on_n_points(tmp_path):
     # read_point_cloud had no upper bound (10**12 reached NumPy's allocator, naming neither it nor n_points)
     # while the loaders refused more than a billion: one check serves both, and resample too
