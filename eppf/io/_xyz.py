@@ -9,6 +9,10 @@
   only the number of points (``0`` alone: a file of no points); extra
   columns are intensity and color, read as in ``.xyz``. A Leica PTS file of
   several scans, each after its count line, is refused naming the second.
+  The count must be the number of rows: a file of more rows than its count
+  line says is refused (PDAL and Open3D read the first rows and drop the
+  rest, which would be a silently shortened cloud), naming the count line
+  and the first row past the count.
 - ``.xyzn`` (Open3D): ``x y z nx ny nz``, normals always.
 - ``.xyzrgb`` (Open3D): ``x y z r g b``, the color is ignored.
 """
@@ -64,6 +68,13 @@ def _table(path, data, owner, start=0, start_line=0):
                 ) from None
             return np.empty((0, width)), []
         idx, rows = idx[1:], rows[1:]
+    first = rows[0].split()
+    if start_line == 0 and len(rows) > 1 and len(first) == 1 and first[0].isdigit() and len(rows[1].split()) >= 3:
+        # (read as a row of one value, it was reported as "expected 1 values in point 1" on the next line)
+        raise FileFormatError(
+            f"{owner}: {path!r} line {idx[0] + 1}: a count line ({first[0]}) as a .pts file begins with, but "
+            f"the rows of this file's format hold x y z; read it as .pts (format='pts') to use the count"
+        )
     arr = parse_float_rows(rows, idx, path, owner, "point")
     if arr.shape[1] < 3:
         raise FileFormatError(
@@ -115,8 +126,26 @@ def _refuse_several_scans(path, data, owner, pos, count):
                               "several scans, each after its count line; eppf reads .pts files of one scan")
 
 
+def _line_of_row(data, pos, k):
+    """The 1-based line of row ``k`` (from 0) of the table from byte ``pos``, past a header line of names as
+    the table readers skip it. Only called to name a line in an error, so the lines are split here in Python."""
+    idx, rows = content(data[pos:].decode("utf-8", "replace").splitlines())
+    try:
+        [float(t) for t in rows[0].replace(",", " ").replace(";", " ").split()]
+    except ValueError:
+        idx = idx[1:]
+    return data[:pos].count(b"\n") + idx[k] + 1
+
+
 def read_pts(path, data, owner, want_normals="auto"):
-    """Open3D's ``.pts``: an optional first line with the point count, then rows."""
+    """Open3D's ``.pts``: an optional first line with the point count, then rows.
+
+    The count must match the rows. Fewer rows are a truncated file; more rows are refused too, naming the
+    count line and the first row past the count, rather than read as PDAL and Open3D read them (the first
+    ``count`` rows, the rest dropped without a word): which of the two is wrong, the count or the rows, the
+    file does not say, and a cloud cut short would look like a whole one. A second count line is a Leica
+    file of several scans, refused as such.
+    """
     first, pos = next_line(data, 0)
     if first is not None and len(first.split()) == 1:
         token = first.split()[0]
@@ -142,9 +171,13 @@ def read_pts(path, data, owner, want_normals="auto"):
                 raise
             if arr.shape[0] != count:
                 _refuse_several_scans(path, data, owner, pos, count)
+                more = ""
+                if arr.shape[0] > count:
+                    more = (f", {arr.shape[0] - count} more from line {_line_of_row(data, pos, count)} (PDAL and Open3D "
+                            "would drop them: correct the count line, or delete it to read every row)")
                 raise FileFormatError(
                     f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
-                    f"but the file holds {arr.shape[0]} rows"
+                    f"but the file holds {arr.shape[0]} rows{more}"
                 )
             return cloud_of_table(arr, want_normals)
     return read_xyz(path, data, owner, want_normals)
