@@ -126,6 +126,16 @@ def _refuse_several_scans(path, data, owner, pos, count):
                               "several scans, each after its count line; eppf reads .pts files of one scan")
 
 
+def _first_content(data):
+    """The first line of ``data`` holding more than blanks and a ``#`` comment, without the comment, and the
+    offset after it (None and the end when there is none): where a .pts file's count line is, so that a
+    comment line before it does not make it a row of one value."""
+    line, pos = next_line(data, 0)
+    while line is not None and not line.split(b"#", 1)[0].strip():
+        line, pos = next_line(data, pos)
+    return (None if line is None else line.split(b"#", 1)[0].strip()), pos
+
+
 def _line_of_row(data, pos, k):
     """The 1-based line of row ``k`` (from 0) of the table from byte ``pos``, past a header line of names as
     the table readers skip it. Only called to name a line in an error, so the lines are split here in Python."""
@@ -146,7 +156,7 @@ def read_pts(path, data, owner, want_normals="auto"):
     file does not say, and a cloud cut short would look like a whole one. A second count line is a Leica
     file of several scans, refused as such.
     """
-    first, pos = next_line(data, 0)
+    first, pos = _first_content(data)
     if first is not None and len(first.split()) == 1:
         token = first.split()[0]
         try:
@@ -247,7 +257,7 @@ def read_text_fields(path, data, owner, fmt):
     three), by the layout of .xyzn/.xyzrgb/.pts, else ``column_4``, ``column_5``, ... (counting from 1)."""
     start = 0
     if fmt == "pts":
-        first, pos = next_line(data, 0)
+        first, pos = _first_content(data)
         if first is not None and len(first.split()) == 1:
             try:
                 int(first.split()[0])

@@ -179,6 +179,16 @@ def test_a_count_line_in_a_table_without_one_is_named_as_such(write_file, tmp_pa
     assert read_point_cloud(path, format="pts").shape == (2, 6)
 
 
+def test_pts_count_line_after_a_comment_is_the_count_line(write_file, tmp_path):
+    # the count line was looked for on the first line only: after a comment it was read as a row of one value
+    # (and then named a count line of a format that has none, in a .pts file)
+    path = write_file(tmp_path / "c.pts", "# exported\r\n2 # points\r\n1 2 3 7\r\n4 5 6 8\r\n")
+    assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
+    from eppf.io import read_point_fields
+
+    assert read_point_fields(path)[1]["intensity"].tolist() == [7, 8]
+
+
 def test_pts_count_line_without_rows_is_truncated(write_file, tmp_path):
     path = write_file(tmp_path / "cut.pts", "3\n# the rows are missing\n")
     with pytest.raises(FileFormatError, match=re.escape(
