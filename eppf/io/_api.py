@@ -237,10 +237,10 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         A :class:`ValueError`: the file is empty, truncated or malformed, it
         holds no points (a well-formed file of no points or vertices, in
         every format, or only NaN points), a header count does not fit the
-        file, a mesh cannot be sampled (no faces, non-finite vertices, zero area) or a cloud cannot be
-        resampled to ``n_points`` (fewer than two distinct points); the
-        message names the file and the line (text) or byte (binary) where
-        reading failed.
+        file, a mesh cannot be sampled (no faces, non-finite vertices, zero
+        area) or a cloud cannot be resampled to ``n_points`` (fewer than two
+        distinct points); the message names the file and the line (text) or
+        byte (binary) where reading failed.
     ValueError
         If the extension is unknown or an argument is invalid.
     TypeError
