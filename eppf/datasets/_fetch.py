@@ -33,6 +33,7 @@ import warnings
 import zipfile
 
 from ..utils._param_validation import validate_parameter
+from ..io._api import check_flag
 from ._loaders import MODELNET_VERSION, check_path, load_modelnet
 
 __all__ = ["clear_data_home", "fetch_file", "fetch_modelnet", "get_data_home"]
@@ -348,6 +349,7 @@ def fetch_file(url, *, sha256=None, data_home=None, filename=None, download_if_m
     """
     owner = "fetch_file"
     _check_url(url, owner)
+    download_if_missing = check_flag(download_if_missing, "download_if_missing", owner)
     sha256 = _check_sha256(sha256, owner)
     if sha256 is None and url in KNOWN_SHA256:
         sha256 = _check_sha256(KNOWN_SHA256[url], owner)
@@ -507,6 +509,7 @@ def fetch_modelnet(version=40, *, data_home=None, url=None, sha256=None, downloa
     """
     owner = "fetch_modelnet"
     validate_parameter(version, MODELNET_VERSION, name="version", owner=owner)
+    download_if_missing = check_flag(download_if_missing, "download_if_missing", owner)
     home = _data_home(data_home, owner)
     folder = os.path.join(home, f"ModelNet{version}")
     if not os.path.isdir(folder):

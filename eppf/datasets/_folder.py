@@ -7,6 +7,7 @@ import numpy as np
 from sklearn.utils import Bunch
 
 from ..io import read_point_cloud, supported_extensions
+from ..io._api import check_flag, check_normals
 from ..utils._param_validation import RANDOM_STATE, validate_parameter
 from ._loaders import check_choice, check_class_names, check_dir, check_n_points, file_seeds, load_all
 
@@ -146,7 +147,7 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
         If given, every object is resampled (point files) or sampled (meshes)
         to this many points. If None, point files are kept as they are and
         meshes are sampled with 2,048 points. At most a billion
-        (``eppf.datasets._loaders.MAX_N_POINTS``).
+        (``eppf.utils._sampling.MAX_N_POINTS``).
     normals : {"auto", True, False}, default="auto"
         Whether to return normals (columns 3 to 5) when the files have them
         (face normals for meshes).
@@ -197,7 +198,8 @@ def load_folder(path, *, classes=None, subset="all", n_points=None, normals="aut
     root = check_dir(path, owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    check_choice(normals, "normals", ("auto", True, False), owner)
+    normals = check_normals(normals, owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     n_points = check_n_points(n_points, owner)
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     classes = check_class_names(classes, owner, allow_none=True)

@@ -18,7 +18,8 @@ downloads), returns a :class:`~sklearn.utils.Bunch` (or ``(X, y)`` with
 - Paths may be ``str``, ``bytes`` or path-like (:func:`os.fsdecode` makes
   them ``str``; anything else is a TypeError naming the parameter), and a
   folder's symbolic links are followed.
-- ``n_points`` is at most a billion (:data:`MAX_N_POINTS`), refused before
+- ``n_points`` is at most a billion (``eppf.utils._sampling.MAX_N_POINTS``,
+  the bound of :func:`eppf.io.read_point_cloud` too), refused before
   anything is allocated.
 """
 
@@ -35,10 +36,10 @@ from joblib import Parallel, delayed
 from sklearn.utils import Bunch, check_random_state
 
 from ..io import read_point_cloud, supported_extensions
+from ..io._api import check_flag, check_normals
 from ..utils._param_validation import RANDOM_STATE, Interval, Options, Satisfies, validate_parameter
 from ..utils._validation import check_n_jobs
-from ..utils._sampling import check_n_points as _check_n_points
-from ..utils._sampling import check_resolution
+from ..utils._sampling import check_n_points, check_resolution
 
 __all__ = ["load_modelnet", "load_s3dis_objects", "load_scannet_objects"]
 
@@ -76,21 +77,6 @@ def check_dir(path, owner, name="path"):
     if not os.path.isdir(path):
         raise FileNotFoundError(f"{owner}: no such folder: {path!r}")
     return path
-
-
-#: Most points per object that a loader (or :func:`eppf.datasets.make_shapes`) samples or resamples
-#: to: a billion points are 24 GB of float64 coordinates (48 GB with normals) in one object. A larger
-#: ``n_points`` is refused before anything is allocated, where NumPy's "Unable to allocate" came out
-#: of the middle of the reading, naming neither the loader nor the parameter.
-MAX_N_POINTS = 10**9
-
-
-def check_n_points(n_points, owner, allow_none=True):
-    """``n_points`` checked as :mod:`eppf.utils._sampling` does and against :data:`MAX_N_POINTS`; an int or None."""
-    n_points = _check_n_points(n_points, owner, allow_none=allow_none)
-    if n_points is not None and n_points > MAX_N_POINTS:
-        raise ValueError(f"{owner}: n_points must be at most {MAX_N_POINTS:,} points per object, got {n_points:,}")
-    return n_points
 
 
 #: ModelNet's ``version`` (:mod:`eppf.utils._param_validation`), for the loader and the fetcher.
@@ -385,7 +371,8 @@ def load_modelnet(path, *, version=40, subset="all", n_points=2048, resolution=N
     validate_parameter(version, MODELNET_VERSION, name="version", owner=owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    check_choice(normals, "normals", ("auto", True, False), owner)
+    normals = check_normals(normals, owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     resolution = check_resolution(resolution, owner)
     if resolution is not None and n_points is not None:
         raise ValueError(f"{owner}: give n_points or resolution, not both (set n_points=None to use resolution)")
@@ -562,7 +549,8 @@ def load_scannet_objects(path, *, subset="all", classes=SCANNET_CLASSES, n_point
     root = check_dir(path, owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
-    check_choice(normals, "normals", ("auto", True, False), owner)
+    normals = check_normals(normals, owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     n_points = check_n_points(n_points, owner)
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     resolution = check_resolution(resolution, owner)
@@ -699,6 +687,7 @@ def load_s3dis_objects(path, *, subset="all", classes=S3DIS_CLASSES, areas=None,
     root = check_dir(path, owner)
     check_choice(subset, "subset", ("all", "train", "test"), owner)
     check_choice(on_error, "on_error", ("raise", "skip"), owner)
+    return_X_y = check_flag(return_X_y, "return_X_y", owner)
     n_points = check_n_points(n_points, owner)
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     validate_parameter(train_size, TRAIN_SIZE, name="train_size", owner=owner)

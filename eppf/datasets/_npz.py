@@ -7,6 +7,7 @@ import os
 import numpy as np
 from sklearn.utils import Bunch
 
+from ..io._api import check_flag
 from ..io._npy import read_npz_arrays
 from ..utils._atomic import atomic_write
 from ._loaders import check_path
@@ -69,6 +70,7 @@ def load_npz(path, *, return_X_y=False):
     (['table', 'chair'], ['train', 'test'])
     """
     path = check_path(path, "path", "load_npz")
+    return_X_y = check_flag(return_X_y, "return_X_y", "load_npz")
     if not os.path.exists(path):
         raise FileNotFoundError(f"load_npz: no such file: {path!r}")
     archive = read_npz_arrays(path, "load_npz")  # (headers checked against the stored bytes before allocating)

@@ -24,7 +24,7 @@ from ..preprocessing._perturb import (
 )
 from ..utils._param_validation import RANDOM_STATE, Interval, Options, StrOptions, validate_parameter
 from ..utils._sampling import CONSTRAINTS as SAMPLING_CONSTRAINTS
-from ._loaders import MAX_N_POINTS
+from ..utils._sampling import MAX_N_POINTS
 
 __all__ = ["make_shapes"]
 
@@ -40,8 +40,10 @@ _CONSTRAINTS = {
     "occlusion": [Interval(numbers.Real, 0, _MAX_OCCLUSION, closed="both", description=f"a float in [0, {_MAX_OCCLUSION}]")],
     "size_variation": PERTURB_CONSTRAINTS["fraction"],
     "rotate": [Options(bool, description="True, False"), StrOptions(["z"])],
+    "with_normals": [Options(bool)],
     "test_size": PERTURB_CONSTRAINTS["fraction"],
     "random_state": RANDOM_STATE,
+    "return_X_y": [Options(bool)],
 }
 
 
@@ -448,7 +450,8 @@ def make_shapes(
     """
     params = {
         "n_samples_per_class": n_samples_per_class, "n_points": n_points, "noise": noise, "occlusion": occlusion,
-        "size_variation": size_variation, "rotate": rotate, "test_size": test_size, "random_state": random_state,
+        "size_variation": size_variation, "rotate": rotate, "with_normals": with_normals, "test_size": test_size,
+        "random_state": random_state, "return_X_y": return_X_y,
     }
     for name, value in params.items():
         validate_parameter(value, _CONSTRAINTS[name], name=name, owner=_OWNER)

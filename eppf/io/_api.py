@@ -6,13 +6,15 @@ import os
 import numpy as np
 from sklearn.utils import check_random_state
 
+from ..utils._param_validation import Options, validate_parameter
 from ..utils._sampling import check_n_points, check_resolution, object_rng, resample, sample_mesh
 from . import _ply
 from ._common import Cloud, Mesh, read_bytes
 from ._errors import FileFormatError
 from ._formats import lookup
 
-__all__ = ["MESH_POINTS", "read_mesh", "read_point_cloud", "write_mesh", "write_point_cloud"]
+__all__ = ["MESH_POINTS", "NORMALS", "check_flag", "check_normals", "read_mesh", "read_point_cloud", "write_mesh",
+           "write_point_cloud"]
 
 # points drawn from a mesh when neither n_points nor resolution is given (as load_folder does)
 MESH_POINTS = 2048
@@ -21,15 +23,31 @@ MESH_POINTS = 2048
 # --------------------------------------------------------------------------- argument checks
 
 
-def _check_normals_arg(normals, owner):
-    if normals not in ("auto", True, False):
-        raise ValueError(f"{owner}: normals must be 'auto', True or False, got {normals!r}")
+#: ``normals`` of the readers and of the loaders of :mod:`eppf.datasets`
+#: (:mod:`eppf.utils._param_validation`): "auto", or a bool (``numpy.bool_`` too). It was compared with
+#: ``in ("auto", True, False)``, which took 1, 0 and 1.0 (equal to True and False) and then, since
+#: ``normals is True`` did not hold for them, read them as "auto".
+NORMALS = [Options((str, bool), values=["auto", True, False], description="'auto', True or False")]
+
+
+def check_normals(normals, owner):
+    """``normals`` checked against :data:`NORMALS`: ``"auto"``, True or False (a ``numpy.bool_`` as its bool)."""
+    validate_parameter(normals, NORMALS, name="normals", owner=owner)
+    return normals if isinstance(normals, str) else bool(normals)
+
+
+def check_flag(value, name, owner):
+    """A bool parameter (``remove_nan``, ``binary``, ``return_X_y``, ...) as the estimators check theirs
+    (``Options(bool)``): True or False, or a ``numpy.bool_``; anything else (``"yes"``, 1, None) is an
+    InvalidParameterError, a TypeError, naming ``owner`` and ``name``, where truthiness took it."""
+    validate_parameter(value, [Options(bool)], name=name, owner=owner)
+    return bool(value)
 
 
 def check_sampling_args(owner, normals, n_points, resolution):
     """``(n_points, resolution)`` checked as :func:`read_point_cloud` takes them, with ``normals``: for
     callers that read many files, so that a bad option fails once, before any file is read."""
-    _check_normals_arg(normals, owner)
+    check_normals(normals, owner)
     n_points = check_n_points(n_points, owner)
     resolution = check_resolution(resolution, owner)
     if n_points is not None and resolution is not None:
@@ -194,7 +212,9 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
         when neither ``n_points`` nor ``resolution`` is given); point files
         are resampled to it (:func:`eppf.preprocessing.resample`: without
         replacement when they have more points, every point plus random
-        repeats when fewer). None keeps point files as they are.
+        repeats when fewer). None keeps point files as they are. At most a
+        billion, as in the loaders of :mod:`eppf.datasets` (a larger count is
+        refused before any file is read).
     resolution : float, default=None
         Instead of ``n_points``, sample meshes on a voxel grid of this cell
         size (see :func:`eppf.preprocessing.sample_mesh`); point files are
@@ -214,14 +234,19 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     FileNotFoundError, IsADirectoryError, PermissionError
         If the file cannot be opened; the message names it.
     FileFormatError
-        A :class:`ValueError`: the file is empty, truncated or malformed, a
-        header count does not fit the file, a mesh cannot be sampled (no
-        faces, non-finite vertices, zero area) or a cloud cannot be
-        resampled to ``n_points`` (fewer than two distinct points); the
-        message names the file and the line (text) or byte (binary) where
-        reading failed.
+        A :class:`ValueError`: the file is empty, truncated or malformed, it
+        holds no points (a well-formed file of no points or vertices, in
+        every format, or only NaN points), a header count does not fit the
+        file, a mesh cannot be sampled (no faces, non-finite vertices, zero
+        area) or a cloud cannot be resampled to ``n_points`` (fewer than two
+        distinct points); the message names the file and the line (text) or
+        byte (binary) where reading failed.
     ValueError
         If the extension is unknown or an argument is invalid.
+    TypeError
+        If ``normals`` or ``remove_nan`` is not one of the values listed
+        (``numpy.bool_`` is taken as a bool; ``1``, ``0`` or ``"yes"`` are
+        not); the error is a ValueError too.
 
     See Also
     --------
@@ -252,6 +277,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     if mesh not in ("sample", "vertices"):
         raise ValueError(f"{owner}: mesh must be 'sample' or 'vertices', got {mesh!r}")
     n_points, resolution = check_sampling_args(owner, normals, n_points, resolution)
+    normals = check_normals(normals, owner)
+    remove_nan = check_flag(remove_nan, "remove_nan", owner)
     # the generator is made only for a file that is sampled (a mesh, or resampling to n_points)
     _check_random_state_arg(random_state, owner)
     path = os.fspath(path)
@@ -260,6 +287,8 @@ def read_point_cloud(path, *, format=None, normals="auto", remove_nan=True, mesh
     if shape is not None and (mesh == "vertices" or fmt.name == "ply" and shape.faces.shape[0] == 0):
         cloud, shape = (cloud if fmt.name == "ply" else Cloud(shape.vertices, None)), None
     if shape is not None:
+        if shape.vertices.shape[0] == 0:  # (as a point file of no points, not as a mesh without faces)
+            raise FileFormatError(f"{owner}: {path!r} holds no points")
         _check_vertices(shape, path, owner)
         if shape.faces.shape[0] == 0:
             raise FileFormatError(f"{owner}: {path!r} has no faces, so it cannot be sampled; pass mesh='vertices'")
@@ -297,7 +326,10 @@ def read_mesh(path, *, format=None):
         ``(vertices, faces)``: float64 (n_vertices, 3) and int64 (n_faces, 3).
         Polygons are split into triangles by a fan from their first vertex.
         OBJ texture and normal indices are ignored. A PLY file without a
-        ``face`` element gives a mesh with no faces.
+        ``face`` element gives a mesh with no faces, and a well-formed file
+        of no vertices (PLY ``element vertex 0``, OFF counts ``0 0 0``, an
+        STL of no facets, an OBJ of no ``v`` and no ``f`` lines) an empty
+        mesh, as :func:`read_point_fields` gives a file of no points.
 
     Raises
     ------
@@ -388,6 +420,7 @@ def write_point_cloud(path, cloud, *, format=None, binary=True):
     owner = "write_point_cloud"
     path = os.fspath(path)
     fmt = lookup(path, format, owner, kind="cloud")
+    binary = check_flag(binary, "binary", owner)
     if fmt.writer is None:
         raise ValueError(f"{owner}: eppf does not write {fmt.name} files (clouds have no colour); write .xyz instead")
     cloud = _check_cloud_arg(cloud, owner)
@@ -430,6 +463,7 @@ def write_mesh(path, vertices, faces, *, format=None, binary=True):
     owner = "write_mesh"
     path = os.fspath(path)
     fmt = lookup(path, format, owner, kind="mesh")
+    binary = check_flag(binary, "binary", owner)
     vertices = _check_cloud_arg(vertices, owner)
     if vertices.shape[1] != 3:
         raise ValueError(f"{owner}: vertices must have shape (n_vertices, 3), got {vertices.shape}")

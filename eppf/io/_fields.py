@@ -58,7 +58,11 @@ def read_point_fields(path, *, format=None):
         their millimeters). E57: every scan's cartesian (or spherical,
         converted) coordinates moved by its pose into the file's frame, the
         scans one after the other. Every point of the file is kept,
-        including PCL's NaN points.
+        including PCL's NaN points. A well-formed file of no points (PCD
+        ``POINTS 0``, PLY ``element vertex 0``, a ``.pts`` count line ``0``,
+        a text table of only a header line or comments, an empty array, LAS
+        or E57 scans of no points) gives shape (0, 3), and its fields no
+        rows; :func:`read_point_cloud` refuses such a file.
     fields : dict of str to ndarray
         Every other per-point field, in the file's order, each an array of
         length ``n_points`` in the file's own type (shape ``(n_points, k)``

@@ -58,7 +58,7 @@ def read_obj(path, data, owner):
             for k in range(1, len(ids) - 1):  # a fan from the first vertex
                 tris.extend((ids[0], ids[k], ids[k + 1]))
                 tri_lines.append(i)
-    if not n_v:
+    if not n_v and tris:  # (a file of no vertices and no faces is a mesh of nothing, as a PLY file may be)
         raise FileFormatError(f"{owner}: {path!r} holds no vertices ('v' lines)")
     faces = np.frombuffer(tris, dtype=np.int64).reshape(-1, 3).copy()
     bad = np.flatnonzero((faces >= n_v).any(axis=1))

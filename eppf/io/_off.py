@@ -181,7 +181,11 @@ def _read_off_lines(path, data, owner):
             f"got {count_line[:60]!r}"
         ) from None
     n_v, n_f = counts[0], counts[1]
-    if n_v == 0:
+    if n_v == 0 and n_f == 0:
+        # a mesh of nothing, as a PLY file of no vertices is: read_mesh gives it, read_point_cloud says it holds
+        # no points (lines after the counts are ignored, as lines after the faces of any OFF file are)
+        return Mesh(np.empty((0, 3)), np.empty((0, 3), dtype=np.int64))
+    if n_v == 0:  # (faces of no vertices)
         raise FileFormatError(f"{owner}: {path!r} line {idx[count_k] + 1}: the mesh has no vertices")
     avail = len(rows) - body_start
     if avail < n_v + n_f:

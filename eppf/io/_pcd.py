@@ -204,9 +204,14 @@ def _columns(path, data, owner):
     missing = [f for f in "xyz" if f not in fields]
     if missing:
         raise FileFormatError(f"{owner}: {path!r} line {fline}: FIELDS lacks {missing}; it has {fields}")
-    if n_points == 0:
-        raise FileFormatError(f"{owner}: {path!r} line {nline}: the header declares 0 points")
-    if kind == "ascii":
+    if n_points == 0 and (kind != "binary_compressed" or not body):
+        # a cloud of no points, as PLY, NPY, LAS, E57 and .pts files may hold: its columns are empty (a
+        # compressed one may leave out its size header, as there is nothing to compress)
+        empty = np.zeros(0, dtype=dtype)
+        cols = {name: empty[dtype.names[k]] for k, name in enumerate(fields)}
+        if kind == "ascii":
+            cols = {name: np.asarray(col, dtype=np.float64) for name, col in cols.items()}
+    elif kind == "ascii":
         n_cols = sum(counts)
         # each point is a line holding at least one digit and a line break
         if n_points > len(body) // 2 + 1:
@@ -304,7 +309,8 @@ def _coordinates(fields, types, n_points, kind, cols, path, owner, names="xyz"):
     def first(name):
         values = _as_declared(cols[name], declared[name], name, path, owner) if kind == "ascii" else cols[name]
         with np.errstate(invalid="ignore"):  # (NaN to float64 is exact; its cast warning is noise)
-            return np.asarray(values, dtype=np.float64).reshape(n_points, -1)[:, 0]
+            values = np.asarray(values, dtype=np.float64)
+            return values if values.ndim == 1 else values[:, 0]
 
     return np.column_stack([first(f) for f in names])
 

@@ -46,8 +46,8 @@ def read_stl(path, data, owner):
     if len(data) >= 84:
         (n,) = struct.unpack_from("<I", data, 80)
         if 84 + 50 * n == len(data):
-            if n == 0:
-                raise FileFormatError(f"{owner}: {path!r}: binary STL with no triangles")
+            if n == 0:  # a mesh of nothing, as a PLY file of no vertices is
+                return Mesh(np.empty((0, 3)), np.empty((0, 3), dtype=np.int64))
             rec = np.frombuffer(data, dtype=_RECORD, count=n, offset=84)
             with np.errstate(invalid="ignore"):
                 corners = rec["vertices"].reshape(-1, 3).astype(np.float64)
@@ -108,8 +108,8 @@ def _read_ascii(path, data, owner):
             raise FileFormatError(f"{where}: unexpected {parts[0][:20]!r} (inside {state!r})")
     if state != "top":
         raise FileFormatError(f"{owner}: {path!r}: file ends inside a facet (truncated)")
-    if not facets:
-        raise FileFormatError(f"{owner}: {path!r}: ASCII STL with no facets")
+    if not facets:  # a mesh of nothing, as a PLY file of no vertices is
+        return Mesh(np.empty((0, 3)), np.empty((0, 3), dtype=np.int64))
     corners = np.array(corners, dtype=np.float64)
     bad = np.flatnonzero(~np.isfinite(corners).all(axis=1))
     if bad.size:

@@ -3,11 +3,16 @@
 - ``.xyz``, ``.txt``, ``.csv``: rows ``x y z [more columns]`` separated by
   spaces, tabs, commas or semicolons, ``#`` comments, and one optional header
   line of names; columns 4 to 6 are normals when every row there has unit
-  length (so ``x y z r g b`` files are not mistaken).
+  length (so ``x y z r g b`` files are not mistaken). A table of no rows (a
+  header line or comments only) is a file of no points.
 - ``.pts`` (Open3D): the same rows, optionally after a first line holding
   only the number of points (``0`` alone: a file of no points); extra
   columns are intensity and color, read as in ``.xyz``. A Leica PTS file of
   several scans, each after its count line, is refused naming the second.
+  The count must be the number of rows: a file of more rows than its count
+  line says is refused (PDAL and Open3D read the first rows and drop the
+  rest, which would be a silently shortened cloud), naming the count line
+  and the first row past the count.
 - ``.xyzn`` (Open3D): ``x y z nx ny nz``, normals always.
 - ``.xyzrgb`` (Open3D): ``x y z r g b``, the color is ignored.
 """
@@ -47,15 +52,29 @@ def _table(path, data, owner, start=0, start_line=0):
     idx, rows = content(lines[start_line:])
     idx = [i + start_line for i in idx]
     rows = [r.replace(",", " ").replace(";", " ") for r in rows]
+    # a table of no rows (only blank or comment lines, or a header line) is a file of no points, as an empty
+    # PLY, PCD, NPY, LAS or E57 file is: read_point_fields gives it, read_point_cloud says it holds no points
     if not rows:
-        raise FileFormatError(f"{owner}: {path!r} holds no points (only blank or comment lines)")
+        return np.empty((0, 3)), []
     # one header line of names (e.g. "x,y,z") is allowed
     try:
         [float(t) for t in rows[0].split()]
     except ValueError:
+        if len(rows) == 1:
+            width = len(rows[0].split())
+            if width < 3:
+                raise FileFormatError(
+                    f"{owner}: {path!r} line {idx[0] + 1}: expected at least 3 columns (x y z), got {width}"
+                ) from None
+            return np.empty((0, width)), []
         idx, rows = idx[1:], rows[1:]
-        if not rows:
-            raise FileFormatError(f"{owner}: {path!r} holds no points (only a header line)") from None
+    first = rows[0].split()
+    if start_line == 0 and len(rows) > 1 and len(first) == 1 and first[0].isdigit() and len(rows[1].split()) >= 3:
+        # (read as a row of one value, it was reported as "expected 1 values in point 1" on the next line)
+        raise FileFormatError(
+            f"{owner}: {path!r} line {idx[0] + 1}: a count line ({first[0]}) as a .pts file begins with, but "
+            f"the rows of this file's format hold x y z; read it as .pts (format='pts') to use the count"
+        )
     arr = parse_float_rows(rows, idx, path, owner, "point")
     if arr.shape[1] < 3:
         raise FileFormatError(
@@ -107,9 +126,37 @@ def _refuse_several_scans(path, data, owner, pos, count):
                               "several scans, each after its count line; eppf reads .pts files of one scan")
 
 
+def _first_content(data):
+    """The first line of ``data`` holding more than blanks and a ``#`` comment, without the comment, and the
+    offset after it (None and the end when there is none): where a .pts file's count line is, so that a
+    comment line before it does not make it a row of one value."""
+    line, pos = next_line(data, 0)
+    while line is not None and not line.split(b"#", 1)[0].strip():
+        line, pos = next_line(data, pos)
+    return (None if line is None else line.split(b"#", 1)[0].strip()), pos
+
+
+def _line_of_row(data, pos, k):
+    """The 1-based line of row ``k`` (from 0) of the table from byte ``pos``, past a header line of names as
+    the table readers skip it. Only called to name a line in an error, so the lines are split here in Python."""
+    idx, rows = content(data[pos:].decode("utf-8", "replace").splitlines())
+    try:
+        [float(t) for t in rows[0].replace(",", " ").replace(";", " ").split()]
+    except ValueError:
+        idx = idx[1:]
+    return data[:pos].count(b"\n") + idx[k] + 1
+
+
 def read_pts(path, data, owner, want_normals="auto"):
-    """Open3D's ``.pts``: an optional first line with the point count, then rows."""
-    first, pos = next_line(data, 0)
+    """Open3D's ``.pts``: an optional first line with the point count, then rows.
+
+    The count must match the rows. Fewer rows are a truncated file; more rows are refused too, naming the
+    count line and the first row past the count, rather than read as PDAL and Open3D read them (the first
+    ``count`` rows, the rest dropped without a word): which of the two is wrong, the count or the rows, the
+    file does not say, and a cloud cut short would look like a whole one. A second count line is a Leica
+    file of several scans, refused as such.
+    """
+    first, pos = _first_content(data)
     if first is not None and len(first.split()) == 1:
         token = first.split()[0]
         try:
@@ -134,9 +181,13 @@ def read_pts(path, data, owner, want_normals="auto"):
                 raise
             if arr.shape[0] != count:
                 _refuse_several_scans(path, data, owner, pos, count)
+                more = ""
+                if arr.shape[0] > count:
+                    more = (f", {arr.shape[0] - count} more from line {_line_of_row(data, pos, count)} (PDAL and Open3D "
+                            "would drop them: correct the count line, or delete it to read every row)")
                 raise FileFormatError(
                     f"{owner}: {path!r} line {line_no + 1}: the count line says {count} points, "
-                    f"but the file holds {arr.shape[0]} rows"
+                    f"but the file holds {arr.shape[0]} rows{more}"
                 )
             return cloud_of_table(arr, want_normals)
     return read_xyz(path, data, owner, want_normals)
@@ -144,6 +195,8 @@ def read_pts(path, data, owner, want_normals="auto"):
 
 def _fixed(path, data, owner, what):
     arr, idx = _table(path, data, owner)
+    if arr.shape == (0, 3) and not idx:  # (no rows and no header line: no points, of any width)
+        return np.empty((0, 6))
     if arr.shape[1] != 6:
         line = idx[0] + 1 if idx else 1
         raise FileFormatError(f"{owner}: {path!r} line {line}: a .{what} row holds 6 values, got {arr.shape[1]}")
@@ -204,7 +257,7 @@ def read_text_fields(path, data, owner, fmt):
     three), by the layout of .xyzn/.xyzrgb/.pts, else ``column_4``, ``column_5``, ... (counting from 1)."""
     start = 0
     if fmt == "pts":
-        first, pos = next_line(data, 0)
+        first, pos = _first_content(data)
         if first is not None and len(first.split()) == 1:
             try:
                 int(first.split()[0])

@@ -12,7 +12,7 @@ from sklearn.utils import check_random_state
 from ._param_validation import Interval, validate_parameter
 from ._validation import check_point_cloud
 
-__all__ = ["CONSTRAINTS", "check_n_points", "check_resolution", "object_rng", "resample", "sample_mesh"]
+__all__ = ["CONSTRAINTS", "MAX_N_POINTS", "check_n_points", "check_resolution", "object_rng", "resample", "sample_mesh"]
 
 #: What the sampling parameters accept (:mod:`eppf.utils._param_validation`):
 #: the functions here, the readers of :mod:`eppf.io` and the loaders of
@@ -27,9 +27,24 @@ CONSTRAINTS = {
 }
 
 
+#: Most points per cloud that a reader (:func:`eppf.io.read_point_cloud`), a loader of
+#: :mod:`eppf.datasets` or :func:`resample` samples or resamples to: a billion points are 24 GB of
+#: float64 coordinates (48 GB with normals) in one cloud. A larger ``n_points`` is refused before
+#: anything is allocated, where NumPy's "Unable to allocate" came out of the middle of the reading,
+#: naming neither the function nor the parameter.
+MAX_N_POINTS = 10**9
+
+
 def check_n_points(n_points, owner, allow_none=True):
-    """Check a point count against ``CONSTRAINTS["n_points"]`` (None too when ``allow_none``); return an int or None."""
+    """Check a point count against ``CONSTRAINTS["n_points"]`` (None too when ``allow_none``) and
+    :data:`MAX_N_POINTS`; return an int or None.
+
+    The one check of every ``n_points`` of the readers, the loaders and :func:`resample`, so that they
+    accept the same counts and refuse the others with the same message.
+    """
     validate_parameter(n_points, ([None] if allow_none else []) + CONSTRAINTS["n_points"], name="n_points", owner=owner)
+    if n_points is not None and n_points > MAX_N_POINTS:
+        raise ValueError(f"{owner}: n_points must be at most {MAX_N_POINTS:,} points per object, got {n_points:,}")
     return None if n_points is None else int(n_points)
 
 
@@ -240,7 +255,8 @@ def resample(cloud, n_points, *, random_state=None):
     cloud : array-like of shape (n, 3) or (n, 6)
         Coordinates, optionally followed by unit normals.
     n_points : int
-        Number of points to return, >= 2. When ``n_points <= n`` the points
+        Number of points to return, >= 2 and at most a billion
+        (:data:`MAX_N_POINTS`). When ``n_points <= n`` the points
         are drawn without replacement. When ``n_points > n`` every point is
         kept once and the ``n_points - n`` extra points are drawn with
         replacement, so no information is lost.

@@ -199,13 +199,51 @@ def test_modelnet_hdf5_layout(tmp_path):
         ({"resolution": 0.0, "n_points": None}, ValueError, "resolution must be None or a positive finite float, got 0.0"),
         ({"resolution": 0.1}, ValueError, "give n_points or resolution, not both"),
         ({"n_points": None}, ValueError, "meshes need n_points or resolution"),
-        ({"normals": "yes"}, ValueError, "normals must be one of ['auto', True, False]"),
+        ({"normals": "yes"}, ValueError, "load_modelnet: normals must be 'auto', True or False, got 'yes'"),
     ],
 )
 def test_modelnet_parameter_errors(tmp_path, kwargs, exc, msg):
     _modelnet_official(tmp_path)
     with pytest.raises(exc, match=re.escape(msg)):
         load_modelnet(tmp_path, **kwargs)
+
+
+def _flag_calls():
+    from eppf.datasets import fetch_file, fetch_modelnet, load_folder, load_npz, make_shapes
+
+    folder = lambda func: lambda tmp_path, **kw: func(tmp_path, **kw)  # noqa: E731
+    return [
+        ("load_modelnet", "return_X_y", folder(load_modelnet)),
+        ("load_modelnet", "normals", folder(load_modelnet)),
+        ("load_scannet_objects", "return_X_y", folder(load_scannet_objects)),
+        ("load_scannet_objects", "normals", folder(load_scannet_objects)),
+        ("load_s3dis_objects", "return_X_y", folder(load_s3dis_objects)),
+        ("load_folder", "return_X_y", folder(load_folder)),
+        ("load_folder", "normals", folder(load_folder)),
+        ("load_npz", "return_X_y", lambda tmp_path, **kw: load_npz(tmp_path / "none.npz", **kw)),
+        ("make_shapes", "return_X_y", lambda tmp_path, **kw: make_shapes(1, n_points=8, **kw)),
+        ("make_shapes", "with_normals", lambda tmp_path, **kw: make_shapes(1, n_points=8, **kw)),
+        ("fetch_file", "download_if_missing", lambda tmp_path, **kw: fetch_file("file:///x", data_home=tmp_path, **kw)),
+        ("fetch_modelnet", "download_if_missing", lambda tmp_path, **kw: fetch_modelnet(10, data_home=tmp_path, **kw)),
+    ]
+
+
+@pytest.mark.parametrize("value", ["yes", 1, 0, None, np.int64(1)])
+@pytest.mark.parametrize("owner, name, call", _flag_calls(), ids=lambda x: x if isinstance(x, str) else "")
+def test_a_flag_that_is_not_a_bool_is_refused_naming_the_function(tmp_path, owner, name, call, value):
+    # the flags were taken by truthiness ("yes" was True, None False) and normals by ==, which took 1 and 0
+    # and then read them as "auto": every one is now True or False (or a numpy.bool_), as estimators check theirs
+    accepted = "'auto', True or False" if name == "normals" else "True or False"
+    with pytest.raises(TypeError, match=re.escape(f"{owner}: {name} must be {accepted}, got {value!r}")):
+        call(tmp_path, **{name: value})
+
+
+def test_a_numpy_bool_flag_is_the_bool_it_holds():
+    from eppf.datasets import make_shapes
+
+    X, y = make_shapes(1, n_points=8, classes=["box"], with_normals=np.True_, return_X_y=np.True_)
+    assert X[0].shape == (8, 6) and y.tolist() == [0]
+    assert make_shapes(1, n_points=8, classes=["box"], with_normals=np.False_).data[0].shape == (8, 3)
 
 
 def test_modelnet_missing_and_unknown_layout(tmp_path):

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from eppf.io import FileFormatError, Mesh, read_mesh, read_point_cloud, write_mesh, write_point_cloud
+from eppf.io import (FileFormatError, Mesh, read_mesh, read_point_cloud, read_point_fields, write_mesh,
+                     write_point_cloud, write_point_fields)
 
 
 
@@ -66,6 +67,89 @@ def test_empty_file(write_file, tmp_path, ext):
             reader(path)
 
 
+_PCD_HEAD = "VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH 0\nHEIGHT 1\n" \
+            "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA "
+_PLY_HEAD = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
+
+
+def _no_fields(path):
+    write_point_fields(path, np.zeros((0, 3)), {"intensity": np.zeros(0, np.float32)})
+
+
+def _las(path):
+    pytest.importorskip("laspy")
+    _no_fields(path)
+
+
+def _e57(path):
+    from .test_io_las_e57 import _e57_with_normals  # (skips without laspy, as that module does)
+
+    pytest.importorskip("pye57")
+    _e57_with_normals(path, np.zeros((0, 3)), np.zeros((0, 3)), [1, 0, 0, 0], [0, 0, 0])
+
+
+def _text(content):
+    def write(path):
+        with open(path, "wb") as fh:
+            fh.write(content.encode() if isinstance(content, str) else content)
+    return write
+
+
+#: A file of no points (or a mesh of no vertices) in every format, as its writers (or its tools) write one.
+_NO_POINTS = {
+    "ascii.pcd": _text(_PCD_HEAD + "ascii\n"),
+    "binary.pcd": _text(_PCD_HEAD + "binary\n"),
+    "compressed.pcd": _text((_PCD_HEAD + "binary_compressed\n").encode() + bytes(8)),
+    "compressed_no_sizes.pcd": _text(_PCD_HEAD + "binary_compressed\n"),
+    "written.pcd": _no_fields,
+    "ascii.ply": _text(_PLY_HEAD + "property float intensity\nend_header\n"),
+    "written.ply": _no_fields,
+    "a.npy": lambda path: np.save(path, np.zeros((0, 3))),
+    "a.npz": lambda path: np.savez(path, np.zeros((0, 6))),
+    "points.npz": lambda path: np.savez(path, points=np.zeros((0, 3))),
+    "open3d.pts": _text("0\r\n"),
+    "header.xyz": _text("x y z intensity\n"),
+    "comment.txt": _text("# no points\n\n"),
+    "header.csv": _text("x,y,z\n"),
+    "comment.xyzn": _text("# no points\n"),
+    "header.xyzrgb": _text("x y z r g b\n"),
+    "a.las": _las,
+    "a.laz": _las,
+    "a.e57": _e57,
+    # meshes
+    "a.off": _text("OFF\n0 0 0\n"),
+    "a.obj": _text("# no vertices\no nothing\n"),
+    "binary.stl": _text(b"empty".ljust(80) + bytes(4)),
+    "ascii.stl": _text("solid empty\nendsolid empty\n"),
+    "mesh.ply": _text(_PLY_HEAD + "element face 0\nproperty list uchar int vertex_indices\nend_header\n"),
+}
+
+
+@pytest.mark.parametrize("name", list(_NO_POINTS))
+def test_a_file_of_no_points_reads_alike_in_every_format(tmp_path, name):
+    # PCD's POINTS 0 was refused by every reader, as were an OFF of no vertices, an STL of no facets, an OBJ of
+    # no 'v' lines and a text table of only a header or comments, while a PLY, NPY, LAS, E57 or .pts file of no
+    # points was read. Now every format agrees: the readers of a file's content (read_point_fields, read_mesh)
+    # give it with no rows, read_point_cloud, whose cloud needs points, says the file holds none.
+    path = str(tmp_path / name)
+    _NO_POINTS[name](path)
+    if name.endswith((".off", ".obj", ".stl")) or name == "mesh.ply":
+        mesh = read_mesh(path)
+        assert mesh.vertices.shape == (0, 3) and mesh.faces.shape == (0, 3) and mesh.faces.dtype == np.int64
+        modes = ("sample", "vertices")
+    else:
+        points, fields = read_point_fields(path)
+        assert points.shape == (0, 3) and points.dtype == np.float64
+        assert all(v.shape[0] == 0 for v in fields.values())
+        if name in ("ascii.pcd", "written.pcd", "ascii.ply", "written.ply", "header.xyz", "a.las", "a.laz"):
+            assert "intensity" in fields
+        modes = ("sample",)
+    for mesh_mode in modes:
+        with pytest.raises(FileFormatError) as info:
+            read_point_cloud(path, mesh=mesh_mode)
+        assert str(info.value) == f"read_point_cloud: {path!r} holds no points"
+
+
 def test_missing_file_and_folder(tmp_path):
     for name in ("none.pcd", "none.npy", "none.OFF"):
         with pytest.raises(FileNotFoundError, match="read_point_cloud: no such file") as info:
@@ -97,6 +181,8 @@ def test_missing_file_and_folder(tmp_path):
         (read_point_cloud, ("x.pcd",), {"mesh": "faces"}, ValueError, "mesh must be 'sample' or 'vertices'"),
         (read_point_cloud, ("x.pcd",), {"n_points": 1}, ValueError, "n_points must be None or an int >= 2, got 1"),
         (read_point_cloud, ("x.pcd",), {"n_points": 2.5}, TypeError, "n_points must be None or an int >= 2, got 2.5"),
+        (read_point_cloud, ("x.pcd",), {"n_points": 10**12}, ValueError,
+         "read_point_cloud: n_points must be at most 1,000,000,000 points per object, got 1,000,000,000,000"),
         (read_point_cloud, ("x.pcd",), {"resolution": np.nan}, ValueError, "resolution must be None or a positive finite float, got nan"),
         (read_point_cloud, ("x.pcd",), {"n_points": 10, "resolution": 0.1}, ValueError, "give n_points or resolution, not both"),
         (read_point_cloud, ("x.pcd",), {"random_state": -1}, ValueError, "an int random_state must lie in 0..2**64-1"),
@@ -113,6 +199,48 @@ def test_argument_errors(tmp_path, monkeypatch, func, args, kwargs, exc, msg):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(exc, match=re.escape(msg)):
         func(*args, **kwargs)
+
+
+@pytest.mark.parametrize("value", ["yes", 1, 0, None, 1.0])
+@pytest.mark.parametrize("func, args, name", [
+    (read_point_cloud, ("x.npy",), "normals"),
+    (read_point_cloud, ("x.npy",), "remove_nan"),
+    (write_point_cloud, ("x.ply", np.eye(3)), "binary"),
+    (write_mesh, ("x.ply", np.eye(3), [[0, 1, 2]]), "binary"),
+])
+def test_a_flag_that_is_not_a_bool_is_refused(tmp_path, monkeypatch, func, args, name, value):
+    # remove_nan and binary were taken by truthiness ("yes" wrote a binary file, None an ASCII one), normals
+    # by ==, which took 1 and 0 and then read them as "auto" (normals=0 kept a file's normals)
+    monkeypatch.chdir(tmp_path)
+    accepted = "'auto', True or False" if name == "normals" else "True or False"
+    with pytest.raises(TypeError, match=re.escape(f"{func.__name__}: {name} must be {accepted}, got {value!r}")):
+        func(*args, **{name: value})
+    assert not os.listdir(tmp_path)  # (refused before any file is written)
+
+
+def test_a_numpy_bool_flag_is_the_bool_it_holds(make_cloud, tmp_path):
+    path = tmp_path / "c.ply"
+    write_point_cloud(path, make_cloud(n=5), binary=np.False_)
+    assert path.read_bytes().startswith(b"ply\nformat ascii")
+    assert read_point_cloud(path, normals=np.False_).shape == (5, 3)  # (np.False_ read as "auto": (5, 6))
+    write_point_cloud(tmp_path / "d.ply", make_cloud(n=5, normals=False))
+    with pytest.raises(FileFormatError, match="has no normals, but normals=True"):  # (np.True_ read as "auto")
+        read_point_cloud(tmp_path / "d.ply", normals=np.True_)
+
+
+def test_the_readers_and_the_loaders_share_one_bound_on_n_points(tmp_path):
+    # read_point_cloud had no upper bound (10**12 reached NumPy's allocator, naming neither it nor n_points)
+    # while the loaders refused more than a billion: one check serves both, and resample too
+    from eppf.datasets import load_folder
+    from eppf.utils._sampling import MAX_N_POINTS, resample
+
+    path = tmp_path / "c.npy"
+    write_point_cloud(path, np.eye(3))
+    for func, args in ((read_point_cloud, (path,)), (load_folder, (tmp_path,)), (resample, (np.eye(3),))):
+        with pytest.raises(ValueError, match=re.escape(f"{func.__name__}: n_points must be at most 1,000,000,000 "
+                                                       f"points per object, got {MAX_N_POINTS + 1:,}")):
+            func(*args, n_points=MAX_N_POINTS + 1)
+    assert MAX_N_POINTS == 10**9
 
 
 def test_core_import_needs_no_optional_dependency(tmp_path):

@@ -47,7 +47,7 @@ def test_off_variants(write_file, tmp_path, text):
         ("OFF\n4 2 0\n" + SQUARE + "3 0 1 2\n3 0 2 4\n", "line 8: face index out of range 0..3"),
         ("OFF\n4 2 0\n" + SQUARE + "3 0 1 2\n3 0 2\n", "line 8: a face needs at least 3 vertex indices"),
         ("OFF\n4 2 0\n" + SQUARE + "3 0 1 2\n3 0 b 2\n", "line 8: malformed face"),
-        ("OFF\n0 0 0\n", "line 2: the mesh has no vertices"),
+        ("OFF\n0 1 0\n3 0 1 2\n", "line 2: the mesh has no vertices"),
     ],
 )
 def test_off_malformed(write_file, tmp_path, text, msg):

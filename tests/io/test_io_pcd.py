@@ -245,7 +245,6 @@ def test_lzf_longest_reference_is_within_the_ratio_bound():
 @pytest.mark.parametrize(
     "header, body, msg",
     [
-        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 0\nDATA ascii\n", "", "line 4: the header declares 0 points"),
         ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 999999999999\nDATA ascii\n", "1 2 3\n",
          "the header declares 999999999999 points, more than the 6 bytes"),
         ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 99999999999\nDATA binary\n", "\0" * 24, "file ends"),

@@ -37,7 +37,7 @@ def test_xyz_unit_normal_columns_are_normals(write_file, tmp_path):
         ("1 2 3\n4 5\n", "line 2: expected 3 values in point 1, got 2"),
         ("1 2 3\n\n4 5 six\n", "line 3: malformed number in point 1"),
         ("1 2\n3 4\n", "line 1: expected at least 3 columns (x y z), got 2"),
-        ("# only a comment\n", "holds no points (only blank or comment lines)"),
+        ("# only a comment\n", "holds no points"),
     ],
 )
 def test_xyz_malformed(write_file, tmp_path, text, msg):
@@ -149,6 +149,44 @@ def test_pts_of_no_points_as_open3d_writes_it_is_refused_as_other_empty_files_ar
         assert points.shape == (0, 3) and fields == {}
     write_file(path, "0\n# no points\n\n")
     assert read_point_fields(path)[0].shape == (0, 3)
+
+
+@pytest.mark.parametrize("text, line", [
+    ("8\n" + "".join(f"{k} {k} {k}\n" for k in range(9)), 10),  # as PDAL's bunny_8.pts: 8, then 9 rows
+    ("8\r\n# scan\r\nx y z\r\n" + "".join(f"{k} 0 1\r\n\r\n" for k in range(9)), 20),
+])
+def test_pts_of_more_rows_than_its_count_line_says_names_both_lines(write_file, tmp_path, text, line):
+    # refused (PDAL and Open3D read the first 8 and drop the rest without a word), but the message said only
+    # "holds 9 rows": now it says how many more, from which line, and how to read the file
+    path = write_file(tmp_path / "bunny_8.pts", text)
+    with pytest.raises(FileFormatError) as info:
+        read_point_cloud(path)
+    assert str(info.value) == (
+        f"read_point_cloud: {path!r} line 1: the count line says 8 points, but the file holds 9 rows, 1 more from "
+        f"line {line} (PDAL and Open3D would drop them: correct the count line, or delete it to read every row)")
+    write_file(path, text.split("\n", 1)[1])  # without the count line: every row
+    assert read_point_cloud(path).shape == (9, 3)
+
+
+@pytest.mark.parametrize("ext", ["xyz", "txt", "xyzn"])
+def test_a_count_line_in_a_table_without_one_is_named_as_such(write_file, tmp_path, ext):
+    # read as a row of one value, it was reported as "line 2: expected 1 values in point 1, got 3"
+    path = write_file(tmp_path / f"counted.{ext}", "2\n1 2 3 0 0 1\n4 5 6 0 0 1\n")
+    with pytest.raises(FileFormatError, match=re.escape(
+            "counted." + ext + "' line 1: a count line (2) as a .pts file begins with, but the rows of this file's "
+            "format hold x y z; read it as .pts (format='pts') to use the count")):
+        read_point_cloud(path)
+    assert read_point_cloud(path, format="pts").shape == (2, 6)
+
+
+def test_pts_count_line_after_a_comment_is_the_count_line(write_file, tmp_path):
+    # the count line was looked for on the first line only: after a comment it was read as a row of one value
+    # (and then named a count line of a format that has none, in a .pts file)
+    path = write_file(tmp_path / "c.pts", "# exported\r\n2 # points\r\n1 2 3 7\r\n4 5 6 8\r\n")
+    assert_array_equal(read_point_cloud(path), [[1, 2, 3], [4, 5, 6]])
+    from eppf.io import read_point_fields
+
+    assert read_point_fields(path)[1]["intensity"].tolist() == [7, 8]
 
 
 def test_pts_count_line_without_rows_is_truncated(write_file, tmp_path):
