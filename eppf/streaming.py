@@ -166,14 +166,14 @@ def describe_files(files, descriptor, *, output=None, n_points=None, resolution=
     True
     """
     from .datasets._folder import object_files
-    from .datasets._loaders import check_n_points, check_path, file_seeds
+    from .datasets._loaders import check_path, file_seeds
     from .io._api import check_sampling_args
 
     owner = "describe_files"
     if on_error not in ("raise", "skip"):
         raise ValueError(f"{owner}: on_error must be 'raise' or 'skip', got {on_error!r}")
-    check_sampling_args(owner, normals, n_points, resolution)  # (once: not per file, where "skip" hid them)
-    check_n_points(n_points, owner)  # (the loaders' bound: a huge count is refused before any file is read)
+    # once, not per file (where "skip" hid them); n_points within the readers' bound before any file is read
+    check_sampling_args(owner, normals, n_points, resolution)
     validate_parameter(random_state, RANDOM_STATE, name="random_state", owner=owner)
     if output is not None and not (hasattr(output, "write") or isinstance(output, (str, bytes, os.PathLike))):
         raise TypeError(f"{owner}: output must be a .npy path or a binary file open for writing, "
