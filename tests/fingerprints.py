@@ -28,6 +28,7 @@ same script runs on old and new layouts.
 import argparse
 import hashlib
 import json
+import platform
 import sys
 import tempfile
 
@@ -54,6 +55,18 @@ def _digest(value):
 #: seen between torch's CPU kernel choices, 4x below the change a 10% different
 #: learning rate makes to the one-epoch PointNet (7.7e-4).
 PROBA_ATOL = 2e-4
+
+#: Where the recorded network probabilities hold: torch's x86-64 kernels agree within
+#: PROBA_ATOL after training; its aarch64 kernels sum in other orders, and two epochs of
+#: training on 40 objects amplify that beyond the tolerance (labels included), so the
+#: documentation promises the networks' class (b) on x86-64 only.
+NETWORK_MACHINES = ("x86_64", "amd64")
+
+
+def networks_compared():
+    """Whether this machine's network fingerprints are compared with the recorded ones."""
+    return platform.machine().lower() in NETWORK_MACHINES
+
 
 #: Tolerance of class-(b) outputs, relative to the output's scale: the largest
 #: change seen between CPUs' NumPy/BLAS kernels is about 1e-14 of it
@@ -305,10 +318,14 @@ def main(argv=None):
     if args.check:
         with open(args.check) as fh:
             ref = json.load(fh)
-        bad = sorted(k for k in ref if not matches(fp.get(k), ref[k]))
+        compared = {k: v for k, v in ref.items() if networks_compared() or not k.startswith("networks.")}
+        bad = sorted(k for k in compared if not matches(fp.get(k), compared[k]))
         for k in bad:
             print(f"differs: {k}")
-        print(f"{len(ref) - len(bad)} of {len(ref)} fingerprints equal")
+        print(f"{len(compared) - len(bad)} of {len(compared)} fingerprints equal")
+        if len(compared) < len(ref):
+            print(f"not compared on {platform.machine()}: {', '.join(sorted(set(ref) - set(compared)))} (the "
+                  "networks' probabilities are promised on x86-64 only)")
         return 1 if bad else 0
     if not args.write:
         json.dump(fp, sys.stdout, indent=1, sort_keys=True)

@@ -26,17 +26,10 @@ with open(_REF) as fh:
     REFERENCE = json.load(fh)
 
 
-#: Where the recorded network probabilities hold: torch's x86-64 kernels agree within
-#: fingerprints.PROBA_ATOL after training; its aarch64 kernels sum in other orders, and two
-#: epochs of training on 40 objects amplify that beyond the tolerance (labels included), so
-#: the documentation promises the networks' class (b) on x86-64 only.
-NETWORK_MACHINES = ("x86_64", "amd64")
-
-
 @pytest.mark.parametrize("group", sorted(fingerprints.GROUPS))
 def test_outputs_bit_identical_to_recorded(group):
     if group == "networks":
-        if platform.machine().lower() not in NETWORK_MACHINES:
+        if not fingerprints.networks_compared():
             pytest.skip(f"network probabilities are compared on x86-64 only, not on {platform.machine()}")
         recorded, running = REFERENCE["networks.torch"], fingerprints.torch_release()
         if running != recorded:
@@ -130,3 +123,25 @@ def test_approximate_fingerprint_tolerates_kernel_noise_only():
     assert not fingerprints.matches(fingerprints._approx([[0.2 + 8e-4, 0.8 - 8e-4]]), ref)
     assert not fingerprints.matches(fingerprints._approx([[0.2, 0.8, 0.0]]), ref)
     assert not fingerprints.matches("a digest", ref)
+
+
+@pytest.mark.parametrize("machine", ["x86_64", "aarch64"])
+def test_check_compares_the_networks_where_they_are_promised(monkeypatch, capsys, tmp_path, machine):
+    # `fingerprints.py --check` (scripts/check_arm64.sh runs it) follows the same promise as the test above:
+    # a network fingerprint that differs fails the check on x86-64 and is listed as not compared elsewhere;
+    # any other output that differs fails it everywhere.
+    ref = {"descriptors.a": "d1", "networks.p": {"values": [0.5], "atol": 1e-4}}
+    path = tmp_path / "ref.json"
+    path.write_text(json.dumps(ref))
+    monkeypatch.setattr(fingerprints.platform, "machine", lambda: machine)
+    monkeypatch.setattr(fingerprints, "compute", lambda: {"descriptors.a": "d1", "networks.p": {"values": [0.9]}})
+    status = fingerprints.main(["--check", str(path)])
+    out = capsys.readouterr().out
+    if machine == "x86_64":
+        assert status == 1 and "differs: networks.p" in out and "1 of 2 fingerprints equal" in out
+    else:
+        assert status == 0 and "differs" not in out and "1 of 1 fingerprints equal" in out
+        assert "not compared on aarch64: networks.p" in out
+    monkeypatch.setattr(fingerprints, "compute", lambda: {"descriptors.a": "d2", "networks.p": {"values": [0.5]}})
+    assert fingerprints.main(["--check", str(path)]) == 1
+    assert "differs: descriptors.a" in capsys.readouterr().out
