@@ -176,17 +176,19 @@ def _grid_surface(points, cell, max_slope):
 
 
 def _low_outliers(flat, n_cells, n_columns, z, reach):
-    """Whether each point is low noise (a multipath return, LAS class 7) under the ground, on the grid of
-    cells ``flat`` (``n_cells`` of them, ``n_columns`` a row): in its cell and the 8 adjacent ones, fewer
-    than :data:`_SUPPORT` other points lie within ``reach`` above it (from ``z`` to ``z + reach``), and at
-    least :data:`_SUPPORT` points lie higher (the ground it is under).
+    """(whether each point is low noise, whether it is alone) on the grid of cells ``flat`` (``n_cells`` of
+    them, ``n_columns`` a row). Low noise (a multipath return, LAS class 7) under the ground: in its cell
+    and the 8 adjacent ones, fewer than :data:`_SUPPORT` other points lie within ``reach`` above it (from
+    ``z`` to ``z + reach``), and at least :data:`_SUPPORT` points lie higher (the ground it is under).
+    Alone: fewer than :data:`_SUPPORT` of either (for :func:`_one_grid` to compare with the ground around).
 
     ``reach`` is the most a ground surface through the point rises within those cells: the threshold, plus
     ``max_slope`` times the farthest two points of the 3 x 3 cells can be apart. Ground, sampled densely
     enough for the cells, has points in that reach: those of its noise and of the terrain around; a lone
     point farther under it, or a clump of three, has none. Points with nothing over them (stray points,
-    sparse returns far from the scene) are not noise. Only the points that would set their cell's lowest
-    height are looked at: each cell's lowest point, then, while that one is noise, the next one up.
+    sparse returns far from the scene, low noise off the ground's edge or in a hole of it, where water
+    returns nothing) are not noise but alone. Only the points that would set their cell's lowest height are
+    looked at: each cell's lowest point, then, while that one is noise, the next one up.
     """
     n = len(z)
     order = np.argsort(z)
@@ -202,7 +204,7 @@ def _low_outliers(flat, n_cells, n_columns, z, reach):
     keys = keys[by_cell]
     bounds = np.zeros(n_cells + 1, dtype=np.int64)
     np.cumsum(np.bincount(flat, minlength=n_cells), out=bounds[1:])
-    low = np.zeros(n, dtype=bool)
+    low, alone = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     at = bounds[:-1][bounds[1:] > bounds[:-1]]  # each nonempty cell's lowest point, as a position in keys
     while at.size:
         # most points have _SUPPORT points of their own cell within reach: those are not looked at further
@@ -227,9 +229,10 @@ def _low_outliers(flat, n_cells, n_columns, z, reach):
                 above[inside] += bounds[other + 1] - middle
         noise = (support < _SUPPORT) & (above >= _SUPPORT)
         low[point[noise]] = True
+        alone[point[(support < _SUPPORT) & (above < _SUPPORT)]] = True
         at = at[noise] + 1  # the next point up of the cells whose lowest was noise
         at = at[at < bounds[flat[by_cell[at - 1]] + 1]]
-    return low
+    return low, alone
 
 
 def _one_grid(points, cell, max_slope):
@@ -268,8 +271,18 @@ def _one_grid(points, cell, max_slope):
     # ground within reach of a point: under the band over a surface rising at most max_slope across the block
     with np.errstate(over="ignore"):
         reach = band + max_slope * (2.0 * np.sqrt(2.0) * wide)
-    low = _low_outliers(wide_ij[:, 0] * wide_shape[1] + wide_ij[:, 1], int(wide_shape[0] * wide_shape[1]),
-                        int(wide_shape[1]), points[:, 2], reach)
+    low, alone = _low_outliers(wide_ij[:, 0] * wide_shape[1] + wide_ij[:, 1],
+                               int(wide_shape[0] * wide_shape[1]), int(wide_shape[1]), points[:, 2], reach)
+    rest = ~(low | alone)
+    if alone.any() and rest.any():
+        # a point alone is low noise too where it lies farther than reach under the surface of the others
+        # (off the ground's edge, in a hole of it): it would pull that surface down; stray points far from
+        # the scene, under that surface too, are ground either way
+        others = np.full(int(shape[0] * shape[1]), np.inf)
+        np.minimum.at(others, flat[rest], points[rest, 2])
+        others = others.reshape(tuple(shape))
+        _cluster_fast.slope_envelope(others, max_slope * cell, max_slope * cell * np.sqrt(2.0))
+        low |= alone & (points[:, 2] < others.reshape(-1)[flat] - reach)
     zmin = np.full(int(shape[0] * shape[1]), np.inf)
     if low.any():  # a cell of low noise only is empty: the surface around fills it
         np.minimum.at(zmin, flat[~low], points[~low, 2])
@@ -380,7 +393,11 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
       points lie within reach above it (no higher than ``threshold`` plus
       ``max_slope`` times the farthest two points of those cells can be
       apart: where a surface through it could reach; the tolerance when
-      ``threshold`` is None), and at least three lie higher. Low noise is ground, as the points under the plane are.
+      ``threshold`` is None), and at least three lie higher; or, with fewer
+      than three higher too (off the ground's edge, in a hole of it where
+      water returns nothing), when it lies more than that reach under the
+      surface of the other points. Low noise is ground, as the points under
+      the plane are.
       Real low terrain (a ditch, a pit of more than three points) holds its
       own support and is followed.
       Limits: a flat object of height ``h`` is taken for ground where it is

@@ -322,6 +322,24 @@ def test_low_noise_on_hills_and_a_ditch_that_is_ground(method):
     assert mask[len(points):].all()
 
 
+@pytest.mark.parametrize("where", [(21.0, 10.0), (23.0, 10.0), (50.0, 10.0), (10.0, 10.0)])
+@pytest.mark.parametrize("method", ["grid", "auto"])
+def test_low_noise_off_the_ground_or_in_a_hole_of_it(method, where):
+    # with no point over it (1 m to 30 m off the floor's edge, or in a hole of it where water returns
+    # nothing), a point 50 m down pulled the grid's whole surface down: no floor point was ground; now a point
+    # alone is low noise where it lies farther under the surface of the others than their reach
+    points, n_ground = _scene()
+    hole = np.hypot(points[:, 0] - 10.0, points[:, 1] - 10.0) < 3.0
+    points, n_ground = points[~hole], n_ground - int(np.count_nonzero(hole[:n_ground]))
+    tolerance = default_tolerance(points)
+    alone, used = ground_mask(points, method, None, tolerance, 0.3, 100, np.random.RandomState(0))
+    mask, with_noise = ground_mask(np.vstack([points, [[*where, -50.0]]]), method, None, tolerance, 0.3, 100,
+                                   np.random.RandomState(0))
+    np.testing.assert_array_equal(mask[:-1], alone)
+    assert mask[-1] and with_noise == used
+    assert alone[:n_ground].all() and not alone[n_ground:].any()
+
+
 def test_a_pit_of_three_points_is_low_noise_and_four_are_ground():
     # the rule's size: three points alone under the floor are noise, four within the band are a surface
     rng = np.random.default_rng(4)
