@@ -43,9 +43,11 @@ _SUPPORT = 3
 _SUPPORT_CELL = 2.0
 
 
-def _toward_objects(local, nrm, d, threshold):
+def _toward_objects(local, nrm, d, threshold, up=False):
     """The plane ``local @ nrm = d`` with its normal turned toward the side holding more of the points
-    farther than ``threshold`` from it (the objects)."""
+    farther than ``threshold`` from it (the objects); with ``up``, toward +z (unless the plane is vertical)."""
+    if up and nrm[2] != 0:
+        return (-nrm, -d) if nrm[2] < 0 else (nrm, d)
     dist = local @ nrm - d
     flip = np.count_nonzero(dist <= -threshold) > np.count_nonzero(dist >= threshold)
     return (-nrm, -d) if flip else (nrm, d)
@@ -70,9 +72,10 @@ def _subset(n, k, rng):
     return np.sort(kept)
 
 
-def _plane_ransac(points, threshold, n_trials, rng):
+def _plane_ransac(points, threshold, n_trials, rng, up=False):
     """(unit normal toward the objects, offset, robust standard deviation of the ground's noise) of the plane
-    with most points within ``threshold``, refined by least squares.
+    with most points within ``threshold``, refined by least squares; with ``up``, the normal is toward +z
+    (see :func:`_toward_objects`).
 
     The refinement fits the points within a band around the plane, from ``threshold`` down to twice the
     noise's standard deviation: within ``threshold`` lie the lowest parts of the objects standing on the
@@ -102,7 +105,7 @@ def _plane_ransac(points, threshold, n_trials, rng):
         helper = np.eye(3)[np.argmin(np.abs(axis))]
         nrm = np.cross(axis, helper)
         best = (nrm / np.linalg.norm(nrm), 0.0)
-    nrm, d = _toward_objects(local, *best, threshold)
+    nrm, d = _toward_objects(local, *best, threshold, up)
     band, sigma = threshold, threshold / 4.0
     for _ in range(_REFITS):
         inliers = local[np.abs(local @ nrm - d) < band]
@@ -110,7 +113,7 @@ def _plane_ransac(points, threshold, n_trials, rng):
             break
         mean = inliers.mean(axis=0)
         _, _, vt = np.linalg.svd(inliers - mean, full_matrices=False)
-        nrm, d = _toward_objects(local, vt[2], mean @ vt[2], threshold)
+        nrm, d = _toward_objects(local, vt[2], mean @ vt[2], threshold, up)
         height = local @ nrm - d
         under = height[(height < 0) & (height > -threshold)]
         if not under.size:  # nothing under the plane: a noise-free plane
@@ -335,7 +338,9 @@ def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
     """
     if method in ("plane", "auto"):
         fit_distance = tolerance if threshold is None else threshold
-        nrm, offset, sigma = _plane_ransac(points, fit_distance, n_trials, rng)
+        # auto keeps the plane only where the lowest surface (along z) lies on it: its objects are above it
+        # along z, even where low noise under it outnumbers them (the side holding more took it for them)
+        nrm, offset, sigma = _plane_ransac(points, fit_distance, n_trials, rng, up=method == "auto")
         height = points @ nrm - offset
         plane = height < (min(tolerance, max(4.0 * sigma, tolerance / 4.0)) if threshold is None else threshold)
         if method == "plane":
@@ -412,7 +417,10 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
     - ``"auto"``: the plane when the lowest points of at least 90% of the
       grid's ground cells (low noise left out) lie within the grid's
       threshold of it (a floor, flat or evenly tilted ground), else the
-      grid: a few low points under a floor leave it the plane.
+      grid: a few low points under a floor leave it the plane. The plane's
+      "above" is then +z (the lowest surface's objects stand on it), not
+      the side holding more points off it, which low noise under a floor
+      with few objects on it would be.
 
     Parameters
     ----------

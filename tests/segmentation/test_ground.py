@@ -133,6 +133,18 @@ def test_noise_below_the_floor_is_ground():
     assert mask[:10050].all() and not mask[10050:].any()
 
 
+def test_auto_keeps_the_objects_above_a_floor_with_more_low_noise_under_it():
+    # the plane's "above" was the side holding more points off it: 50 low points under a floor outnumbered a
+    # box of 40 points, the box was taken for ground and the low points for objects; auto, which keeps the
+    # plane only where the lowest surface along z lies on it, now turns it up
+    rng = np.random.default_rng(3)
+    ground = floor(10.0, 10000, rng, noise=0.005)
+    below = np.column_stack([rng.uniform(0, 10, (50, 2)), rng.uniform(-2, -1, 50)])
+    box = rng.uniform([2, 2, 0.5], [3, 3, 2.0], size=(40, 3))
+    mask, used = ground_mask(np.vstack([ground, below, box]), "auto", None, 0.2, 0.3, 100, np.random.RandomState(0))
+    assert used == "plane" and mask[:10050].all() and not mask[10050:].any()
+
+
 def test_deterministic_and_seeded():
     points, _ = _scene(height=lambda x, y: 0.1 * x)
     first = remove_ground(points, method="plane")
