@@ -34,11 +34,20 @@ _FLAT = 1e-3
 _PLANAR_SHARE = 0.9
 #: Most runs of points far apart the grid model takes one by one (see :func:`_apart`); beyond, one grid.
 _MAX_RUNS = 64
+#: Fewest other points within reach above a point, in its cell and the 8 adjacent ones, that make it a part
+#: of a surface rather than low noise (see :func:`_low_outliers`): lone points, pairs and clumps of three
+#: have fewer.
+_SUPPORT = 3
+#: Side of the cells whose blocks of 3 x 3 the support is counted in, at least: in mean point spacings (the
+#: side of the scene's box over the square root of its points), some 36 points a block.
+_SUPPORT_CELL = 2.0
 
 
-def _toward_objects(local, nrm, d, threshold):
+def _toward_objects(local, nrm, d, threshold, up=False):
     """The plane ``local @ nrm = d`` with its normal turned toward the side holding more of the points
-    farther than ``threshold`` from it (the objects)."""
+    farther than ``threshold`` from it (the objects); with ``up``, toward +z (unless the plane is vertical)."""
+    if up and nrm[2] != 0:
+        return (-nrm, -d) if nrm[2] < 0 else (nrm, d)
     dist = local @ nrm - d
     flip = np.count_nonzero(dist <= -threshold) > np.count_nonzero(dist >= threshold)
     return (-nrm, -d) if flip else (nrm, d)
@@ -63,9 +72,10 @@ def _subset(n, k, rng):
     return np.sort(kept)
 
 
-def _plane_ransac(points, threshold, n_trials, rng):
+def _plane_ransac(points, threshold, n_trials, rng, up=False):
     """(unit normal toward the objects, offset, robust standard deviation of the ground's noise) of the plane
-    with most points within ``threshold``, refined by least squares.
+    with most points within ``threshold``, refined by least squares; with ``up``, the normal is toward +z
+    (see :func:`_toward_objects`).
 
     The refinement fits the points within a band around the plane, from ``threshold`` down to twice the
     noise's standard deviation: within ``threshold`` lie the lowest parts of the objects standing on the
@@ -95,7 +105,7 @@ def _plane_ransac(points, threshold, n_trials, rng):
         helper = np.eye(3)[np.argmin(np.abs(axis))]
         nrm = np.cross(axis, helper)
         best = (nrm / np.linalg.norm(nrm), 0.0)
-    nrm, d = _toward_objects(local, *best, threshold)
+    nrm, d = _toward_objects(local, *best, threshold, up)
     band, sigma = threshold, threshold / 4.0
     for _ in range(_REFITS):
         inliers = local[np.abs(local @ nrm - d) < band]
@@ -103,7 +113,7 @@ def _plane_ransac(points, threshold, n_trials, rng):
             break
         mean = inliers.mean(axis=0)
         _, _, vt = np.linalg.svd(inliers - mean, full_matrices=False)
-        nrm, d = _toward_objects(local, vt[2], mean @ vt[2], threshold)
+        nrm, d = _toward_objects(local, vt[2], mean @ vt[2], threshold, up)
         height = local @ nrm - d
         under = height[(height < 0) & (height > -threshold)]
         if not under.size:  # nothing under the plane: a noise-free plane
@@ -158,19 +168,83 @@ def _grid_surface(points, cell, max_slope):
         return _one_grid(points, cell, max_slope)
     rise = np.empty(len(points))
     flat = np.empty(len(points), dtype=np.int64)
+    low = np.empty(len(points), dtype=bool)
     zmins, first = [], 0
     for run in runs:
-        rise[run], run_flat, run_zmin, _ = _one_grid(points[run], cell, max_slope)
+        rise[run], run_flat, run_zmin, _, low[run] = _one_grid(points[run], cell, max_slope)
         flat[run] = run_flat + first
         zmins.append(run_zmin)
         first += len(run_zmin)
-    return rise, flat, np.concatenate(zmins), cell
+    return rise, flat, np.concatenate(zmins), cell, low
+
+
+def _low_outliers(flat, n_cells, n_columns, z, reach):
+    """(whether each point is low noise, whether it is alone) on the grid of cells ``flat`` (``n_cells`` of
+    them, ``n_columns`` a row). Low noise (a multipath return, LAS class 7) under the ground: in its cell
+    and the 8 adjacent ones, fewer than :data:`_SUPPORT` other points lie within ``reach`` above it (from
+    ``z`` to ``z + reach``), and at least :data:`_SUPPORT` points lie higher (the ground it is under).
+    Alone: fewer than :data:`_SUPPORT` of either (for :func:`_one_grid` to compare with the ground around).
+
+    ``reach`` is the most a ground surface through the point rises within those cells: the threshold, plus
+    ``max_slope`` times the farthest two points of the 3 x 3 cells can be apart. Ground, sampled densely
+    enough for the cells, has points in that reach: those of its noise and of the terrain around; a lone
+    point farther under it, or a clump of three, has none. Points with nothing over them (stray points,
+    sparse returns far from the scene, low noise off the ground's edge or in a hole of it, where water
+    returns nothing) are not noise but alone. Only the points that would set their cell's lowest height are
+    looked at: each cell's lowest point, then, while that one is noise, the next one up.
+    """
+    n = len(z)
+    order = np.argsort(z)
+    heights = z[order]
+    # each point's rank among the heights, tied points sharing the lowest: the points of a cell from z up
+    # are those of rank >= the point's
+    first = np.ones(n, dtype=bool)
+    first[1:] = heights[1:] != heights[:-1]
+    rank = np.empty(n, dtype=np.int64)
+    rank[order] = np.maximum.accumulate(np.where(first, np.arange(n), 0))
+    keys = flat * n + rank  # below 1e19: a grid holds at most max(4 n, 2^20) cells
+    by_cell = np.argsort(keys)
+    keys = keys[by_cell]
+    bounds = np.zeros(n_cells + 1, dtype=np.int64)
+    np.cumsum(np.bincount(flat, minlength=n_cells), out=bounds[1:])
+    low, alone = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    at = bounds[:-1][bounds[1:] > bounds[:-1]]  # each nonempty cell's lowest point, as a position in keys
+    while at.size:
+        # most points have _SUPPORT points of their own cell within reach: those are not looked at further
+        ahead = at + _SUPPORT
+        ahead_inside = ahead < bounds[flat[by_cell[at]] + 1]
+        ahead[~ahead_inside] = at[~ahead_inside]
+        at = at[~ahead_inside | (z[by_cell[ahead]] > z[by_cell[at]] + reach)]
+        point = by_cell[at]
+        top = np.searchsorted(heights, z[point] + reach, side="right")  # within reach: ranks below top
+        cell = flat[point]
+        row, column = np.divmod(cell, n_columns)
+        support = np.full(len(at), -1, dtype=np.int64)  # the point itself is counted in its own cell
+        above = np.zeros(len(at), dtype=np.int64)
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                i, j = row + di, column + dj
+                inside = np.flatnonzero((i >= 0) & (j >= 0) & (j < n_columns) & (i * n_columns + j < n_cells))
+                other = i[inside] * n_columns + j[inside]
+                start = np.searchsorted(keys, other * n + rank[point[inside]])
+                middle = np.searchsorted(keys, other * n + top[inside])
+                support[inside] += middle - start
+                above[inside] += bounds[other + 1] - middle
+        noise = (support < _SUPPORT) & (above >= _SUPPORT)
+        low[point[noise]] = True
+        alone[point[(support < _SUPPORT) & (above < _SUPPORT)]] = True
+        at = at[noise] + 1  # the next point up of the cells whose lowest was noise
+        at = at[at < bounds[flat[by_cell[at - 1]] + 1]]
+    return low, alone
 
 
 def _one_grid(points, cell, max_slope):
-    """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side).
+    """(height of each point above the grid's ground surface, cell of each point, lowest z per cell, cell side,
+    whether each point is low noise).
 
-    The cells' lowest points give the surface ``S(c) = min over cells c' of
+    Low noise is found by :func:`_low_outliers` on cells at least :data:`_SUPPORT_CELL` mean spacings
+    wide, its reach ``cell`` (as given: the threshold) plus ``max_slope`` across 3 x 3 of them. The cells'
+    lowest points, low noise left out, give the surface ``S(c) = min over cells c' of
     (zmin(c') + max_slope * |c - c'|)`` (8-neighbor chamfer distances between
     cell centers): objects standing on the ground leave it, roofs and other
     raised flat parts too where they are narrower than their height over
@@ -178,6 +252,7 @@ def _one_grid(points, cell, max_slope):
     lowest point of its cell (the cell's center for an empty cell) along the
     surface's gradient (central differences, at most ``max_slope`` steep).
     """
+    band = cell  # the ground's band: its threshold, or the tolerance that bounds it
     xy = points[:, :2] - points[:, :2].min(axis=0)
     extent = xy.max(axis=0)
     budget = max(4.0 * len(points), 2.0**20)  # memory linear in the points, whatever the cell
@@ -188,8 +263,34 @@ def _one_grid(points, cell, max_slope):
     shape = np.minimum(np.floor(extent / cell), budget).astype(np.int64) + 1
     ij = np.minimum(np.floor(xy / cell), shape - 1).astype(np.int64)
     flat = ij[:, 0] * shape[1] + ij[:, 1]
+    # the support is counted on cells at least twice the mean spacing of the points over the scene's box, so
+    # that a block of 3 x 3 holds some 36 points where the ground is as dense as the scene: cells of a
+    # threshold finer than the spacing hold too few, and took the ground points under an object for noise
+    with np.errstate(over="ignore"):
+        spacing = float(np.sqrt(extent[0] + band) * np.sqrt(extent[1] + band) / np.sqrt(len(points)))
+    wide = max(cell, _SUPPORT_CELL * spacing)
+    wide_shape = np.minimum(np.floor(extent / wide), budget).astype(np.int64) + 1
+    wide_ij = np.minimum(np.floor(xy / wide), wide_shape - 1).astype(np.int64)
+    # ground within reach of a point: under the band over a surface rising at most max_slope across the block
+    with np.errstate(over="ignore"):
+        reach = band + max_slope * (2.0 * np.sqrt(2.0) * wide)
+    low, alone = _low_outliers(wide_ij[:, 0] * wide_shape[1] + wide_ij[:, 1],
+                               int(wide_shape[0] * wide_shape[1]), int(wide_shape[1]), points[:, 2], reach)
+    rest = ~(low | alone)
+    if alone.any() and rest.any():
+        # a point alone is low noise too where it lies farther than reach under the surface of the others
+        # (off the ground's edge, in a hole of it): it would pull that surface down; stray points far from
+        # the scene, under that surface too, are ground either way
+        others = np.full(int(shape[0] * shape[1]), np.inf)
+        np.minimum.at(others, flat[rest], points[rest, 2])
+        others = others.reshape(tuple(shape))
+        _cluster_fast.slope_envelope(others, max_slope * cell, max_slope * cell * np.sqrt(2.0))
+        low |= alone & (points[:, 2] < others.reshape(-1)[flat] - reach)
     zmin = np.full(int(shape[0] * shape[1]), np.inf)
-    np.minimum.at(zmin, flat, points[:, 2])
+    if low.any():  # a cell of low noise only is empty: the surface around fills it
+        np.minimum.at(zmin, flat[~low], points[~low, 2])
+    else:
+        np.minimum.at(zmin, flat, points[:, 2])
     surface = zmin.reshape(tuple(shape)).copy()
     _cluster_fast.slope_envelope(surface, max_slope * cell, max_slope * cell * np.sqrt(2.0))
     gradient = np.zeros((2,) + surface.shape)
@@ -202,12 +303,12 @@ def _one_grid(points, cell, max_slope):
     gradient[:, over] *= max_slope / steep[over]
     # where the ground surface is known: the lowest point of each cell, else the cell's center
     anchor = (np.indices(tuple(shape)).reshape(2, -1).T + 0.5) * cell
-    lowest = np.flatnonzero(points[:, 2] == zmin[flat])
+    lowest = np.flatnonzero((points[:, 2] == zmin[flat]) & ~low)
     anchor[flat[lowest]] = xy[lowest]
     offset = xy - anchor[flat]
     ground = surface.reshape(-1)[flat] + gradient[0].reshape(-1)[flat] * offset[:, 0] \
         + gradient[1].reshape(-1)[flat] * offset[:, 1]
-    return points[:, 2] - ground, flat, zmin, cell
+    return points[:, 2] - ground, flat, zmin, cell, low
 
 
 def grid_threshold(rise, tolerance):
@@ -237,19 +338,21 @@ def ground_mask(points, method, threshold, tolerance, max_slope, n_trials, rng):
     """
     if method in ("plane", "auto"):
         fit_distance = tolerance if threshold is None else threshold
-        nrm, offset, sigma = _plane_ransac(points, fit_distance, n_trials, rng)
+        # auto keeps the plane only where the lowest surface (along z) lies on it: its objects are above it
+        # along z, even where low noise under it outnumbers them (the side holding more took it for them)
+        nrm, offset, sigma = _plane_ransac(points, fit_distance, n_trials, rng, up=method == "auto")
         height = points @ nrm - offset
         plane = height < (min(tolerance, max(4.0 * sigma, tolerance / 4.0)) if threshold is None else threshold)
         if method == "plane":
             return plane, "plane"
-    rise, flat, zmin, cell = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
-    if threshold is None:
-        threshold = grid_threshold(rise, tolerance)
-    grid = rise < threshold
+    rise, flat, zmin, cell, low = _grid_surface(points, tolerance if threshold is None else threshold, max_slope)
+    if threshold is None:  # from the ground without its low noise, which would lower its median
+        threshold = grid_threshold(rise[~low] if low.any() else rise, tolerance)
+    grid = rise < threshold  # low noise, under the surface, included
     if method == "grid":
         return grid, "grid"
     # auto: the plane where the lowest surface is planar (a floor, flat or tilted ground), else the grid
-    lowest = np.flatnonzero((points[:, 2] == zmin[flat]) & grid)  # each ground cell's lowest point(s)
+    lowest = np.flatnonzero((points[:, 2] == zmin[flat]) & grid & ~low)  # each ground cell's lowest point(s)
     ground_cells = np.zeros(len(zmin), dtype=bool)
     ground_cells[flat[lowest]] = True
     planar = np.zeros(len(zmin), dtype=bool)
@@ -286,16 +389,38 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
       Points farther apart horizontally than the scene's height range over
       ``max_slope`` (stray points far from the scene), where the surface of
       one never reaches the other, get grids of their own when one grid
-      would widen its cells (up to 64 such runs). Limits: a flat object of
-      height ``h`` is taken for ground where it is farther than
-      ``h / max_slope`` from its edge (the middle of a large flat roof),
-      terrain steeper than ``max_slope`` is partly left out of the ground,
-      and a point far below the ground (low noise) pulls the surface down
-      around it, as the model has it: remove such points first, or use
-      ``"plane"``.
+      would widen its cells (up to 64 such runs).
+      Low noise (multipath returns, LAS class 7: lone points or clumps of up
+      to three far under the ground) is left out of the cells' lowest
+      points, so it does not pull the surface down: a point is low noise
+      when, in its cell and the 8 adjacent ones of a grid of cells at least
+      twice the scene's mean point spacing wide, fewer than three other
+      points lie within reach above it (no higher than ``threshold`` plus
+      ``max_slope`` times the farthest two points of those cells can be
+      apart: where a surface through it could reach; the tolerance when
+      ``threshold`` is None), and at least three lie higher; or, with fewer
+      than three higher too (off the ground's edge, in a hole of it where
+      water returns nothing), when it lies more than that reach under the
+      surface of the other points. Low noise is ground, as the points under
+      the plane are.
+      Real low terrain (a ditch, a pit of more than three points) holds its
+      own support and is followed.
+      Limits: a flat object of height ``h`` is taken for ground where it is
+      farther than ``h / max_slope`` from its edge (the middle of a large
+      flat roof), terrain steeper than ``max_slope`` is partly left out of
+      the ground, a clump of more than three low points, or low points
+      within that reach of the ground (``threshold`` plus ``2.83 *
+      max_slope`` cells or more: 0.63 m for cells and threshold of 0.34 m
+      and the default slope), still pull the surface down around them, and
+      the lowest points of an object overhanging the scene's edge, with no
+      ground under it, are taken for low noise.
     - ``"auto"``: the plane when the lowest points of at least 90% of the
-      grid's ground cells lie within the grid's threshold of it (a floor,
-      flat or evenly tilted ground), else the grid.
+      grid's ground cells (low noise left out) lie within the grid's
+      threshold of it (a floor, flat or evenly tilted ground), else the
+      grid: a few low points under a floor leave it the plane. The plane's
+      "above" is then +z (the lowest surface's objects stand on it), not
+      the side holding more points off it, which low noise under a floor
+      with few objects on it would be.
 
     Parameters
     ----------
@@ -312,9 +437,10 @@ def remove_ground(points, *, method="auto", threshold=None, max_slope=0.3, n_tri
         cells are that wide; the threshold is then the ground's noise, four
         robust standard deviations of the distances to the plane (1.4826 times
         the median distance of the points under it, where no object is), or
-        for the grid the median height above its surface plus four robust
-        standard deviations (1.4826 times a median absolute deviation), kept
-        between a quarter of the tolerance and the tolerance.
+        for the grid the median height above its surface (low noise left
+        out) plus four robust standard deviations (1.4826 times a median
+        absolute deviation), kept between a quarter of the tolerance and the
+        tolerance.
     max_slope : float, default=0.3
         Steepest ground of the grid model, as rise over run (0.3 is about 17
         degrees), >= 0.

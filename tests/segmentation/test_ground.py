@@ -133,6 +133,18 @@ def test_noise_below_the_floor_is_ground():
     assert mask[:10050].all() and not mask[10050:].any()
 
 
+def test_auto_keeps_the_objects_above_a_floor_with_more_low_noise_under_it():
+    # the plane's "above" was the side holding more points off it: 50 low points under a floor outnumbered a
+    # box of 40 points, the box was taken for ground and the low points for objects; auto, which keeps the
+    # plane only where the lowest surface along z lies on it, now turns it up
+    rng = np.random.default_rng(3)
+    ground = floor(10.0, 10000, rng, noise=0.005)
+    below = np.column_stack([rng.uniform(0, 10, (50, 2)), rng.uniform(-2, -1, 50)])
+    box = rng.uniform([2, 2, 0.5], [3, 3, 2.0], size=(40, 3))
+    mask, used = ground_mask(np.vstack([ground, below, box]), "auto", None, 0.2, 0.3, 100, np.random.RandomState(0))
+    assert used == "plane" and mask[:10050].all() and not mask[10050:].any()
+
+
 def test_deterministic_and_seeded():
     points, _ = _scene(height=lambda x, y: 0.1 * x)
     first = remove_ground(points, method="plane")
@@ -265,3 +277,89 @@ def test_stray_points_far_away_leave_the_grid_ground_as_it_was(method):
     flat, _ = _scene()
     mask = remove_ground(np.vstack([flat, [[1e12, 0, 0]]]), method=method)
     assert mask[:n_ground].all() and not mask[n_ground:-1].any()
+
+
+def _low_noise(kind, depth, rng):
+    """Low noise (multipath returns) ``depth`` under the ground of :func:`_scene` at z = 0: one point, five
+    points apart, or a clump of three points within 2 cm."""
+    if kind == "one":
+        xy = np.array([[10.3, 10.2]])
+    elif kind == "five":
+        xy = np.array([[2.5, 10.0], [10.0, 2.5], [10.2, 10.1], [17.5, 10.0], [9.0, 17.5]])
+    else:
+        xy = np.array([7.1, 12.3]) + rng.uniform(-0.01, 0.01, (3, 2))
+    return np.column_stack([xy, np.full(len(xy), depth) + rng.uniform(-0.01, 0.01, len(xy))])
+
+
+@pytest.mark.parametrize("kind", ["one", "five", "clump"])
+@pytest.mark.parametrize("depth", [-0.5, -50.0, -1e12])
+@pytest.mark.parametrize("method", ["grid", "auto"])
+def test_low_noise_leaves_the_ground_as_it_was(method, depth, kind):
+    # a point 50 m under the floor pulled the grid's surface down around it (0.3 m a cell): every floor point
+    # rose above the threshold and none was ground, and "auto", whose grid cells no longer lay on the plane,
+    # chose the grid; now points with fewer than three others within reach of a slope-limited surface
+    # through them (in their cell and the adjacent ones) are low noise, left out of the cells' lowest
+    # heights, and ground as the points under the plane are
+    # the scene of _scene on a 10 m square (spacing 7 cm, tolerance 0.17 m): a surface reaching from the
+    # ground 0.5 m down within the cells around (0.3 a cell and the threshold) would be a real dip
+    points, n_ground = _scene()
+    points[:, :2] *= 0.5
+    noise = _low_noise(kind, depth, np.random.default_rng(1))
+    noise[:, :2] *= 0.5
+    tolerance = default_tolerance(points)  # the same for both (one point more shifts its sample of the scene)
+    alone, used = ground_mask(points, method, None, tolerance, 0.3, 100, np.random.RandomState(0))
+    scene = np.vstack([points, noise])
+    mask, with_noise = ground_mask(scene, method, None, tolerance, 0.3, 100, np.random.RandomState(0))
+    np.testing.assert_array_equal(mask[:len(points)], alone)
+    assert mask[len(points):].all() and with_noise == used
+    assert alone[:n_ground].mean() > 0.999 and not alone[n_ground:].any()
+
+
+@pytest.mark.parametrize("method", ["grid", "auto"])
+def test_low_noise_on_hills_and_a_ditch_that_is_ground(method):
+    # the grid on terrain that is not a plane, low noise under it; and a ditch 0.6 m deep (real low terrain,
+    # many points) still followed as ground
+    hills = lambda x, y: np.sin(x / 6) * 0.8 + 0.05 * y - 0.6 * np.clip(1 - np.abs(x - 10) / 5, 0, None)  # noqa: E731
+    points, n_ground = _scene(height=hills)
+    tolerance = default_tolerance(points)
+    alone, used = ground_mask(points, method, None, tolerance, 0.3, 100, np.random.RandomState(0))
+    assert used == "grid"
+    assert alone[:n_ground].all() and not alone[n_ground:].any()
+    noise = _low_noise("five", -20.0, np.random.default_rng(2))
+    noise[:, 2] += hills(noise[:, 0], noise[:, 1])
+    scene = np.vstack([points, noise])
+    mask, used = ground_mask(scene, method, None, tolerance, 0.3, 100, np.random.RandomState(0))
+    assert used == "grid"
+    np.testing.assert_array_equal(mask[:len(points)], alone)
+    assert mask[len(points):].all()
+
+
+@pytest.mark.parametrize("where", [(21.0, 10.0), (23.0, 10.0), (50.0, 10.0), (10.0, 10.0)])
+@pytest.mark.parametrize("method", ["grid", "auto"])
+def test_low_noise_off_the_ground_or_in_a_hole_of_it(method, where):
+    # with no point over it (1 m to 30 m off the floor's edge, or in a hole of it where water returns
+    # nothing), a point 50 m down pulled the grid's whole surface down: no floor point was ground; now a point
+    # alone is low noise where it lies farther under the surface of the others than their reach
+    points, n_ground = _scene()
+    hole = np.hypot(points[:, 0] - 10.0, points[:, 1] - 10.0) < 3.0
+    points, n_ground = points[~hole], n_ground - int(np.count_nonzero(hole[:n_ground]))
+    tolerance = default_tolerance(points)
+    alone, used = ground_mask(points, method, None, tolerance, 0.3, 100, np.random.RandomState(0))
+    mask, with_noise = ground_mask(np.vstack([points, [[*where, -50.0]]]), method, None, tolerance, 0.3, 100,
+                                   np.random.RandomState(0))
+    np.testing.assert_array_equal(mask[:-1], alone)
+    assert mask[-1] and with_noise == used
+    assert alone[:n_ground].all() and not alone[n_ground:].any()
+
+
+def test_a_pit_of_three_points_is_low_noise_and_four_are_ground():
+    # the rule's size: three points alone under the floor are noise, four within the band are a surface
+    rng = np.random.default_rng(4)
+    ground = floor(10.0, 5000, rng, noise=0.005)
+    box = rng.uniform([4, 4, 0.5], [5, 5, 1.5], size=(300, 3))
+    for count, pulls in ((3, False), (4, True)):
+        pit = np.column_stack([7.0 + rng.uniform(-0.02, 0.02, (count, 2)), np.full(count, -1.0)])
+        mask = remove_ground(np.vstack([ground, box, pit]), method="grid", threshold=0.2)
+        # a surface pulls the ground around it down: the floor points next to it rise above the threshold
+        near = np.hypot(ground[:, 0] - 7.0, ground[:, 1] - 7.0) < 0.3
+        assert mask[:len(ground)][near].all() != pulls and not mask[len(ground):-count].any()

@@ -28,6 +28,17 @@ def test_separated_spheres_on_a_plane(spheres_on_plane):
     np.testing.assert_array_equal(seg.labels_[kept], euclidean_clusters(points[kept], seg.tolerance_, min_points=30))
 
 
+@pytest.mark.parametrize("depth", [-50.0, -1e12])
+def test_a_low_noise_point_leaves_the_segments_as_they_were(spheres_on_plane, depth):
+    # one multipath return 50 m under the floor lowered the grid's surface, so "auto" chose the grid, found
+    # no ground and joined the floor and all five spheres into one segment
+    points, truth = spheres_on_plane
+    low = points[:1] + [0.1, 0.1, depth]
+    seg = SceneSegmenter().fit(np.vstack([points, low]))
+    assert seg.ground_method_ == "plane" and seg.n_segments_ == 5 and seg.labels_[-1] == -1
+    assert _agree(seg.labels_[:-1], truth)
+
+
 def test_the_same_scene_at_cad_scale_gives_the_same_segments(spheres_on_plane):
     points, truth = spheres_on_plane
     local = (points - points.min(axis=0)) * 1e-3  # millimeter-sized
