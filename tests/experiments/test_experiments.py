@@ -249,7 +249,7 @@ def test_cli_quick_ablation(tmp_path):
         (["classification", "--epochs", "-1"], "--epochs must be a positive int, got -1"),
         (["classification", "--validation-fraction", "1.5"], "--validation-fraction must lie in (0, 1)"),
         (["retrieval", "--descriptors", "fpfh"], "invalid choice: 'fpfh'"),
-        (["runtime", "--n-jobs", "0"], "--n-jobs must be a non-zero int, got 0"),
+        (["runtime", "--n-jobs", "0"], "argument --n-jobs: 0 has no meaning; use a positive count or -1"),
     ],
 )
 def test_cli_errors(argv, msg, tmp_path, capsys):
