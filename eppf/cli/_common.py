@@ -111,13 +111,15 @@ def n_jobs_type(text):
 
 def add_runtime(parser, n_jobs=True, random_state=True):
     """``--n-jobs``, ``--random-state`` and ``--no-progress``: the same in every subcommand (a command whose
-    work draws nothing at random, or draws it with seeds of its own, leaves ``--random-state`` out)."""
+    work draws nothing at random, or draws it with seeds of its own, leaves ``--random-state`` out; one that
+    draws only some of those things gives, as ``random_state``, the help that names them)."""
     if n_jobs:
         parser.add_argument("--n-jobs", type=n_jobs_type, default=-1, help="threads (default: -1, all cores)")
     if random_state:
         parser.add_argument("--random-state", type=int, default=0,
-                            help="seed of everything random: descriptor draws, mesh sampling, splits, a scene's "
-                                 "RANSAC ground plane (default: 0)")
+                            help=random_state if isinstance(random_state, str) else
+                            "seed of everything random: descriptor draws, mesh sampling, splits, a scene's "
+                            "RANSAC ground plane (default: 0)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars and per-epoch lines")
 
 

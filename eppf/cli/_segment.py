@@ -68,7 +68,8 @@ def add_arguments(p):
     p.add_argument("--format", choices=FIELD_FORMATS, default=None,
                    help="format of the object files (default: the scene's when it is LAS, LAZ, PCD or PLY, "
                         f"else {FALLBACK_FORMAT.upper()}); every field of the scene is kept")
-    add_runtime(p, n_jobs=False)
+    add_runtime(p, n_jobs=False, random_state="seed of the RANSAC ground plane, the only thing it draws at "
+                                               "random (default: 0)")
 
 
 def segmentation_settings(args):

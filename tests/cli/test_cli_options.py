@@ -372,3 +372,14 @@ def test_reading_options_are_refused_with_the_built_in_shapes(tmp_path, capsys, 
     assert err.strip().endswith(f"error: {option}: the built-in synthetic shapes are made in memory, not read from "
                                 "files; leave it out")
     assert os.listdir(tmp_path) == []
+
+
+def test_segment_random_state_help_names_only_what_segment_draws(capsys):
+    # the shared help lists descriptor draws, mesh sampling and splits, none of which eppf segment makes
+    with pytest.raises(SystemExit) as stop:
+        main(["segment", "--help"])
+    assert stop.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    help_text = text[text.rindex("--random-state RANDOM_STATE"):]  # (its entry, not the usage line)
+    assert help_text.startswith("--random-state RANDOM_STATE seed of the RANSAC ground plane, the only thing it")
+    assert "descriptor draws" not in help_text.split("--no-progress")[0]
