@@ -65,6 +65,9 @@ def run_evaluate(args, out=None):
         if given:
             raise ValueError(f"{given[0]}: it sets the descriptor of the retrieval, which --no-retrieval skips (the "
                              "model keeps its own descriptor); leave it out")
+        if args.random_state != 0:  # (0, the default, changes nothing either way)
+            raise ValueError("--random-state: it seeds the retrieval's descriptors, which --no-retrieval skips (the "
+                             "model reads the files with its saved seeds); leave it out")
     if args.model is not None:
         # the model's files are read as its training files were: a sampling option here would be ignored
         given = [o for o, v in (("--n-points", args.n_points), ("--resolution", args.resolution)) if v is not None]

@@ -254,6 +254,8 @@ def test_other_ignored_options_are_refused(tmp_path, capsys):
              "--test-size: --all trains on every object")
     _refused(["evaluate", "--built-in", "--model", tmp_path / "m.eppf", "--no-retrieval", "--descriptor", "esf"],
              capsys, "--descriptor: it sets the descriptor of the retrieval, which --no-retrieval skips")
+    _refused(["evaluate", "--built-in", "--model", tmp_path / "m.eppf", "--no-retrieval", "--random-state", "3"],
+             capsys, "--random-state: it seeds the retrieval's descriptors, which --no-retrieval skips")
     for command in (["describe", data, "-o", tmp_path / "d.npy"], ["train", "--data", data, "-o", tmp_path / "m"]):
         _refused([*command, "--n-points", "8"], capsys, f"--n-points: {data} is a .npz data set")
     assert not (tmp_path / "d.npy").exists() and not (tmp_path / "m").exists()
