@@ -7,11 +7,16 @@ import numpy as np
 from ..utils._param_validation import Interval, validate_parameter
 from ..utils._validation import check_point_cloud
 
-__all__ = ["MAX_EXTENT", "MIN_EXTENT", "MIN_TOLERANCE", "TOLERANCE", "check_field", "check_scene", "check_tolerance"]
+__all__ = ["MAX_EXTENT", "MAX_POINTS", "MIN_EXTENT", "MIN_TOLERANCE", "TOLERANCE", "check_field", "check_scene",
+           "check_tolerance"]
 
 #: The largest scene extent per axis: squared distances and the plane fit's sums of squares
 #: (up to 1e9 points) stay finite below it, with a wide margin over any real scan (1e7 m).
 MAX_EXTENT = 1e100
+
+#: The most points a scene may have (the readers' bound on a cloud too): the grid ground model's int64 sort
+#: keys, a cell (at most 4 per point) times the points plus a rank, stay below 2**63 up to about 1.5e9.
+MAX_POINTS = 10**9
 
 #: The smallest largest extent of a scene: below it, cell sides derived from the extent or a tolerance
 #: consistent with it reach subnormal numbers, whose reciprocals overflow (a real scan spans 1e-3 m at least).
@@ -30,12 +35,15 @@ def check_scene(points, owner):
 
     Six-column input (points and normals) is accepted; the normals are dropped.
     Raises TypeError/ValueError naming ``owner`` for a wrong type or shape, an
-    empty scene, a single point, NaN or infinite coordinates, a scene whose
-    points are all identical, one whose extent is beyond :data:`MAX_EXTENT`
-    (its squared distances would overflow float64) or one whose largest extent
-    is below :data:`MIN_EXTENT`.
+    empty scene, a single point, more than :data:`MAX_POINTS` points, NaN or
+    infinite coordinates, a scene whose points are all identical, one whose
+    extent is beyond :data:`MAX_EXTENT` (its squared distances would overflow
+    float64) or one whose largest extent is below :data:`MIN_EXTENT`.
     """
     arr = check_point_cloud(points, owner=owner, min_points=2, allow_normals=True)
+    if len(arr) > MAX_POINTS:
+        raise ValueError(f"{owner}: the scene has {len(arr):,} points; at most {MAX_POINTS:,} can be segmented: "
+                         "split it into tiles")
     xyz = np.ascontiguousarray(arr[:, :3])
     with np.errstate(over="ignore"):
         extent = xyz.max(axis=0) - xyz.min(axis=0)

@@ -248,3 +248,17 @@ def test_a_single_point_left_by_the_ground():
     points = np.vstack([floor(10.0, 5000, rng), [[5.0, 5.0, 3.0]]])
     np.testing.assert_array_equal(np.flatnonzero(segment_scene(points, min_points=1) >= 0), [5000])
     assert segment_scene(points).max() == -1
+
+
+@pytest.mark.parametrize("call", [lambda pts: segment_scene(pts), lambda pts: euclidean_clusters(pts, 0.5),
+                                  lambda pts: SceneSegmenter().fit_predict(pts)])
+def test_scenes_over_the_point_bound_are_refused(monkeypatch, call):
+    # the grid ground model's int64 keys (cells times points) hold up to about 1.5e9 points; a scene of more
+    # than MAX_POINTS (1e9, lowered here so that the test allocates nothing big) is refused before any work
+    import eppf.segmentation._checks as checks
+
+    monkeypatch.setattr(checks, "MAX_POINTS", 50)
+    pts = np.random.default_rng(0).normal(size=(51, 3))
+    with pytest.raises(ValueError, match=r"the scene has 51 points; at most 50 can be segmented: split it into tiles"):
+        call(pts)
+    call(pts[:50])  # at the bound: segmented
