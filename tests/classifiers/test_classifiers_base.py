@@ -344,6 +344,39 @@ def test_a_failed_refit_leaves_the_previous_fit(kind, error, monkeypatch):
     np.testing.assert_array_equal(clf.predict_proba(X), proba)
 
 
+def test_an_ensemble_whose_last_network_fails_keeps_the_previous_fit(monkeypatch):
+    # the ensemble trains its networks one after another: a failure in the last one must not leave the
+    # networks trained before it beside the previous fit's
+    from eppf.nn import EPPFNet4D
+
+    clf, X, y = _make("eppf", max_epochs=1, early_stopping=False, n_estimators=2, random_state=0, verbose=0)
+    forward, calls = EPPFNet4D.forward, []
+
+    def counting_forward(self, *args, **kwargs):
+        calls.append(1)
+        return forward(self, *args, **kwargs)
+
+    monkeypatch.setattr(EPPFNet4D, "forward", counting_forward)
+    clf.fit(X, y)
+    total = len(calls)  # forward calls of a whole fit of both networks
+    before = dict(clf.__dict__)
+    proba = clf.predict_proba(X)
+    calls.clear()
+
+    def failing_forward(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == total - 1:  # within the second network's training
+            raise RuntimeError("boom")
+        return forward(self, *args, **kwargs)
+
+    monkeypatch.setattr(EPPFNet4D, "forward", failing_forward)
+    with pytest.raises(RuntimeError, match="boom"):
+        clf.fit(X, np.where(y == y[0], "first", "second"))
+    monkeypatch.setattr(EPPFNet4D, "forward", forward)
+    assert clf.__dict__.keys() == before.keys() and all(clf.__dict__[k] is v for k, v in before.items())
+    np.testing.assert_array_equal(clf.predict_proba(X), proba)
+
+
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("error", [ValueError("late"), KeyboardInterrupt()])
 def test_a_failed_first_fit_leaves_the_estimator_unfitted(kind, error, monkeypatch):
