@@ -38,7 +38,7 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted
 
 from ..utils._param_validation import N_JOBS, RANDOM_STATE, Interval, Options, StrOptions, validate_params
-from ..utils._validation import check_n_jobs
+from ..utils._validation import MAX_PARAMETERS, check_n_jobs
 
 __all__ = []
 
@@ -69,13 +69,6 @@ COMMON_CONSTRAINTS = {
     "random_state": RANDOM_STATE,
     "verbose": [Interval(numbers.Integral, 0, None, closed="left")],
 }
-
-
-#: Most parameters a network of the classifiers may have: 4 GB of float32 weights, and about four
-#: times that to train (gradients and Adam's two moments). The paper's 4D network has 15 million.
-#: (The bound of the networks of eppf.nn too, ``eppf.nn._networks.MAX_PARAMETERS``: not imported from
-#: there, since this module imports no torch.)
-MAX_PARAMETERS = 10**9
 
 
 class _torch_threads:

@@ -31,6 +31,7 @@ import torch
 from torch import nn
 
 from ..utils._param_validation import Interval, IntTuple, Options, StrOptions, validate_parameter
+from ..utils._validation import MAX_PARAMETERS
 from ._conv4d import Conv4d, same_conv, same_padding
 from ._precision import check_precision
 from ._spectral import choose_impl, spectral_conv
@@ -186,13 +187,6 @@ def _check_network_args(owner, n_bins, n_classes, dropout, filters, n_hidden):
 def _check_options(owner, n_side, side_hidden, batch_norm):
     check_network_values(owner, n_side=n_side, side_hidden=side_hidden, batch_norm=batch_norm)
     return int(n_side), int(side_hidden), bool(batch_norm)
-
-
-#: Most parameters of a network built here: a larger one is refused before any layer is built (torch's
-#: allocator failed with a RuntimeError, "you tried to allocate 57600000000000 bytes", or torch.empty
-#: with an overflow TypeError). 4 GB of float32 weights; the paper's 4D network has 15 million.
-#: (``eppf.classifiers._base.MAX_PARAMETERS``, the classifiers' bound, is the same.)
-MAX_PARAMETERS = 10**9
 
 
 def parameter_lower_bound(n_bins, n_hidden, n_classes, filters, n_side, side_hidden):

@@ -20,8 +20,9 @@ from sklearn.utils.multiclass import type_of_target
 from ._param_validation import N_JOBS, Interval, validate_parameter
 
 __all__ = [
-    "PackedClouds", "as_vector3", "check_class_labels", "check_int", "check_n_jobs", "check_packed_clouds",
-    "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds", "pack_point_clouds",
+    "MAX_PARAMETERS", "PackedClouds", "as_vector3", "check_class_labels", "check_int", "check_n_jobs",
+    "check_packed_clouds", "check_point_cloud", "check_point_clouds", "condition_point_clouds", "object_seeds",
+    "pack_point_clouds",
 ]
 
 
@@ -616,6 +617,13 @@ def pack_point_clouds(clouds):
         normals = np.ascontiguousarray(stacked[:, 3:6], dtype=np.float64)
     return points, normals, offsets
 
+
+#: The most parameters a network of eppf may have (the networks of :mod:`eppf.nn` and the classifiers that
+#: build them): 4 GB of float32 weights, about four times that to train (gradients and Adam's two moments).
+#: The paper's 4D network has 15 million. A larger one is refused before it is built: torch's allocator
+#: failed with a RuntimeError ("you tried to allocate 57600000000000 bytes"), torch.empty with an overflow
+#: TypeError. (Here, not beside the networks, for the classifiers, which import torch only on use.)
+MAX_PARAMETERS = 10**9
 
 #: The most threads ``n_jobs`` may ask for (positive or, counted from the cores, negative): OpenMP runs the
 #: threads it is asked for, and far more than any machine has cores crashed it (65,536 on a 2-core guest).
