@@ -56,7 +56,7 @@ class EPPF4DClassifier(SkorchClassifierBase):
         Filters of the three convolutions (Table I). With ``n_bins``,
         ``n_hidden``, ``side_hidden`` and the number of classes they set the
         network's size, which may be at most a billion parameters
-        (``eppf.classifiers._base.MAX_PARAMETERS``; the paper's network has
+        (``eppf.utils._validation.MAX_PARAMETERS``; the paper's network has
         15 million): a larger one is refused in ``fit`` before it is built.
     early_stopping : bool, default=True
         Hold out ``validation_fraction`` of the training objects (stratified,
