@@ -15,7 +15,7 @@ from ..registry import CLASSIFIERS, DESCRIPTORS
 from ._common import (CLASSIFIER_ALIASES, CLASSIFIER_NAMES, DEFAULT_N_PAIRS, Command, add_data_source, add_descriptor,
                       add_runtime, add_sampling, check_classes, check_not_input, check_output, descriptor_from_args,
                       load_labelled, count, fewest_points, positive_int, progress_of, register, sampling_from_args,
-                      set_runtime, warn, warn_tiny)
+                      set_runtime, warn_tiny)
 
 __all__ = ["make_pipeline_from_args", "run_train"]
 
