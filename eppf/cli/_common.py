@@ -161,6 +161,11 @@ def add_on_error(parser, refusable=False):
                         help="a file that cannot be read: skip it with a summary on stderr (default) or stop")
 
 
+def on_error_of(args):
+    """``--on-error`` as the readers take it: "skip" where it was not given (:func:`add_on_error`'s None)."""
+    return getattr(args, "on_error", None) or "skip"
+
+
 def add_data_source(parser):
     group = parser.add_mutually_exclusive_group(required=True)
     group.add_argument("--data", metavar="FILE.npz|FOLDER",
@@ -700,7 +705,7 @@ def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
         refuse_sampling_of_data_set(args, data)
     if os.path.isdir(data) and not sampling.get("root"):
         sampling = dict(sampling, root=os.path.realpath(data))
-    objects = read_inputs([data], sampling, on_error=getattr(args, "on_error", "skip"),
+    objects = read_inputs([data], sampling, on_error=on_error_of(args),
                           progress=progress_of(args), cmd=cmd, labelled=True, min_points=min_points)
     objects.name = data
     objects.sampling = sampling

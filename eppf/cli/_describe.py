@@ -22,8 +22,8 @@ import numpy as np
 from ..streaming import write_descriptors
 from ..utils._atomic import atomic_write
 from ._common import (Command, add_descriptor, count, fewest_points, add_runtime, add_sampling, check_not_input,
-                      check_output, descriptor_from_args, is_data_set_input, plan_inputs, progress_of, read_inputs,
-                      refuse_sampling_of_data_set, register, sampling_from_args, warn_tiny)
+                      check_output, descriptor_from_args, is_data_set_input, on_error_of, plan_inputs, progress_of,
+                      read_inputs, refuse_sampling_of_data_set, register, sampling_from_args, warn_tiny)
 
 __all__ = ["run_describe"]
 
@@ -67,7 +67,7 @@ def run_describe(args, out=None):
         refuse_sampling_of_data_set(args, args.inputs[0])
         est = descriptor_from_args(args, progress)
         params = _saved_params(est)
-        objects = read_inputs(args.inputs, sampling, on_error=args.on_error, progress=progress, cmd=cmd,
+        objects = read_inputs(args.inputs, sampling, on_error=on_error_of(args), progress=progress, cmd=cmd,
                               min_points=fewest_points(est), exclude=[output])
         warn_tiny(objects.clouds, objects.ids, est, cmd, args.descriptor)
         X = est.fit_transform(objects.clouds)
@@ -131,7 +131,7 @@ def _stream(args, est, sampling, output, progress, cmd):
     names = [f for f, _, _ in plan.entries]
 
     def unreadable(k, exc):
-        return plan.error(k, exc, args.on_error)
+        return plan.error(k, exc, on_error_of(args))
 
     def run(fh):
         result = write_descriptors(fh, names, plan.read, est, n_jobs=args.n_jobs, unreadable=unreadable,

@@ -8,7 +8,8 @@ import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_distinct_outputs,
                       check_not_input, check_output, class_name, count, emit, fewest_points, file_seeds, load_model,
-                      model_sampling, progress_of, read_inputs, register, set_runtime, too_few_points, warn, warn_tiny)
+                      model_sampling, on_error_of, progress_of, read_inputs, register, set_runtime, too_few_points,
+                      warn, warn_tiny)
 from ._segment import (FIELD_FORMATS, add_segmentation, coordinate, given_segmentation_options, segment_file,
                        segmentation_settings, stage, summary)
 
@@ -93,7 +94,7 @@ def run_predict(args, out=None):
     saved = load_model(args.model, trust=args.trust)
     model = saved["model"]
     set_runtime(model, args.n_jobs, progress_of(args))
-    objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=args.on_error or "skip",
+    objects = read_inputs(args.inputs, model_sampling(saved, cmd), on_error=on_error_of(args),
                           progress=progress_of(args), cmd=cmd, labelled=False, min_points=fewest_points(model),
                           exclude=[args.output])
     unreliable = warn_unreliable(model, objects.clouds, objects.ids, cmd)

@@ -10,7 +10,7 @@ import numpy as np
 from ..io._npy import read_npy_array, read_npz_arrays
 from ..registry import DESCRIPTORS, make_descriptor
 from ._common import (SEED_RULE, Command, add_on_error, add_runtime, check_not_input, check_output, emit, fewest_points,
-                      positive_int, progress_of, read_inputs, register, warn_tiny)
+                      on_error_of, positive_int, progress_of, read_inputs, register, warn_tiny)
 
 __all__ = ["run_retrieve"]
 
@@ -112,7 +112,7 @@ def run_retrieve(args, out=None):
             {"n_points": None, "resolution": None, "normals": "auto", "random_state": 0, "seed_rule": SEED_RULE}
         settings = dict(params, n_jobs=args.n_jobs, verbose=1 if progress_of(args) else 0)
         est = make_descriptor(descriptor, **settings)
-        objects = read_inputs(args.queries, sampling, on_error=args.on_error or "skip", progress=progress_of(args),
+        objects = read_inputs(args.queries, sampling, on_error=on_error_of(args), progress=progress_of(args),
                               cmd=cmd, min_points=fewest_points(est), exclude=[args.output])
         q_ids = objects.ids
         if objects.labels is not None:
