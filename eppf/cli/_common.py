@@ -276,16 +276,18 @@ def check_not_input(output, inputs, option="--output"):
         if same:
             raise ValueError(f"{option} {output} is {what} (the same file); writing it would replace that "
                              "input, so give another output file")
-        if os.path.isdir(path) and _inside(output, path) and _readable_point_file(output) \
+        if os.path.isdir(path) and within_folder(output, path) and _readable_point_file(output) \
                 and not is_own_output(output):
             where = f"the input folder {path}" if name is None else f"the {name} folder {path}"
             raise ValueError(f"{option} {output} is a point file in {where}; writing it would replace that "
                              "object, so give another output file")
 
 
-def _inside(path, folder):
-    real, root = os.path.realpath(path), os.path.realpath(folder)
-    return real.startswith(os.path.join(root, ""))
+def within_folder(path, folder):
+    """True when ``path`` is ``folder`` or lies inside it, after links are resolved (case-folded where the file
+    system folds case)."""
+    real, root = (os.path.normcase(os.path.realpath(p)) for p in (path, folder))
+    return real == root or real.startswith(os.path.join(root, ""))
 
 
 def _readable_point_file(path):

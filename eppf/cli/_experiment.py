@@ -17,7 +17,7 @@ import sys
 import textwrap
 import warnings
 
-from ._common import Command, n_jobs_type, register
+from ._common import Command, n_jobs_type, register, within_folder
 
 __all__ = ["run_experiment"]
 
@@ -154,12 +154,8 @@ def _check_outside_data(data, outputs):
     be read as objects of the data set by the next run (a CSV is a point file)."""
     if data == "builtin" or not os.path.isdir(data):
         return
-    root = os.path.normcase(os.path.realpath(data))
     for option, path in outputs:
-        if path is None:
-            continue
-        real = os.path.normcase(os.path.realpath(path))
-        if real == root or real.startswith(os.path.join(root, "")):
+        if path is not None and within_folder(path, data):
             raise ValueError(f"{option} {path} is inside the --data folder {data}; the next run would read its "
                              "files as objects of the data set, so give a folder outside it")
 
