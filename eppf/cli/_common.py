@@ -541,11 +541,16 @@ class InputPlan:
         return Objects(clouds, ids, keys, labels, self.class_names, split, skipped, self.name)
 
 
+def given_options(args, *options):
+    """Those of ``options`` (spelled ``--n-points``, ...) given on the command line: the ones whose value is
+    not None, their default when not given (a command that lacks one has not been given it)."""
+    return [o for o in options if getattr(args, o[2:].replace("-", "_"), None) is not None]
+
+
 def refuse_sampling_of_data_set(args, data):
     """Refuse ``--n-points``/``--resolution`` with a ``.npz`` data set: its clouds are read as they are stored, so
     the option would be ignored (and ``train`` would record it in the model as how its objects were read)."""
-    given = [o for o, v in (("--n-points", getattr(args, "n_points", None)),
-                            ("--resolution", getattr(args, "resolution", None))) if v is not None]
+    given = given_options(args, "--n-points", "--resolution")
     if given:
         raise ValueError(f"{given[0]}: {data} is a .npz data set, whose clouds are read as they are stored (the "
                          "option samples mesh files and resamples point files); leave it out")
@@ -684,9 +689,7 @@ def load_labelled(args, sampling, cmd, min_points=MIN_POINTS):
         from ..datasets import make_shapes
 
         # no file is read: a reading option would be ignored (and train would record it as how its objects were read)
-        given = [o for o, v in (("--n-points", getattr(args, "n_points", None)),
-                                ("--resolution", getattr(args, "resolution", None)),
-                                ("--on-error", getattr(args, "on_error", None))) if v is not None]
+        given = given_options(args, "--n-points", "--resolution", "--on-error")
         if given:
             raise ValueError(f"{given[0]}: the built-in synthetic shapes are made in memory, not read from files; "
                              "leave it out")

@@ -6,8 +6,8 @@ import numpy as np
 
 from ._common import (DEFAULT_N_PAIRS, MODEL_HELP, TRUST_HELP, Command, add_data_source, add_descriptor, add_runtime,
                       add_sampling, check_not_input, check_output, count, descriptor_from_args, emit, fewest_points,
-                      load_labelled, load_model, model_sampling, progress_of, register, sampling_from_args, set_runtime,
-                      warn, warn_tiny)
+                      given_options, load_labelled, load_model, model_sampling, progress_of, register,
+                      sampling_from_args, set_runtime, warn, warn_tiny)
 
 __all__ = ["run_evaluate"]
 
@@ -70,7 +70,7 @@ def run_evaluate(args, out=None):
                              "model reads the files with its saved seeds); leave it out")
     if args.model is not None:
         # the model's files are read as its training files were: a sampling option here would be ignored
-        given = [o for o, v in (("--n-points", args.n_points), ("--resolution", args.resolution)) if v is not None]
+        given = given_options(args, "--n-points", "--resolution")
         if given:
             raise ValueError(f"{given[0]}: with --model the files are read as the model's training files were "
                              "(its saved sampling settings); leave it out")

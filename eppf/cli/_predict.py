@@ -7,9 +7,9 @@ import sys
 import numpy as np
 
 from ._common import (MODEL_HELP, TRUST_HELP, Command, add_on_error, add_runtime, check_distinct_outputs,
-                      check_not_input, check_output, class_name, count, emit, fewest_points, file_seeds, load_model,
-                      model_sampling, on_error_of, progress_of, read_inputs, register, set_runtime, too_few_points,
-                      warn, warn_tiny)
+                      check_not_input, check_output, class_name, count, emit, fewest_points, file_seeds, given_options,
+                      load_model, model_sampling, on_error_of, progress_of, read_inputs, register, set_runtime,
+                      too_few_points, warn, warn_tiny)
 from ._segment import (FIELD_FORMATS, add_segmentation, coordinate, given_segmentation_options, segment_file,
                        segmentation_settings, stage, summary)
 
@@ -88,7 +88,7 @@ def run_predict(args, out=None):
     if getattr(args, "segment", False):
         return run_predict_scene(args, out)
     given = given_segmentation_options(args) + (["--labelled-output"] if args.labelled_output else []) \
-        + (["--random-state"] if getattr(args, "random_state", None) is not None else [])
+        + given_options(args, "--random-state")
     if given:
         raise ValueError(f"{given[0]} applies to scenes: add --segment")
     saved = load_model(args.model, trust=args.trust)
