@@ -107,14 +107,6 @@ def cloud_of_table(arr, want_normals):
     return Cloud(arr[:, :3], _guess_normals(arr))
 
 
-def _has_rows(data, pos):
-    """True when a line from byte ``pos`` holds more than blanks and a ``#`` comment (stops at the first)."""
-    line, pos = next_line(data, pos)
-    while line is not None and not line.split(b"#", 1)[0].strip():
-        line, pos = next_line(data, pos)
-    return line is not None
-
-
 def _refuse_several_scans(path, data, owner, pos, count):
     """A FileFormatError naming a second count line after the first ``count`` rows from byte ``pos``: Leica's
     PTS files may hold several scans, each after its own count line (Open3D and PDAL read the first). Only
@@ -126,11 +118,11 @@ def _refuse_several_scans(path, data, owner, pos, count):
                               "several scans, each after its count line; eppf reads .pts files of one scan")
 
 
-def _first_content(data):
-    """The first line of ``data`` holding more than blanks and a ``#`` comment, without the comment, and the
-    offset after it (None and the end when there is none): where a .pts file's count line is, so that a
-    comment line before it does not make it a row of one value."""
-    line, pos = next_line(data, 0)
+def _first_content(data, pos=0):
+    """The first line of ``data`` from byte ``pos`` holding more than blanks and a ``#`` comment, without the
+    comment, and the offset after it (None and the end when there is none): where a .pts file's count line
+    is, so that a comment line before it does not make it a row of one value, and whether rows follow it."""
+    line, pos = next_line(data, pos)
     while line is not None and not line.split(b"#", 1)[0].strip():
         line, pos = next_line(data, pos)
     return (None if line is None else line.split(b"#", 1)[0].strip()), pos
@@ -167,7 +159,7 @@ def read_pts(path, data, owner, want_normals="auto"):
             line_no = data[:pos].rstrip(b"\n").count(b"\n")
             if count < 0:
                 raise FileFormatError(f"{owner}: {path!r} line {line_no + 1}: negative point count {count}")
-            if not _has_rows(data, pos):
+            if _first_content(data, pos)[0] is None:  # (no rows after the count line)
                 # Open3D writes an empty cloud as the count line "0" alone: a file of no points, as an empty
                 # PLY, NPY, LAS or E57 file is (read_point_cloud then says it holds no points)
                 if count == 0:
